@@ -1,0 +1,1 @@
+"""nusim ROS 2 package."""

@@ -1,0 +1,1 @@
+"""nuslam ROS 2 package."""

@@ -1,0 +1,1 @@
+"""nuturtle_control ROS 2 package."""

@@ -1,0 +1,1 @@
+"""nuturtle_description ROS 2 package."""

@@ -1,0 +1,71 @@
+"""Conversions between turtlelib values and standard ROS messages (planar, REP 103 units)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import Pose, Quaternion, TransformStamped
+from numpy.typing import NDArray
+from turtlelib import Transform2D
+
+
+def quaternion_from_yaw(yaw_rad: float) -> Quaternion:
+    """Rotation about +z by yaw: q = (0, 0, sin(yaw/2), cos(yaw/2))."""
+    return Quaternion(x=0.0, y=0.0, z=math.sin(yaw_rad / 2.0), w=math.cos(yaw_rad / 2.0))
+
+
+def yaw_from_quaternion(q: Quaternion) -> float:
+    """Yaw of a quaternion (rotation about z of its ZYX Euler decomposition)."""
+    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+
+
+def pose_from_transform(T: Transform2D) -> Pose:
+    pose = Pose()
+    pose.position.x = T.x
+    pose.position.y = T.y
+    pose.orientation = quaternion_from_yaw(T.theta)
+    return pose
+
+
+def transform_from_pose(pose: Pose) -> Transform2D:
+    """The planar part of a 3D pose (x, y, yaw); raises ValueError when non-finite."""
+    return Transform2D(pose.position.x, pose.position.y, yaw_from_quaternion(pose.orientation))
+
+
+def transform_stamped(
+    T_parent_child: Transform2D, parent: str, child: str, stamp: Time
+) -> TransformStamped:
+    msg = TransformStamped()
+    msg.header.stamp = stamp
+    msg.header.frame_id = parent
+    msg.child_frame_id = child
+    msg.transform.translation.x = T_parent_child.x
+    msg.transform.translation.y = T_parent_child.y
+    msg.transform.rotation = quaternion_from_yaw(T_parent_child.theta)
+    return msg
+
+
+def planar_covariance_6x6(P_xyt: NDArray[np.float64]) -> list[float]:
+    """Embed a (3, 3) covariance of (x, y, yaw) into ROS's row-major 6x6 (x, y, z, roll, pitch, yaw)."""
+    P6 = np.zeros((6, 6))
+    index = [0, 1, 5]
+    P6[np.ix_(index, index)] = P_xyt
+    return P6.ravel().tolist()
+
+
+def covariance_from_6x6(values) -> NDArray[np.float64]:
+    """The (x, y, yaw) block of a ROS 6x6 covariance."""
+    P6 = np.asarray(values, dtype=float).reshape(6, 6)
+    index = [0, 1, 5]
+    return P6[np.ix_(index, index)]
+
+
+def stamp_seconds(stamp: Time) -> float:
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+def stamp_from_seconds(seconds: float) -> Time:
+    sec = math.floor(seconds)
+    return Time(sec=int(sec), nanosec=int(round((seconds - sec) * 1e9)) % 1_000_000_000)

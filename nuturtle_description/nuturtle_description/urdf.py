@@ -1,0 +1,107 @@
+"""The TurtleBot3 Burger's URDF, generated from the same constants the nodes use.
+
+One source of truth: the wheel radius, track width and collision radius come from `RobotParams`
+(config/diff_params.yaml), so the drawn robot and the kinematics can never disagree. Frames follow
+REP 105 and the stock robot: base_footprint → base_link → {wheel_left_link, wheel_right_link,
+base_scan}; the wheel joints are named `wheel_left_joint` and `wheel_right_joint`.
+
+`color` tints the body (red = simulator truth, blue = wheel odometry, green = SLAM, purple = other),
+so several robots can be shown at once with a frame prefix per colour.
+"""
+
+from __future__ import annotations
+
+from xml.sax.saxutils import quoteattr
+
+from .robot_params import RobotParams
+
+COLORS = {
+    "red": (0.8, 0.1, 0.1, 1.0),
+    "green": (0.1, 0.7, 0.2, 1.0),
+    "blue": (0.1, 0.3, 0.9, 1.0),
+    "purple": (0.55, 0.2, 0.75, 1.0),
+}
+
+# Burger geometry that the kinematics do not use (m), from the stock robot's description.
+BASE_HEIGHT = 0.14
+WHEEL_WIDTH = 0.018
+LIDAR_X = -0.032
+LIDAR_Z = 0.172
+LIDAR_RADIUS = 0.035
+LIDAR_HEIGHT = 0.04
+
+
+def _origin(x: float = 0.0, y: float = 0.0, z: float = 0.0, roll: float = 0.0) -> str:
+    return f'<origin xyz="{x:.6g} {y:.6g} {z:.6g}" rpy="{roll:.6g} 0 0"/>'
+
+
+def _cylinder_link(name: str, radius: float, length: float, origin: str, material: str) -> str:
+    geometry = f'<geometry><cylinder radius="{radius:.6g}" length="{length:.6g}"/></geometry>'
+    return (
+        f'  <link name="{name}">\n'
+        f"    <visual>{origin}{geometry}<material name={quoteattr(material)}/></visual>\n"
+        f"    <collision>{origin}{geometry}</collision>\n"
+        f"  </link>\n"
+    )
+
+
+def _joint(name: str, kind: str, parent: str, child: str, origin: str, axis: str = "") -> str:
+    axis_xml = f'<axis xyz="{axis}"/>' if axis else ""
+    return (
+        f'  <joint name="{name}" type="{kind}"><parent link="{parent}"/><child link="{child}"/>'
+        f"{origin}{axis_xml}</joint>\n"
+    )
+
+
+def burger_urdf(params: RobotParams, color: str = "purple") -> str:
+    """URDF text of the Burger drawn in `color` (one of COLORS); ValueError for another colour."""
+    if color not in COLORS:
+        raise ValueError(f"color must be one of {sorted(COLORS)}, got {color!r}")
+    r, g, b, a = COLORS[color]
+    radius = params.wheel_radius
+    half_track = params.track_width / 2.0
+    materials = (
+        f'  <material name="{color}"><color rgba="{r} {g} {b} {a}"/></material>\n'
+        '  <material name="dark"><color rgba="0.1 0.1 0.1 1"/></material>\n'
+    )
+    links = (
+        '  <link name="base_footprint"/>\n'
+        + _cylinder_link(
+            "base_link",
+            params.collision_radius,
+            BASE_HEIGHT,
+            _origin(z=BASE_HEIGHT / 2.0),
+            color,
+        )
+        + _cylinder_link(
+            "wheel_left_link", radius, WHEEL_WIDTH, _origin(roll=1.5707963267948966), "dark"
+        )
+        + _cylinder_link(
+            "wheel_right_link", radius, WHEEL_WIDTH, _origin(roll=1.5707963267948966), "dark"
+        )
+        + _cylinder_link("base_scan", LIDAR_RADIUS, LIDAR_HEIGHT, _origin(), "dark")
+    )
+    joints = (
+        _joint("base_joint", "fixed", "base_footprint", "base_link", _origin(z=0.010))
+        + _joint(
+            "wheel_left_joint",
+            "continuous",
+            "base_link",
+            "wheel_left_link",
+            _origin(y=half_track, z=radius - 0.010),
+            "0 1 0",
+        )
+        + _joint(
+            "wheel_right_joint",
+            "continuous",
+            "base_link",
+            "wheel_right_link",
+            _origin(y=-half_track, z=radius - 0.010),
+            "0 1 0",
+        )
+        + _joint("scan_joint", "fixed", "base_link", "base_scan", _origin(x=LIDAR_X, z=LIDAR_Z))
+    )
+    return (
+        '<?xml version="1.0"?>\n'
+        f'<robot name="turtlebot3_burger_{color}">\n{materials}{links}{joints}</robot>\n'
+    )
