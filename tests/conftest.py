@@ -16,14 +16,22 @@ _ros_home = tempfile.mkdtemp(prefix="nuturtle-test-ros-")
 os.environ["ROS_HOME"] = _ros_home
 os.environ["ROS_LOG_DIR"] = os.path.join(_ros_home, "log")
 
+import sys  # noqa: E402
+
 import pytest  # noqa: E402
+from rclpy_harness import RosHarness  # noqa: E402
+
+# pytest put this folder on sys.path to import this file, and `python -m pytest` puts the repository root
+# there; both hold folders named after the packages (tests/turtlelib, turtlelib/, ...) that Python would
+# import as empty namespace packages ahead of the installed ones, so take them off again.
+_tests_dir = os.path.dirname(os.path.abspath(__file__))
+_shadowing = {_tests_dir, os.path.dirname(_tests_dir)}
+sys.path[:] = [entry for entry in sys.path if os.path.abspath(entry or os.curdir) not in _shadowing]
 
 
 @pytest.fixture
 def ros():
     """A private rclpy context + executor for in-process node tests (see rclpy_harness.py)."""
-    from rclpy_harness import RosHarness
-
     harness = RosHarness()
     yield harness
     harness.shutdown()
