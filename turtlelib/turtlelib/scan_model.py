@@ -1,0 +1,208 @@
+"""A 2D LiDAR scan model: ray casting against cylinders (circles) and walls (line segments).
+
+Beam geometry
+-------------
+Beam ``b = 0 .. samples-1`` leaves the sensor origin along ``phi_b = angle_min + b * angle_increment``
+(rad, counter-clockwise from the sensor's x axis), direction ``u_b = [cos(phi_b), sin(phi_b)]``. Its
+true range is the smallest ``t > 0`` with ``t u_b`` on an object's boundary (everything in the sensor
+frame), or ``inf`` when it hits nothing:
+
+* circle, centre ``c``, radius ``r``: ``|t u - c|^2 = r^2``, i.e. ``t^2 - 2 t beta + q = 0`` with
+  ``beta = u . c`` and ``q = |c|^2 - r^2``; from outside (``q > 0``) the near root is
+  ``t = beta - sqrt(beta^2 - q) = q / (beta + sqrt(beta^2 - q))`` (the second form has no cancellation),
+  from inside (``q < 0``) the far root ``t = beta + sqrt(beta^2 - q)``;
+* segment ``p0 + s e``, ``e = p1 - p0``, ``s`` in [0, 1]: ``t u - s e = p0`` gives
+  ``t = (p0 x e) / (u x e)`` and ``s = (p0 x u) / (u x e)`` (``a x b = a_x b_y - a_y b_x``); a beam
+  parallel to the segment (``u x e = 0``) never hits it.
+
+Measurement (the LDS-01 convention): ``range = quantise(t + n)``, ``n ~ N(0, noise^2)``,
+``quantise(v) = resolution * round(v / resolution)`` (no quantisation when ``resolution == 0``), and a
+beam reads 0.0 ("no return") when the measured range lies outside ``[range_min, range_max]`` or it hit
+nothing.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .geometry import Transform2D
+
+# Tolerance on samples * angle_increment <= 2 pi (beams may not wrap past a full turn).
+_FULL_TURN_SLACK_RAD = 1e-9
+
+
+@dataclass(frozen=True)
+class LidarConfig:
+    """Geometry and noise of a 2D LiDAR; defaults are the TurtleBot3 LDS-01 (360 beams of 1 deg).
+
+    Field names match the nusim parameters ``lidar.<field>``. Ranges in m, angles in rad:
+
+    * ``range_min``, ``range_max``: valid measured ranges, ``0 <= range_min < range_max``;
+    * ``angle_min``: direction of beam 0; ``angle_increment > 0``: angle between beams;
+    * ``samples``: number of beams (int >= 1), with ``samples * angle_increment <= 2 pi``;
+    * ``noise``: standard deviation of the Gaussian range noise (m, >= 0);
+    * ``resolution``: range quantisation step (m, >= 0; 0 means none).
+
+    Invalid values raise ValueError.
+    """
+
+    range_min: float = 0.12
+    range_max: float = 3.5
+    angle_min: float = 0.0
+    angle_increment: float = 2.0 * math.pi / 360.0
+    samples: int = 360
+    noise: float = 0.0
+    resolution: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("range_min", "range_max", "angle_min", "angle_increment", "noise", "resolution"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
+                raise ValueError(f"lidar {name} must be a finite number, got {value!r}")
+            object.__setattr__(self, name, float(value))
+        if isinstance(self.samples, bool) or not isinstance(self.samples, numbers.Integral):
+            raise ValueError(f"lidar samples must be an int, got {self.samples!r}")
+        if self.samples < 1:
+            raise ValueError(f"lidar samples must be >= 1, got {self.samples}")
+        object.__setattr__(self, "samples", int(self.samples))
+        if not 0.0 <= self.range_min < self.range_max:
+            raise ValueError(f"need 0 <= range_min < range_max, got {self.range_min}, {self.range_max}")
+        if self.angle_increment <= 0.0:
+            raise ValueError(f"lidar angle_increment must be > 0, got {self.angle_increment}")
+        if self.samples * self.angle_increment > 2.0 * math.pi + _FULL_TURN_SLACK_RAD:
+            raise ValueError(
+                f"samples * angle_increment = {self.samples * self.angle_increment} exceeds a full turn"
+            )
+        if self.noise < 0.0 or self.resolution < 0.0:
+            raise ValueError(f"lidar noise and resolution must be >= 0, got {self.noise}, {self.resolution}")
+
+    def angles(self) -> NDArray[np.float64]:
+        """Beam directions ``phi_b = angle_min + b * angle_increment`` (rad), shape (samples,)."""
+        return self.angle_min + self.angle_increment * np.arange(self.samples, dtype=np.float64)
+
+
+def _as_objects(values: ArrayLike, columns: int, name: str) -> NDArray[np.float64]:
+    """A finite float array of shape (M, columns); any empty input is (0, columns)."""
+    array = np.asarray(values, dtype=np.float64)
+    if array.size == 0:
+        return np.empty((0, columns))
+    if array.ndim != 2 or array.shape[1] != columns:
+        raise ValueError(f"{name} must have shape (M, {columns}), got {array.shape}")
+    if not np.all(np.isfinite(array)):
+        raise ValueError(f"{name} must be finite")
+    return array
+
+
+def cast_beams(
+    T_world_sensor: Transform2D,
+    angles_rad: ArrayLike,
+    circles: ArrayLike,
+    segments: ArrayLike,
+) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
+    """Exact nearest hits of beams from the sensor pose (no noise, no range limits).
+
+    ``circles`` (M, 3) rows ``[x, y, r]`` and ``segments`` (K, 4) rows ``[x0, y0, x1, y1]`` are in the
+    world frame (m; radii > 0); ``angles_rad`` (B,) are beam directions in the sensor frame. Returns
+    ``range_m`` (B,), the true range (``inf`` where nothing is hit), and ``hit`` (B,), the index of the
+    object hit: ``0 .. M-1`` for circles, ``M .. M+K-1`` for segments, ``-1`` for none. Vectorised over
+    beams x objects (see the module docstring for the intersection formulas). ValueError on bad shapes,
+    non-finite values or radii <= 0.
+    """
+    phi = np.asarray(angles_rad, dtype=np.float64)
+    if phi.ndim != 1 or not np.all(np.isfinite(phi)):
+        raise ValueError(f"angles_rad must be a finite 1-D array, got shape {phi.shape}")
+    circles_world = _as_objects(circles, 3, "circles")
+    segments_world = _as_objects(segments, 4, "segments")
+    if np.any(circles_world[:, 2] <= 0.0):
+        raise ValueError("circle radii must be > 0")
+
+    # objects in the sensor frame: p_sensor = T_sensor_world @ p_world
+    T_sensor_world = T_world_sensor.inverse()
+    u = np.stack((np.cos(phi), np.sin(phi)), axis=1)  # (B, 2)
+    t = np.full((phi.size, circles_world.shape[0] + segments_world.shape[0]), np.inf)
+
+    if circles_world.shape[0]:
+        c = T_sensor_world @ circles_world[:, :2]  # (M, 2)
+        r = circles_world[:, 2]
+        beta = u @ c.T  # (B, M), beta = u . c
+        q = np.einsum("mi,mi->m", c, c) - r * r  # q = |c|^2 - r^2
+        disc = beta * beta - q
+        root = np.sqrt(np.maximum(disc, 0.0))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            # outside: t = q / (beta + sqrt(beta^2 - q)); inside: t = beta + sqrt(beta^2 - q)
+            t_circle = np.where(q > 0.0, q / (beta + root), beta + root)
+        hit = (disc >= 0.0) & ((q <= 0.0) | (beta > 0.0)) & (t_circle > 0.0)
+        t[:, : c.shape[0]] = np.where(hit, t_circle, np.inf)
+
+    if segments_world.shape[0]:
+        p0 = T_sensor_world @ segments_world[:, :2]  # (K, 2)
+        e = T_sensor_world @ segments_world[:, 2:] - p0
+        u_cross_e = np.outer(u[:, 0], e[:, 1]) - np.outer(u[:, 1], e[:, 0])  # (B, K)
+        p0_cross_e = p0[:, 0] * e[:, 1] - p0[:, 1] * e[:, 0]  # (K,)
+        p0_cross_u = np.outer(u[:, 1], p0[:, 0]) - np.outer(u[:, 0], p0[:, 1])  # (B, K)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            # t = (p0 x e) / (u x e),  s = (p0 x u) / (u x e)
+            t_segment = p0_cross_e / u_cross_e
+            s = p0_cross_u / u_cross_e
+        hit = (u_cross_e != 0.0) & (t_segment > 0.0) & (s >= 0.0) & (s <= 1.0)
+        t[:, circles_world.shape[0] :] = np.where(hit, t_segment, np.inf)
+
+    if t.shape[1] == 0:
+        return np.full(phi.size, np.inf), np.full(phi.size, -1, dtype=np.intp)
+    nearest = np.argmin(t, axis=1)
+    range_m = t[np.arange(phi.size), nearest]
+    return range_m, np.where(np.isfinite(range_m), nearest, -1)
+
+
+def simulate_scan(
+    T_world_sensor: Transform2D,
+    circles: ArrayLike,
+    segments: ArrayLike,
+    config: LidarConfig,
+    rng: np.random.Generator | None = None,
+) -> NDArray[np.float64]:
+    """A simulated scan: measured ranges (m), shape (config.samples,), 0.0 where there is no return.
+
+    ``T_world_sensor`` is the sensor pose, ``circles`` (M, 3) ``[x, y, r]`` and ``segments`` (K, 4)
+    ``[x0, y0, x1, y1]`` the world (m). Each beam's true range from :func:`cast_beams` becomes
+    ``quantise(t + n)`` with ``n ~ N(0, noise^2)``; a beam reads 0.0 when nothing was hit or the measured
+    range falls outside ``[range_min, range_max]``. ``rng`` draws the noise (a fresh, OS-seeded generator
+    when None and ``config.noise > 0``; pass a seeded one for reproducible scans).
+    """
+    true_range_m, _ = cast_beams(T_world_sensor, config.angles(), circles, segments)
+    range_m = true_range_m
+    if config.noise > 0.0:
+        rng = np.random.default_rng() if rng is None else rng
+        # t + n,  n ~ N(0, noise^2)
+        range_m = range_m + rng.normal(0.0, config.noise, size=range_m.shape)
+    if config.resolution > 0.0:
+        # resolution * round(v / resolution)
+        with np.errstate(invalid="ignore"):
+            range_m = config.resolution * np.round(range_m / config.resolution)
+    returned = (range_m >= config.range_min) & (range_m <= config.range_max)
+    return np.where(returned, range_m, 0.0)
+
+
+def arena_walls(x_length: float, y_length: float) -> NDArray[np.float64]:
+    """The inner faces of a rectangular arena centred at the world origin, shape (4, 4).
+
+    Rows ``[x0, y0, x1, y1]`` (m) run counter-clockwise: bottom (y = -y_length/2), right, top, left.
+    Both lengths must be finite and > 0 (ValueError).
+    """
+    for name, value in (("x_length", x_length), ("y_length", y_length)):
+        if not (math.isfinite(value) and value > 0.0):
+            raise ValueError(f"arena {name} must be finite and > 0, got {value!r}")
+    hx, hy = 0.5 * x_length, 0.5 * y_length
+    return np.array(
+        [
+            [-hx, -hy, hx, -hy],
+            [hx, -hy, hx, hy],
+            [hx, hy, -hx, hy],
+            [-hx, hy, -hx, -hy],
+        ]
+    )
