@@ -2,3 +2,41 @@
 
 No ROS import, ever: the ROS nodes in nusim, nuturtle_control and nuslam are thin wrappers over this.
 """
+
+from .circle_fit import Circle, CircleFits, fit_circle, fit_circles, refine_for_range_sensor
+from .consistency import chi2_bounds, nees, nis
+from .detection import Clusters, DetectorConfig, Detections, LandmarkDetector, cluster_scan
+from .ekf_slam import Association, EkfSlam, ObservationStatus, SlamConfig
+from .geometry import Transform2D, Twist2D, integrate_twist, normalize_angle, normalize_angles
+from .kinematics import DiffDrive
+from .scan_model import LidarConfig, arena_walls, cast_beams, simulate_scan
+
+__all__ = [
+    "Circle",
+    "CircleFits",
+    "Clusters",
+    "DetectorConfig",
+    "Detections",
+    "LandmarkDetector",
+    "LidarConfig",
+    "arena_walls",
+    "cast_beams",
+    "cluster_scan",
+    "fit_circle",
+    "fit_circles",
+    "refine_for_range_sensor",
+    "simulate_scan",
+    "DiffDrive",
+    "Transform2D",
+    "Twist2D",
+    "integrate_twist",
+    "normalize_angle",
+    "normalize_angles",
+    "Association",
+    "EkfSlam",
+    "ObservationStatus",
+    "SlamConfig",
+    "chi2_bounds",
+    "nees",
+    "nis",
+]

@@ -1,0 +1,282 @@
+"""EKF SLAM update and map growth against a naive dense textbook EKF, plus Monte Carlo checks.
+
+`DenseEkf` below is the textbook filter: full N x N Jacobians, `S^-1` by `np.linalg.inv`, the Joseph form
+`(I - K H) P (I - K H)^T + K R K^T`, and state augmentation with full Jacobians. The fast filter
+(turtlelib.slam_state via EkfSlam) must agree with it to 1e-9 through predictions, batched updates, new
+landmarks (beyond the initial storage capacity) and marginalisation.
+"""
+
+import copy
+import math
+
+import numpy as np
+import pytest
+from turtlelib import DiffDrive, Transform2D
+from turtlelib.ekf_slam import EkfSlam, ObservationStatus, SlamConfig
+from turtlelib.range_bearing import landmarks_from_observations, predict_observations, residual
+from turtlelib.slam_state import SlamState
+from turtlelib.wheel_noise import wheel_slip_covariance
+
+PI = math.pi
+BURGER = DiffDrive(wheel_radius=0.033, track_width=0.16)
+CONFIG = SlamConfig(wheel_noise=0.05, max_range=50.0, initial_xy_std=0.02, initial_theta_std=0.01)
+SENSOR = CONFIG.T_body_sensor
+
+
+class DenseEkf:
+    """Textbook EKF SLAM over [x, y, theta, m_0x, m_0y, ...] with landmarks in creation order."""
+
+    def __init__(self, pose: np.ndarray, pose_covariance: np.ndarray) -> None:
+        self.x = pose.astype(float).copy()
+        self.P = pose_covariance.astype(float).copy()
+        self.ids: list[int] = []
+
+    def predict(self, left: float, right: float) -> None:
+        N = len(self.x)
+        theta = self.x[2]
+        new_pose = BURGER.step(Transform2D(*self.x[:3]), left, right).as_array()
+        G_pose, _ = BURGER.step_jacobians(theta, left, right)
+        F = np.eye(N)
+        F[:3, :3] = G_pose
+        Q = np.zeros((N, N))
+        Q[:3, :3] = wheel_slip_covariance(BURGER, theta, left, right, CONFIG.wheel_noise)
+        self.x[:3] = new_pose
+        self.P = F @ self.P @ F.T + Q
+
+    def landmark(self, landmark_id: int) -> np.ndarray:
+        i = 3 + 2 * self.ids.index(landmark_id)
+        return self.x[i : i + 2]
+
+    def update(self, ids, z, R) -> None:
+        N, K = len(self.x), len(ids)
+        H = np.zeros((2 * K, N))
+        nu = np.zeros(2 * K)
+        for k, landmark_id in enumerate(ids):
+            i = 3 + 2 * self.ids.index(landmark_id)
+            z_hat, H_robot, H_landmark = predict_observations(self.x[:3], self.x[None, i : i + 2], SENSOR)
+            H[2 * k : 2 * k + 2, :3] = H_robot[0]
+            H[2 * k : 2 * k + 2, i : i + 2] = H_landmark[0]
+            nu[2 * k : 2 * k + 2] = residual(z[k], z_hat[0])
+        R_full = np.zeros((2 * K, 2 * K))
+        for k in range(K):
+            R_full[2 * k : 2 * k + 2, 2 * k : 2 * k + 2] = R[k]
+        S = H @ self.P @ H.T + R_full
+        gain = self.P @ H.T @ np.linalg.inv(S)
+        self.x = self.x + gain @ nu
+        self.x[2] = math.remainder(self.x[2], 2.0 * PI)
+        A = np.eye(N) - gain @ H
+        self.P = A @ self.P @ A.T + gain @ R_full @ gain.T
+
+    def augment(self, landmark_id: int, z: np.ndarray, R: np.ndarray) -> None:
+        N = len(self.x)
+        p_map, G_robot, G_z = landmarks_from_observations(self.x[:3], z[None], SENSOR)
+        G_x = np.zeros((2, N))
+        G_x[:, :3] = G_robot[0]
+        P_new = np.zeros((N + 2, N + 2))
+        P_new[:N, :N] = self.P
+        P_new[N:, :N] = G_x @ self.P
+        P_new[:N, N:] = P_new[N:, :N].T
+        P_new[N:, N:] = G_x @ self.P @ G_x.T + G_z[0] @ R @ G_z[0].T
+        self.x = np.concatenate([self.x, p_map[0]])
+        self.P = P_new
+        self.ids.append(landmark_id)
+
+    def sorted_by_id(self) -> tuple[np.ndarray, np.ndarray]:
+        order = np.argsort(self.ids)
+        indices = np.concatenate([np.arange(3), (3 + 2 * order[:, None] + np.arange(2)).ravel()])
+        return self.x[indices], self.P[np.ix_(indices, indices)]
+
+
+def random_noise(rng, count):
+    """Per-observation noise covariances with different scales and correlations."""
+    R = np.empty((count, 2, 2))
+    for k in range(count):
+        A = rng.normal(size=(2, 2)) * [[0.03], [0.02]]
+        R[k] = A @ A.T + np.diag([1e-4, 1e-4])
+    return R
+
+
+def assert_agrees(slam: EkfSlam, dense: DenseEkf, atol=1e-9) -> None:
+    x, P = dense.sorted_by_id()
+    state = slam.state
+    np.testing.assert_allclose(state[3:], x[3:], rtol=0.0, atol=atol)
+    np.testing.assert_allclose(state[:2], x[:2], rtol=0.0, atol=atol)
+    assert math.remainder(state[2] - x[2], 2.0 * PI) == pytest.approx(0.0, abs=atol)
+    np.testing.assert_allclose(slam.covariance, P, rtol=0.0, atol=atol)
+
+
+def test_fast_filter_equals_the_dense_textbook_filter():
+    rng = np.random.default_rng(3)
+    world = rng.uniform(-4.0, 4.0, (40, 2))
+    start = Transform2D(0.1, -0.2, 0.3)
+    slam = EkfSlam(CONFIG, BURGER, start)
+    dense = DenseEkf(start.as_array(), CONFIG.initial_pose_covariance())
+    truth = start
+    seen: set[int] = set()
+    for step in range(30):
+        left, right = rng.uniform(-5.0, 25.0, 2)
+        slam.predict(left, right)
+        dense.predict(left, right)
+        truth = BURGER.step(truth, left, right)
+        assert_agrees(slam, dense)
+
+        # a batch of distinct ids mixing seen and unseen landmarks (40 ids outgrow the initial capacity)
+        ids = rng.choice(len(world), size=int(rng.integers(1, 9)), replace=False)
+        z, _, _ = predict_observations(truth.as_array(), world[ids], SENSOR)
+        z = z + rng.normal(0.0, 0.02, z.shape)
+        R = random_noise(rng, len(ids))
+        result = slam.update_known(ids, z, R)
+
+        old = np.array([i in seen for i in ids], dtype=bool)
+        expected_status = np.where(old, ObservationStatus.MATCHED, ObservationStatus.NEW)
+        np.testing.assert_array_equal(result.status, expected_status)
+        np.testing.assert_array_equal(result.landmark_ids, ids)
+        if old.any():
+            dense.update(ids[old], z[old], R[old])
+        for k in np.flatnonzero(~old):
+            dense.augment(int(ids[k]), z[k], R[k])
+            seen.add(int(ids[k]))
+        assert_agrees(slam, dense)
+    assert len(seen) > 16
+
+
+def test_joint_nis_of_a_batch_matches_the_dense_innovation():
+    rng = np.random.default_rng(11)
+    slam = EkfSlam(CONFIG, BURGER)
+    dense = DenseEkf(np.zeros(3), CONFIG.initial_pose_covariance())
+    z0 = np.array([[1.0, 0.2], [2.0, -0.5], [1.5, 2.0]])
+    R0 = random_noise(rng, 3)
+    slam.update_known([0, 1, 2], z0, R0)
+    for k in range(3):
+        dense.augment(k, z0[k], R0[k])
+    slam.predict(3.0, 4.0)
+    dense.predict(3.0, 4.0)
+
+    z = z0 + rng.normal(0.0, 0.02, z0.shape)
+    R = random_noise(rng, 3)
+    # the dense joint NIS: nu^T S^-1 nu with the stacked innovation
+    H = np.zeros((6, 9))
+    nu = np.zeros(6)
+    for k in range(3):
+        z_hat, H_robot, H_landmark = predict_observations(dense.x[:3], dense.landmark(k)[None], SENSOR)
+        H[2 * k : 2 * k + 2, :3] = H_robot[0]
+        H[2 * k : 2 * k + 2, 3 + 2 * k : 5 + 2 * k] = H_landmark[0]
+        nu[2 * k : 2 * k + 2] = residual(z[k], z_hat[0])
+    S = H @ dense.P @ H.T
+    for k in range(3):
+        S[2 * k : 2 * k + 2, 2 * k : 2 * k + 2] += R[k]
+    result = slam.update_known([0, 1, 2], z, R)
+    assert result.nis == pytest.approx(nu @ np.linalg.solve(S, nu), rel=1e-10)
+    assert result.nis_dof == 6
+
+
+# --- SlamState: marginalisation and numerical health -------------------------------------------------------
+
+
+def grown_state(rng, n_landmarks):
+    state = SlamState(np.array([0.1, 0.2, 0.3]), np.diag([1e-3, 2e-3, 1e-4]), capacity_landmarks=2)
+    for _ in range(n_landmarks):
+        z = np.array([[rng.uniform(0.5, 3.0), rng.uniform(-PI, PI)]])
+        p_map, G_robot, G_z = landmarks_from_observations(state.mean[:3], z, SENSOR)
+        state.append(p_map[0], G_robot[0], G_z[0], np.diag([4e-4, 1e-3]))
+    return state
+
+
+@pytest.mark.parametrize("slot", [0, 3, 6])
+def test_remove_is_the_marginal(slot):
+    rng = np.random.default_rng(5)
+    state = grown_state(rng, 7)
+    x, P = state.mean.copy(), state.covariance.copy()
+    moved = state.remove(slot)
+    keep = [i for i in range(7) if i != slot]
+    # the last slot moves into the freed one
+    if slot != 6:
+        assert moved == 6
+        keep = [6 if i == slot else i for i in range(6)]
+    else:
+        assert moved is None
+    indices = np.concatenate([np.arange(3), (3 + 2 * np.array(keep)[:, None] + np.arange(2)).ravel()])
+    np.testing.assert_array_equal(state.mean, x[indices])
+    np.testing.assert_array_equal(state.covariance, P[np.ix_(indices, indices)])
+
+
+def test_covariance_stays_symmetric_positive_definite_under_precise_observations():
+    # very precise observations, many times, of landmarks whose prior is wide: the regime where the
+    # standard form P - K H P loses symmetry and definiteness
+    rng = np.random.default_rng(9)
+    slam = EkfSlam(CONFIG, BURGER)
+    world = rng.uniform(-3.0, 3.0, (12, 2))
+    truth = Transform2D()
+    z, _, _ = predict_observations(truth.as_array(), world, SENSOR)
+    slam.update_known(np.arange(12), z, np.tile(np.diag([1.0, 0.3]), (12, 1, 1)))
+    for _ in range(200):
+        left, right = rng.uniform(0.0, 3.0, 2)
+        slam.predict(left, right)
+        truth = BURGER.step(truth, left, right)
+        ids = rng.choice(12, 6, replace=False)
+        z, _, _ = predict_observations(truth.as_array(), world[ids], SENSOR)
+        slam.update_known(ids, z, np.tile(np.diag([1e-12, 1e-12]), (6, 1, 1)))
+        P = slam.covariance
+        np.testing.assert_array_equal(P, P.T)
+        assert np.linalg.eigvalsh(P).min() > 0.0
+
+
+# --- Monte Carlo -------------------------------------------------------------------------------------------
+
+
+def test_new_landmark_covariance_matches_monte_carlo():
+    rng = np.random.default_rng(21)
+    pose_cov = np.array([[4e-4, 1e-4, 2e-5], [1e-4, 3e-4, -1e-5], [2e-5, -1e-5, 1e-4]])
+    start = Transform2D(0.5, 0.2, 1.1)
+    slam = EkfSlam(CONFIG, BURGER, start)
+    slam.reset(start, pose_cov)
+    z = np.array([[1.0, 0.4], [2.5, -2.0]])
+    R = random_noise(rng, 1)[0]
+    slam.update_known([0], z[:1], R[None])
+    slam.update_known([1], z[1:], R[None])
+
+    n_samples = 40_000
+    poses = rng.multivariate_normal(start.as_array(), pose_cov, n_samples)
+    noise = rng.multivariate_normal(np.zeros(2), R, (n_samples, 2))
+    samples = np.empty((n_samples, 7))
+    samples[:, :3] = poses
+    for i in range(n_samples):
+        # the landmark position that the true pose and true landmark would have produced z
+        p_map, _, _ = landmarks_from_observations(poses[i], z - noise[i], SENSOR)
+        samples[i, 3:] = p_map.ravel()
+    error = samples - slam.state
+    C = np.cov(error.T)
+    P = slam.covariance
+    std = np.sqrt(np.diag(P))
+    np.testing.assert_array_less(np.abs(C - P) / np.outer(std, std), 0.04)
+
+
+def test_update_covariance_matches_monte_carlo():
+    # x ~ N(x_hat, P), z = h(x) + v: the filter's posterior mean x_hat+ = x_hat + K (z - h(x_hat)) has
+    # error covariance E[(x - x_hat+)(x - x_hat+)^T] = P+ (up to linearisation)
+    rng = np.random.default_rng(31)
+    slam = EkfSlam(CONFIG, BURGER, Transform2D(0.0, 0.0, 0.2))
+    slam.reset(Transform2D(0.0, 0.0, 0.2), np.diag([1e-3, 1e-3, 5e-4]))
+    z0 = np.array([[1.5, 0.3], [2.0, -1.2]])
+    slam.update_known([0, 1], z0, np.tile(np.diag([4e-4, 4e-4]), (2, 1, 1)))
+    slam.predict(10.0, 12.0)
+    prior_mean, prior_cov = slam.state, slam.covariance
+    R = random_noise(rng, 2)
+
+    n_samples = 3000
+    truth = rng.multivariate_normal(prior_mean, prior_cov, n_samples)
+    errors = np.empty((n_samples, 7))
+    posterior_cov = None
+    for i in range(n_samples):
+        trial = copy.deepcopy(slam)
+        z, _, _ = predict_observations(truth[i, :3], truth[i, 3:].reshape(2, 2), SENSOR)
+        z = z + np.array([rng.multivariate_normal(np.zeros(2), R[k]) for k in range(2)])
+        trial.update_known([0, 1], z, R)
+        errors[i] = truth[i] - trial.state
+        posterior_cov = trial.covariance
+    errors[:, 2] = np.remainder(errors[:, 2] + PI, 2.0 * PI) - PI
+    C = np.cov(errors.T)
+    std = np.sqrt(np.diag(posterior_cov))
+    # the update shrinks the covariance, and the sampled error agrees (3000 samples: ~3 % noise)
+    assert np.trace(posterior_cov) < 0.9 * np.trace(prior_cov)
+    np.testing.assert_array_less(np.abs(C - posterior_cov) / np.outer(std, std), 0.1)

@@ -1,0 +1,121 @@
+"""Range-bearing observations of 2D point landmarks from a sensor mounted on a planar robot.
+
+Model
+-----
+Robot pose ``q = [x, y, theta]`` (``T_map_body``; m, m, rad), sensor mounted at
+``T_body_sensor = (sx, sy, sphi)`` (the LDS-01 of a TurtleBot3 Burger at ``(-0.032, 0, 0)``), landmark
+``m = [mx, my]`` (m, map frame). With ``R(theta)`` the rotation and ``t = R'(theta) [sx, sy]``::
+
+    p_sensor = [x, y] + R(theta) [sx, sy]
+    d = m - p_sensor,   rho^2 = d . d
+    h(q, m) = [range_m, bearing_rad] = [rho, atan2(d_y, d_x) - theta - sphi]
+
+The predicted bearing is left unwrapped: :func:`residual` is the one place where angle residuals are
+wrapped. Jacobians (rows range, bearing)::
+
+    H_landmark = dh/dm = [[ d_x / rho,    d_y / rho  ],
+                          [-d_y / rho^2,  d_x / rho^2]]
+    H_robot    = dh/dq = [-H_landmark,  -H_landmark t - [0, 1]^T]
+
+The inverse observation model places a landmark seen at ``z = [r, b]``::
+
+    g(q, z) = p_sensor + r [cos(phi), sin(phi)],   phi = theta + sphi + b
+    G_robot = dg/dq = [I_2,  t + r [-sin(phi), cos(phi)]^T]
+    G_z     = dg/dz = [[cos(phi), -r sin(phi)],
+                       [sin(phi),  r cos(phi)]]
+
+All functions are vectorised over landmarks / observations (leading axis).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .geometry import Transform2D, normalize_angles
+
+
+def _sensor_position(
+    pose: NDArray[np.float64], T_body_sensor: Transform2D
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``p_sensor = [x, y] + R(theta) [sx, sy]`` and its heading derivative ``t = R'(theta) [sx, sy]``."""
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    sx, sy = T_body_sensor.x, T_body_sensor.y
+    p_sensor = np.array([pose[0] + c * sx - s * sy, pose[1] + s * sx + c * sy])
+    dp_dtheta = np.array([-s * sx - c * sy, c * sx - s * sy])
+    return p_sensor, dp_dtheta
+
+
+def predict_observations(
+    pose: NDArray[np.float64], p_map: NDArray[np.float64], T_body_sensor: Transform2D
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """``h(q, m)`` and its Jacobians for landmarks ``p_map`` (n, 2) seen from robot pose ``pose`` (3,).
+
+    Returns ``(z_hat (n, 2) [range_m, bearing_rad], H_robot (n, 2, 3), H_landmark (n, 2, 2))``. Landmarks
+    must not sit on the sensor (``rho > 0``).
+    """
+    p_sensor, dp_dtheta = _sensor_position(pose, T_body_sensor)
+    # d = m - p_sensor
+    d = p_map - p_sensor
+    rho2 = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]
+    rho = np.sqrt(rho2)
+    z_hat = np.empty_like(d)
+    z_hat[:, 0] = rho
+    # bearing = atan2(d_y, d_x) - theta - sphi
+    z_hat[:, 1] = np.arctan2(d[:, 1], d[:, 0]) - (pose[2] + T_body_sensor.theta)
+
+    # H_landmark = [[d_x/rho, d_y/rho], [-d_y/rho^2, d_x/rho^2]]
+    H_landmark = np.empty((len(d), 2, 2))
+    H_landmark[:, 0, 0] = d[:, 0] / rho
+    H_landmark[:, 0, 1] = d[:, 1] / rho
+    H_landmark[:, 1, 0] = -d[:, 1] / rho2
+    H_landmark[:, 1, 1] = d[:, 0] / rho2
+    # H_robot = [-H_landmark, -H_landmark t - [0, 1]]
+    H_robot = np.empty((len(d), 2, 3))
+    H_robot[:, :, :2] = -H_landmark
+    H_robot[:, :, 2] = -(H_landmark @ dp_dtheta)
+    H_robot[:, 1, 2] -= 1.0
+    return z_hat, H_robot, H_landmark
+
+
+def landmarks_from_observations(
+    pose: NDArray[np.float64], z: NDArray[np.float64], T_body_sensor: Transform2D
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The inverse model ``g(q, z)`` for observations ``z`` (K, 2) [range_m, bearing_rad] from ``pose`` (3,).
+
+    Returns ``(p_map (K, 2), G_robot (K, 2, 3), G_z (K, 2, 2))``.
+    """
+    p_sensor, dp_dtheta = _sensor_position(pose, T_body_sensor)
+    range_m = z[:, 0]
+    # phi = theta + sphi + b
+    phi = pose[2] + T_body_sensor.theta + z[:, 1]
+    c, s = np.cos(phi), np.sin(phi)
+    # g = p_sensor + r [cos(phi), sin(phi)]
+    p_map = p_sensor + range_m[:, None] * np.column_stack([c, s])
+
+    # G_robot = [I, t + r [-sin(phi), cos(phi)]]
+    G_robot = np.zeros((len(z), 2, 3))
+    G_robot[:, 0, 0] = 1.0
+    G_robot[:, 1, 1] = 1.0
+    G_robot[:, 0, 2] = dp_dtheta[0] - range_m * s
+    G_robot[:, 1, 2] = dp_dtheta[1] + range_m * c
+    # G_z = [[cos(phi), -r sin(phi)], [sin(phi), r cos(phi)]]
+    G_z = np.empty((len(z), 2, 2))
+    G_z[:, 0, 0] = c
+    G_z[:, 1, 0] = s
+    G_z[:, 0, 1] = -range_m * s
+    G_z[:, 1, 1] = range_m * c
+    return p_map, G_robot, G_z
+
+
+def residual(z: NDArray[np.float64], z_hat: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The innovation ``nu = z - z_hat`` (..., 2) with its bearing wrapped into (-pi, pi].
+
+    The only place where range-bearing residual angles are wrapped; ``z`` and ``z_hat`` broadcast.
+    """
+    nu = np.subtract(z, z_hat)
+    # nu_bearing <- wrap(b - b_hat)
+    nu[..., 1:] = normalize_angles(nu[..., 1:])
+    return nu

@@ -1,0 +1,259 @@
+"""The Gaussian state of EKF SLAM: mean and covariance of the robot pose and 2D point landmarks.
+
+Layout
+------
+::
+
+    x = [x, y, theta, m_0x, m_0y, m_1x, m_1y, ..., m_(n-1)x, m_(n-1)y],   N = 3 + 2 n
+
+(m, m, rad, then landmark positions in m, all in the map frame); landmark slot ``i`` occupies indices
+``3 + 2i`` and ``4 + 2i``; ``P`` is the (N, N) covariance. The arrays are allocated with spare capacity
+(``P`` is stored as the leading block of a larger C-ordered square) so that adding landmarks reallocates
+only when the capacity (grown by an eighth at a time) is exhausted.
+
+Cost per operation (``m = 2k`` stacked observation rows)
+--------------------------------------------------------
+* :meth:`predict` touches only the robot rows and columns: O(N).
+* :meth:`correct` uses that ``H`` is non-zero only in the robot columns and the observed landmarks'
+  columns: it gathers those ``3 + m`` rows of ``P`` (O(N m)), forms ``S`` (m x m), and applies one
+  symmetric rank-m downdate of ``P`` in place through BLAS: O(N^2 m), never an N x N product or inverse.
+* :meth:`append` / :meth:`remove` of a landmark: O(N) (swap-remove; the last slot moves).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.linalg.blas import dgemm
+from scipy.linalg.lapack import dpotrf, dtrtrs
+
+from .geometry import normalize_angle
+
+ROBOT_DIM = 3
+LANDMARK_DIM = 2
+HEADING = 2  # index of theta in x
+
+
+class SlamState:
+    """Mean and covariance of ``[robot pose, landmark slots]`` (see the module docstring)."""
+
+    def __init__(
+        self, pose: NDArray[np.float64], pose_covariance: NDArray[np.float64], capacity_landmarks: int = 16
+    ) -> None:
+        capacity = ROBOT_DIM + LANDMARK_DIM * capacity_landmarks
+        self._mean = np.zeros(capacity)
+        self._cov = np.zeros((capacity, capacity))
+        self._n = 0
+        self.reset_robot(pose, pose_covariance, keep_map=False)
+
+    # --- views -------------------------------------------------------------------------------------------
+
+    @property
+    def n_landmarks(self) -> int:
+        return self._n
+
+    @property
+    def dim(self) -> int:
+        """``N = 3 + 2 n``."""
+        return ROBOT_DIM + LANDMARK_DIM * self._n
+
+    @property
+    def mean(self) -> NDArray[np.float64]:
+        """``x`` (N,), a view into the filter's storage (read it, do not write it)."""
+        return self._mean[: self.dim]
+
+    @property
+    def covariance(self) -> NDArray[np.float64]:
+        """``P`` (N, N), a view into the filter's storage (read it, do not write it)."""
+        dim = self.dim
+        return self._cov[:dim, :dim]
+
+    def landmark_positions(self) -> NDArray[np.float64]:
+        """``[m_i]`` (n, 2), a view."""
+        return self._mean[ROBOT_DIM : self.dim].reshape(self._n, LANDMARK_DIM)
+
+    def landmark_blocks(self, slots: NDArray[np.int64] | None = None) -> NDArray[np.float64]:
+        """The marginal covariances ``P_(m_i m_i)`` (k, 2, 2) of ``slots`` (default all), gathered in O(k)."""
+        slots = np.arange(self._n) if slots is None else np.asarray(slots)
+        rows = (ROBOT_DIM + LANDMARK_DIM * slots)[:, None] + np.arange(LANDMARK_DIM)
+        return self._cov[rows[:, :, None], rows[:, None, :]]
+
+    def pose_landmark_blocks(self, slots: NDArray[np.int64] | None = None) -> NDArray[np.float64]:
+        """Joint covariances (k, 5, 5) of ``[x, y, theta, m_ix, m_iy]`` for ``slots`` (default all), O(k)."""
+        slots = np.arange(self._n) if slots is None else np.asarray(slots)
+        rows = np.empty((len(slots), ROBOT_DIM + LANDMARK_DIM), dtype=np.int64)
+        rows[:, :ROBOT_DIM] = np.arange(ROBOT_DIM)
+        rows[:, ROBOT_DIM:] = (ROBOT_DIM + LANDMARK_DIM * slots)[:, None] + np.arange(LANDMARK_DIM)
+        return self._cov[rows[:, :, None], rows[:, None, :]]
+
+    # --- the filter steps --------------------------------------------------------------------------------
+
+    def predict(self, pose: NDArray[np.float64], G: NDArray[np.float64], Q: NDArray[np.float64]) -> None:
+        """Robot motion ``q <- f(q, u)`` with Jacobian ``G = df/dq`` (3, 3) and process noise ``Q`` (3, 3)."""
+        dim = self.dim
+        P = self._cov
+        # P_qq <- G P_qq G^T + Q
+        P_qq = G @ P[:ROBOT_DIM, :ROBOT_DIM] @ G.T + Q
+        P[:ROBOT_DIM, :ROBOT_DIM] = 0.5 * (P_qq + P_qq.T)
+        # P_qm <- G P_qm,  P_mq = P_qm^T
+        P[:ROBOT_DIM, ROBOT_DIM:dim] = G @ P[:ROBOT_DIM, ROBOT_DIM:dim]
+        P[ROBOT_DIM:dim, :ROBOT_DIM] = P[:ROBOT_DIM, ROBOT_DIM:dim].T
+        self._mean[:ROBOT_DIM] = pose
+
+    def observation_covariance(
+        self, slots: NDArray[np.int64], H_robot: NDArray[np.float64], H_landmark: NDArray[np.float64]
+    ) -> NDArray[np.float64]:
+        """``H P H^T`` (2k, 2k) for observations of ``slots`` (k,) with Jacobians (k, 2, 3) and (k, 2, 2)."""
+        cols, H = self._compressed_jacobian(slots, H_robot, H_landmark)
+        return H @ self._cov[np.ix_(cols, cols)] @ H.T
+
+    def correct(
+        self,
+        slots: NDArray[np.int64],
+        H_robot: NDArray[np.float64],
+        H_landmark: NDArray[np.float64],
+        nu: NDArray[np.float64],
+        R: NDArray[np.float64],
+    ) -> float:
+        """EKF update with ``k`` observations of distinct ``slots``; returns the joint NIS ``nu^T S^-1 nu``.
+
+        ``H_robot`` (k, 2, 3), ``H_landmark`` (k, 2, 2), innovations ``nu`` (k, 2) (already wrapped) and
+        noise ``R`` (k, 2, 2). With ``S = L L^T`` (Cholesky) and ``W = L^-1 H P`` (m, N)::
+
+            x <- x + K nu = x + W^T (L^-1 nu)
+            P <- P - K S K^T = P - W^T W
+
+        ``P - W^T W`` is the Joseph form ``(I - K H) P (I - K H)^T + K R K^T`` for the optimal gain
+        ``K = P H^T S^-1 = W^T L^-1``, written as one symmetric rank-m downdate: the same ``W`` on both
+        sides keeps ``P`` symmetric, and what is removed is exactly the information the observations add,
+        ``P+ = (P^-1 + H^T R^-1 H)^-1``.
+        """
+        dim, k = self.dim, len(slots)
+        if k == 0:
+            return 0.0
+        m = LANDMARK_DIM * k
+        capacity = self._cov.shape[0]
+        cols, H = self._compressed_jacobian(slots, H_robot, H_landmark)
+        # right-hand sides [H P, 0, nu] (m, capacity + 1); H P = (P H^T)^T needs only the rows `cols` of P
+        rhs = np.zeros((m, capacity + 1), order="F")
+        np.matmul(H, self._cov[cols, :dim], out=rhs[:, :dim])
+        rhs[:, capacity] = nu.reshape(m)
+        # S = H P H^T + R
+        S = rhs[:, cols] @ H.T
+        diagonal = np.arange(k)
+        # S is C-contiguous, so its (k, 2, k, 2) reshape is a view: add R_i to the diagonal block i
+        S.reshape(k, LANDMARK_DIM, k, LANDMARK_DIM)[diagonal, :, diagonal, :] += R
+        L, info = dpotrf(S, lower=1, clean=1, overwrite_a=1)
+        if info != 0:
+            raise np.linalg.LinAlgError("the innovation covariance S is not positive definite")
+        # [W, 0, w] = L^-1 [H P, 0, nu]: W (m, N) padded with zeros to the storage width, w (m,)
+        solved, info = dtrtrs(L, rhs, lower=1, overwrite_b=1)
+        W_pad, w = solved[:, :capacity], solved[:, capacity]
+        W = W_pad[:, :dim]
+        # x <- x + W^T w, with the heading kept in (-pi, pi]
+        self._mean[:dim] += W.T @ w
+        self._mean[HEADING] = normalize_angle(self._mean[HEADING])
+        # P <- P - W^T W, in place on the first N rows of the storage: their transpose is a Fortran
+        # (capacity, N) array, so BLAS updates it without a copy (the spare columns get W_pad = 0)
+        rows_T = self._cov[:dim, :].T
+        updated = dgemm(-1.0, W_pad, W, beta=1.0, c=rows_T, trans_a=1, overwrite_c=1)
+        if updated is not rows_T:  # f2py worked on a copy (never for this float64 Fortran block)
+            rows_T[...] = updated
+        return float(w @ w)
+
+    def append(
+        self,
+        p_map: NDArray[np.float64],
+        G_robot: NDArray[np.float64],
+        G_z: NDArray[np.float64],
+        R: NDArray[np.float64],
+    ) -> int:
+        """Add a landmark ``m = g(q, z)`` (2,) from the inverse observation model; returns its slot.
+
+        ``G_robot = dg/dq`` (2, 3), ``G_z = dg/dz`` (2, 2), ``R`` (2, 2) the observation noise::
+
+            P_mx = G_robot P_qx              (cross-covariance with the pose and every landmark)
+            P_mm = G_robot P_qq G_robot^T + G_z R G_z^T
+        """
+        self._reserve(self._n + 1)
+        dim = self.dim
+        new = slice(dim, dim + LANDMARK_DIM)
+        P = self._cov
+        # P_mx = G_robot P_qx
+        P[new, :dim] = G_robot @ P[:ROBOT_DIM, :dim]
+        P[:dim, new] = P[new, :dim].T
+        # P_mm = G_robot P_qq G_robot^T + G_z R G_z^T
+        P_mm = G_robot @ P[:ROBOT_DIM, :ROBOT_DIM] @ G_robot.T + G_z @ R @ G_z.T
+        P[new, new] = 0.5 * (P_mm + P_mm.T)
+        self._mean[new] = p_map
+        self._n += 1
+        return self._n - 1
+
+    def remove(self, slot: int) -> int | None:
+        """Marginalise landmark ``slot`` out (delete its rows and columns); O(N).
+
+        The last slot moves into the freed one: returns its old index, or None if ``slot`` was last.
+        """
+        last = self._n - 1
+        dim = self.dim
+        moved = None
+        if slot != last:
+            P = self._cov
+            target = slice(ROBOT_DIM + LANDMARK_DIM * slot, ROBOT_DIM + LANDMARK_DIM * (slot + 1))
+            source = slice(ROBOT_DIM + LANDMARK_DIM * last, dim)
+            P[target, :dim] = P[source, :dim]
+            P[:dim, target] = P[:dim, source]
+            self._mean[target] = self._mean[source]
+            moved = last
+        self._n -= 1
+        return moved
+
+    def reset_robot(
+        self, pose: NDArray[np.float64], pose_covariance: NDArray[np.float64], keep_map: bool
+    ) -> None:
+        """New pose mean and covariance, independent of the map; ``keep_map=False`` also empties it."""
+        if not keep_map:
+            self._n = 0
+        dim = self.dim
+        self._cov[:ROBOT_DIM, :dim] = 0.0
+        self._cov[:dim, :ROBOT_DIM] = 0.0
+        self._cov[:ROBOT_DIM, :ROBOT_DIM] = pose_covariance
+        self._mean[:ROBOT_DIM] = pose
+
+    # --- helpers -----------------------------------------------------------------------------------------
+
+    def _compressed_jacobian(
+        self, slots: NDArray[np.int64], H_robot: NDArray[np.float64], H_landmark: NDArray[np.float64]
+    ) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+        """The state indices ``cols`` (3 + 2k,) that ``H`` touches and ``H`` restricted to them (2k, 3 + 2k).
+
+        Block row ``i`` has ``H_robot[i]`` in the pose columns and ``H_landmark[i]`` in columns
+        ``3 + 2i, 4 + 2i``, which are slot ``slots[i]``'s state indices.
+        """
+        k = len(slots)
+        m = LANDMARK_DIM * k
+        width = ROBOT_DIM + m
+        cols = np.empty(width, dtype=np.int64)
+        cols[:ROBOT_DIM] = np.arange(ROBOT_DIM)
+        cols[ROBOT_DIM:] = (ROBOT_DIM + LANDMARK_DIM * np.asarray(slots)[:, None] + np.arange(2)).ravel()
+        H = np.zeros((m, width))
+        H[:, :ROBOT_DIM] = H_robot.reshape(m, ROBOT_DIM)
+        # H[2i + a, 3 + 2i + b] = H_landmark[i, a, b], through the flat index of the C-ordered H
+        block = LANDMARK_DIM * np.arange(k)[:, None, None]
+        flat = (block + np.arange(2)[:, None]) * width + ROBOT_DIM + block + np.arange(2)
+        H.ravel()[flat] = H_landmark
+        return cols, H
+
+    def _reserve(self, n_landmarks: int) -> None:
+        """Grow the storage (by at least an eighth) so that ``n_landmarks`` slots fit."""
+        needed = ROBOT_DIM + LANDMARK_DIM * n_landmarks
+        capacity = self._cov.shape[0]
+        if needed <= capacity:
+            return
+        capacity = needed + LANDMARK_DIM * max(8, n_landmarks // 8)
+        dim = self.dim
+        mean = np.zeros(capacity)
+        mean[:dim] = self._mean[:dim]
+        cov = np.zeros((capacity, capacity))
+        cov[:dim, :dim] = self._cov[:dim, :dim]
+        self._mean, self._cov = mean, cov
