@@ -1,0 +1,326 @@
+"""`nusim`: a simulated TurtleBot3 Burger in an arena of cylinders, publishing what the real robot does.
+
+A thin ROS wrapper over `nusim.simulation.Simulation` (models in that module's docstring).
+
+Subscribes
+    `wheel_cmd` (sensor_msgs/JointState): `velocity` (rad/s) of joints `wheel_left`, `wheel_right`
+        (matched by name), quantised and clamped to motor units; held until the next command.
+    `~/teleport` (geometry_msgs/PoseWithCovarianceStamped, frame `nusim/world` or empty): moves the robot
+        to the pose's (x, y, yaw); refused (with a warning) if its disc would overlap a cylinder or a wall.
+Publishes (all stamped with simulation time)
+    `/clock` (rosgraph_msgs/Clock): every physics step.
+    `joint_states` (sensor_msgs/JointState, at `joint_states_rate`): encoder wheel angles (rad, quantised
+        to ticks) and wheel speeds (rad/s) of `wheel_left`, `wheel_right`.
+    `scan` (sensor_msgs/LaserScan, frame `base_scan`, sensor-data QoS like the real LDS-01, at
+        `scan_rate`): every beam is cast from the pose at the stamp, so `time_increment` is 0.
+    `fake_sensor` (visualization_msgs/MarkerArray, frame `base_footprint`, at `fake_sensor_rate`): one
+        CYLINDER per landmark within `max_range` (id = obstacle index, noisy centre, diameter as scale,
+        ADD) and a DELETE for each landmark out of range.
+    `~/ground_truth` (nav_msgs/Odometry, `nusim/world` -> `nusim/base_footprint`, true pose and body
+        twist) and `~/path` (nav_msgs/Path, decimated by `PathTrailConfig`), with the same stamps as
+        `joint_states`; `/tf` `nusim/world` -> `nusim/base_footprint` where tf2_msgs is installed.
+    `~/obstacles`, `~/walls` (visualization_msgs/MarkerArray, frame `nusim/world`, transient local, red).
+Services
+    `~/reset` (std_srvs/Empty): back to (x0, y0, theta0), at rest; the encoders keep their count and time
+        runs on (nodes on /clock never see time jump back, odometry sees no wheel motion).
+Parameters
+    `NusimTiming` (rate, realtime_factor, joint_states_rate, scan_rate, fake_sensor_rate), `ArenaConfig`
+    (x0, y0, theta0, arena_x_length, arena_y_length), `Obstacles` (obstacles.x, obstacles.y, obstacles.r),
+    `NoiseConfig` (input_noise, slip_fraction, basic_sensor_variance, max_range, seed), `LidarConfig`
+    (lidar.*), `RobotParams` (the Burger's constants by default), `WheelJoints` (wheel_left, wheel_right),
+    `PathTrailConfig` (path_*). The defaults are the default world of config/basic_world.yaml. Invalid
+    values stop the node at start-up with a message (exit code 1).
+
+Time: a wall-clock (steady) timer ticks at `rate * realtime_factor` Hz and each tick advances simulation
+time by `1 / rate` s, so the node needs no `use_sim_time` itself; every other node runs on its /clock.
+A stream of `f` Hz is published after step k when ``floor(k f / rate)`` increases.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass
+
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
+from nav_msgs.msg import Odometry, Path
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
+from rosgraph_msgs.msg import Clock as ClockMsg
+from sensor_msgs.msg import JointState, LaserScan
+from std_srvs.srv import Empty
+from turtlelib.scan_model import LidarConfig
+from visualization_msgs.msg import Marker, MarkerArray
+
+from nuturtle_control.path_trail import PathTrail, PathTrailConfig
+from nuturtle_control.wheel_joints import WheelJoints, wheel_values
+from nuturtle_description.conversions import (
+    pose_from_transform,
+    stamp_from_seconds,
+    transform_from_pose,
+    transform_stamped,
+)
+from nuturtle_description.node_main import run_node
+from nuturtle_description.robot_params import RobotParams, burger_params
+from nuturtle_description.ros_params import declare_dataclass
+from nuturtle_description.tf_compat import OptionalTfBroadcaster
+
+from .simulation import (
+    ArenaConfig,
+    NoiseConfig,
+    Obstacles,
+    Simulation,
+    SimulationConfig,
+    default_lidar,
+)
+
+WORLD_FRAME = "nusim/world"
+TRUE_BODY_FRAME = "nusim/base_footprint"
+BODY_FRAME = "base_footprint"
+SCAN_FRAME = "base_scan"
+# Drawn height of cylinders and walls, and wall thickness (m): display only.
+MARKER_HEIGHT_M = 0.25
+WALL_THICKNESS_M = 0.1
+RED = (1.0, 0.0, 0.0, 1.0)
+YELLOW = (1.0, 0.85, 0.0, 1.0)
+# Minimum time between two warnings from the same place (s)
+WARN_THROTTLE_S = 2.0
+
+
+@dataclass(frozen=True)
+class NusimTiming:
+    """Physics rate and publishing rates (Hz, finite, > 0; no stream faster than `rate`), and the
+    `realtime_factor` (> 0) of simulation time over wall time."""
+
+    rate: float = 100.0
+    realtime_factor: float = 1.0
+    joint_states_rate: float = 20.0
+    scan_rate: float = 5.0
+    fake_sensor_rate: float = 5.0
+
+    def __post_init__(self) -> None:
+        for name in ("rate", "realtime_factor", "joint_states_rate", "scan_rate", "fake_sensor_rate"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f"{name} must be finite and > 0, got {value!r}")
+        for name in ("joint_states_rate", "scan_rate", "fake_sensor_rate"):
+            if getattr(self, name) > self.rate:
+                raise ValueError(
+                    f"{name} ({getattr(self, name)} Hz) cannot exceed the physics rate ({self.rate} Hz)"
+                )
+
+    def due(self, step: int, stream_hz: float) -> bool:
+        """Whether a stream of `stream_hz` publishes after physics step `step` (>= 1)."""
+        # floor(k f / rate) > floor((k - 1) f / rate)
+        return math.floor(step * stream_hz / self.rate) > math.floor((step - 1) * stream_hz / self.rate)
+
+
+def _color(marker: Marker, rgba: tuple[float, float, float, float]) -> None:
+    marker.color.r, marker.color.g, marker.color.b, marker.color.a = rgba
+
+
+def cylinder_marker(
+    frame_id: str, stamp: Time, ns: str, marker_id: int, x: float, y: float, radius_m: float, rgba
+) -> Marker:
+    """A CYLINDER (action ADD) of diameter 2 radius_m standing on the floor at (x, y)."""
+    marker = Marker(ns=ns, id=marker_id, type=Marker.CYLINDER, action=Marker.ADD)
+    marker.header.frame_id = frame_id
+    marker.header.stamp = stamp
+    marker.pose.position.x = x
+    marker.pose.position.y = y
+    marker.pose.position.z = 0.5 * MARKER_HEIGHT_M
+    marker.pose.orientation.w = 1.0
+    marker.scale.x = marker.scale.y = 2.0 * radius_m
+    marker.scale.z = MARKER_HEIGHT_M
+    _color(marker, rgba)
+    return marker
+
+
+def wall_markers(arena: ArenaConfig, stamp: Time) -> MarkerArray:
+    """Four CUBEs of WALL_THICKNESS_M just outside the arena's inner faces (frame nusim/world)."""
+    hx, hy = arena.half_extents_m
+    t = WALL_THICKNESS_M
+    # (centre x, centre y, length along x, length along y): bottom, right, top, left
+    walls = [
+        (0.0, -hy - t / 2, 2 * hx + 2 * t, t),
+        (hx + t / 2, 0.0, t, 2 * hy + 2 * t),
+        (0.0, hy + t / 2, 2 * hx + 2 * t, t),
+        (-hx - t / 2, 0.0, t, 2 * hy + 2 * t),
+    ]
+    markers = []
+    for index, (x, y, length_x, length_y) in enumerate(walls):
+        marker = Marker(ns="walls", id=index, type=Marker.CUBE, action=Marker.ADD)
+        marker.header.frame_id = WORLD_FRAME
+        marker.header.stamp = stamp
+        marker.pose.position.x = float(x)
+        marker.pose.position.y = float(y)
+        marker.pose.position.z = 0.5 * MARKER_HEIGHT_M
+        marker.pose.orientation.w = 1.0
+        marker.scale.x, marker.scale.y, marker.scale.z = float(length_x), float(length_y), MARKER_HEIGHT_M
+        _color(marker, RED)
+        markers.append(marker)
+    return MarkerArray(markers=markers)
+
+
+class NusimNode(Node):
+    def __init__(self, **kwargs) -> None:
+        super().__init__("nusim", **kwargs)
+        self.timing = declare_dataclass(self, NusimTiming)
+        config = SimulationConfig(
+            arena=declare_dataclass(self, ArenaConfig),
+            obstacles=declare_dataclass(self, Obstacles, prefix="obstacles."),
+            robot=declare_dataclass(self, RobotParams, overrides=vars(burger_params())),
+            noise=declare_dataclass(self, NoiseConfig),
+            lidar=declare_dataclass(self, LidarConfig, prefix="lidar.", overrides=vars(default_lidar())),
+        )
+        self.joints = declare_dataclass(self, WheelJoints)
+        self.trail: PathTrail[PoseStamped] = PathTrail(declare_dataclass(self, PathTrailConfig))
+        self.simulation = Simulation(config)
+        self.step_count = 0
+
+        self._clock_publisher = self.create_publisher(ClockMsg, "/clock", 10)
+        self._joint_states_publisher = self.create_publisher(JointState, "joint_states", 10)
+        self._scan_publisher = self.create_publisher(LaserScan, "scan", qos_profile_sensor_data)
+        self._fake_sensor_publisher = self.create_publisher(MarkerArray, "fake_sensor", 10)
+        self._ground_truth_publisher = self.create_publisher(Odometry, "~/ground_truth", 10)
+        self._path_publisher = self.create_publisher(Path, "~/path", 10)
+        latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        obstacles_publisher = self.create_publisher(MarkerArray, "~/obstacles", latched)
+        walls_publisher = self.create_publisher(MarkerArray, "~/walls", latched)
+        self._tf = OptionalTfBroadcaster(self)
+        self.create_subscription(JointState, "wheel_cmd", self._on_wheel_cmd, 10)
+        self.create_subscription(PoseWithCovarianceStamped, "~/teleport", self._on_teleport, 10)
+        self.create_service(Empty, "~/reset", self._on_reset)
+
+        start = self.sim_stamp()
+        self._clock_publisher.publish(ClockMsg(clock=start))
+        obstacles_publisher.publish(self._obstacle_markers(start))
+        walls_publisher.publish(wall_markers(config.arena, start))
+        # a steady (wall) clock, never the ROS clock: this node is what drives /clock
+        self.create_timer(
+            1.0 / (self.timing.rate * self.timing.realtime_factor),
+            self._on_tick,
+            clock=Clock(clock_type=ClockType.STEADY_TIME),
+        )
+
+    def sim_stamp(self) -> Time:
+        """Simulation time ``step_count / rate`` (s) as a stamp."""
+        return stamp_from_seconds(self.step_count / self.timing.rate)
+
+    # --- inputs ------------------------------------------------------------------------------------------
+
+    def _on_wheel_cmd(self, msg: JointState) -> None:
+        try:
+            left_rad_s, right_rad_s = wheel_values(self.joints, msg.name, msg.velocity)
+        except ValueError as error:
+            self.get_logger().warning(f"wheel_cmd skipped: {error}", throttle_duration_sec=WARN_THROTTLE_S)
+            return
+        self.simulation.command_wheels(left_rad_s, right_rad_s)
+
+    def _on_teleport(self, msg: PoseWithCovarianceStamped) -> None:
+        frame_id = msg.header.frame_id
+        try:
+            if frame_id not in ("", WORLD_FRAME):
+                raise ValueError(f"the pose is in frame {frame_id!r}, not {WORLD_FRAME!r}")
+            self.simulation.teleport(transform_from_pose(msg.pose.pose))
+        except ValueError as error:
+            self.get_logger().warning(f"teleport refused: {error}", throttle_duration_sec=WARN_THROTTLE_S)
+            return
+        self.trail.clear()
+        T = self.simulation.T_world_body
+        self.get_logger().info(f"teleported to x = {T.x:.3f} m, y = {T.y:.3f} m, theta = {T.theta:.3f} rad")
+
+    def _on_reset(self, request: Empty.Request, response: Empty.Response) -> Empty.Response:
+        self.simulation.reset()
+        self.trail.clear()
+        self.get_logger().info("reset to the start pose")
+        return response
+
+    # --- physics and outputs -----------------------------------------------------------------------------
+
+    def _on_tick(self) -> None:
+        self.simulation.step(1.0 / self.timing.rate)
+        self.step_count += 1
+        stamp = self.sim_stamp()
+        self._clock_publisher.publish(ClockMsg(clock=stamp))
+        if self.timing.due(self.step_count, self.timing.joint_states_rate):
+            self._publish_joint_states(stamp)
+            self._publish_ground_truth(stamp)
+        if self.timing.due(self.step_count, self.timing.scan_rate):
+            self._publish_scan(stamp)
+        if self.timing.due(self.step_count, self.timing.fake_sensor_rate):
+            self._publish_fake_sensor(stamp)
+
+    def _publish_joint_states(self, stamp: Time) -> None:
+        msg = JointState(
+            name=self.joints.names,
+            position=self.simulation.wheel_angles_rad.tolist(),
+            velocity=self.simulation.wheel_speed_rad_s.tolist(),
+        )
+        msg.header.stamp = stamp
+        self._joint_states_publisher.publish(msg)
+
+    def _publish_ground_truth(self, stamp: Time) -> None:
+        T_world_body = self.simulation.T_world_body
+        omega, vx, vy = self.simulation.V_body
+        odom = Odometry(child_frame_id=TRUE_BODY_FRAME)
+        odom.header.stamp = stamp
+        odom.header.frame_id = WORLD_FRAME
+        odom.pose.pose = pose_from_transform(T_world_body)
+        odom.twist.twist.linear.x = float(vx)
+        odom.twist.twist.linear.y = float(vy)
+        odom.twist.twist.angular.z = float(omega)
+        self._ground_truth_publisher.publish(odom)
+        self._tf.send(transform_stamped(T_world_body, WORLD_FRAME, TRUE_BODY_FRAME, stamp))
+        if self.trail.offer(T_world_body, PoseStamped(header=odom.header, pose=odom.pose.pose)):
+            self._path_publisher.publish(Path(header=odom.header, poses=list(self.trail.items)))
+
+    def _publish_scan(self, stamp: Time) -> None:
+        lidar = self.simulation.config.lidar
+        msg = LaserScan(
+            angle_min=lidar.angle_min,
+            angle_max=lidar.angle_min + (lidar.samples - 1) * lidar.angle_increment,
+            angle_increment=lidar.angle_increment,
+            time_increment=0.0,
+            scan_time=1.0 / self.timing.scan_rate,
+            range_min=lidar.range_min,
+            range_max=lidar.range_max,
+            ranges=self.simulation.scan().tolist(),
+        )
+        msg.header.stamp = stamp
+        msg.header.frame_id = SCAN_FRAME
+        self._scan_publisher.publish(msg)
+
+    def _publish_fake_sensor(self, stamp: Time) -> None:
+        readings = self.simulation.sense_landmarks()
+        radii_m = self.simulation.circles[:, 2]
+        markers = [
+            cylinder_marker(
+                BODY_FRAME, stamp, "fake_sensor", int(j), float(x), float(y), float(radii_m[j]), YELLOW
+            )
+            for j, (x, y) in zip(readings.ids, readings.p_body)
+        ]
+        for j in sorted(set(range(radii_m.size)) - set(readings.ids.tolist())):
+            marker = Marker(ns="fake_sensor", id=j, action=Marker.DELETE)
+            marker.header.frame_id = BODY_FRAME
+            marker.header.stamp = stamp
+            markers.append(marker)
+        self._fake_sensor_publisher.publish(MarkerArray(markers=markers))
+
+    def _obstacle_markers(self, stamp: Time) -> MarkerArray:
+        return MarkerArray(
+            markers=[
+                cylinder_marker(WORLD_FRAME, stamp, "obstacles", j, float(x), float(y), float(r), RED)
+                for j, (x, y, r) in enumerate(self.simulation.circles)
+            ]
+        )
+
+
+def main(args: list[str] | None = None) -> None:
+    sys.exit(run_node(lambda: NusimNode(), "nusim", args))
+
+
+if __name__ == "__main__":
+    main()

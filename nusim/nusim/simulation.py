@@ -1,0 +1,400 @@
+"""The simulated TurtleBot3 Burger in an arena of cylinders: pure Python/numpy, no ROS.
+
+World (frame ``world``, m, rad)
+-------------------------------
+A rectangular arena ``|x| <= arena_x_length / 2``, ``|y| <= arena_y_length / 2`` (the inner faces of its
+walls), cylinders ``j`` at ``c_j = (obstacles.x[j], obstacles.y[j])`` of radius ``obstacles.r[j]``, and the
+robot, a disc of ``collision_radius`` ``R`` centred on ``base_footprint`` with true pose ``T_world_body``
+(starting at ``(x0, y0, theta0)``). The robot's centre ``p`` is *free* when
+``|p - c_j| >= R + r_j`` for every cylinder and ``|p_x| <= hx - R``, ``|p_y| <= hy - R`` (walls).
+
+Motors (per wheel ``i`` in (left, right), per physics step of ``dt`` s)
+---------------------------------------------------------------------
+* command: ``u_i = clip(round(w_i * motor_cmd_per_rad_sec), -motor_cmd_max, motor_cmd_max)`` motor
+  units (mcu), the wheel speed the motor holds is ``w_i' = u_i / motor_cmd_per_rad_sec`` (rad/s);
+* wheel-speed noise (only on a turning wheel: a stopped motor holds still):
+  ``w_i'' = w_i' + n_i``, ``n_i ~ N(0, input_noise^2)`` drawn each step;
+* the encoder counts the noisy commanded rotation ``phi_i += w_i'' dt`` and reads
+  ``ticks_i = round(phi_i * encoder_ticks_per_rad)``;
+* slip: the wheel's contact with the floor moves ``dphi_i = w_i'' dt (1 + s_i)``,
+  ``s_i ~ U(-slip_fraction, slip_fraction)``, and the body follows the exact diff-drive arc
+  ``T' = T @ exp([F dphi])`` (``turtlelib.DiffDrive.step``).
+
+Collisions (stop at contact)
+----------------------------
+The body's translation over a step runs along the chord from ``p`` to the arc's end ``p'``
+(the arc's sagitta over one step is below a micrometre at the Burger's speeds). It is cut at the first
+contact, the smallest ``s`` in [0, 1] with ``p + s (p' - p)`` on the boundary of the free space; the heading
+still turns. So a robot pushing against a cylinder or a wall stays touching it while its wheels keep
+turning (and its encoders keep counting, as on the real robot), and it never passes through anything.
+
+Sensors
+-------
+* LiDAR: ``turtlelib.scan_model.simulate_scan`` from ``T_world_scan = T_world_body @ T_body_scan``
+  (the LDS-01 at x = ``LIDAR_X`` m in base_footprint) against the cylinders and the walls.
+* Fake landmark sensor: every cylinder with ``|p_body_j| <= max_range``, where
+  ``p_body_j = T_world_body^-1 @ c_j``, reads ``p_body_j + e``, ``e ~ N(0, basic_sensor_variance I_2)``.
+
+Randomness: one ``numpy.random.SeedSequence(seed)`` spawns four independent streams (wheel noise, slip,
+LiDAR, landmark sensor), so the same seed and the same commands reproduce the same run, and changing
+how often one sensor is read does not change another's noise.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+from turtlelib import DiffDrive, Transform2D
+from turtlelib.scan_model import LidarConfig, arena_walls, simulate_scan
+
+from nuturtle_description.robot_params import RobotParams
+from nuturtle_description.urdf import LIDAR_X
+
+# Pose of the LiDAR (base_scan) in base_footprint: x = LIDAR_X m behind the wheel axle, facing forward.
+T_BODY_SCAN = Transform2D(LIDAR_X, 0.0, 0.0)
+
+# The default world: eight cylinders of the course's radius, 0.75 to 1.85 m from the centre. On any circle
+# of radius 0.5 to 1.0 m through the origin (centre (0, +-radius)) the robot's disc (0.11 m) clears every
+# cylinder by at least 0.1 m, and sees some of them within the fake sensor's 2 m.
+DEFAULT_OBSTACLE_R_M = 0.038
+DEFAULT_OBSTACLES_X = (1.4, -1.4, 1.3, -1.3, 0.0, 0.0, 1.2, -1.2)
+DEFAULT_OBSTACLES_Y = (0.3, -0.3, -1.2, 1.2, 0.75, -0.75, 1.4, -1.4)
+
+
+def _finite(name: str, value: object) -> float:
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
+        raise ValueError(f"{name} must be a finite number, got {value!r}")
+    return float(value)
+
+
+def _positive(name: str, value: object) -> float:
+    value = _finite(name, value)
+    if value <= 0.0:
+        raise ValueError(f"{name} must be > 0, got {value!r}")
+    return value
+
+
+def _non_negative(name: str, value: object) -> float:
+    value = _finite(name, value)
+    if value < 0.0:
+        raise ValueError(f"{name} must be >= 0, got {value!r}")
+    return value
+
+
+@dataclass(frozen=True)
+class ArenaConfig:
+    """The arena's size (m, > 0) and the robot's start pose ``(x0, y0)`` (m), ``theta0`` (rad)."""
+
+    x0: float = 0.0
+    y0: float = 0.0
+    theta0: float = 0.0
+    arena_x_length: float = 5.0
+    arena_y_length: float = 5.0
+
+    def __post_init__(self) -> None:
+        for name in ("x0", "y0", "theta0"):
+            object.__setattr__(self, name, _finite(name, getattr(self, name)))
+        for name in ("arena_x_length", "arena_y_length"):
+            object.__setattr__(self, name, _positive(name, getattr(self, name)))
+
+    @property
+    def T_world_start(self) -> Transform2D:
+        return Transform2D(self.x0, self.y0, self.theta0)
+
+    @property
+    def half_extents_m(self) -> NDArray[np.float64]:
+        """``[hx, hy] = [arena_x_length, arena_y_length] / 2``, shape (2,)."""
+        return 0.5 * np.array([self.arena_x_length, self.arena_y_length])
+
+
+@dataclass(frozen=True)
+class Obstacles:
+    """Cylinders ``j``: centre ``(x[j], y[j])`` (m, finite), radius ``r[j]`` (m, > 0); equal lengths.
+
+    ROS parameters ``obstacles.x``, ``obstacles.y``, ``obstacles.r``; any sequences become float tuples.
+    """
+
+    x: tuple[float, ...] = DEFAULT_OBSTACLES_X
+    y: tuple[float, ...] = DEFAULT_OBSTACLES_Y
+    r: tuple[float, ...] = (DEFAULT_OBSTACLE_R_M,) * len(DEFAULT_OBSTACLES_X)
+
+    def __post_init__(self) -> None:
+        for name in ("x", "y", "r"):
+            values = getattr(self, name)
+            if isinstance(values, (str, bytes)) or not isinstance(values, Sequence):
+                raise ValueError(f"obstacles.{name} must be a list of numbers, got {values!r}")
+            object.__setattr__(
+                self, name, tuple(_finite(f"obstacles.{name}[{j}]", v) for j, v in enumerate(values))
+            )
+        if not len(self.x) == len(self.y) == len(self.r):
+            raise ValueError(
+                "obstacles.x, obstacles.y and obstacles.r must have the same length, got "
+                f"{len(self.x)}, {len(self.y)} and {len(self.r)}"
+            )
+        for j, radius_m in enumerate(self.r):
+            if radius_m <= 0.0:
+                raise ValueError(f"obstacles.r[{j}] must be > 0, got {radius_m!r}")
+
+    def circles(self) -> NDArray[np.float64]:
+        """Rows ``[x, y, r]`` (m), shape (M, 3)."""
+        return np.array([self.x, self.y, self.r], dtype=np.float64).T.reshape(-1, 3)
+
+
+@dataclass(frozen=True)
+class NoiseConfig:
+    """Noise of the motors and the fake landmark sensor, its range, and the random seed.
+
+    ``input_noise`` (rad/s, >= 0): sigma of the wheel-speed noise; ``slip_fraction`` in [0, 1): bound of
+    the uniform slip; ``basic_sensor_variance`` (m^2, >= 0): per-axis variance of the landmark sensor;
+    ``max_range`` (m, > 0): its range; ``seed`` (int >= 0) seeds every noise stream.
+    """
+
+    input_noise: float = 0.01
+    slip_fraction: float = 0.01
+    basic_sensor_variance: float = 1e-4
+    max_range: float = 2.0
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        for name in ("input_noise", "basic_sensor_variance"):
+            object.__setattr__(self, name, _non_negative(name, getattr(self, name)))
+        slip = _non_negative("slip_fraction", self.slip_fraction)
+        if slip >= 1.0:
+            raise ValueError(f"slip_fraction must be < 1 (a wheel cannot slip backwards), got {slip!r}")
+        object.__setattr__(self, "slip_fraction", slip)
+        object.__setattr__(self, "max_range", _positive("max_range", self.max_range))
+        if isinstance(self.seed, bool) or not isinstance(self.seed, numbers.Integral) or self.seed < 0:
+            raise ValueError(f"seed must be an int >= 0, got {self.seed!r}")
+
+
+def default_lidar() -> LidarConfig:
+    """The LDS-01 (360 beams of 1 deg, 0.12 to 3.5 m) with the course's noise and 1 cm resolution."""
+    return LidarConfig(noise=0.01, resolution=0.01)
+
+
+@dataclass(frozen=True)
+class SimulationConfig:
+    """The whole simulated world; the defaults are the default world (config/basic_world.yaml).
+
+    Besides each part's own checks, every cylinder must lie inside the arena and the robot's collision
+    disc must start free (inside the walls, clear of every cylinder); ValueError otherwise.
+    """
+
+    arena: ArenaConfig = field(default_factory=ArenaConfig)
+    obstacles: Obstacles = field(default_factory=Obstacles)
+    robot: RobotParams = field(default_factory=RobotParams)
+    noise: NoiseConfig = field(default_factory=NoiseConfig)
+    lidar: LidarConfig = field(default_factory=default_lidar)
+
+    def __post_init__(self) -> None:
+        hx, hy = self.arena.half_extents_m
+        for j, (x, y, r) in enumerate(self.obstacles.circles()):
+            if abs(x) + r > hx or abs(y) + r > hy:
+                raise ValueError(
+                    f"obstacle {j} at ({x}, {y}) m with radius {r} m does not fit inside the "
+                    f"{self.arena.arena_x_length} m x {self.arena.arena_y_length} m arena"
+                )
+        collision = first_collision(
+            self.arena.T_world_start.translation, self.obstacles.circles(), self.arena.half_extents_m,
+            self.robot.collision_radius,
+        )
+        if collision is not None:
+            raise ValueError(
+                f"the robot's start (x0, y0) = ({self.arena.x0}, {self.arena.y0}) m with collision_radius "
+                f"{self.robot.collision_radius} m {collision}"
+            )
+
+
+def first_collision(
+    p_world: NDArray[np.float64],
+    circles: NDArray[np.float64],
+    half_extents_m: NDArray[np.float64],
+    radius_m: float,
+) -> str | None:
+    """Why a disc of ``radius_m`` centred at ``p_world`` is not free (see the module docstring), or None."""
+    hx, hy = half_extents_m
+    if abs(p_world[0]) > hx - radius_m or abs(p_world[1]) > hy - radius_m:
+        return f"is not inside the arena (walls at |x| = {hx} m, |y| = {hy} m)"
+    # |p - c_j| < R + r_j
+    overlapping = np.hypot(*(p_world - circles[:, :2]).T) < radius_m + circles[:, 2]
+    if np.any(overlapping):
+        j = int(np.argmax(overlapping))
+        return f"overlaps obstacle {j} at ({circles[j, 0]}, {circles[j, 1]}) m"
+    return None
+
+
+def contact_fraction(
+    p_world: NDArray[np.float64],
+    d_world: NDArray[np.float64],
+    circles: NDArray[np.float64],
+    half_extents_m: NDArray[np.float64],
+    radius_m: float,
+) -> float:
+    """The fraction ``s`` in [0, 1] of the move ``p -> p + d`` a disc of ``radius_m`` makes before contact.
+
+    Cylinder ``j`` (inflated to ``rho = radius_m + r_j``): with ``m = p - c_j``, contact where
+    ``|m + s d|^2 = rho^2``, i.e. ``a s^2 + 2 b s + q = 0`` with ``a = d.d``, ``b = m.d``,
+    ``q = |m|^2 - rho^2``; approaching (``b < 0``) and reaching it (``b^2 - a q >= 0``) the near root is
+    ``s = q / (-b + sqrt(b^2 - a q))`` (no cancellation), and ``s = 0`` if already touching (``q <= 0``).
+    Walls: ``p_k + s d_k = +-(h_k - radius_m)`` on the side ``d_k`` points to. A start slightly inside
+    (rounding at a previous contact) only blocks the motion that goes further in.
+    """
+    a = float(d_world @ d_world)
+    if a == 0.0:
+        return 1.0
+    fraction = 1.0
+    if circles.shape[0]:
+        m = p_world - circles[:, :2]
+        rho = radius_m + circles[:, 2]
+        b = m @ d_world
+        q = np.einsum("ji,ji->j", m, m) - rho * rho
+        disc = b * b - a * q
+        reaches = (b < 0.0) & (disc >= 0.0)
+        if np.any(reaches):
+            # s = q / (-b + sqrt(b^2 - a q)), clamped at 0 when touching
+            s = np.maximum(q[reaches], 0.0) / (-b[reaches] + np.sqrt(disc[reaches]))
+            fraction = min(fraction, float(np.min(s)))
+    for k in range(2):
+        limit_m = half_extents_m[k] - radius_m
+        if d_world[k] > 0.0:
+            fraction = min(fraction, max((limit_m - p_world[k]) / d_world[k], 0.0))
+        elif d_world[k] < 0.0:
+            fraction = min(fraction, max((-limit_m - p_world[k]) / d_world[k], 0.0))
+    return fraction
+
+
+@dataclass(frozen=True)
+class LandmarkReadings:
+    """The fake sensor's output: ``ids`` (K,) indices of the cylinders within max_range, and ``p_body``
+    (K, 2) their noisy centres (m) in base_footprint, row k for cylinder ``ids[k]``."""
+
+    ids: NDArray[np.intp]
+    p_body: NDArray[np.float64]
+
+
+class Simulation:
+    """The true state of the simulated Burger and its sensors (see the module docstring for the models).
+
+    State: ``T_world_body`` (true pose), the motor commands ``motor_cmd`` (left, right; mcu), the encoder
+    angles (rad, continuous, before quantisation) and the last step's wheel speeds and body twist.
+    """
+
+    def __init__(self, config: SimulationConfig) -> None:
+        self.config = config
+        self.drive: DiffDrive = config.robot.diff_drive()
+        self.circles = config.obstacles.circles()
+        self.walls = arena_walls(config.arena.arena_x_length, config.arena.arena_y_length)
+        wheel_seq, slip_seq, lidar_seq, landmark_seq = np.random.SeedSequence(config.noise.seed).spawn(4)
+        self._wheel_rng = np.random.default_rng(wheel_seq)
+        self._slip_rng = np.random.default_rng(slip_seq)
+        self._lidar_rng = np.random.default_rng(lidar_seq)
+        self._landmark_rng = np.random.default_rng(landmark_seq)
+        self.T_world_body = config.arena.T_world_start
+        self.motor_cmd = np.zeros(2, dtype=np.int64)
+        self._encoder_rad = np.zeros(2)
+        self.wheel_speed_rad_s = np.zeros(2)
+        self.V_body = np.zeros(3)
+
+    # --- motors ------------------------------------------------------------------------------------------
+
+    def command_wheels(self, left_rad_s: float, right_rad_s: float) -> NDArray[np.int64]:
+        """Set the wheel speeds (rad/s) as the motors take them; returns the motor commands (mcu).
+
+        ``u = clip(round(w * motor_cmd_per_rad_sec), -motor_cmd_max, motor_cmd_max)`` (clipped before
+        rounding, so huge finite speeds saturate). ValueError for non-finite speeds.
+        """
+        w = np.array([left_rad_s, right_rad_s], dtype=np.float64)
+        if not np.all(np.isfinite(w)):
+            raise ValueError(f"wheel speeds must be finite, got ({left_rad_s!r}, {right_rad_s!r})")
+        robot = self.config.robot
+        with np.errstate(over="ignore"):
+            u = np.clip(w * robot.motor_cmd_per_rad_sec, -robot.motor_cmd_max, robot.motor_cmd_max)
+        self.motor_cmd = np.round(u).astype(np.int64)
+        return self.motor_cmd.copy()
+
+    @property
+    def commanded_speed_rad_s(self) -> NDArray[np.float64]:
+        """``w' = u / motor_cmd_per_rad_sec`` (rad/s), shape (2,)."""
+        return self.motor_cmd / self.config.robot.motor_cmd_per_rad_sec
+
+    # --- physics -----------------------------------------------------------------------------------------
+
+    def step(self, dt_s: float) -> None:
+        """Advance the world by ``dt_s`` s (> 0): wheel noise, encoders, slip, arc motion, collisions."""
+        dt_s = _positive("dt_s", dt_s)
+        noise = self.config.noise
+        w = self.commanded_speed_rad_s
+        # w'' = w' + n,  n ~ N(0, input_noise^2), on turning wheels only
+        n = self._wheel_rng.normal(0.0, noise.input_noise, size=2)
+        w_noisy = np.where(w != 0.0, w + n, 0.0)
+        # phi += w'' dt  (what the encoders count)
+        self._encoder_rad = self._encoder_rad + w_noisy * dt_s
+        self.wheel_speed_rad_s = w_noisy
+        # dphi = w'' dt (1 + s),  s ~ U(-slip, slip)
+        slip = self._slip_rng.uniform(-noise.slip_fraction, noise.slip_fraction, size=2)
+        dphi = w_noisy * dt_s * (1.0 + slip)
+        T_start = self.T_world_body
+        # T' = T @ exp([F dphi])
+        T_end = self.drive.step(T_start, dphi[0], dphi[1])
+        d_world = T_end.translation - T_start.translation
+        s = contact_fraction(
+            T_start.translation, d_world, self.circles, self.config.arena.half_extents_m,
+            self.config.robot.collision_radius,
+        )
+        if s < 1.0:
+            p_world = T_start.translation + s * d_world
+            T_end = Transform2D(p_world[0], p_world[1], T_end.theta)
+        self.T_world_body = T_end
+        # V_b = log(T^-1 T') / dt
+        self.V_body = (T_start.inverse() @ T_end).log().as_array() / dt_s
+
+    @property
+    def encoder_ticks(self) -> NDArray[np.int64]:
+        """``ticks = round(phi * encoder_ticks_per_rad)``, (left, right), shape (2,)."""
+        return np.round(self._encoder_rad * self.config.robot.encoder_ticks_per_rad).astype(np.int64)
+
+    @property
+    def wheel_angles_rad(self) -> NDArray[np.float64]:
+        """The encoder reading as a wheel angle: ``ticks / encoder_ticks_per_rad`` (rad), shape (2,)."""
+        return self.encoder_ticks / self.config.robot.encoder_ticks_per_rad
+
+    def teleport(self, T_world_body: Transform2D) -> None:
+        """Put the robot at ``T_world_body`` (the encoders keep their count); ValueError if not free."""
+        collision = first_collision(
+            T_world_body.translation, self.circles, self.config.arena.half_extents_m,
+            self.config.robot.collision_radius,
+        )
+        if collision is not None:
+            raise ValueError(
+                f"cannot teleport to ({T_world_body.x}, {T_world_body.y}) m: the robot {collision}"
+            )
+        self.T_world_body = T_world_body
+        self.V_body = np.zeros(3)
+
+    def reset(self) -> None:
+        """Back to the start pose, at rest (motor commands zero); the encoders keep their count."""
+        self.teleport(self.config.arena.T_world_start)
+        self.motor_cmd = np.zeros(2, dtype=np.int64)
+        self.wheel_speed_rad_s = np.zeros(2)
+
+    # --- sensors -----------------------------------------------------------------------------------------
+
+    def scan(self) -> NDArray[np.float64]:
+        """LiDAR ranges (m), shape (lidar.samples,), 0.0 for no return, from the true pose."""
+        T_world_scan = self.T_world_body @ T_BODY_SCAN
+        return simulate_scan(T_world_scan, self.circles, self.walls, self.config.lidar, self._lidar_rng)
+
+    def sense_landmarks(self) -> LandmarkReadings:
+        """The cylinders within max_range of base_footprint and their noisy body-frame centres."""
+        # p_body_j = T_world_body^-1 @ c_j
+        p_body = self.T_world_body.inverse() @ self.circles[:, :2]
+        sigma_m = math.sqrt(self.config.noise.basic_sensor_variance)
+        # one draw per cylinder every time, so the stream does not depend on what is in range
+        e = self._landmark_rng.normal(0.0, sigma_m, size=p_body.shape)
+        in_range = np.hypot(p_body[:, 0], p_body[:, 1]) <= self.config.noise.max_range
+        return LandmarkReadings(np.flatnonzero(in_range), p_body[in_range] + e[in_range])

@@ -1,0 +1,417 @@
+"""nusim.simulation (no ROS): motor quantisation, exact kinematics, noise and slip statistics, encoders,
+collisions (stop at contact), the LiDAR and fake landmark sensor, seeding and validation.
+
+Hand-computed numbers: the Burger (r = 0.033 m, d = 0.16 m, 1 mcu = 1 / 41.6666667 rad/s, 4096 ticks
+per turn, collision radius R = 0.11 m) and the LDS-01 mounted at x = -0.032 m in base_footprint.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from turtlelib import Transform2D
+from turtlelib.scan_model import LidarConfig
+
+from nuturtle_description.robot_params import RobotParams
+from nusim.simulation import (
+    ArenaConfig,
+    NoiseConfig,
+    Obstacles,
+    Simulation,
+    SimulationConfig,
+    contact_fraction,
+    first_collision,
+)
+
+R_WHEEL = 0.033
+TRACK = 0.16
+MCU_PER_RAD_S = 1.0 / 0.024
+TICKS_PER_RAD = 4096.0 / (2.0 * math.pi)
+R_ROBOT = 0.11
+LIDAR_X = -0.032
+DT = 0.01
+QUIET = NoiseConfig(input_noise=0.0, slip_fraction=0.0, basic_sensor_variance=0.0)
+EXACT_LIDAR = LidarConfig(noise=0.0, resolution=0.0)
+
+
+def world(
+    obstacles=((), (), ()), arena=(4.0, 3.0), start=(0.0, 0.0, 0.0), noise=QUIET, lidar=EXACT_LIDAR
+) -> Simulation:
+    x0, y0, theta0 = start
+    return Simulation(
+        SimulationConfig(
+            arena=ArenaConfig(x0, y0, theta0, *arena),
+            obstacles=Obstacles(*obstacles),
+            robot=RobotParams(),
+            noise=noise,
+            lidar=lidar,
+        )
+    )
+
+
+def run(sim: Simulation, steps: int, dt_s: float = DT) -> list[Transform2D]:
+    poses = []
+    for _ in range(steps):
+        sim.step(dt_s)
+        poses.append(sim.T_world_body)
+    return poses
+
+
+# --- motors ---------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("left", "right", "expected_mcu"),
+    [
+        (1.0, -1.0, (42, -42)),  # 41.67 rounds to 42 mcu
+        (0.011, -0.011, (0, 0)),  # below half a unit: the motor stops
+        (6.0, 7.0, (250, 265)),  # 291.7 clamps at motor_cmd_max
+        (-1e308, 1e308, (-265, 265)),  # overflowing products saturate too
+    ],
+)
+def test_wheel_commands_are_quantised_to_motor_units_and_clamped(left, right, expected_mcu):
+    sim = world()
+    assert tuple(sim.command_wheels(left, right)) == expected_mcu
+    np.testing.assert_allclose(sim.commanded_speed_rad_s, np.array(expected_mcu) * 0.024, rtol=1e-7)
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf])
+def test_non_finite_wheel_commands_raise_and_keep_the_previous_command(bad):
+    sim = world()
+    sim.command_wheels(1.0, 1.0)
+    with pytest.raises(ValueError, match="finite"):
+        sim.command_wheels(bad, 1.0)
+    assert tuple(sim.motor_cmd) == (42, 42)
+
+
+# --- exact kinematics and encoders ----------------------------------------------------------------------
+
+
+def test_straight_drive_moves_r_phi_and_encoders_count_phi_quantised_to_ticks():
+    sim = world()
+    sim.command_wheels(1.0, 1.0)  # 42 mcu = 1.008 rad/s
+    run(sim, 100)  # 1 s
+    phi_rad = 42 / MCU_PER_RAD_S * 1.0
+    np.testing.assert_allclose(sim.T_world_body.as_array(), [R_WHEEL * phi_rad, 0.0, 0.0], atol=1e-12)
+    assert tuple(sim.encoder_ticks) == (round(phi_rad * TICKS_PER_RAD),) * 2
+    np.testing.assert_allclose(sim.wheel_angles_rad, phi_rad, atol=0.5 / TICKS_PER_RAD)
+    np.testing.assert_allclose(sim.wheel_speed_rad_s, 42 / MCU_PER_RAD_S, rtol=1e-15)
+    np.testing.assert_allclose(sim.V_body, [0.0, R_WHEEL * phi_rad, 0.0], atol=1e-12)
+
+
+def test_constant_wheel_speeds_follow_the_one_exact_arc():
+    # 100 steps of a constant twist compose to the single arc exp(100 dt V_b)
+    sim = world(start=(0.2, -0.3, 0.4))
+    sim.command_wheels(-2.0, 5.0)
+    left_rad_s, right_rad_s = sim.commanded_speed_rad_s
+    run(sim, 100)
+    expected = sim.drive.step(Transform2D(0.2, -0.3, 0.4), left_rad_s * 1.0, right_rad_s * 1.0)
+    np.testing.assert_allclose(sim.T_world_body.as_array(), expected.as_array(), atol=1e-12)
+    # omega = r (w_r - w_l) / d,  vx = r (w_l + w_r) / 2
+    np.testing.assert_allclose(
+        sim.V_body,
+        [R_WHEEL * (right_rad_s - left_rad_s) / TRACK, R_WHEEL * (left_rad_s + right_rad_s) / 2, 0.0],
+        atol=1e-12,
+    )
+
+
+def test_a_stopped_robot_neither_moves_nor_gets_wheel_noise():
+    sim = world(noise=NoiseConfig(input_noise=1.0, slip_fraction=0.5))
+    run(sim, 200)
+    assert sim.T_world_body == Transform2D(0.0, 0.0, 0.0)
+    assert tuple(sim.encoder_ticks) == (0, 0)
+
+
+def test_slip_moves_the_body_while_the_encoders_count_the_commanded_rotation():
+    slip = 0.2
+    sim = world(noise=NoiseConfig(input_noise=0.0, slip_fraction=slip), arena=(100.0, 100.0))
+    sim.command_wheels(2.0, 2.0)
+    w_rad_s = sim.commanded_speed_rad_s[0]
+    steps = 3000
+    ratios = []
+    T_previous = sim.T_world_body
+    for _ in range(steps):
+        sim.step(DT)
+        # the wheel increments the body actually made: dphi = H(0) log(T_prev^-1 T)
+        omega, vx, vy = (T_previous.inverse() @ sim.T_world_body).log().as_array()
+        assert abs(vy) < 1e-12
+        dphi = np.array([vx - omega * TRACK / 2, vx + omega * TRACK / 2]) / R_WHEEL
+        ratios.append(dphi / (w_rad_s * DT))
+        T_previous = sim.T_world_body
+    ratios = np.array(ratios)
+    np.testing.assert_array_less(ratios, 1.0 + slip + 1e-9)
+    np.testing.assert_array_less(1.0 - slip - 1e-9, ratios)
+    # U(-s, s): mean 0, variance s^2 / 3; 5-sigma bounds on the sample mean and variance
+    np.testing.assert_allclose(ratios.mean(axis=0), 1.0, atol=5 * slip / math.sqrt(3 * steps))
+    np.testing.assert_allclose(ratios.var(axis=0), slip**2 / 3, rtol=5 * math.sqrt(0.8 / steps))
+    # the encoders saw the commanded rotation only
+    np.testing.assert_allclose(sim.wheel_angles_rad, w_rad_s * steps * DT, atol=0.5 / TICKS_PER_RAD)
+
+
+def test_wheel_speed_noise_has_the_configured_sigma_and_the_encoders_count_it():
+    sigma = 0.5
+    sim = world(noise=NoiseConfig(input_noise=sigma, slip_fraction=0.0), arena=(100.0, 100.0))
+    sim.command_wheels(3.0, -3.0)  # spin in place
+    w = sim.commanded_speed_rad_s
+    speeds = []
+    for _ in range(4000):
+        sim.step(DT)
+        speeds.append(sim.wheel_speed_rad_s)
+    n = np.array(speeds) - w
+    np.testing.assert_allclose(n.mean(axis=0), 0.0, atol=5 * sigma / math.sqrt(4000))
+    np.testing.assert_allclose(n.std(axis=0), sigma, rtol=5 / math.sqrt(2 * 4000))
+    # phi = sum of w'' dt
+    np.testing.assert_allclose(
+        sim.wheel_angles_rad, np.sum(speeds, axis=0) * DT, atol=0.5 / TICKS_PER_RAD + 1e-9
+    )
+
+
+# --- collisions -----------------------------------------------------------------------------------------
+
+
+def test_contact_fraction_hand_cases():
+    half = np.array([2.0, 2.0])
+    circle = np.array([[2.0, 0.0, 0.5]])
+    origin = np.zeros(2)
+    # inflated radius 1: contact at x = 1
+    assert contact_fraction(origin, np.array([2.0, 0.0]), circle, half, 0.5) == pytest.approx(0.5, abs=1e-15)
+    assert contact_fraction(origin, np.array([0.5, 0.0]), circle, half, 0.5) == 1.0
+    # touching and moving away (or along the tangent) is free; moving in is blocked at once
+    touching = np.array([1.0, 0.0])
+    assert contact_fraction(touching, np.array([-0.3, 0.0]), circle, half, 0.5) == 1.0
+    assert contact_fraction(touching, np.array([0.0, 0.3]), circle, half, 0.5) == 1.0
+    assert contact_fraction(touching, np.array([0.3, 0.1]), circle, half, 0.5) == 0.0
+    # a 60 deg oblique approach: first contact where |p + s d - c| = 1
+    d = np.array([4.0, 0.0])
+    start = np.array([-1.0, math.sqrt(3) / 2])
+    s = contact_fraction(start, d, circle, np.array([9.0, 9.0]), 0.5)
+    assert np.hypot(*(start + s * d - circle[0, :2])) == pytest.approx(1.0, abs=1e-12)
+    assert start[0] + s * d[0] == pytest.approx(1.5, abs=1e-12)
+    # walls at |x| = 2 - 0.5 for the centre
+    no_circles = np.empty((0, 3))
+    assert contact_fraction(origin, np.array([3.0, 0.0]), no_circles, half, 0.5) == pytest.approx(0.5)
+    assert contact_fraction(origin, np.array([-1.0, -6.0]), no_circles, half, 0.5) == pytest.approx(0.25)
+
+
+def test_driving_into_a_cylinder_stops_at_contact_and_the_wheels_keep_turning():
+    sim = world(obstacles=((1.0,), (0.0,), (0.05,)))
+    sim.command_wheels(6.0, 6.0)  # 0.198 m/s
+    poses = run(sim, 800)
+    distance_m = np.array([np.hypot(T.x - 1.0, T.y) for T in poses])
+    assert distance_m.min() >= R_ROBOT + 0.05 - 1e-12
+    np.testing.assert_allclose(distance_m[-1], R_ROBOT + 0.05, atol=1e-12)
+    np.testing.assert_allclose(sim.V_body, 0.0, atol=1e-12)
+    # the wheels turned 8 s at 6 rad/s although the body moved only 0.84 m
+    np.testing.assert_allclose(sim.wheel_angles_rad, 250 / MCU_PER_RAD_S * 8.0, atol=1e-3)
+    # backing off is free again
+    sim.command_wheels(-6.0, -6.0)
+    run(sim, 10)
+    assert sim.T_world_body.x < 1.0 - R_ROBOT - 0.05 - 0.01
+
+
+def test_driving_obliquely_into_a_wall_stops_at_the_wall():
+    sim = world(arena=(4.0, 2.0), start=(0.0, 0.0, math.pi / 4))
+    sim.command_wheels(6.0, 6.0)
+    run(sim, 1000)
+    # the first wall hit is y = 1: the centre stops R short of it, on the 45 deg line
+    np.testing.assert_allclose(
+        sim.T_world_body.as_array(), [1.0 - R_ROBOT, 1.0 - R_ROBOT, math.pi / 4], atol=1e-12
+    )
+
+
+def test_default_world_circles_are_collision_free_and_always_see_landmarks():
+    config = SimulationConfig()
+    circles = config.obstacles.circles()
+    for radius_m in (0.5, 0.75, 1.0):
+        for side in (1.0, -1.0):
+            for angle in np.linspace(0.0, 2.0 * math.pi, 90):
+                # a circle through the origin, centre (0, side * radius)
+                p = np.array([radius_m * math.sin(angle), side * radius_m * (1.0 - math.cos(angle))])
+                assert first_collision(p, circles, config.arena.half_extents_m, R_ROBOT) is None
+                in_range = np.hypot(*(circles[:, :2] - p).T) <= config.noise.max_range
+                assert in_range.sum() >= 3
+
+
+crowded = (
+    (0.0, 0.5, -0.6, 0.7, -0.3, 0.3),
+    (0.5, 0.0, 0.2, -0.6, -0.5, 0.9),
+    (0.05, 0.01, 0.1, 0.038, 0.2, 0.05),
+)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    start=st.tuples(st.floats(-1.2, 1.2), st.floats(-1.2, 1.2), st.floats(-math.pi, math.pi)),
+    commands=st.lists(st.tuples(st.floats(-7.0, 7.0), st.floats(-7.0, 7.0)), min_size=1, max_size=6),
+    dt_s=st.sampled_from([0.01, 0.2, 2.0]),
+    seed=st.integers(0, 2**32),
+)
+def test_the_robot_never_overlaps_or_passes_through_anything(start, commands, dt_s, seed):
+    circles = np.array(crowded).T
+    half = np.array([1.5, 1.5])
+    if first_collision(np.array(start[:2]), circles, half, R_ROBOT) is not None:
+        return
+    sim = world(
+        obstacles=crowded, arena=(3.0, 3.0), start=start,
+        noise=NoiseConfig(input_noise=0.5, slip_fraction=0.3, seed=seed),
+    )
+    p_previous = sim.T_world_body.translation
+    for left, right in commands:
+        sim.command_wheels(left, right)
+        for T in run(sim, 15, dt_s):
+            p = T.translation
+            assert first_collision(p, circles, half, R_ROBOT - 1e-9) is None
+            # nor does the straight move cross an (inflated) cylinder: the closest chord point is clear
+            d = p - p_previous
+            s = np.clip(((circles[:, :2] - p_previous) @ d) / max(d @ d, 1e-300), 0.0, 1.0)
+            closest = p_previous + s[:, None] * d
+            assert np.all(np.hypot(*(closest - circles[:, :2]).T) >= R_ROBOT + circles[:, 2] - 1e-9)
+            p_previous = p
+
+
+# --- sensors --------------------------------------------------------------------------------------------
+
+
+def test_scan_at_a_known_pose_matches_the_arena():
+    # arena 4 m x 3 m, a cylinder of radius 0.05 m at (1, 0); robot at the origin facing +x
+    sim = world(obstacles=((1.0,), (0.0,), (0.05,)))
+    ranges = sim.scan()
+    assert ranges.shape == (360,)
+    assert ranges[0] == pytest.approx(1.0 - 0.05 - LIDAR_X, abs=1e-12)  # cylinder dead ahead
+    assert ranges[180] == pytest.approx(2.0 + LIDAR_X, abs=1e-12)  # back wall at x = -2
+    assert ranges[90] == pytest.approx(1.5, abs=1e-12)  # left wall at y = 1.5
+    assert ranges[270] == pytest.approx(1.5, abs=1e-12)
+    # at (1, -1) facing +y: the sensor at (1, -1.032), the cylinder dead ahead, walls x = +-2, y = -1.5
+    sim.teleport(Transform2D(1.0, -1.0, math.pi / 2))
+    ranges = sim.scan()
+    assert ranges[0] == pytest.approx(1.0 - LIDAR_X - 0.05, abs=1e-12)
+    assert ranges[90] == pytest.approx(3.0, abs=1e-12)
+    assert ranges[180] == pytest.approx(1.5 - (1.0 - LIDAR_X), abs=1e-12)
+    assert ranges[270] == pytest.approx(1.0, abs=1e-12)
+    # beyond range_max 3.5 m nothing returns: corners of a large arena
+    far = world(arena=(8.0, 8.0))
+    assert far.scan()[45] == 0.0
+
+
+def test_scan_noise_and_resolution_quantise_ranges():
+    sim = world(obstacles=((1.0,), (0.0,), (0.05,)), lidar=LidarConfig(noise=0.01, resolution=0.01))
+    beams = np.array([sim.scan()[0] for _ in range(400)])
+    np.testing.assert_allclose(beams / 0.01, np.round(beams / 0.01), atol=1e-9)
+    assert beams.mean() == pytest.approx(0.982, abs=5 * 0.011 / math.sqrt(400))
+
+
+def test_fake_sensor_reports_only_landmarks_in_range_with_their_ids():
+    obstacles = ((0.5, 0.0, -3.0, 2.0), (0.0, 1.5, 0.0, 0.0), (0.05, 0.05, 0.05, 0.05))
+    sim = world(obstacles=obstacles, arena=(8.0, 8.0), start=(0.0, 0.0, math.pi / 2))
+    readings = sim.sense_landmarks()
+    # obstacle 3 sits exactly at max_range = 2 m: in range
+    assert readings.ids.tolist() == [0, 1, 3]
+    # in the body frame (facing +y): (0.5, 0) is to the right, (0, 1.5) ahead
+    np.testing.assert_allclose(readings.p_body, [[0.0, -0.5], [1.5, 0.0], [0.0, -2.0]], atol=5 * 0.01)
+
+
+def test_fake_sensor_noise_has_the_configured_variance():
+    variance = 4e-4
+    sim = world(
+        obstacles=((0.5,), (0.3,), (0.05,)),
+        noise=replace(QUIET, basic_sensor_variance=variance),
+        start=(0.0, 0.0, 1.0),
+    )
+    p_true = Transform2D(0.0, 0.0, 1.0).inverse() @ np.array([0.5, 0.3])
+    e = np.array([sim.sense_landmarks().p_body[0] for _ in range(4000)]) - p_true
+    np.testing.assert_allclose(e.mean(axis=0), 0.0, atol=5 * math.sqrt(variance / 4000))
+    np.testing.assert_allclose(e.var(axis=0), variance, rtol=5 * math.sqrt(2 / 4000))
+    assert abs(np.corrcoef(e.T)[0, 1]) < 5 / math.sqrt(4000)
+
+
+# --- seeding, teleport, reset ---------------------------------------------------------------------------
+
+
+def trace(seed: int) -> tuple[np.ndarray, ...]:
+    sim = Simulation(SimulationConfig(noise=NoiseConfig(input_noise=0.2, slip_fraction=0.1, seed=seed)))
+    poses, ticks, scans, landmarks = [], [], [], []
+    for k, (left, right) in enumerate([(3.0, 4.0), (5.0, 5.0), (-2.0, 2.0)] * 3):
+        sim.command_wheels(left, right)
+        poses += [T.as_array() for T in run(sim, 50)]
+        ticks.append(sim.encoder_ticks)
+        scans.append(sim.scan())
+        landmarks.append(sim.sense_landmarks().p_body)
+    return np.array(poses), np.array(ticks), np.array(scans), np.concatenate(landmarks)
+
+
+def test_the_same_seed_reproduces_the_run_and_another_seed_does_not():
+    first, again, other = trace(7), trace(7), trace(8)
+    for a, b in zip(first, again):
+        np.testing.assert_array_equal(a, b)
+    for a, c in zip(first, other):
+        assert not np.array_equal(a, c)
+
+
+def test_teleport_refuses_poses_in_collision_and_reset_returns_to_the_start():
+    sim = world(obstacles=((1.0,), (0.0,), (0.05,)), start=(-0.5, 0.2, 0.3))
+    with pytest.raises(ValueError, match="overlaps obstacle 0"):
+        sim.teleport(Transform2D(0.9, 0.1, 0.0))
+    with pytest.raises(ValueError, match="not inside the arena"):
+        sim.teleport(Transform2D(1.95, 0.0, 0.0))
+    assert sim.T_world_body == Transform2D(-0.5, 0.2, 0.3)
+    sim.teleport(Transform2D(0.0, -1.0, 2.0))
+    assert sim.T_world_body == Transform2D(0.0, -1.0, 2.0)
+    sim.command_wheels(3.0, 2.0)
+    run(sim, 50)
+    ticks = sim.encoder_ticks
+    sim.reset()
+    assert sim.T_world_body == Transform2D(-0.5, 0.2, 0.3)
+    assert tuple(sim.motor_cmd) == (0, 0)
+    np.testing.assert_array_equal(sim.encoder_ticks, ticks)
+
+
+# --- validation -----------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("build", "message"),
+    [
+        (lambda: ArenaConfig(arena_x_length=-1.0), "arena_x_length must be > 0"),
+        (lambda: ArenaConfig(arena_y_length=0.0), "arena_y_length must be > 0"),
+        (lambda: ArenaConfig(x0=math.nan), "x0 must be a finite number"),
+        (lambda: Obstacles((1.0, 2.0), (0.0,), (0.1, 0.1)), "same length, got 2, 1 and 2"),
+        (lambda: Obstacles((1.0,), (0.0,), (0.0,)), r"obstacles.r\[0\] must be > 0"),
+        (lambda: Obstacles((math.inf,), (0.0,), (0.1,)), r"obstacles.x\[0\] must be a finite number"),
+        (lambda: Obstacles("abc", (0.0,), (0.1,)), "obstacles.x must be a list of numbers"),
+        (lambda: NoiseConfig(input_noise=-0.1), "input_noise must be >= 0"),
+        (lambda: NoiseConfig(slip_fraction=1.0), "slip_fraction must be < 1"),
+        (lambda: NoiseConfig(basic_sensor_variance=-1e-4), "basic_sensor_variance must be >= 0"),
+        (lambda: NoiseConfig(max_range=0.0), "max_range must be > 0"),
+        (lambda: NoiseConfig(seed=-1), "seed must be an int >= 0"),
+        (lambda: NoiseConfig(seed=1.5), "seed must be an int >= 0"),
+        (
+            lambda: SimulationConfig(obstacles=Obstacles((0.05,), (0.0,), (0.038,))),
+            r"start \(x0, y0\) = \(0.0, 0.0\) m with collision_radius 0.11 m overlaps obstacle 0",
+        ),
+        (
+            lambda: SimulationConfig(arena=ArenaConfig(x0=2.45)),
+            "is not inside the arena",
+        ),
+        (
+            lambda: SimulationConfig(arena=ArenaConfig(arena_x_length=0.2)),
+            "does not fit inside the 0.2 m x 5.0 m arena",
+        ),
+        (
+            lambda: SimulationConfig(obstacles=Obstacles((2.48,), (0.0,), (0.038,))),
+            "obstacle 0 at .* does not fit inside the 5.0 m x 5.0 m arena",
+        ),
+    ],
+)
+def test_invalid_configurations_raise_with_their_reason(build, message):
+    with pytest.raises(ValueError, match=message):
+        build()
+
+
+def test_step_rejects_a_non_positive_time_step():
+    with pytest.raises(ValueError, match="dt_s must be > 0"):
+        world().step(0.0)
