@@ -17,8 +17,14 @@ def quaternion_from_yaw(yaw_rad: float) -> Quaternion:
 
 
 def yaw_from_quaternion(q: Quaternion) -> float:
-    """Yaw of a quaternion (rotation about z of its ZYX Euler decomposition)."""
-    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+    """Yaw of a quaternion (rotation about z of its ZYX Euler decomposition), for any non-zero norm.
+
+    yaw = atan2(2 (w z + x y), w^2 + x^2 - y^2 - z^2): both arguments scale with |q|^2, so a
+    hand-written, unnormalised quaternion such as (0, 0, 1, 1) gives the yaw it means (pi/2).
+    """
+    return math.atan2(
+        2.0 * (q.w * q.z + q.x * q.y), q.w * q.w + q.x * q.x - q.y * q.y - q.z * q.z
+    )
 
 
 def pose_from_transform(T: Transform2D) -> Pose:
@@ -67,5 +73,8 @@ def stamp_seconds(stamp: Time) -> float:
 
 
 def stamp_from_seconds(seconds: float) -> Time:
+    """The stamp nearest to `seconds` (rounded to the nanosecond; 0 <= nanosec < 1e9)."""
     sec = math.floor(seconds)
-    return Time(sec=int(sec), nanosec=int(round((seconds - sec) * 1e9)) % 1_000_000_000)
+    # the fraction (exact) in ns; one that rounds up to 1e9 carries into sec
+    carry, nanosec = divmod(round((seconds - sec) * 1e9), 1_000_000_000)
+    return Time(sec=int(sec + carry), nanosec=int(nanosec))

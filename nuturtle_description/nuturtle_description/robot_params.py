@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from numbers import Real
 from pathlib import Path
 
 import yaml
@@ -38,7 +39,8 @@ class RobotParams:
             "collision_radius",
         ):
             value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
+            is_number = isinstance(value, Real) and not isinstance(value, bool)
+            if not (is_number and math.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be finite and > 0, got {value!r}")
 
     @property
@@ -62,8 +64,8 @@ def share_file(*parts: str) -> Path:
             candidate = Path(get_package_share_directory(PACKAGE)).joinpath(*parts)
             if candidate.exists():
                 return candidate
-        except PackageNotFoundError:
-            pass
+        except (PackageNotFoundError, OSError):
+            pass  # not installed, or no ament index at all (AMENT_PREFIX_PATH unset: OSError)
     except ImportError:
         pass
     return Path(__file__).resolve().parents[1].joinpath(*parts)

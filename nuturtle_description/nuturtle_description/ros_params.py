@@ -8,33 +8,35 @@ dataclass's own validation raises `ValueError` for invalid values.
 
 from __future__ import annotations
 
+import array
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from typing import Any, TypeVar
 
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 
 C = TypeVar("C")
 
 
 def _coerce(value: Any, like: Any, name: str) -> Any:
-    """Convert a ROS parameter value to the type of the field default (ints where floats are expected,
-    ROS arrays to tuples); anything else of the wrong type is a ValueError."""
-    if isinstance(like, bool):
-        if not isinstance(value, bool):
-            raise ValueError(f"parameter {name} must be a bool, got {value!r}")
+    """Convert a ROS parameter value to the type of the field default: ints are accepted where floats
+    are expected and ROS arrays become tuples of floats; anything else of the wrong type is a ValueError."""
+    is_number = isinstance(value, (int, float)) and not isinstance(value, bool)
+    if isinstance(like, bool) and isinstance(value, bool):
         return value
-    if isinstance(like, float) and isinstance(value, (int, float)) and not isinstance(value, bool):
+    if isinstance(like, float) and is_number:
         return float(value)
-    if isinstance(like, int) and isinstance(value, int) and not isinstance(value, bool):
+    if isinstance(like, int) and not isinstance(like, bool) and isinstance(value, int) and is_number:
         return value
     if isinstance(like, str) and isinstance(value, str):
         return value
-    if isinstance(like, tuple) and isinstance(value, (list, tuple)) or (
-        isinstance(like, tuple) and hasattr(value, "tolist")
-    ):
-        return tuple(float(v) for v in value)
+    if isinstance(like, tuple) and isinstance(value, (list, tuple, array.array)):
+        try:
+            return tuple(float(v) for v in value)
+        except (TypeError, ValueError):
+            pass
     raise ValueError(f"parameter {name} must be of type {type(like).__name__}, got {value!r}")
 
 
@@ -68,3 +70,18 @@ def declare_dataclass(
         like = defaults[name]
         values[name] = _coerce(parameter.value, like, prefix + name)
     return cls(**values)
+
+
+def replace_from_parameters(config: C, parameters: Iterable[Parameter], prefix: str = "") -> C:
+    """`config` with the fields named by `parameters` (`prefix + name`) set to their coerced values.
+
+    For run-time changes: validate in an on-set-parameters callback (a ValueError means reject), apply in
+    the post-set callback. Parameters that name no field are ignored.
+    """
+    current = {field.name: getattr(config, field.name) for field in dataclasses.fields(config)}
+    changes = {}
+    for parameter in parameters:
+        name = parameter.name.removeprefix(prefix)
+        if parameter.name.startswith(prefix) and name in current:
+            changes[name] = _coerce(parameter.value, current[name], parameter.name)
+    return dataclasses.replace(config, **changes)

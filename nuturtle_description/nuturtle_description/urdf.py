@@ -32,11 +32,11 @@ LIDAR_HEIGHT = 0.04
 
 
 def _origin(x: float = 0.0, y: float = 0.0, z: float = 0.0, roll: float = 0.0) -> str:
-    return f'<origin xyz="{x:.6g} {y:.6g} {z:.6g}" rpy="{roll:.6g} 0 0"/>'
+    return f'<origin xyz="{x:.12g} {y:.12g} {z:.12g}" rpy="{roll:.12g} 0 0"/>'
 
 
 def _cylinder_link(name: str, radius: float, length: float, origin: str, material: str) -> str:
-    geometry = f'<geometry><cylinder radius="{radius:.6g}" length="{length:.6g}"/></geometry>'
+    geometry = f'<geometry><cylinder radius="{radius:.12g}" length="{length:.12g}"/></geometry>'
     return (
         f'  <link name="{name}">\n'
         f"    <visual>{origin}{geometry}<material name={quoteattr(material)}/></visual>\n"
@@ -55,7 +55,7 @@ def _joint(name: str, kind: str, parent: str, child: str, origin: str, axis: str
 
 def burger_urdf(params: RobotParams, color: str = "purple") -> str:
     """URDF text of the Burger drawn in `color` (one of COLORS); ValueError for another colour."""
-    if color not in COLORS:
+    if not isinstance(color, str) or color not in COLORS:
         raise ValueError(f"color must be one of {sorted(COLORS)}, got {color!r}")
     r, g, b, a = COLORS[color]
     radius = params.wheel_radius

@@ -1,0 +1,117 @@
+"""`circle`: drive the robot around a circle by publishing a constant body twist.
+
+Publishes
+    `cmd_vel` (geometry_msgs/Twist) at `frequency` Hz: ``vx = s v``, ``omega = s v / R`` for linear speed
+        `velocity` v (m/s), `radius` R (m) and direction s = +1 (counter-clockwise when v > 0) or -1.
+Services (std_srvs/Empty)
+    `~/reverse`: flip the direction of travel (s -> -s): the same circle, driven the other way.
+    `~/stop`: publish one zero Twist, then publish nothing until `~/reverse` is called or one of this
+        node's parameters (frequency, radius, velocity) is set; either resumes driving (reverse in the
+        flipped direction; setting a parameter, even to its current value, in the current one).
+        Nothing is published while stopped, so another command source (teleop) can take over.
+Parameters (`CircleConfig`, changeable at run time; invalid values are rejected with the reason)
+    `frequency` (Hz, finite > 0), `radius` (m, finite > 0), `velocity` (m/s, finite; negative drives
+    backwards).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass
+
+from geometry_msgs.msg import Twist
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from std_srvs.srv import Empty
+from turtlelib import Twist2D
+
+from nuturtle_description.node_main import run_node
+from nuturtle_description.ros_params import declare_dataclass, replace_from_parameters
+
+
+@dataclass(frozen=True)
+class CircleConfig:
+    """Circle driving: `frequency` (Hz) and `radius` (m) finite and > 0, `velocity` (m/s) finite."""
+
+    frequency: float = 100.0
+    radius: float = 0.5
+    velocity: float = 0.1
+
+    def __post_init__(self) -> None:
+        for name in ("frequency", "radius"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f"{name} must be finite and > 0, got {value!r}")
+        if not math.isfinite(self.velocity):
+            raise ValueError(f"velocity must be finite, got {self.velocity!r}")
+        if not math.isfinite(self.velocity / self.radius):
+            raise ValueError(f"velocity / radius overflows: {self.velocity!r} / {self.radius!r}")
+
+    def body_twist(self, direction: float) -> Twist2D:
+        """``V_b = s [v / R, v, 0]`` for direction ``s`` = +1 or -1."""
+        return Twist2D(direction * self.velocity / self.radius, direction * self.velocity, 0.0)
+
+
+def twist_message(V_body: Twist2D) -> Twist:
+    msg = Twist()
+    msg.linear.x = V_body.vx
+    msg.linear.y = V_body.vy
+    msg.angular.z = V_body.omega
+    return msg
+
+
+class CircleNode(Node):
+    """The `circle` node (see the module docstring); kwargs go to rclpy's Node."""
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__("circle", **kwargs)
+        self.config = declare_dataclass(self, CircleConfig)
+        self.direction = 1.0
+        self.stopped = False
+        self._cmd_vel_publisher = self.create_publisher(Twist, "cmd_vel", 10)
+        self._timer = self.create_timer(1.0 / self.config.frequency, self._on_timer)
+        self.add_on_set_parameters_callback(self._check_parameters)
+        self.add_post_set_parameters_callback(self._apply_parameters)
+        self.create_service(Empty, "~/reverse", self._on_reverse)
+        self.create_service(Empty, "~/stop", self._on_stop)
+
+    def _on_timer(self) -> None:
+        if not self.stopped:
+            self._cmd_vel_publisher.publish(twist_message(self.config.body_twist(self.direction)))
+
+    def _check_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
+        try:
+            replace_from_parameters(self.config, parameters)
+        except ValueError as error:
+            return SetParametersResult(successful=False, reason=str(error))
+        return SetParametersResult(successful=True)
+
+    def _apply_parameters(self, parameters: list[Parameter]) -> None:
+        if not any(parameter.name in vars(self.config) for parameter in parameters):
+            return
+        config = replace_from_parameters(self.config, parameters)
+        if config.frequency != self.config.frequency:
+            self._timer.timer_period_ns = round(1e9 / config.frequency)
+        self.config = config
+        self.stopped = False
+        self.get_logger().info(f"driving {config}")
+
+    def _on_reverse(self, request: Empty.Request, response: Empty.Response) -> Empty.Response:
+        self.direction = -self.direction
+        self.stopped = False
+        return response
+
+    def _on_stop(self, request: Empty.Request, response: Empty.Response) -> Empty.Response:
+        self.stopped = True
+        self._cmd_vel_publisher.publish(Twist())
+        return response
+
+
+def main(args: list[str] | None = None) -> None:
+    sys.exit(run_node(lambda: CircleNode(), "circle", args))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,98 @@
+"""`turtle_control`: body velocity commands to wheel speed commands for the Burger.
+
+Subscribes
+    `cmd_vel` (geometry_msgs/Twist): body twist, linear.x (m/s) and angular.z (rad/s).
+Publishes
+    `wheel_cmd` (sensor_msgs/JointState): `velocity` = (left, right) wheel speeds in rad/s for joints
+        `wheel_left`, `wheel_right`, stamped with the time of the command's arrival.
+Parameters
+    `RobotParams` (the Burger's constants by default), `WheelJoints` (wheel_left, wheel_right).
+
+Model: inverse kinematics ``phi_dot = H(0) V_b`` (``turtlelib.DiffDrive.wheel_speeds``), then
+curvature-preserving saturation to ``max_wheel_speed = motor_cmd_max / motor_cmd_per_rad_sec``
+(`wheel_limits.limit_wheel_speeds`: both wheels scaled by one factor, so the robot keeps the commanded
+arc, only slower). A lateral velocity (linear.y) cannot be followed by a differential drive: it is
+dropped with a warning and the rest of the command is executed. The out-of-plane components (linear.z,
+angular.x, angular.y) are ignored. A command with a non-finite component is logged and skipped.
+Warnings are throttled.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+
+from geometry_msgs.msg import Twist
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from turtlelib import Twist2D
+
+from nuturtle_description.node_main import run_node
+from nuturtle_description.robot_params import RobotParams, burger_params
+from nuturtle_description.ros_params import declare_dataclass
+
+from .wheel_joints import WheelJoints
+from .wheel_limits import limit_wheel_speeds
+
+# Minimum time between two warnings from the same place (s)
+WARN_THROTTLE_S = 2.0
+
+
+class TurtleControlNode(Node):
+    """The `turtle_control` node (see the module docstring); kwargs go to rclpy's Node."""
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__("turtle_control", **kwargs)
+        self.robot = declare_dataclass(self, RobotParams, overrides=vars(burger_params()))
+        self.joints = declare_dataclass(self, WheelJoints)
+        self.drive = self.robot.diff_drive()
+        self._wheel_cmd_publisher = self.create_publisher(JointState, "wheel_cmd", 10)
+        self.create_subscription(Twist, "cmd_vel", self._on_cmd_vel, 10)
+
+    def _on_cmd_vel(self, msg: Twist) -> None:
+        components = (
+            msg.linear.x, msg.linear.y, msg.linear.z, msg.angular.x, msg.angular.y, msg.angular.z
+        )
+        if not all(math.isfinite(value) for value in components):
+            self.get_logger().warning(
+                f"cmd_vel skipped: non-finite component in linear {components[:3]}, "
+                f"angular {components[3:]}",
+                throttle_duration_sec=WARN_THROTTLE_S,
+            )
+            return
+        if msg.linear.y != 0.0:
+            self.get_logger().warning(
+                f"cmd_vel has a lateral velocity linear.y = {msg.linear.y} m/s that a differential "
+                "drive cannot follow: it is dropped",
+                throttle_duration_sec=WARN_THROTTLE_S,
+            )
+        V_body = Twist2D(msg.angular.z, msg.linear.x, 0.0)
+        try:
+            # phi_dot = H(0) V_b
+            left_rad_s, right_rad_s = self.drive.wheel_speeds(V_body)
+            left_rad_s, right_rad_s, scale = limit_wheel_speeds(
+                left_rad_s, right_rad_s, self.robot.max_wheel_speed
+            )
+        except ValueError as error:  # finite but so large that the wheel speeds overflow
+            self.get_logger().warning(
+                f"cmd_vel skipped: {error}", throttle_duration_sec=WARN_THROTTLE_S
+            )
+            return
+        if scale < 1.0:
+            self.get_logger().warning(
+                f"cmd_vel (vx = {V_body.vx} m/s, omega = {V_body.omega} rad/s) exceeds the wheel "
+                f"speed limit {self.robot.max_wheel_speed:.3f} rad/s: scaled by {scale:.3f} along "
+                "the same arc",
+                throttle_duration_sec=WARN_THROTTLE_S,
+            )
+        wheel_cmd = JointState(name=self.joints.names, velocity=[left_rad_s, right_rad_s])
+        wheel_cmd.header.stamp = self.get_clock().now().to_msg()
+        self._wheel_cmd_publisher.publish(wheel_cmd)
+
+
+def main(args: list[str] | None = None) -> None:
+    sys.exit(run_node(lambda: TurtleControlNode(), "turtle_control", args))
+
+
+if __name__ == "__main__":
+    main()

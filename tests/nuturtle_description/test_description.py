@@ -1,0 +1,282 @@
+"""nuturtle_description: the generated URDF, the Burger's constants, and dataclass <-> ROS parameters."""
+
+from __future__ import annotations
+
+import ast
+import math
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from rclpy.parameter import Parameter
+
+from nuturtle_description.robot_params import (
+    RobotParams,
+    burger_params,
+    diff_params_path,
+    load_ros_yaml,
+)
+from nuturtle_description.ros_params import declare_dataclass, replace_from_parameters
+from nuturtle_description.urdf import COLORS, burger_urdf
+
+PACKAGE = Path(__file__).resolve().parents[2] / "nuturtle_description"
+TOL = 1e-12
+
+# ---------------------------------------------------------------------------------------------- URDF
+
+
+def floats(text: str) -> list[float]:
+    return [float(v) for v in text.split()]
+
+
+class Urdf:
+    """Parsed URDF with lookups by link and joint name."""
+
+    def __init__(self, text: str) -> None:
+        self.robot = ET.fromstring(text)
+        self.links = {link.get("name"): link for link in self.robot.findall("link")}
+        self.joints = {joint.get("name"): joint for joint in self.robot.findall("joint")}
+        self.materials = {m.get("name"): m for m in self.robot.findall("material")}
+
+    def joint_xyz(self, name: str) -> list[float]:
+        return floats(self.joints[name].find("origin").get("xyz"))
+
+    def cylinder(self, link: str, part: str = "collision") -> tuple[float, float]:
+        cylinder = self.links[link].find(f"{part}/geometry/cylinder")
+        return float(cylinder.get("radius")), float(cylinder.get("length"))
+
+    def position_in_footprint(self, link: str) -> list[float]:
+        """Origin of `link` in base_footprint (the fixed chain has no rotations)."""
+        xyz = [0.0, 0.0, 0.0]
+        while link != "base_footprint":
+            (joint,) = [j for j in self.joints.values() if j.find("child").get("link") == link]
+            xyz = [a + b for a, b in zip(xyz, floats(joint.find("origin").get("xyz")))]
+            link = joint.find("parent").get("link")
+        return xyz
+
+
+def test_burger_urdf_dimensions_and_joints_equal_the_parameters():
+    params = burger_params()
+    urdf = Urdf(burger_urdf(params))
+    assert set(urdf.links) == {
+        "base_footprint", "base_link", "wheel_left_link", "wheel_right_link", "base_scan"
+    }
+    for side, sign in (("left", 1.0), ("right", -1.0)):
+        joint = urdf.joints[f"wheel_{side}_joint"]
+        assert joint.get("type") == "continuous"
+        assert floats(joint.find("axis").get("xyz")) == [0.0, 1.0, 0.0]
+        for part in ("visual", "collision"):
+            assert urdf.cylinder(f"wheel_{side}_link", part)[0] == pytest.approx(0.033, abs=TOL)
+        # wheel centres: on the axle, half the track to each side, one wheel radius above the ground
+        assert urdf.position_in_footprint(f"wheel_{side}_link") == pytest.approx(
+            [0.0, sign * 0.08, 0.033], abs=TOL
+        )
+    assert urdf.cylinder("base_link")[0] == pytest.approx(0.11, abs=TOL)
+    assert urdf.joints["scan_joint"].get("type") == "fixed"
+    assert urdf.position_in_footprint("base_scan")[:2] == pytest.approx([-0.032, 0.0], abs=TOL)
+
+
+@settings(max_examples=30)
+@given(
+    st.floats(0.01, 0.5), st.floats(0.05, 1.0), st.floats(0.05, 1.0)
+)
+def test_urdf_follows_any_robot_parameters(wheel_radius, track_width, collision_radius):
+    params = RobotParams(
+        wheel_radius=wheel_radius, track_width=track_width, collision_radius=collision_radius
+    )
+    urdf = Urdf(burger_urdf(params, "green"))
+    assert urdf.cylinder("wheel_left_link")[0] == pytest.approx(wheel_radius, rel=1e-11)
+    assert urdf.cylinder("base_link")[0] == pytest.approx(collision_radius, rel=1e-11)
+    left = urdf.position_in_footprint("wheel_left_link")
+    right = urdf.position_in_footprint("wheel_right_link")
+    assert left[1] - right[1] == pytest.approx(track_width, rel=1e-11)
+    assert left[2] == pytest.approx(wheel_radius, rel=1e-9)
+    assert right[2] == pytest.approx(wheel_radius, rel=1e-9)
+
+
+def test_urdf_is_one_tree_rooted_at_base_footprint():
+    urdf = Urdf(burger_urdf(burger_params()))
+    children = [joint.find("child").get("link") for joint in urdf.joints.values()]
+    parents = [joint.find("parent").get("link") for joint in urdf.joints.values()]
+    assert len(children) == len(set(children)), "every link has at most one parent"
+    assert set(children) | set(parents) <= set(urdf.links)
+    assert set(urdf.links) - set(children) == {"base_footprint"}
+    for link in urdf.links:  # every link reaches the root
+        urdf.position_in_footprint(link)
+
+
+@pytest.mark.parametrize("color", sorted(COLORS))
+def test_every_colour_tints_the_body(color):
+    urdf = Urdf(burger_urdf(burger_params(), color))
+    assert urdf.robot.get("name") == f"turtlebot3_burger_{color}"
+    assert urdf.links["base_link"].find("visual/material").get("name") == color
+    assert floats(urdf.materials[color].find("color").get("rgba")) == list(COLORS[color])
+    # every material used is defined
+    used = {m.get("name") for m in urdf.robot.iter("material") if m.find("color") is None}
+    assert used <= set(urdf.materials)
+
+
+@pytest.mark.parametrize("color", ["orange", "Red", "", None])
+def test_unknown_colour_is_a_value_error(color):
+    with pytest.raises(ValueError, match="color must be one of"):
+        burger_urdf(burger_params(), color)
+
+
+def test_load_urdf_launch_offers_exactly_the_urdf_colours():
+    tree = ast.parse((PACKAGE / "launch" / "load_urdf.launch.py").read_text())
+    (choices,) = [
+        keyword.value
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Call) and getattr(node.func, "id", None) == "DeclareLaunchArgument"
+        and node.args and node.args[0].value == "color"
+        for keyword in node.keywords
+        if keyword.arg == "choices"
+    ]
+    assert sorted(ast.literal_eval(choices)) == sorted(COLORS)
+
+
+# ------------------------------------------------------------------------------------- RobotParams
+
+
+def test_burger_params_are_the_yaml_values():
+    assert diff_params_path() == PACKAGE / "config" / "diff_params.yaml"
+    params = burger_params()
+    assert params == RobotParams(
+        wheel_radius=0.033,
+        track_width=0.16,
+        motor_cmd_max=265,
+        motor_cmd_per_rad_sec=41.6666667,
+        encoder_ticks_per_rad=651.8986469,
+        collision_radius=0.11,
+    )
+    assert params.max_wheel_speed == pytest.approx(6.36, abs=1e-8)
+    drive = params.diff_drive()
+    assert (drive.wheel_radius, drive.track_width) == (0.033, 0.16)
+    # the dataclass defaults are the same robot
+    for name, value in vars(RobotParams()).items():
+        assert getattr(params, name) == pytest.approx(value, rel=1e-8)
+
+
+@pytest.mark.parametrize(
+    "name",
+    [
+        "wheel_radius",
+        "track_width",
+        "motor_cmd_max",
+        "motor_cmd_per_rad_sec",
+        "encoder_ticks_per_rad",
+        "collision_radius",
+    ],
+)
+@pytest.mark.parametrize("value", [0.0, -1.0, math.nan, math.inf, "0.1", True, None])
+def test_robot_params_reject_invalid_values(name, value):
+    with pytest.raises(ValueError, match=name):
+        RobotParams(**{name: value})
+
+
+def test_load_ros_yaml_reads_the_wildcard_or_first_node_entry(tmp_path):
+    wildcard = tmp_path / "wildcard.yaml"
+    wildcard.write_text("/**:\n  ros__parameters:\n    a: 1\n    b: [1.0, 2.0]\n")
+    assert load_ros_yaml(wildcard) == {"a": 1, "b": [1.0, 2.0]}
+    named = tmp_path / "named.yaml"
+    named.write_text("odometry:\n  ros__parameters:\n    body_id: base\n")
+    assert load_ros_yaml(named) == {"body_id": "base"}
+    for text in ("", "odometry:\n  other: 1\n"):
+        empty = tmp_path / "empty.yaml"
+        empty.write_text(text)
+        with pytest.raises(ValueError, match="no ros__parameters"):
+            load_ros_yaml(empty)
+
+
+# ---------------------------------------------------------------------------- dataclass parameters
+
+
+@dataclass(frozen=True)
+class Example:
+    """Every supported field type; `gain` must be > 0."""
+
+    gain: float = 1.5
+    count: int = 3
+    label: str = "x"
+    enabled: bool = False
+    weights: tuple[float, ...] = (1.0, 2.0)
+
+    def __post_init__(self) -> None:
+        if not self.gain > 0:
+            raise ValueError(f"gain must be > 0, got {self.gain!r}")
+
+
+def test_declare_dataclass_declares_every_field_with_its_default(ros):
+    node = ros.node("declare_defaults")
+    config = declare_dataclass(node, Example)
+    assert config == Example()
+    assert node.get_parameter("gain").value == 1.5
+    assert list(node.get_parameter("weights").value) == [1.0, 2.0]
+
+
+def test_declare_dataclass_takes_overrides_and_parameter_values(ros):
+    node = ros.node(
+        "declare_overrides",
+        parameter_overrides=[
+            Parameter("robot.wheel_radius", value=0.05),
+            Parameter("robot.track_width", value=1),  # int where a float is expected
+        ],
+    )
+    params = declare_dataclass(node, RobotParams, prefix="robot.", overrides=vars(burger_params()))
+    assert params.wheel_radius == 0.05
+    assert params.track_width == 1.0 and isinstance(params.track_width, float)
+    assert params.motor_cmd_max == 265 and params.collision_radius == 0.11  # from the YAML overrides
+    assert node.has_parameter("robot.encoder_ticks_per_rad")
+
+
+def test_declare_dataclass_converts_every_field_type(ros):
+    node = ros.node(
+        "declare_types",
+        parameter_overrides=[
+            Parameter("gain", value=2),
+            Parameter("count", value=7),
+            Parameter("label", value="y"),
+            Parameter("enabled", value=True),
+            Parameter("weights", value=[3, 4, 5]),
+        ],
+    )
+    config = declare_dataclass(node, Example)
+    assert config == Example(gain=2.0, count=7, label="y", enabled=True, weights=(3.0, 4.0, 5.0))
+    assert isinstance(config.gain, float) and all(isinstance(w, float) for w in config.weights)
+
+
+@pytest.mark.parametrize(
+    "parameter",
+    [
+        Parameter("gain", value="big"),
+        Parameter("gain", value=True),
+        Parameter("count", value=2.5),
+        Parameter("label", value=1),
+        Parameter("enabled", value=1),
+        Parameter("weights", value=["a", "b"]),
+        Parameter("gain", value=-1.0),  # the right type, refused by the dataclass
+    ],
+    ids=lambda p: f"{p.name}={p.value!r}",
+)
+def test_declare_dataclass_rejects_wrong_types_and_invalid_values(ros, parameter):
+    node = ros.node("declare_invalid", parameter_overrides=[parameter])
+    with pytest.raises(ValueError, match=parameter.name):
+        declare_dataclass(node, Example)
+
+
+def test_replace_from_parameters_coerces_validates_and_ignores_other_names():
+    config = Example()
+    changed = replace_from_parameters(
+        config, [Parameter("gain", value=4), Parameter("use_sim_time", value=True)]
+    )
+    assert changed == Example(gain=4.0) and config == Example()
+    parameters = [Parameter("a.count", value=9), Parameter("count", value=1)]
+    prefixed = replace_from_parameters(config, parameters, prefix="a.")
+    assert prefixed == Example(count=9)
+    with pytest.raises(ValueError, match="gain"):
+        replace_from_parameters(config, [Parameter("gain", value=0.0)])
+    with pytest.raises(ValueError, match="label"):
+        replace_from_parameters(config, [Parameter("label", value=2.0)])
