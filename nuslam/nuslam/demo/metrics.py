@@ -1,0 +1,290 @@
+"""Accuracy and consistency metrics of one simulation + SLAM run: pure numpy/scipy, no ROS.
+
+Frames
+------
+Every pose series handed to these functions is in the simulator's world frame ``nusim/world``: the SLAM
+``map`` frame *is* that frame because SLAM starts at the true initial pose, and wheel odometry's ``odom``
+frame starts at the identity on the true initial pose ``T_world_start``, so its poses are mapped with
+``T_world_body = T_world_start @ T_odom_body`` (:func:`odom_in_world`).
+
+Series
+------
+A :class:`PoseSeries` holds stamps ``t_s`` (N,) (s, strictly increasing) and poses ``poses`` (N, 3)
+``[x, y, theta]`` (m, m, rad). The ground truth is interpolated at an estimate's stamps (linear in x, y
+and in the unwrapped heading), so estimates published at any rate are compared with the truth at the
+same instant.
+
+Metrics
+-------
+* pose error ``e = [x_hat - x, y_hat - y, wrap(theta_hat - theta)]``; final position error ``|e_xy|`` and
+  heading error ``|e_theta|`` at the estimate's last stamp;
+* ATE RMSE ``sqrt(mean |e_xy|^2)`` over the whole run (no re-alignment: the frames are tied by the start);
+* landmarks: mapped landmarks ``m_hat`` (K, 2) are associated one-to-one with the true centres ``m``
+  (M, 2) by the Hungarian algorithm on Euclidean distance, keeping pairs closer than a gate; a mapped
+  landmark without a partner within the gate is *spurious*, a mapped landmark whose nearest true
+  centre is another one's partner a *duplicate*; RMSE ``sqrt(mean |m_hat_i - m_j|^2)`` over the pairs;
+* pose NEES ``eps_k = e_k^T P_k^-1 e_k`` (3 dof) per estimate with covariance ``P_k``, judged against the
+  two-sided 95% chi2 interval for one run (``turtlelib.consistency``); estimates whose covariance is
+  singular (the exactly known start, before the robot moves) are left out.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import linear_sum_assignment
+from turtlelib import Transform2D, normalize_angles
+from turtlelib.consistency import chi2_bounds, nees
+
+POSE_DOF = 3
+# Covariances with a smallest eigenvalue at or below this (m^2 or rad^2: a 1 micrometre / microradian
+# standard deviation) are treated as singular: their NEES is undefined
+MIN_EIGENVALUE = 1e-12
+NEES_BAND_PROB = 0.95
+
+
+@dataclass(frozen=True)
+class PoseSeries:
+    """Stamped planar poses: ``t_s`` (N,) strictly increasing (s), ``poses`` (N, 3) ``[x, y, theta]``."""
+
+    t_s: NDArray[np.float64]
+    poses: NDArray[np.float64]
+
+    def __post_init__(self) -> None:
+        t_s = np.asarray(self.t_s, dtype=np.float64).reshape(-1)
+        poses = np.asarray(self.poses, dtype=np.float64).reshape(-1, 3)
+        if t_s.size != poses.shape[0]:
+            raise ValueError(f"{t_s.size} stamps but {poses.shape[0]} poses")
+        if not (np.all(np.isfinite(t_s)) and np.all(np.isfinite(poses))):
+            raise ValueError("stamps and poses must be finite")
+        if np.any(np.diff(t_s) <= 0.0):
+            raise ValueError("stamps must be strictly increasing")
+        object.__setattr__(self, "t_s", t_s)
+        object.__setattr__(self, "poses", poses)
+
+    def __len__(self) -> int:
+        return int(self.t_s.size)
+
+    @property
+    def xy(self) -> NDArray[np.float64]:
+        return self.poses[:, :2]
+
+    def within(self, t0_s: float, t1_s: float) -> NDArray[np.bool_]:
+        """Mask of the samples with ``t0_s <= t <= t1_s``."""
+        return (self.t_s >= t0_s) & (self.t_s <= t1_s)
+
+    def interpolate(self, t_query_s: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Poses (M, 3) at ``t_query_s`` (M,), all within ``[t_s[0], t_s[-1]]`` (ValueError otherwise).
+
+        x, y: linear interpolation; theta: linear in the unwrapped heading, wrapped back to (-pi, pi].
+        """
+        t_query_s = np.asarray(t_query_s, dtype=np.float64).reshape(-1)
+        if len(self) == 0 or np.any(t_query_s < self.t_s[0]) or np.any(t_query_s > self.t_s[-1]):
+            raise ValueError("query stamps must lie within the series")
+        theta_unwrapped = np.unwrap(self.poses[:, 2])
+        return np.column_stack(
+            [
+                np.interp(t_query_s, self.t_s, self.poses[:, 0]),
+                np.interp(t_query_s, self.t_s, self.poses[:, 1]),
+                normalize_angles(np.interp(t_query_s, self.t_s, theta_unwrapped)),
+            ]
+        )
+
+
+def odom_in_world(odom: PoseSeries, T_world_start: Transform2D) -> PoseSeries:
+    """Odometry poses in the world: ``T_world_body = T_world_start @ T_odom_body`` for each sample."""
+    poses = np.array([(T_world_start @ Transform2D(*pose)).as_array() for pose in odom.poses])
+    return PoseSeries(odom.t_s, poses.reshape(-1, 3))
+
+
+def pose_errors(estimate: PoseSeries, truth: PoseSeries) -> NDArray[np.float64]:
+    """``e_k = [x_hat - x, y_hat - y, wrap(theta_hat - theta)]`` (K, 3) at the estimate's stamps that
+    the truth covers (estimates outside the truth's time span are left out)."""
+    covered = estimate.within(truth.t_s[0], truth.t_s[-1])
+    true_poses = truth.interpolate(estimate.t_s[covered])
+    e = estimate.poses[covered] - true_poses
+    e[:, 2] = normalize_angles(e[:, 2])
+    return e
+
+
+def ate_rmse(errors: NDArray[np.float64]) -> float:
+    """``sqrt(mean_k (e_x^2 + e_y^2))`` of pose errors (K, 3) (m); ValueError when empty."""
+    if errors.shape[0] == 0:
+        raise ValueError("no pose errors")
+    return float(np.sqrt(np.mean(np.sum(errors[:, :2] ** 2, axis=1))))
+
+
+@dataclass(frozen=True)
+class LandmarkAssociation:
+    """One-to-one pairs ``(mapped[i], true[j])`` closer than the gate, and the leftovers.
+
+    ``mapped_index``, ``true_index`` (P,) the pairs; ``distance_m`` (P,) their distances;
+    ``spurious`` mapped landmarks with no true centre within the gate; ``duplicates`` unpaired mapped
+    landmarks whose nearest true centre (within the gate) is already paired: a cylinder mapped twice.
+    """
+
+    mapped_index: NDArray[np.intp]
+    true_index: NDArray[np.intp]
+    distance_m: NDArray[np.float64]
+    spurious: NDArray[np.intp]
+    duplicates: NDArray[np.intp]
+
+    @property
+    def rmse_m(self) -> float:
+        """``sqrt(mean distance^2)`` over the pairs (NaN when there is none)."""
+        return float(np.sqrt(np.mean(self.distance_m**2))) if self.distance_m.size else float("nan")
+
+
+def associate_landmarks(
+    mapped_xy: NDArray[np.float64], true_xy: NDArray[np.float64], gate_m: float
+) -> LandmarkAssociation:
+    """Hungarian assignment of mapped (K, 2) to true (M, 2) landmark centres on distance, gated at
+    ``gate_m`` (> 0): pairs farther apart than the gate are dropped (see :class:`LandmarkAssociation`)."""
+    if not gate_m > 0.0:
+        raise ValueError(f"gate_m must be > 0, got {gate_m!r}")
+    mapped_xy = np.asarray(mapped_xy, dtype=np.float64).reshape(-1, 2)
+    true_xy = np.asarray(true_xy, dtype=np.float64).reshape(-1, 2)
+    # D_ij = |m_hat_i - m_j|
+    D = np.linalg.norm(mapped_xy[:, None, :] - true_xy[None, :, :], axis=2)
+    # pairs beyond the gate must never be preferred to leaving both unpaired: cost them out of reach
+    cost = np.where(D <= gate_m, D, 1e6 + D)
+    rows, cols = linear_sum_assignment(cost) if D.size else (np.zeros(0, int), np.zeros(0, int))
+    keep = D[rows, cols] <= gate_m
+    rows, cols = rows[keep], cols[keep]
+    unpaired = np.setdiff1d(np.arange(mapped_xy.shape[0]), rows)
+    near = D[unpaired].min(axis=1) <= gate_m if true_xy.shape[0] else np.zeros(unpaired.size, bool)
+    return LandmarkAssociation(
+        mapped_index=rows.astype(np.intp),
+        true_index=cols.astype(np.intp),
+        distance_m=D[rows, cols],
+        spurious=unpaired[~near].astype(np.intp),
+        duplicates=unpaired[near].astype(np.intp),
+    )
+
+
+def landmarks_within_range(
+    true_xy: NDArray[np.float64], path_xy: NDArray[np.float64], range_m: float
+) -> NDArray[np.bool_]:
+    """Mask (M,) of the true landmarks that came within ``range_m`` of some point of the path (N, 2)."""
+    true_xy = np.asarray(true_xy, dtype=np.float64).reshape(-1, 2)
+    path_xy = np.asarray(path_xy, dtype=np.float64).reshape(-1, 2)
+    if path_xy.shape[0] == 0:
+        return np.zeros(true_xy.shape[0], dtype=bool)
+    closest_m = np.min(np.linalg.norm(true_xy[:, None, :] - path_xy[None, :, :], axis=2), axis=1)
+    return closest_m <= range_m
+
+
+def pose_nees(errors: NDArray[np.float64], covariances: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``eps_k = e_k^T P_k^-1 e_k`` (K,) for errors (K, 3) and covariances (K, 3, 3).
+
+    A sample whose covariance is not positive definite (smallest eigenvalue <= ``MIN_EIGENVALUE``, e.g.
+    the exactly known start pose before the robot moves) has no NEES: NaN.
+    """
+    eps = np.full(errors.shape[0], np.nan)
+    if errors.shape[0] == 0:
+        return eps
+    valid = np.linalg.eigvalsh(covariances)[:, 0] > MIN_EIGENVALUE
+    if np.any(valid):
+        eps[valid] = nees(errors[valid], covariances[valid])
+    return eps
+
+
+def nees_band(prob: float = NEES_BAND_PROB) -> tuple[float, float]:
+    """The two-sided ``prob`` interval of a single run's 3-dof pose NEES."""
+    return chi2_bounds(POSE_DOF, 1, prob)
+
+
+@dataclass(frozen=True)
+class RunMetrics:
+    """The figures of one run (metrics.json); units in the names, counts are landmarks."""
+
+    final_position_error_odom_m: float
+    final_position_error_slam_m: float
+    final_heading_error_odom_rad: float
+    final_heading_error_slam_rad: float
+    ate_rmse_odom_m: float
+    ate_rmse_slam_m: float
+    landmarks_true: int
+    landmarks_in_range: int
+    landmarks_mapped: int
+    landmarks_paired: int
+    landmarks_in_range_unmapped: int
+    landmarks_duplicate: int
+    landmarks_spurious: int
+    landmark_rmse_m: float
+    nees_pose_mean: float
+    nees_pose_within_95_fraction: float
+    nees_pose_band_95: tuple[float, float]
+    sim_seconds: float
+    wall_seconds: float
+
+    def as_dict(self) -> dict:
+        values = asdict(self)
+        values["nees_pose_band_95"] = list(self.nees_pose_band_95)
+        return values
+
+
+@dataclass(frozen=True)
+class RunData:
+    """What a run produced, in the world frame (see the module docstring).
+
+    ``truth``, ``odom``, ``slam`` pose series; ``slam_covariances`` (K, 3, 3) the (x, y, theta) covariance
+    of each SLAM pose; ``mapped_xy`` (n, 2) the final map; ``true_xy`` (M, 2) the true cylinder centres;
+    ``sensor_range_m`` the range within which a cylinder counts as seen; ``gate_m`` the association gate.
+    """
+
+    truth: PoseSeries
+    odom: PoseSeries
+    slam: PoseSeries
+    slam_covariances: NDArray[np.float64]
+    mapped_xy: NDArray[np.float64]
+    true_xy: NDArray[np.float64]
+    sensor_range_m: float
+    gate_m: float
+
+    def __post_init__(self) -> None:
+        covariances = np.asarray(self.slam_covariances, dtype=np.float64).reshape(-1, 3, 3)
+        if covariances.shape[0] != len(self.slam):
+            raise ValueError(f"{len(self.slam)} SLAM poses but {covariances.shape[0]} covariances")
+        object.__setattr__(self, "slam_covariances", covariances)
+
+
+def evaluate_run(data: RunData, sim_seconds: float, wall_seconds: float) -> RunMetrics:
+    """All metrics of a run (module docstring); ValueError when an estimate never overlaps the truth."""
+    e_odom = pose_errors(data.odom, data.truth)
+    slam_covered = data.slam.within(data.truth.t_s[0], data.truth.t_s[-1])
+    e_slam = pose_errors(data.slam, data.truth)
+    if e_odom.shape[0] == 0 or e_slam.shape[0] == 0:
+        raise ValueError("the estimates do not overlap the ground truth in time")
+    eps = pose_nees(e_slam, data.slam_covariances[slam_covered])
+    eps = eps[np.isfinite(eps)]
+    if eps.size == 0:
+        raise ValueError("no SLAM pose has a positive definite covariance")
+    low, high = nees_band()
+    association = associate_landmarks(data.mapped_xy, data.true_xy, data.gate_m)
+    in_range = landmarks_within_range(data.true_xy, data.truth.xy, data.sensor_range_m)
+    paired = np.zeros(in_range.size, dtype=bool)
+    paired[association.true_index] = True
+    return RunMetrics(
+        final_position_error_odom_m=float(np.hypot(*e_odom[-1, :2])),
+        final_position_error_slam_m=float(np.hypot(*e_slam[-1, :2])),
+        final_heading_error_odom_rad=float(abs(e_odom[-1, 2])),
+        final_heading_error_slam_rad=float(abs(e_slam[-1, 2])),
+        ate_rmse_odom_m=ate_rmse(e_odom),
+        ate_rmse_slam_m=ate_rmse(e_slam),
+        landmarks_true=int(data.true_xy.shape[0]),
+        landmarks_in_range=int(np.count_nonzero(in_range)),
+        landmarks_mapped=int(np.asarray(data.mapped_xy).reshape(-1, 2).shape[0]),
+        landmarks_paired=int(association.true_index.size),
+        landmarks_in_range_unmapped=int(np.count_nonzero(in_range & ~paired)),
+        landmarks_duplicate=int(association.duplicates.size),
+        landmarks_spurious=int(association.spurious.size),
+        landmark_rmse_m=association.rmse_m,
+        nees_pose_mean=float(np.mean(eps)),
+        nees_pose_within_95_fraction=float(np.mean((eps >= low) & (eps <= high))),
+        nees_pose_band_95=(low, high),
+        sim_seconds=float(sim_seconds),
+        wall_seconds=float(wall_seconds),
+    )

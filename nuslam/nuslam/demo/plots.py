@@ -1,0 +1,136 @@
+"""The demo's figures (PNG): trajectories and map, SLAM pose error against its 2-sigma bounds, the final
+covariance matrix.
+
+matplotlib is imported lazily, inside each function, and only its object-oriented API is used
+(``matplotlib.figure.Figure`` renders with the Agg canvas): no pyplot state, no display needed.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .metrics import PoseSeries
+
+TRUTH_COLOR = "tab:red"
+ODOM_COLOR = "tab:blue"
+SLAM_COLOR = "tab:green"
+LANDMARK_SIGMAS = 2.0
+DPI = 130
+
+
+def _figure(width_in: float, height_in: float) -> Any:
+    from matplotlib.figure import Figure
+
+    return Figure(figsize=(width_in, height_in), dpi=DPI, layout="constrained")
+
+
+def ellipse_points(
+    center: NDArray[np.float64], covariance: NDArray[np.float64], n_sigma: float, samples: int = 64
+) -> NDArray[np.float64]:
+    """Points (samples, 2) of the ellipse ``(p - c)^T C^-1 (p - c) = n_sigma^2`` of a 2x2 covariance.
+
+    ``C = V diag(lambda) V^T`` gives ``p = c + n_sigma V diag(sqrt(lambda)) [cos t, sin t]``.
+    """
+    eigenvalues, V = np.linalg.eigh(np.asarray(covariance, dtype=np.float64))
+    t = np.linspace(0.0, 2.0 * math.pi, samples)
+    unit = np.vstack([np.cos(t), np.sin(t)])
+    # p = c + n V sqrt(Lambda) u
+    return (np.asarray(center)[:, None] + n_sigma * V @ (np.sqrt(np.maximum(eigenvalues, 0.0))[:, None] * unit)).T
+
+
+def plot_trajectory(
+    path: str | Path,
+    truth: PoseSeries,
+    odom: PoseSeries,
+    slam: PoseSeries,
+    true_circles: NDArray[np.float64],
+    mapped_xy: NDArray[np.float64],
+    mapped_covariances: NDArray[np.float64],
+    arena_xy_m: tuple[float, float],
+) -> None:
+    """trajectory.png: the arena walls, the true cylinders (rows ``[x, y, r]``), the ground truth (red),
+    odometry (blue) and SLAM (green) paths in the world frame, and the mapped landmarks (n, 2) with their
+    2-sigma ellipses from ``mapped_covariances`` (n, 2, 2)."""
+    from matplotlib.patches import Circle, Rectangle
+
+    figure = _figure(7.0, 7.0)
+    axes = figure.add_subplot()
+    hx, hy = 0.5 * arena_xy_m[0], 0.5 * arena_xy_m[1]
+    axes.add_patch(Rectangle((-hx, -hy), 2 * hx, 2 * hy, fill=False, edgecolor="black", linewidth=2.0))
+    for x, y, r in np.asarray(true_circles).reshape(-1, 3):
+        axes.add_patch(Circle((x, y), r, color="0.35", alpha=0.8))
+    axes.plot([], [], "o", color="0.35", label="true cylinders")
+    axes.plot(*truth.xy.T, color=TRUTH_COLOR, linewidth=1.6, label="ground truth")
+    axes.plot(*odom.xy.T, color=ODOM_COLOR, linewidth=1.0, label="odometry")
+    axes.plot(*slam.xy.T, color=SLAM_COLOR, linewidth=1.0, linestyle="--", label="SLAM")
+    axes.plot(*truth.xy[0], "k^", markersize=8, label="start")
+    mapped_xy = np.asarray(mapped_xy).reshape(-1, 2)
+    covariances = np.asarray(mapped_covariances).reshape(-1, 2, 2)
+    for center, covariance in zip(mapped_xy, covariances):
+        axes.plot(*ellipse_points(center, covariance, LANDMARK_SIGMAS).T, color=SLAM_COLOR, linewidth=1.0)
+    axes.plot(*mapped_xy.T, "+", color=SLAM_COLOR, markersize=9, label="mapped landmarks (2σ)")
+    axes.set_aspect("equal")
+    margin = 0.15
+    axes.set_xlim(-hx - margin, hx + margin)
+    axes.set_ylim(-hy - margin, hy + margin)
+    axes.set_xlabel("x (m), nusim/world = map")
+    axes.set_ylabel("y (m)")
+    axes.set_title("Trajectories and map")
+    axes.grid(True, alpha=0.3)
+    axes.legend(loc="upper right", fontsize="small")
+    figure.savefig(path)
+
+
+def plot_errors(
+    path: str | Path, t_s: NDArray[np.float64], errors: NDArray[np.float64], sigmas: NDArray[np.float64]
+) -> None:
+    """errors.png: SLAM pose error ``e = [x, y, theta]`` (K, 3) over time (K,) with its +-2 sigma bounds
+    (``sigmas`` (K, 3), square roots of the covariance diagonal)."""
+    figure = _figure(8.0, 7.0)
+    labels = ("x error (m)", "y error (m)", "heading error (rad)")
+    axes_list = figure.subplots(3, 1, sharex=True)
+    for k, (axes, label) in enumerate(zip(axes_list, labels)):
+        axes.fill_between(t_s, -2 * sigmas[:, k], 2 * sigmas[:, k], color=SLAM_COLOR, alpha=0.2, label="±2σ")
+        axes.plot(t_s, errors[:, k], color=SLAM_COLOR, linewidth=1.0, label="SLAM error")
+        axes.axhline(0.0, color="black", linewidth=0.5)
+        axes.set_ylabel(label)
+        axes.grid(True, alpha=0.3)
+    axes_list[0].legend(loc="upper right", fontsize="small")
+    axes_list[0].set_title("SLAM pose error against its ±2σ bounds")
+    axes_list[-1].set_xlabel("simulation time (s)")
+    figure.savefig(path)
+
+
+def plot_covariance(path: str | Path, P: NDArray[np.float64]) -> None:
+    """covariance.png: the final (N, N) covariance of ``[x, y, theta, m_0x, m_0y, ...]``: log10 |P_ij|
+    (left) and the correlation coefficients ``P_ij / sqrt(P_ii P_jj)`` (right), robot and landmark blocks
+    outlined."""
+    from matplotlib.colors import Normalize
+
+    P = np.asarray(P, dtype=np.float64)
+    n = P.shape[0]
+    d = np.sqrt(np.clip(np.diag(P), 1e-300, None))
+    correlation = P / np.outer(d, d)
+    magnitude = np.log10(np.abs(P) + 1e-16)
+    figure = _figure(12.0, 5.6)
+    left, right = figure.subplots(1, 2)
+    image = left.imshow(magnitude, cmap="viridis", interpolation="nearest", vmin=max(magnitude.min(), -12.0))
+    figure.colorbar(image, ax=left, label="log10 |P_ij|")
+    image = right.imshow(correlation, cmap="RdBu_r", norm=Normalize(-1.0, 1.0), interpolation="nearest")
+    figure.colorbar(image, ax=right, label="correlation")
+    edges = [3 + 2 * k for k in range((n - 3) // 2 + 1)]
+    ticks = [1.0] + [3.5 + 2 * k for k in range((n - 3) // 2)]
+    names = ["robot"] + [f"m{k}" for k in range((n - 3) // 2)]
+    for axes, title in ((left, "final covariance, log10 |P|"), (right, "final correlation")):
+        for edge in edges:
+            axes.axhline(edge - 0.5, color="white", linewidth=0.6)
+            axes.axvline(edge - 0.5, color="white", linewidth=0.6)
+        axes.set_xticks(ticks, names, rotation=90, fontsize="small")
+        axes.set_yticks(ticks, names, fontsize="small")
+        axes.set_title(title)
+    figure.savefig(path)
