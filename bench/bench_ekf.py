@@ -59,7 +59,7 @@ def observations(T_world_body: Transform2D, world: np.ndarray, ids: np.ndarray, 
 
 def mapped_filter(world: np.ndarray, mode: str, rng: np.random.Generator) -> EkfSlam:
     """A filter that has mapped every landmark of ``world`` from the origin, in batches of 10."""
-    config = CONFIG if mode == "known" else dataclasses.replace(CONFIG, association=mode)
+    config = CONFIG if mode == "known" else dataclasses.replace(CONFIG, matcher=mode)
     slam = EkfSlam(config, BURGER)
     for first in range(0, len(world), OBSERVATIONS_PER_STEP):
         ids = np.arange(first, min(first + OBSERVATIONS_PER_STEP, len(world)))

@@ -62,6 +62,7 @@ from nuturtle_description.conversions import (
     transform_from_pose,
     transform_stamped,
 )
+from nuturtle_description.markers import MARKER_HEIGHT_M, cylinder_marker, set_color
 from nuturtle_description.node_main import run_node
 from nuturtle_description.robot_params import RobotParams, burger_params
 from nuturtle_description.ros_params import declare_dataclass
@@ -80,8 +81,7 @@ WORLD_FRAME = "nusim/world"
 TRUE_BODY_FRAME = "nusim/base_footprint"
 BODY_FRAME = "base_footprint"
 SCAN_FRAME = "base_scan"
-# Drawn height of cylinders and walls, and wall thickness (m): display only.
-MARKER_HEIGHT_M = 0.25
+# Wall thickness (m): display only.
 WALL_THICKNESS_M = 0.1
 RED = (1.0, 0.0, 0.0, 1.0)
 YELLOW = (1.0, 0.85, 0.0, 1.0)
@@ -117,27 +117,6 @@ class NusimTiming:
         return math.floor(step * stream_hz / self.rate) > math.floor((step - 1) * stream_hz / self.rate)
 
 
-def _color(marker: Marker, rgba: tuple[float, float, float, float]) -> None:
-    marker.color.r, marker.color.g, marker.color.b, marker.color.a = rgba
-
-
-def cylinder_marker(
-    frame_id: str, stamp: Time, ns: str, marker_id: int, x: float, y: float, radius_m: float, rgba
-) -> Marker:
-    """A CYLINDER (action ADD) of diameter 2 radius_m standing on the floor at (x, y)."""
-    marker = Marker(ns=ns, id=marker_id, type=Marker.CYLINDER, action=Marker.ADD)
-    marker.header.frame_id = frame_id
-    marker.header.stamp = stamp
-    marker.pose.position.x = x
-    marker.pose.position.y = y
-    marker.pose.position.z = 0.5 * MARKER_HEIGHT_M
-    marker.pose.orientation.w = 1.0
-    marker.scale.x = marker.scale.y = 2.0 * radius_m
-    marker.scale.z = MARKER_HEIGHT_M
-    _color(marker, rgba)
-    return marker
-
-
 def wall_markers(arena: ArenaConfig, stamp: Time) -> MarkerArray:
     """Four CUBEs of WALL_THICKNESS_M just outside the arena's inner faces (frame nusim/world)."""
     hx, hy = arena.half_extents_m
@@ -159,7 +138,7 @@ def wall_markers(arena: ArenaConfig, stamp: Time) -> MarkerArray:
         marker.pose.position.z = 0.5 * MARKER_HEIGHT_M
         marker.pose.orientation.w = 1.0
         marker.scale.x, marker.scale.y, marker.scale.z = float(length_x), float(length_y), MARKER_HEIGHT_M
-        _color(marker, RED)
+        set_color(marker, RED)
         markers.append(marker)
     return MarkerArray(markers=markers)
 

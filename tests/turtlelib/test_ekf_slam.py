@@ -51,7 +51,7 @@ def test_default_config_matches_the_burger():
         config.measurement_covariance(2),
         np.tile(np.diag([config.range_std**2, config.bearing_std**2]), (2, 1, 1)),
     )
-    assert config.association == "nn"
+    assert config.matcher == "nn"
     np.testing.assert_array_equal(config.initial_pose_covariance(), np.zeros((3, 3)))
 
 
@@ -65,7 +65,7 @@ def test_default_config_matches_the_burger():
         ("bearing_std", math.inf),
         ("sensor_x", math.nan),
         ("sensor_theta", "0"),
-        ("association", "icp"),
+        ("matcher", "icp"),
         ("gate_associate", 0.0),
         ("gate_associate", 0.99999),  # not below gate_new
         ("gate_new", 1.0),

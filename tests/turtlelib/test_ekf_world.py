@@ -179,7 +179,7 @@ def min_separation_sigmas(slam: EkfSlam) -> float:
 @pytest.mark.parametrize("association", ["nn", "jcbb"])
 @pytest.mark.parametrize("seed", [100, 101, 102])
 def test_unknown_association_maps_each_landmark_once(association, seed):
-    config = dataclasses.replace(CONFIG, association=association)
+    config = dataclasses.replace(CONFIG, matcher=association)
     separations = []
     _, slam, history = run(
         seed, known=False, config=config, on_scan=lambda slam: separations.append(min_separation_sigmas(slam))
@@ -201,7 +201,7 @@ def test_unknown_association_maps_each_landmark_once(association, seed):
 @pytest.mark.parametrize("seed", [200, 201, 202])
 def test_spurious_detections_never_survive_confirmation(association, seed):
     # clutter: one random detection for every four real ones, i.e. 20 % of all detections
-    config = dataclasses.replace(CONFIG, association=association)
+    config = dataclasses.replace(CONFIG, matcher=association)
     _, slam, history = run(seed, known=False, config=config, clutter=0.25)
     n_clutter = sum(int(np.sum(source < 0)) for source, _ in history)
     n_total = sum(len(source) for source, _ in history)

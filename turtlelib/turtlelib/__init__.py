@@ -10,6 +10,7 @@ from .ekf_slam import Association, EkfSlam, ObservationStatus, SlamConfig
 from .geometry import Transform2D, Twist2D, integrate_twist, normalize_angle, normalize_angles
 from .kinematics import DiffDrive
 from .scan_model import LidarConfig, arena_walls, cast_beams, simulate_scan
+from .slam_timeline import SlamTimeline, TimelineConfig
 
 __all__ = [
     "Circle",
@@ -36,6 +37,8 @@ __all__ = [
     "EkfSlam",
     "ObservationStatus",
     "SlamConfig",
+    "SlamTimeline",
+    "TimelineConfig",
     "chi2_bounds",
     "nees",
     "nis",

@@ -182,7 +182,8 @@ class Detections:
 
     ``p_sensor`` (K, 2) centres, ``radius`` (K,), ``n_points`` (K,) int, ``residual`` (K,) RMS fit
     error, ``range_m`` (K,) and ``bearing_rad`` (K,) of the centres, ``covariance`` (K, 2, 2) of the
-    measurement ``[range_m, bearing_rad]``. Inconsistent shapes raise ValueError.
+    measurement ``[range_m, bearing_rad]``, and ``cluster_index`` (K,) the cluster of the scan's
+    :class:`Clusters` each came from (-1 when not given). Inconsistent shapes raise ValueError.
     """
 
     p_sensor: NDArray[np.float64]
@@ -192,10 +193,13 @@ class Detections:
     range_m: NDArray[np.float64]
     bearing_rad: NDArray[np.float64]
     covariance: NDArray[np.float64]
+    cluster_index: NDArray[np.intp] | None = None
 
     def __post_init__(self) -> None:
         k = self.radius.shape[0] if self.radius.ndim == 1 else -1
-        vectors = (self.radius, self.n_points, self.residual, self.range_m, self.bearing_rad)
+        if self.cluster_index is None:
+            object.__setattr__(self, "cluster_index", np.full(max(k, 0), -1, dtype=np.intp))
+        vectors = (self.radius, self.n_points, self.residual, self.range_m, self.bearing_rad, self.cluster_index)
         if (
             k < 0
             or any(v.shape != (k,) for v in vectors)
@@ -399,7 +403,8 @@ class LandmarkDetector:
             chord[:, 0] * chord[:, 0] + chord[:, 1] * chord[:, 1] <= 4.0 * cfg.max_radius * cfg.max_radius
         )
         if not candidate.any():
-            return self._detections(np.empty((0, 2)), np.empty(0), np.empty(0, dtype=np.intp), np.empty(0))
+            nothing = np.empty(0, dtype=np.intp)
+            return self._detections(np.empty((0, 2)), np.empty(0), nothing, np.empty(0), nothing)
         n = sizes[candidate]
         p = clusters.p_sensor[candidate.repeat(sizes)]
         starts = np.zeros(n.shape[0], dtype=np.intp)
@@ -458,7 +463,11 @@ class LandmarkDetector:
             & clear[:, 1]
         )
         return self._detections(
-            centre[is_cylinder], radius[is_cylinder], n[is_cylinder], residual[is_cylinder]
+            centre[is_cylinder],
+            radius[is_cylinder],
+            n[is_cylinder],
+            residual[is_cylinder],
+            np.flatnonzero(candidate)[is_cylinder],
         )
 
     def _detections(
@@ -467,6 +476,7 @@ class LandmarkDetector:
         radius: NDArray[np.float64],
         n_points: NDArray[np.intp],
         residual: NDArray[np.float64],
+        cluster_index: NDArray[np.intp],
     ) -> Detections:
         """Step 7: range, bearing and covariance of the kept centres."""
         cfg = self.config
@@ -483,6 +493,7 @@ class LandmarkDetector:
             range_m=np.hypot(p_sensor[:, 0], p_sensor[:, 1]),
             bearing_rad=np.arctan2(p_sensor[:, 1], p_sensor[:, 0]),
             covariance=covariance,
+            cluster_index=cluster_index,
         )
 
 

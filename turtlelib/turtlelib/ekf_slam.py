@@ -29,7 +29,7 @@ Unknown association (:meth:`EkfSlam.update_unknown`)
 ----------------------------------------------------
 Every observation is gated against every landmark (vectorised 2x2 innovation covariances, O(n) each)
 with ``D2 < chi2_2^-1(gate_associate)``; compatible observations join a landmark by nearest neighbour or
-by JCBB (``association``, :mod:`turtlelib.association`), confirmed landmarks first: a tentative landmark
+by JCBB (``matcher``, :mod:`turtlelib.association`), confirmed landmarks first: a tentative landmark
 only takes observations that no confirmed landmark is compatible with, so a tentative duplicate next to
 a confirmed landmark starves and expires. An unpaired observation starts a new tentative
 landmark only if ``D2 > chi2_2^-1(gate_new)`` for every landmark, and is discarded otherwise. A tentative
@@ -59,7 +59,7 @@ from .range_bearing import landmarks_from_observations, predict_observations, re
 from .slam_state import ROBOT_DIM, SlamState
 from .wheel_noise import wheel_slip_covariance
 
-ASSOCIATION_METHODS = ("nn", "jcbb")
+MATCHERS = ("nn", "jcbb")
 
 
 @dataclass(frozen=True)
@@ -72,7 +72,8 @@ class SlamConfig:
       bearing_std^2)`` when an update is given no ``R``.
     * ``sensor_x``, ``sensor_y`` (m), ``sensor_theta`` (rad): ``T_body_sensor``, the sensor mounting in the
       body frame (the LDS-01 of the Burger sits at x = -0.032 m).
-    * ``association``: ``'nn'`` (nearest neighbour) or ``'jcbb'`` (joint compatibility branch and bound).
+    * ``matcher``: how unknown association pairs observations with landmarks, ``'nn'`` (nearest neighbour)
+      or ``'jcbb'`` (joint compatibility branch and bound).
     * ``gate_associate`` < ``gate_new``, both in (0, 1): chi2 probabilities (2 dof) of the association gate
       and of the gate beyond which an observation may start a new landmark.
     * ``confirm_count`` (>= 1): sightings that confirm a tentative landmark; ``tentative_timeout`` (scans,
@@ -90,7 +91,7 @@ class SlamConfig:
     sensor_x: float = -0.032
     sensor_y: float = 0.0
     sensor_theta: float = 0.0
-    association: str = "nn"
+    matcher: str = "nn"
     gate_associate: float = 0.99
     gate_new: float = 0.9999
     confirm_count: int = 5
@@ -109,8 +110,8 @@ class SlamConfig:
         for name in ("range_std", "bearing_std", "max_range"):
             if _real(name, getattr(self, name)) <= 0.0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)!r}")
-        if self.association not in ASSOCIATION_METHODS:
-            raise ValueError(f"association must be one of {ASSOCIATION_METHODS}, got {self.association!r}")
+        if self.matcher not in MATCHERS:
+            raise ValueError(f"matcher must be one of {MATCHERS}, got {self.matcher!r}")
         gate_associate = _real("gate_associate", self.gate_associate)
         gate_new = _real("gate_new", self.gate_new)
         if not 0.0 < gate_associate < gate_new < 1.0:
@@ -191,20 +192,38 @@ class EkfSlam:
     # --- the filter steps --------------------------------------------------------------------------------
 
     def predict(self, dphi_left: float, dphi_right: float) -> None:
-        """Move the pose by wheel increments (rad); only the robot rows and columns of ``P`` change."""
-        T_map_body = self.pose
-        # q' = q (+) exp([F dphi])
+        """Move the pose by wheel increments (rad); only the robot rows and columns of ``P`` change.
+
+        ValueError (filter unchanged) for non-finite increments.
+        """
+        q_next, G, Q = self._motion(self.pose, dphi_left, dphi_right)
+        # P_qq' = G P_qq G^T + Q,  P_qm' = G P_qm
+        self._state.predict(q_next, G, Q)
+
+    def propagated_pose(
+        self, dphi_left: float, dphi_right: float
+    ) -> tuple[Transform2D, NDArray[np.float64]]:
+        """The pose and its covariance (3, 3) :meth:`predict` would give, without changing the filter.
+
+        ``q' = f(q, dphi)``, ``P_qq' = G P_qq G^T + Q``: O(1), for publishing the pose between filter steps.
+        """
+        q_next, G, Q = self._motion(self.pose, dphi_left, dphi_right)
+        P_qq = G @ self._state.covariance[:ROBOT_DIM, :ROBOT_DIM] @ G.T + Q
+        return Transform2D(*q_next), 0.5 * (P_qq + P_qq.T)
+
+    def _motion(
+        self, T_map_body: Transform2D, dphi_left: float, dphi_right: float
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """The motion model: the new pose ``q'`` (3,), its Jacobian ``G = dq'/dq`` and the noise ``Q`` (3, 3)."""
+        # q' = q (+) exp([F dphi])  (DiffDrive.step raises ValueError for non-finite increments)
         q_next = self._drive.step(T_map_body, dphi_left, dphi_right).as_array()
         # G = dq'/dq = [[1, 0, -dy], [0, 1, dx], [0, 0, 1]] (DiffDrive.step_jacobians' G_pose) with
         # [dx, dy] = [x', y'] - [x, y]
         G = np.eye(3)
         G[0, 2] = -(q_next[1] - T_map_body.y)
         G[1, 2] = q_next[0] - T_map_body.x
-        Q = wheel_slip_covariance(
-            self._drive, T_map_body.theta, dphi_left, dphi_right, self._config.wheel_noise
-        )
-        # P_qq' = G P_qq G^T + Q,  P_qm' = G P_qm
-        self._state.predict(q_next, G, Q)
+        Q = wheel_slip_covariance(self._drive, T_map_body.theta, dphi_left, dphi_right, self._config.wheel_noise)
+        return q_next, G, Q
 
     def update_known(self, ids: ArrayLike, z: ArrayLike, R: ArrayLike | None = None) -> Association:
         """Update with observations ``z`` (K, 2) [range_m, bearing_rad] (sensor frame) of landmarks ``ids``.
@@ -212,10 +231,7 @@ class EkfSlam:
         ``ids`` (K,) distinct integers >= 0 are the truth: an id never seen before starts a new (confirmed)
         landmark from its observation. ``R`` (K, 2, 2) the observation noise (default from the config).
         """
-        landmark_ids = _landmark_ids(ids)
-        z, R = self._observations(z, R)
-        if len(landmark_ids) != len(z):
-            raise ValueError(f"{len(landmark_ids)} ids for {len(z)} observations")
+        z, R, landmark_ids = self.checked_observations(z, R, ids)
         self._enter_mode("known")
 
         in_range = z[:, 0] <= self._config.max_range
@@ -238,7 +254,7 @@ class EkfSlam:
         Call it once per scan, also with no observations (K = 0): the tentative timeout counts these calls.
         ``R`` (K, 2, 2) the observation noise (default from the config).
         """
-        z, R = self._observations(z, R)
+        z, R, _ = self.checked_observations(z, R)
         self._enter_mode("unknown")
         self._scan += 1
         usable = (z[:, 0] <= self._config.max_range).nonzero()[0]
@@ -382,6 +398,25 @@ class EkfSlam:
 
     # --- helpers -----------------------------------------------------------------------------------------
 
+    def checked_observations(
+        self, z: ArrayLike, R: ArrayLike | None = None, ids: ArrayLike | None = None
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64] | None]:
+        """What the updates take, validated: ``z`` (K, 2) finite with range > 0, ``R`` (K, 2, 2) symmetric
+        positive definite (default from the config) and, if given, ``ids`` (K,) distinct integers >= 0.
+        Observations with ``ids`` are for :meth:`update_known`, without for :meth:`update_unknown`: they
+        must fit the filter's association mode.
+
+        ValueError otherwise. For callers that queue observations and must refuse bad ones at once.
+        """
+        mode = "unknown" if ids is None else "known"
+        if self._mode not in (None, mode):
+            raise ValueError(f"this filter runs with {self._mode} association; reset() to switch")
+        landmark_ids = None if ids is None else _landmark_ids(ids)
+        z, R = self._observations(z, R)
+        if landmark_ids is not None and len(landmark_ids) != len(z):
+            raise ValueError(f"{len(landmark_ids)} ids for {len(z)} observations")
+        return z, R, landmark_ids
+
     def _observations(
         self, z: ArrayLike, R: ArrayLike | None
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -477,8 +512,8 @@ class EkfSlam:
         H_robot: NDArray[np.float64],
         H_landmark: NDArray[np.float64],
     ) -> NDArray[np.int64]:
-        """Observations to ``compatible`` slots by nearest neighbour or JCBB (the ``association`` option)."""
-        if self._config.association == "nn":
+        """Observations to ``compatible`` slots by nearest neighbour or JCBB (the ``matcher`` option)."""
+        if self._config.matcher == "nn":
             # most likely: the smallest -2 log N(nu; 0, S) = D2 + ln det S (+ const)
             return nearest_neighbour(d2 + log_det, compatible)
         candidates = compatible.any(axis=0).nonzero()[0]

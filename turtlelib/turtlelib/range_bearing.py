@@ -119,3 +119,46 @@ def residual(z: NDArray[np.float64], z_hat: NDArray[np.float64]) -> NDArray[np.f
     # nu_bearing <- wrap(b - b_hat)
     nu[..., 1:] = normalize_angles(nu[..., 1:])
     return nu
+
+
+def observations_from_points(
+    p_sensor: NDArray[np.float64], covariance: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Range-bearing observations of points measured in the sensor frame as Cartesian positions.
+
+    ``p_sensor`` (K, 2) (m) with covariances ``covariance`` (K, 2, 2) (m^2), e.g. a landmark sensor that
+    reports positions. With ``rho = |p|``::
+
+        z = [rho, atan2(p_y, p_x)]
+        J = dz/dp = [[ p_x / rho,    p_y / rho  ],
+                     [-p_y / rho^2,  p_x / rho^2]]
+        R = J Sigma J^T
+
+    Returns ``(z (K, 2), R (K, 2, 2))``. ValueError for mismatched shapes, non-finite values or a point
+    at the sensor's origin (``rho = 0``: no bearing).
+    """
+    p = np.asarray(p_sensor, dtype=np.float64)
+    if p.size == 0:
+        p = p.reshape(0, 2)
+    if p.ndim != 2 or p.shape[1] != 2:
+        raise ValueError(f"points must have shape (K, 2), got {p.shape}")
+    sigma = np.asarray(covariance, dtype=np.float64)
+    if sigma.shape != (len(p), 2, 2):
+        raise ValueError(f"covariance must have shape ({len(p)}, 2, 2), got {sigma.shape}")
+    if not (np.isfinite(p).all() and np.isfinite(sigma).all()):
+        raise ValueError("points and covariances must be finite")
+    rho2 = p[:, 0] * p[:, 0] + p[:, 1] * p[:, 1]
+    if np.any(rho2 == 0.0):
+        raise ValueError("a point at the sensor's origin has no bearing")
+    rho = np.sqrt(rho2)
+    # z = [rho, atan2(p_y, p_x)]
+    z = np.column_stack([rho, np.arctan2(p[:, 1], p[:, 0])])
+    # J = [[p_x / rho, p_y / rho], [-p_y / rho^2, p_x / rho^2]]
+    J = np.empty((len(p), 2, 2))
+    J[:, 0, 0] = p[:, 0] / rho
+    J[:, 0, 1] = p[:, 1] / rho
+    J[:, 1, 0] = -p[:, 1] / rho2
+    J[:, 1, 1] = p[:, 0] / rho2
+    # R = J Sigma J^T
+    R = J @ sigma @ J.transpose(0, 2, 1)
+    return z, 0.5 * (R + R.transpose(0, 2, 1))

@@ -1,0 +1,100 @@
+"""`landmarks`: cylinders found in each LiDAR scan (a thin wrapper over `turtlelib.LandmarkDetector`).
+
+Subscribes
+    `scan` (sensor_msgs/LaserScan, sensor-data QoS as the LDS-01 publishes it).
+Publishes (stamped with the scan's stamp, in the scan's frame)
+    `landmarks` (visualization_msgs/MarkerArray): a DELETEALL, then one CYLINDER (ADD) per detected cylinder,
+        id = its index in this scan, centre in ``pose.position`` (m), diameter in ``scale.x``/``scale.y``.
+        One array per scan, also when nothing is found (SLAM counts scans).
+    `~/clusters` (visualization_msgs/MarkerArray): a DELETEALL, then one POINTS marker per cluster of the
+        scan, cylinders green and rejected clusters grey (for tuning the thresholds).
+Parameters
+    Every field of `turtlelib.DetectorConfig` (cluster_threshold, min_points, min_radius, max_radius, ...),
+    under the same names. Invalid values stop the node at start-up with a message.
+
+A scan the detector refuses (an empty or non-finite layout, range_min >= range_max) is skipped with a
+throttled warning; the node keeps running.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+from geometry_msgs.msg import Point
+from rclpy.node import Node
+from rclpy.qos import qos_profile_sensor_data
+from sensor_msgs.msg import LaserScan
+from turtlelib import Clusters, DetectorConfig, Detections, LandmarkDetector
+from visualization_msgs.msg import Marker, MarkerArray
+
+from nuturtle_description.markers import cylinder_marker, delete_all_marker, set_color
+from nuturtle_description.node_main import run_node
+from nuturtle_description.ros_params import declare_dataclass
+
+GREEN = (0.1, 0.8, 0.2, 1.0)
+GREY = (0.6, 0.6, 0.6, 0.8)
+# Size of a drawn cluster point (m)
+CLUSTER_POINT_M = 0.02
+# Minimum time between two warnings from the same place (s)
+WARN_THROTTLE_S = 2.0
+
+
+def landmark_markers(detections: Detections, msg: LaserScan) -> MarkerArray:
+    """The `landmarks` array of one scan: DELETEALL, then a CYLINDER per detection."""
+    frame_id, stamp = msg.header.frame_id, msg.header.stamp
+    markers = [delete_all_marker(frame_id, stamp)]
+    for k, ((x, y), radius_m) in enumerate(zip(detections.p_sensor, detections.radius)):
+        markers.append(cylinder_marker(frame_id, stamp, "landmarks", k, float(x), float(y), float(radius_m), GREEN))
+    return MarkerArray(markers=markers)
+
+
+def cluster_markers(clusters: Clusters, detections: Detections, msg: LaserScan) -> MarkerArray:
+    """The `~/clusters` array of one scan: DELETEALL, then a POINTS marker per cluster, green when the
+    cluster became one of the ``detections``, grey otherwise."""
+    frame_id, stamp = msg.header.frame_id, msg.header.stamp
+    markers = [delete_all_marker(frame_id, stamp)]
+    cylinders = set(detections.cluster_index.tolist())
+    for k in range(len(clusters)):
+        marker = Marker(ns="clusters", id=k, type=Marker.POINTS, action=Marker.ADD)
+        marker.header.frame_id = frame_id
+        marker.header.stamp = stamp
+        marker.pose.orientation.w = 1.0
+        marker.scale.x = marker.scale.y = CLUSTER_POINT_M
+        marker.points = [Point(x=float(x), y=float(y)) for x, y in clusters.points(k)]
+        set_color(marker, GREEN if k in cylinders else GREY)
+        markers.append(marker)
+    return MarkerArray(markers=markers)
+
+
+class LandmarksNode(Node):
+    """The `landmarks` node (see the module docstring); kwargs go to rclpy's Node."""
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__("landmarks", **kwargs)
+        self.config = declare_dataclass(self, DetectorConfig)
+        self.detector = LandmarkDetector(self.config)
+        self._landmarks_publisher = self.create_publisher(MarkerArray, "landmarks", 10)
+        self._clusters_publisher = self.create_publisher(MarkerArray, "~/clusters", 10)
+        self.create_subscription(LaserScan, "scan", self._on_scan, qos_profile_sensor_data)
+
+    def _on_scan(self, msg: LaserScan) -> None:
+        ranges = np.asarray(msg.ranges, dtype=np.float64)  # array.array('f'): through the buffer protocol
+        try:
+            detections, clusters = self.detector.detect_with_clusters(
+                ranges, msg.angle_min, msg.angle_increment, msg.range_min, msg.range_max
+            )
+        except ValueError as error:
+            self.get_logger().warning(f"scan skipped: {error}", throttle_duration_sec=WARN_THROTTLE_S)
+            return
+        self._landmarks_publisher.publish(landmark_markers(detections, msg))
+        if self._clusters_publisher.get_subscription_count():
+            self._clusters_publisher.publish(cluster_markers(clusters, detections, msg))
+
+
+def main(args: list[str] | None = None) -> None:
+    sys.exit(run_node(lambda: LandmarksNode(), "landmarks", args))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,272 @@
+"""`slam`: EKF SLAM from wheel encoders and landmark observations (a thin wrapper over turtlelib).
+
+The filter is `turtlelib.EkfSlam`; `turtlelib.SlamTimeline` brings it to each observation's stamp before
+the observation is applied (wheel angles interpolated between joint_states samples), so observations that
+arrive late (up to `max_observation_delay`) are still applied at the pose they were taken from.
+
+Subscribes
+    `joint_states` (sensor_msgs/JointState): wheel angles (rad) of joints `wheel_left`, `wheel_right`.
+    `association` = `unknown` (default): `landmarks` (visualization_msgs/MarkerArray from the `landmarks`
+        node, frame `sensor_id` or `body_id`): one scan's cylinder centres; the EKF associates them
+        (Mahalanobis gates, nearest neighbour or JCBB, tentative landmarks confirmed after
+        `confirm_count` sightings). Noise ``R = diag(range_std^2, bearing_std^2)``.
+    `association` = `known`: `fake_sensor` (MarkerArray from nusim, frame `body_id`): marker id = landmark
+        id; positions with per-axis standard deviation `fake_sensor_std`, turned into range-bearing with
+        ``R = J Sigma J^T`` (`turtlelib.range_bearing.observations_from_points`).
+Publishes
+    `~/odom` (nav_msgs/Odometry, `map_id` -> `body_id`, stamped with the joint_states stamp): the pose at
+        that stamp with its (x, y, yaw) covariance in the 6x6, and the wheels' body twist.
+    `~/path` (nav_msgs/Path, frame `map_id`), decimated by `PathTrailConfig`.
+    `~/map` (visualization_msgs/MarkerArray, frame `map_id`, after each applied scan, stamped with it):
+        DELETEALL, then per confirmed landmark a green CYLINDER (ns `landmarks`, id = landmark id, diameter
+        2 `landmark_radius`) and its 2-sigma ellipse (ns `covariance`).
+    `/tf` `map_id` -> `odom_id` where tf2_msgs is installed: ``T_map_odom = T_map_body T_odom_body^-1``
+        with ``T_odom_body`` the wheel odometry integrated from the same joint_states (the `odometry`
+        node's), so the odometry frame hangs under the map as REP 105 says.
+Parameters
+    `SlamNodeConfig` (association, x0, y0, theta0, frame ids, fake_sensor_std, landmark_radius),
+    `turtlelib.SlamConfig` (wheel_noise, range_std, bearing_std, sensor_x/y/theta, matcher, gates,
+    confirm_count, tentative_timeout, max_range, initial_*_std, jcbb_max_nodes), `turtlelib.TimelineConfig`
+    (max_observation_delay, max_pending_observations), `RobotParams` (the Burger's by default),
+    `WheelJoints`, `PathTrailConfig`. Defaults in config/slam.yaml. Invalid values stop the node at
+    start-up with a message.
+
+Bad input never stops the node: invalid joint_states, observations that are stale, non-finite, in an
+unknown frame or beyond the filter's checks are skipped with a throttled warning; a joint_states stamp
+earlier than the last restarts the timeline there (a restarted simulator or a looped recording).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass
+
+import numpy as np
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import PoseStamped
+from nav_msgs.msg import Odometry, Path
+from numpy.typing import NDArray
+from rclpy.impl.rcutils_logger import RcutilsLogger
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from turtlelib import EkfSlam, SlamConfig, SlamTimeline, TimelineConfig, Transform2D, Twist2D
+from turtlelib.range_bearing import observations_from_points
+from visualization_msgs.msg import MarkerArray
+
+from nuturtle_control.path_trail import PathTrail, PathTrailConfig
+from nuturtle_control.wheel_joints import WheelJoints, wheel_values
+from nuturtle_control.wheel_odometry import WheelOdometry
+from nuturtle_description.conversions import (
+    planar_covariance_6x6,
+    pose_from_transform,
+    stamp_from_seconds,
+    stamp_seconds,
+    transform_stamped,
+)
+from nuturtle_description.markers import cylinder_marker, delete_all_marker, ellipse_marker, marker_positions
+from nuturtle_description.node_main import run_node
+from nuturtle_description.robot_params import RobotParams, burger_params
+from nuturtle_description.ros_params import declare_dataclass
+from nuturtle_description.tf_compat import OptionalTfBroadcaster
+
+ASSOCIATIONS = ("known", "unknown")
+GREEN = (0.1, 0.8, 0.2, 1.0)
+GREEN_TRANSLUCENT = (0.1, 0.8, 0.2, 0.35)
+# Drawn confidence region of a mapped landmark (standard deviations)
+ELLIPSE_SIGMA = 2.0
+# Minimum time between two warnings from the same place (s)
+WARN_THROTTLE_S = 2.0
+
+
+@dataclass(frozen=True)
+class SlamNodeConfig:
+    """The node's own parameters (ValueError for invalid values):
+
+    * ``association``: ``unknown`` (LiDAR landmarks) or ``known`` (nusim's fake sensor, ids given);
+    * ``x0``, ``y0``, ``theta0`` (m, m, rad, finite): the start pose ``T_map_body``;
+    * ``map_id``, ``odom_id``, ``body_id``, ``sensor_id``: frame ids, non-empty and distinct;
+    * ``fake_sensor_std`` (m, > 0): per-axis standard deviation of the fake sensor's positions;
+    * ``landmark_radius`` (m, > 0): drawn radius of the mapped landmarks.
+    """
+
+    association: str = "unknown"
+    x0: float = 0.0
+    y0: float = 0.0
+    theta0: float = 0.0
+    map_id: str = "map"
+    odom_id: str = "odom"
+    body_id: str = "base_footprint"
+    sensor_id: str = "base_scan"
+    fake_sensor_std: float = 0.01
+    landmark_radius: float = 0.038
+
+    def __post_init__(self) -> None:
+        if self.association not in ASSOCIATIONS:
+            raise ValueError(f"association must be one of {ASSOCIATIONS}, got {self.association!r}")
+        for name in ("x0", "y0", "theta0"):
+            if not math.isfinite(getattr(self, name)):
+                raise ValueError(f"{name} must be finite, got {getattr(self, name)!r}")
+        for name in ("fake_sensor_std", "landmark_radius"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f"{name} must be finite and > 0, got {value!r}")
+        frames = [self.map_id, self.odom_id, self.body_id, self.sensor_id]
+        if not all(isinstance(frame, str) and frame for frame in frames) or len(set(frames)) != 4:
+            raise ValueError(f"map_id, odom_id, body_id and sensor_id must be distinct, non-empty, got {frames}")
+
+    @property
+    def T_map_body0(self) -> Transform2D:
+        return Transform2D(self.x0, self.y0, self.theta0)
+
+
+class SlamNode(Node):
+    """The `slam` node (see the module docstring); kwargs go to rclpy's Node."""
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__("slam", **kwargs)
+        self.node_config = declare_dataclass(self, SlamNodeConfig)
+        self.config = declare_dataclass(self, SlamConfig)
+        timeline_config = declare_dataclass(self, TimelineConfig)
+        robot = declare_dataclass(self, RobotParams, overrides=vars(burger_params()))
+        self.joints = declare_dataclass(self, WheelJoints)
+        self.trail: PathTrail[PoseStamped] = PathTrail(declare_dataclass(self, PathTrailConfig))
+        drive = robot.diff_drive()
+        self.slam = EkfSlam(self.config, drive, self.node_config.T_map_body0)
+        self.timeline = SlamTimeline(self.slam, timeline_config)
+        self.odometry = WheelOdometry(drive)
+        # T_sensor_frame for the frames observations may come in
+        T_body_sensor = self.config.T_body_sensor
+        self._T_sensor_from = {
+            self.node_config.sensor_id: Transform2D(),
+            self.node_config.body_id: T_body_sensor.inverse(),
+        }
+        self._fake_sensor_covariance = self.node_config.fake_sensor_std**2 * np.eye(2)
+        self._loggers: dict[str, RcutilsLogger] = {}
+
+        self._odom_publisher = self.create_publisher(Odometry, "~/odom", 10)
+        self._path_publisher = self.create_publisher(Path, "~/path", 10)
+        self._map_publisher = self.create_publisher(MarkerArray, "~/map", 10)
+        self._tf = OptionalTfBroadcaster(self)
+        self.create_subscription(JointState, "joint_states", self._on_joint_states, 10)
+        if self.node_config.association == "known":
+            self.create_subscription(MarkerArray, "fake_sensor", self._on_fake_sensor, 10)
+        else:
+            self.create_subscription(MarkerArray, "landmarks", self._on_landmarks, 10)
+
+    # --- inputs ------------------------------------------------------------------------------------------
+
+    def _on_joint_states(self, msg: JointState) -> None:
+        try:
+            phi_left_rad, phi_right_rad = wheel_values(self.joints, msg.name, msg.position)
+        except ValueError as error:
+            self._warn("joint_states", f"joint_states skipped: {error}")
+            return
+        t_s = stamp_seconds(msg.header.stamp)
+        latest_s = self.timeline.latest_time_s
+        if latest_s is not None and t_s < latest_s:
+            self._warn("joint_states", f"time went backwards ({t_s:.9f} s < {latest_s:.9f} s): restarting the timeline there")
+            self.timeline.restart(t_s, phi_left_rad, phi_right_rad)
+            self.odometry.set_reference(t_s, phi_left_rad, phi_right_rad)
+            return
+        try:
+            applied = self.timeline.add_wheels(t_s, phi_left_rad, phi_right_rad)
+        except (ValueError, np.linalg.LinAlgError) as error:
+            self._warn("joint_states", f"joint_states skipped: {error}")
+            return
+        if self.odometry.reference_time_s is None:
+            self.odometry.set_reference(t_s, phi_left_rad, phi_right_rad)
+        V_body = self.odometry.step(t_s, phi_left_rad, phi_right_rad)
+        self._publish_pose(msg.header.stamp, V_body)
+        if applied:
+            self._publish_map(applied[-1][0])
+
+    def _on_fake_sensor(self, msg: MarkerArray) -> None:
+        try:
+            t_s, ids, p_sensor, rotation = self._observed_points(msg)
+            # Sigma_sensor = R_sf Sigma R_sf^T
+            covariance = np.broadcast_to(rotation @ self._fake_sensor_covariance @ rotation.T, (len(ids), 2, 2))
+            z, R = observations_from_points(p_sensor, covariance)
+            applied = self.timeline.add_observations(t_s, z, R, ids)
+        except (ValueError, np.linalg.LinAlgError) as error:
+            self._warn("fake_sensor", f"fake_sensor skipped: {error}")
+            return
+        if applied:
+            self._publish_map(applied[-1][0])
+
+    def _on_landmarks(self, msg: MarkerArray) -> None:
+        try:
+            t_s, ids, p_sensor, _ = self._observed_points(msg)
+            z, _ = observations_from_points(p_sensor, np.zeros((len(ids), 2, 2)))
+            applied = self.timeline.add_observations(t_s, z)
+        except (ValueError, np.linalg.LinAlgError) as error:
+            self._warn("landmarks", f"landmarks skipped: {error}")
+            return
+        if applied:
+            self._publish_map(applied[-1][0])
+
+    def _observed_points(
+        self, msg: MarkerArray
+    ) -> tuple[float, NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
+        """Stamp (s), ids, centres ``p_sensor`` (K, 2) and the rotation from the markers' frame into the
+        sensor frame; ValueError for an unusable array."""
+        positions = marker_positions(msg)
+        T_sensor_frame = self._T_sensor_from.get(positions.frame_id)
+        if T_sensor_frame is None:
+            raise ValueError(
+                f"markers in frame {positions.frame_id!r}; expected one of {sorted(self._T_sensor_from)}"
+            )
+        # p_sensor = T_sensor_frame @ p_frame
+        p_sensor = T_sensor_frame @ positions.xy if len(positions.ids) else positions.xy
+        return stamp_seconds(positions.stamp), positions.ids, p_sensor, T_sensor_frame.rotation_matrix()
+
+    # --- outputs -----------------------------------------------------------------------------------------
+
+    def _publish_pose(self, stamp: Time, V_body: Twist2D) -> None:
+        frames = self.node_config
+        T_map_body, P_pose = self.timeline.latest_pose()
+        odom = Odometry()
+        odom.header.stamp = stamp
+        odom.header.frame_id = frames.map_id
+        odom.child_frame_id = frames.body_id
+        odom.pose.pose = pose_from_transform(T_map_body)
+        odom.pose.covariance = planar_covariance_6x6(P_pose)
+        odom.twist.twist.linear.x = V_body.vx
+        odom.twist.twist.angular.z = V_body.omega
+        self._odom_publisher.publish(odom)
+        if self._tf.available:
+            T_map_odom = T_map_body @ self.odometry.T_odom_body.inverse()
+            self._tf.send(transform_stamped(T_map_odom, frames.map_id, frames.odom_id, stamp))
+        if self.trail.offer(T_map_body, PoseStamped(header=odom.header, pose=odom.pose.pose)):
+            self._path_publisher.publish(Path(header=odom.header, poses=list(self.trail.items)))
+
+    def _publish_map(self, t_s: float) -> None:
+        map_id = self.node_config.map_id
+        stamp = stamp_from_seconds(t_s)
+        markers = [delete_all_marker(map_id, stamp)]
+        radius_m = self.node_config.landmark_radius
+        for landmark_id, xy, covariance in zip(
+            self.slam.landmark_ids.tolist(), self.slam.landmarks, self.slam.landmark_covariances
+        ):
+            markers.append(
+                cylinder_marker(map_id, stamp, "landmarks", landmark_id, float(xy[0]), float(xy[1]), radius_m, GREEN)
+            )
+            markers.append(
+                ellipse_marker(map_id, stamp, "covariance", landmark_id, xy, covariance, ELLIPSE_SIGMA, GREEN_TRANSLUCENT)
+            )
+        self._map_publisher.publish(MarkerArray(markers=markers))
+
+    def _warn(self, source: str, text: str) -> None:
+        """A warning throttled per ``source`` (a child logger each: rclpy throttles per logger and call site)."""
+        logger = self._loggers.get(source)
+        if logger is None:
+            logger = self._loggers[source] = self.get_logger().get_child(source)
+        logger.warning(text, throttle_duration_sec=WARN_THROTTLE_S)
+
+
+def main(args: list[str] | None = None) -> None:
+    sys.exit(run_node(lambda: SlamNode(), "slam", args))
+
+
+if __name__ == "__main__":
+    main()
