@@ -526,6 +526,30 @@ def test_latest_pose_is_the_filter_moved_on_to_the_newest_sample():
     assert_unchanged(before, snapshot(timeline))
 
 
+def test_latest_pose_follows_each_sample_interval_when_the_wheel_speeds_change():
+    # over the delay the robot turns left, then right: one arc per interval, as the filter will predict
+    speeds = [(4.0, 9.0), (4.0, 9.0), (9.0, 2.0), (-3.0, 6.0), (8.0, 8.0), (1.0, 7.0)]
+    samples = samples_from([0.05] * len(speeds), speeds)
+    delay = 0.17
+    timeline = SlamTimeline(mapped_filter(), TimelineConfig(max_observation_delay=delay))
+    for sample in samples:
+        timeline.add_wheels(*sample)
+    t_f = timeline.filter_time_s
+    expected = copy.deepcopy(timeline.slam)
+    phi = angles_at(samples, t_f)
+    later = [sample for sample in samples if sample[0] > t_f]
+    assert len(later) >= 3
+    for _, left, right in later:
+        expected.predict(left - phi[0], right - phi[1])
+        phi = (left, right)
+    pose, P = timeline.latest_pose()
+    np.testing.assert_allclose(pose.as_array(), expected.pose.as_array(), rtol=0.0, atol=1e-12)
+    np.testing.assert_allclose(P, expected.pose_covariance, rtol=0.0, atol=1e-12 * np.abs(P).max())
+    # one arc from t_f straight to the newest sample would not be the same pose
+    one_arc, _ = timeline.slam.propagated_pose(later[-1][1] - angles_at(samples, t_f)[0], later[-1][2] - angles_at(samples, t_f)[1])
+    assert np.abs(one_arc.as_array() - pose.as_array()).max() > 1e-4
+
+
 def test_without_delay_the_filter_is_at_the_newest_sample():
     samples = samples_from([0.05, 0.03, 0.07, 0.05], [(3.0, 5.0), (-2.0, 4.0), (6.0, 6.0), (1.0, -1.0)])
     timeline = SlamTimeline(mapped_filter(), TimelineConfig(max_observation_delay=0.0))

@@ -207,9 +207,21 @@ class EkfSlam:
 
         ``q' = f(q, dphi)``, ``P_qq' = G P_qq G^T + Q``: O(1), for publishing the pose between filter steps.
         """
-        q_next, G, Q = self._motion(self.pose, dphi_left, dphi_right)
-        P_qq = G @ self._state.covariance[:ROBOT_DIM, :ROBOT_DIM] @ G.T + Q
-        return Transform2D(*q_next), 0.5 * (P_qq + P_qq.T)
+        return self.propagated_pose_along([(dphi_left, dphi_right)])
+
+    def propagated_pose_along(self, increments: ArrayLike) -> tuple[Transform2D, NDArray[np.float64]]:
+        """As :meth:`propagated_pose` for consecutive increments ``[[dphi_left, dphi_right], ...]`` (S, 2)
+        (rad), one motion step each (the arcs of S sample intervals); S = 0 gives the current pose."""
+        steps = np.asarray(increments, dtype=np.float64).reshape(-1, 2)
+        T_map_body = self.pose
+        P_qq = self._state.covariance[:ROBOT_DIM, :ROBOT_DIM].copy()
+        for dphi_left, dphi_right in steps.tolist():
+            q_next, G, Q = self._motion(T_map_body, dphi_left, dphi_right)
+            # P_qq' = G P_qq G^T + Q
+            P_qq = G @ P_qq @ G.T + Q
+            P_qq = 0.5 * (P_qq + P_qq.T)
+            T_map_body = Transform2D(*q_next)
+        return T_map_body, P_qq
 
     def _motion(
         self, T_map_body: Transform2D, dphi_left: float, dphi_right: float

@@ -21,8 +21,9 @@ whatever pose is current, so the filter runs a little behind the newest wheel sa
 * An observation with ``t_o <= t_w`` is applied at once (filter brought to ``t_o``); one newer than every
   wheel sample waits for the wheel samples that reach it; one older than ``t_f`` came too late and is
   refused (ValueError): applying it at a later pose would be wrong.
-* The pose at ``t_w`` (what a node publishes) is the filter's pose moved on by ``phi_w - phi_f`` with its
-  covariance propagated alongside (:meth:`EkfSlam.propagated_pose`), without changing the filter.
+* The pose at ``t_w`` (what a node publishes) is the filter's pose moved on by the wheel increments from
+  ``t_f`` to ``t_w``, interval by interval, with its covariance propagated alongside
+  (:meth:`EkfSlam.propagated_pose_along`), without changing the filter.
 """
 
 from __future__ import annotations
@@ -162,11 +163,13 @@ class SlamTimeline:
 
     def latest_pose(self) -> tuple[Transform2D, NDArray[np.float64]]:
         """``T_map_body`` at ``t_w`` and its covariance (3, 3): the filter moved on by the wheel increments
-        since ``t_f`` (the filter is unchanged). ValueError before the first wheel sample."""
+        since ``t_f``, one arc per sample interval as :meth:`_advance_to` would (the filter is unchanged).
+        ValueError before the first wheel sample."""
         if self._t_f is None:
             raise ValueError("no wheel sample yet")
-        phi_left, phi_right = self._angles[-1]
-        return self.slam.propagated_pose(phi_left - self._phi_f[0], phi_right - self._phi_f[1])
+        later = self._angles[bisect.bisect_right(self._times, self._t_f) :]
+        angles = np.array([self._phi_f, *later])
+        return self.slam.propagated_pose_along(np.diff(angles, axis=0))
 
     # --- helpers -----------------------------------------------------------------------------------------
 
