@@ -16,15 +16,19 @@ Cost per operation (``m = 2k`` stacked observation rows)
 * :meth:`predict` touches only the robot rows and columns: O(N).
 * :meth:`correct` uses that ``H`` is non-zero only in the robot columns and the observed landmarks'
   columns: it gathers those ``3 + m`` rows of ``P`` (O(N m)), forms ``S`` (m x m), and applies one
-  symmetric rank-m downdate of ``P`` in place through BLAS: O(N^2 m), never an N x N product or inverse.
+  symmetric rank-m downdate of ``P`` in place: BLAS ``dsyrk`` on one triangle (O(N^2 m)), then a copy
+  of that triangle into the other (O(N^2)); never an N x N temporary, product or inverse.
 * :meth:`append` / :meth:`remove` of a landmark: O(N) (swap-remove; the last slot moves).
+
+Every step writes ``P`` exactly (bitwise) symmetric: each off-diagonal pair ``P_ij``, ``P_ji`` is either
+computed once and copied, or computed by the same floating-point operations on equal operands.
 """
 
 from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.linalg.blas import dgemm
+from scipy.linalg.blas import dsyrk
 from scipy.linalg.lapack import dpotrf, dtrtrs
 
 from .geometry import normalize_angle
@@ -32,6 +36,8 @@ from .geometry import normalize_angle
 ROBOT_DIM = 3
 LANDMARK_DIM = 2
 HEADING = 2  # index of theta in x
+MIRROR_BLOCK = 256  # rows per block when copying the upper triangle of P into the lower one (measured)
+_STRICT_LOWER = np.tri(MIRROR_BLOCK, k=-1, dtype=bool)  # strictly-lower mask of a diagonal block
 
 
 class SlamState:
@@ -124,9 +130,20 @@ class SlamState:
             P <- P - K S K^T = P - W^T W
 
         ``P - W^T W`` is the Joseph form ``(I - K H) P (I - K H)^T + K R K^T`` for the optimal gain
-        ``K = P H^T S^-1 = W^T L^-1``, written as one symmetric rank-m downdate: the same ``W`` on both
-        sides keeps ``P`` symmetric, and what is removed is exactly the information the observations add,
-        ``P+ = (P^-1 + H^T R^-1 H)^-1``.
+        ``K = P H^T S^-1 = W^T L^-1``, written as one symmetric rank-m downdate: what is removed is
+        exactly the information the observations add, ``P+ = (P^-1 + H^T R^-1 H)^-1``.
+
+        The downdate is computed on one triangle only and then mirrored, so that ``P`` stays bitwise
+        symmetric (a general ``dgemm`` rounds ``P_ij`` and ``P_ji`` differently, ~1e-19 apart):
+
+        1. ``triu(P) <- triu(P - W^T W)`` by BLAS ``dsyrk`` (m flops per entry of ``P``, half of
+           ``dgemm``), in place on the F-contiguous transpose of the whole C-ordered storage (its lower
+           triangle is the upper one of ``P``). f2py would copy any non-contiguous view, so the call spans
+           the full capacity; the spare columns of ``W_pad`` are zero and leave the spare storage unchanged.
+        2. ``tril(P, -1) <- triu(P, 1)^T``, in blocks of ``MIRROR_BLOCK`` rows ``[i0, i1)``: the block
+           column below the diagonal block is the transposed block row right of it,
+           ``P[i1:N, i0:i1] = P[i0:i1, i1:N]^T``, and the diagonal block takes its own upper triangle
+           through a strictly-lower mask. O(N^2) copies, no arithmetic.
         """
         dim, k = self.dim, len(slots)
         if k == 0:
@@ -153,12 +170,14 @@ class SlamState:
         # x <- x + W^T w, with the heading kept in (-pi, pi]
         self._mean[:dim] += W.T @ w
         self._mean[HEADING] = normalize_angle(self._mean[HEADING])
-        # P <- P - W^T W, in place on the first N rows of the storage: their transpose is a Fortran
-        # (capacity, N) array, so BLAS updates it without a copy (the spare columns get W_pad = 0)
-        rows_T = self._cov[:dim, :].T
-        updated = dgemm(-1.0, W_pad, W, beta=1.0, c=rows_T, trans_a=1, overwrite_c=1)
-        if updated is not rows_T:  # f2py worked on a copy (never for this float64 Fortran block)
-            rows_T[...] = updated
+        # triu(P) <- triu(P - W^T W): dsyrk on the lower triangle of the storage's F-contiguous transpose
+        # (capacity x capacity, so f2py passes it without a copy; W_pad = 0 on the spare columns)
+        storage_T = self._cov.T
+        updated = dsyrk(-1.0, W_pad, beta=1.0, c=storage_T, trans=1, lower=1, overwrite_c=1)
+        if updated is not storage_T:  # f2py worked on a copy (never for this float64 Fortran array)
+            storage_T[...] = updated
+        # tril(P, -1) <- triu(P, 1)^T
+        _mirror_upper_triangle(self._cov, dim)
         return float(w @ w)
 
     def append(
@@ -217,7 +236,7 @@ class SlamState:
         dim = self.dim
         self._cov[:ROBOT_DIM, :dim] = 0.0
         self._cov[:dim, :ROBOT_DIM] = 0.0
-        self._cov[:ROBOT_DIM, :ROBOT_DIM] = pose_covariance
+        self._cov[:ROBOT_DIM, :ROBOT_DIM] = 0.5 * (pose_covariance + pose_covariance.T)
         self._mean[:ROBOT_DIM] = pose
 
     # --- helpers -----------------------------------------------------------------------------------------
@@ -257,3 +276,19 @@ class SlamState:
         cov = np.zeros((capacity, capacity))
         cov[:dim, :dim] = self._cov[:dim, :dim]
         self._mean, self._cov = mean, cov
+
+
+def _mirror_upper_triangle(P: NDArray[np.float64], dim: int) -> None:
+    """``tril(P, -1) <- triu(P, 1)^T`` on the leading ``dim x dim`` block of ``P``, in place, O(dim^2).
+
+    Row blocks ``[i0, i1)`` of ``MIRROR_BLOCK`` rows: the block column under the diagonal block is the
+    transposed block row to its right, written as ``MIRROR_BLOCK``-wide row segments while the block row
+    is read column by column (each cache line on either side is loaded once), and the diagonal block
+    copies its own transpose through a strictly-lower mask (numpy buffers the overlapping source).
+    """
+    for i0 in range(0, dim, MIRROR_BLOCK):
+        i1 = min(i0 + MIRROR_BLOCK, dim)
+        diagonal = P[i0:i1, i0:i1]
+        np.copyto(diagonal, diagonal.T, where=_STRICT_LOWER[: i1 - i0, : i1 - i0])
+        # P[i1:N, i0:i1] = P[i0:i1, i1:N]^T
+        P[i1:dim, i0:i1] = P[i0:i1, i1:dim].T
