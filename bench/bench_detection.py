@@ -15,7 +15,6 @@ import argparse
 import math
 import os
 import platform
-import re
 import sys
 import time
 from pathlib import Path
@@ -23,8 +22,9 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests" / "turtlelib"))
+sys.path[:0] = [str(ROOT / "bench"), str(ROOT / "tests" / "turtlelib")]  # bench_docs, detection_scenes
 
+from bench_docs import write_section  # noqa: E402
 from detection_scenes import random_scene, score  # noqa: E402
 from turtlelib import DetectorConfig, LandmarkDetector, LidarConfig, simulate_scan  # noqa: E402
 
@@ -118,17 +118,6 @@ def section() -> str:
     )
 
 
-def write_section(text: str, path: Path) -> None:
-    """Replace this benchmark's section of ``path`` (up to the next ``## `` heading), or append it."""
-    document = path.read_text() if path.exists() else "# Benchmarks\n"
-    pattern = re.compile(rf"^{re.escape(HEADING)}\n.*?(?=^## |\Z)", re.DOTALL | re.MULTILINE)
-    if pattern.search(document):
-        document = pattern.sub(lambda _: text + "\n", document, count=1)
-    else:
-        document = document.rstrip("\n") + "\n\n" + text + "\n"
-    path.write_text(document.rstrip("\n") + "\n")
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--write", action="store_true", help="update docs/benchmarks.md")
@@ -136,7 +125,7 @@ def main() -> None:
     text = section()
     print(text)
     if arguments.write:
-        write_section(text, ROOT / "docs" / "benchmarks.md")
+        write_section(HEADING, text, ROOT / "docs" / "benchmarks.md")
 
 
 if __name__ == "__main__":

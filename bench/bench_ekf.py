@@ -24,11 +24,15 @@ import argparse  # noqa: E402
 import dataclasses  # noqa: E402
 import math  # noqa: E402
 import platform  # noqa: E402
-import re  # noqa: E402
+import sys  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench_docs, also under python -P
+
+from bench_docs import write_section  # noqa: E402
 
 from turtlelib import DiffDrive, Transform2D  # noqa: E402
 from turtlelib.ekf_slam import EkfSlam, ObservationStatus, SlamConfig  # noqa: E402
@@ -162,17 +166,6 @@ def section(sizes: tuple[int, ...]) -> str:
     )
 
 
-def write_section(text: str, path: Path) -> None:
-    """Replace the ``## EKF SLAM`` section of ``path`` (up to the next ``## `` heading), or append it."""
-    document = path.read_text() if path.exists() else "# Benchmarks\n"
-    pattern = re.compile(rf"^{re.escape(HEADING)}\n.*?(?=^## |\Z)", re.DOTALL | re.MULTILINE)
-    if pattern.search(document):
-        document = pattern.sub(lambda _: text + "\n", document, count=1)
-    else:
-        document = document.rstrip("\n") + "\n\n" + text + "\n"
-    path.write_text(document.rstrip("\n") + "\n")
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--write", action="store_true", help="update docs/benchmarks.md")
@@ -181,7 +174,7 @@ def main() -> None:
     text = section(tuple(arguments.sizes))
     print(text)
     if arguments.write:
-        write_section(text, ROOT / "docs" / "benchmarks.md")
+        write_section(HEADING, text, ROOT / "docs" / "benchmarks.md")
 
 
 if __name__ == "__main__":
