@@ -43,7 +43,7 @@ def test_nodes_as_processes_flow_with_expected_types_and_frames(tmp_path):
         for name, (process, _) in processes.items():
             assert process.poll() is None, f"{name} exited: {(tmp_path / f'{name}.log').read_text()}"
     finally:
-        for process, log in processes.values():
+        for process, _ in processes.values():
             process.terminate()
         for process, log in processes.values():
             try:

@@ -335,7 +335,7 @@ def test_fake_sensor_noise_has_the_configured_variance():
 def trace(seed: int) -> tuple[np.ndarray, ...]:
     sim = Simulation(SimulationConfig(noise=NoiseConfig(input_noise=0.2, slip_fraction=0.1, seed=seed)))
     poses, ticks, scans, landmarks = [], [], [], []
-    for k, (left, right) in enumerate([(3.0, 4.0), (5.0, 5.0), (-2.0, 2.0)] * 3):
+    for left, right in [(3.0, 4.0), (5.0, 5.0), (-2.0, 2.0)] * 3:
         sim.command_wheels(left, right)
         poses += [T.as_array() for T in run(sim, 50)]
         ticks.append(sim.encoder_ticks)

@@ -17,7 +17,6 @@ from turtlelib import (
     LidarConfig,
     Transform2D,
     arena_walls,
-    cast_beams,
     cluster_scan,
     simulate_scan,
 )

@@ -113,7 +113,7 @@ def test_fast_filter_equals_the_dense_textbook_filter():
     dense = DenseEkf(start.as_array(), CONFIG.initial_pose_covariance())
     truth = start
     seen: set[int] = set()
-    for step in range(30):
+    for _ in range(30):
         left, right = rng.uniform(-5.0, 25.0, 2)
         slam.predict(left, right)
         dense.predict(left, right)
