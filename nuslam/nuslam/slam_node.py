@@ -142,6 +142,10 @@ class SlamNode(Node):
             self.node_config.body_id: T_body_sensor.inverse(),
         }
         self._fake_sensor_covariance = self.node_config.fake_sensor_std**2 * np.eye(2)
+        # the header stamps of the observations waiting in the timeline, by their time in s: the map is
+        # stamped with these, not with a stamp rebuilt from seconds (a float holds an epoch-sized time to
+        # about 0.2 us only, so the map's stamp would differ from the scan's)
+        self._waiting_stamps: dict[float, Time] = {}
         self._loggers: dict[str, RcutilsLogger] = {}
 
         self._odom_publisher = self.create_publisher(Odometry, "~/odom", 10)
@@ -165,21 +169,30 @@ class SlamNode(Node):
         t_s = stamp_seconds(msg.header.stamp)
         latest_s = self.timeline.latest_time_s
         if latest_s is not None and t_s < latest_s:
-            self._warn("joint_states", f"time went backwards ({t_s:.9f} s < {latest_s:.9f} s): restarting the timeline there")
-            self.timeline.restart(t_s, phi_left_rad, phi_right_rad)
-            self.odometry.set_reference(t_s, phi_left_rad, phi_right_rad)
+            self._warn(
+                "joint_states",
+                f"time went backwards ({t_s:.9f} s < {latest_s:.9f} s): restarting the timeline there",
+            )
+            self._restart(t_s, phi_left_rad, phi_right_rad)
             return
         try:
             applied = self.timeline.add_wheels(t_s, phi_left_rad, phi_right_rad)
+            if self.odometry.reference_time_s is None:
+                self.odometry.set_reference(t_s, phi_left_rad, phi_right_rad)
+            V_body = self.odometry.step(t_s, phi_left_rad, phi_right_rad)
+            T_map_body, P_pose = self.timeline.latest_pose()
         except (ValueError, np.linalg.LinAlgError) as error:
-            self._warn("joint_states", f"joint_states skipped: {error}")
+            # finite angles whose increment the kinematics cannot take (a turn rate that overflows): the
+            # timeline may hold the sample already and would fail on it again at every later sample, so
+            # start afresh from it, as the odometry node does
+            self._warn("joint_states", f"joint_states skipped: {error}; taking it as the new reference")
+            self._restart(t_s, phi_left_rad, phi_right_rad)
             return
-        if self.odometry.reference_time_s is None:
-            self.odometry.set_reference(t_s, phi_left_rad, phi_right_rad)
-        V_body = self.odometry.step(t_s, phi_left_rad, phi_right_rad)
-        self._publish_pose(msg.header.stamp, V_body)
+        map_stamp = self._waiting_stamps.get(applied[-1][0]) if applied else None
+        self._forget_waiting_stamps()
+        self._publish_pose(msg.header.stamp, V_body, T_map_body, P_pose)
         if applied:
-            self._publish_map(applied[-1][0])
+            self._publish_map(map_stamp if map_stamp is not None else stamp_from_seconds(applied[-1][0]))
 
     def _on_fake_sensor(self, msg: MarkerArray) -> None:
         try:
@@ -191,8 +204,7 @@ class SlamNode(Node):
         except (ValueError, np.linalg.LinAlgError) as error:
             self._warn("fake_sensor", f"fake_sensor skipped: {error}")
             return
-        if applied:
-            self._publish_map(applied[-1][0])
+        self._observation_added(t_s, msg, applied)
 
     def _on_landmarks(self, msg: MarkerArray) -> None:
         try:
@@ -202,8 +214,28 @@ class SlamNode(Node):
         except (ValueError, np.linalg.LinAlgError) as error:
             self._warn("landmarks", f"landmarks skipped: {error}")
             return
+        self._observation_added(t_s, msg, applied)
+
+    def _observation_added(self, t_s: float, msg: MarkerArray, applied: list) -> None:
+        """Publish the map of an observation applied at once, or keep its stamp while it waits."""
+        stamp = msg.markers[0].header.stamp  # _observed_points checked that all markers share it
         if applied:
-            self._publish_map(applied[-1][0])
+            self._publish_map(stamp)
+        else:
+            self._waiting_stamps[t_s] = stamp
+
+    def _restart(self, t_s: float, phi_left_rad: float, phi_right_rad: float) -> None:
+        """Take this wheel sample as the new start of the timeline and of the odometry (estimate kept)."""
+        self.timeline.restart(t_s, phi_left_rad, phi_right_rad)
+        self._waiting_stamps.clear()
+        self.odometry.set_reference(t_s, phi_left_rad, phi_right_rad)
+
+    def _forget_waiting_stamps(self) -> None:
+        """Drop the stamps of observations no longer waiting: every one at or before the newest wheel
+        sample has been applied (or refused)."""
+        latest_s = self.timeline.latest_time_s
+        if latest_s is not None:
+            self._waiting_stamps = {t_s: stamp for t_s, stamp in self._waiting_stamps.items() if t_s > latest_s}
 
     def _observed_points(
         self, msg: MarkerArray
@@ -222,9 +254,10 @@ class SlamNode(Node):
 
     # --- outputs -----------------------------------------------------------------------------------------
 
-    def _publish_pose(self, stamp: Time, V_body: Twist2D) -> None:
+    def _publish_pose(
+        self, stamp: Time, V_body: Twist2D, T_map_body: Transform2D, P_pose: NDArray[np.float64]
+    ) -> None:
         frames = self.node_config
-        T_map_body, P_pose = self.timeline.latest_pose()
         odom = Odometry()
         odom.header.stamp = stamp
         odom.header.frame_id = frames.map_id
@@ -240,9 +273,8 @@ class SlamNode(Node):
         if self.trail.offer(T_map_body, PoseStamped(header=odom.header, pose=odom.pose.pose)):
             self._path_publisher.publish(Path(header=odom.header, poses=list(self.trail.items)))
 
-    def _publish_map(self, t_s: float) -> None:
+    def _publish_map(self, stamp: Time) -> None:
         map_id = self.node_config.map_id
-        stamp = stamp_from_seconds(t_s)
         markers = [delete_all_marker(map_id, stamp)]
         radius_m = self.node_config.landmark_radius
         for landmark_id, xy, covariance in zip(

@@ -13,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from turtlelib import DiffDrive, Transform2D
 from turtlelib.ekf_slam import EkfSlam, SlamConfig
-from turtlelib.wheel_noise import wheel_slip_covariance
+from turtlelib.wheel_noise import MAX_STEP_TURN_RAD, wheel_slip_covariance
 
 PI = math.pi
 BURGER = DiffDrive(wheel_radius=0.033, track_width=0.16)
@@ -178,3 +178,16 @@ def test_prediction_rejects_non_finite_increments_and_keeps_the_filter():
             slam.predict(1.0, bad)
     np.testing.assert_array_equal(slam.state, state)
     np.testing.assert_array_equal(slam.covariance, cov)
+
+
+def test_a_turn_beyond_the_step_limit_is_refused_and_keeps_the_filter():
+    # a wheel jump of 1e9 rad (a corrupt encoder reading) would need a billion quadrature panels
+    slam = filter_at(Transform2D(0.2, 0.1, 0.3))
+    state, cov = slam.state, slam.covariance
+    with pytest.raises(ValueError, match="not a motion"):
+        slam.predict(-1e9, 1e9)
+    np.testing.assert_array_equal(slam.state, state)
+    np.testing.assert_array_equal(slam.covariance, cov)
+    # the largest turn it takes: omega = r / d (dphi_right - dphi_left) = MAX_STEP_TURN_RAD
+    dphi = MAX_STEP_TURN_RAD * BURGER.track_width / BURGER.wheel_radius / 2.0
+    assert np.isfinite(wheel_slip_covariance(BURGER, 0.0, -dphi, dphi, 0.05)).all()

@@ -476,6 +476,19 @@ def test_time_going_backwards_is_refused_and_changes_nothing():
     assert_unchanged(before, snapshot(timeline))
 
 
+def test_restart_first_brings_the_filter_to_the_newest_sample():
+    # the filter runs max_observation_delay behind; a clock jump must not lose that last stretch of motion
+    samples = straight_samples(8)
+    timeline = SlamTimeline(mapped_filter(), TimelineConfig(max_observation_delay=0.2))
+    for sample in samples:
+        timeline.add_wheels(*sample)
+    assert timeline.filter_time_s < timeline.latest_time_s
+    expected_pose, expected_P = timeline.latest_pose()
+    timeline.restart(0.0, 0.0, 0.0)
+    np.testing.assert_allclose(timeline.slam.pose.as_array(), expected_pose.as_array(), rtol=0.0, atol=1e-12)
+    np.testing.assert_allclose(timeline.slam.pose_covariance, expected_P, rtol=1e-12, atol=0.0)
+
+
 def test_restart_re_anchors_time_keeps_the_estimate_and_drops_waiting_observations():
     timeline = started_timeline(delay=0.0, n=8)
     timeline.add_observations(timeline.latest_time_s + 0.02, GOOD_Z, ids=[0, 1])

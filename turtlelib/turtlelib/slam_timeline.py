@@ -155,8 +155,16 @@ class SlamTimeline:
 
     def restart(self, t_s: float, phi_left_rad: float, phi_right_rad: float) -> None:
         """Take this wheel sample as the new start of time, keeping the filter's estimate (for a clock that
-        jumped back: a restarted simulator or a looped recording); waiting observations are dropped."""
+        jumped back: a restarted simulator or a looped recording). The filter is first brought to the newest
+        wheel sample, so no motion is lost (as far as it can be: the estimate stops before a sample whose
+        increment the motion model refuses, e.g. a corrupt reading); observations still waiting are dropped.
+        """
         t_s, phi_left_rad, phi_right_rad = _finite("wheel sample", t_s, phi_left_rad, phi_right_rad)
+        if self._t_f is not None:
+            try:
+                self._advance_to(self._times[-1])
+            except ValueError:
+                pass  # that motion is lost; the estimate is kept where the last valid increment left it
         self._times, self._angles = [t_s], [(phi_left_rad, phi_right_rad)]
         self._t_f, self._phi_f = t_s, (phi_left_rad, phi_right_rad)
         self._pending.clear()

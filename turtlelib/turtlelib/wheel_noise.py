@@ -34,6 +34,9 @@ from numpy.typing import NDArray
 from .kinematics import DiffDrive
 
 GAUSS_LEGENDRE_NODES = 8
+# Largest heading change of one step (rad) the quadrature takes: a turn of more than a thousand rad between
+# two encoder readings is a corrupt reading, not a motion (and would need that many panels).
+MAX_STEP_TURN_RAD = 1000.0
 # Gauss-Legendre nodes and weights mapped to [0, 1]: constants of the quadrature rule, not state.
 _NODES_ON_UNIT, _WEIGHTS_ON_UNIT = np.polynomial.legendre.leggauss(GAUSS_LEGENDRE_NODES)
 _NODES_ON_UNIT = 0.5 * (_NODES_ON_UNIT + 1.0)
@@ -45,10 +48,13 @@ def wheel_slip_covariance(
 ) -> NDArray[np.float64]:
     """The (3, 3) covariance of ``[x, y, theta]`` added by a step ``dphi`` (rad) from heading ``theta_rad``.
 
-    See the module docstring for the model; ``wheel_noise`` in sqrt(rad), >= 0.
+    See the module docstring for the model; ``wheel_noise`` in sqrt(rad), >= 0. ValueError for a step that
+    turns the body by more than ``MAX_STEP_TURN_RAD``.
     """
     twist = diff_drive.body_twist(dphi_left, dphi_right)
     u, omega = twist.vx, twist.omega
+    if not abs(omega) <= MAX_STEP_TURN_RAD:
+        raise ValueError(f"a step turning the body by {omega!r} rad is not a motion (> {MAX_STEP_TURN_RAD} rad)")
     r, d = diff_drive.wheel_radius, diff_drive.track_width
     q_left, q_right = wheel_noise**2 * abs(dphi_left), wheel_noise**2 * abs(dphi_right)
     # Q_v = M Q_w M^T with M = [[r/2, r/2], [-r/d, r/d]]

@@ -1,0 +1,260 @@
+"""landmarks in process with real rclpy: LiDAR scans in, `landmarks` and `~/clusters` MarkerArrays out.
+
+Scans are LDS-01 scans (360 beams of 1 deg, 0.12-3.5 m, frame base_scan) ray cast by
+`turtlelib.simulate_scan` with 1 cm noise and 1 cm resolution (seeded), of two cylinders at known places
+inside a square arena, everything given in the sensor frame.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from rclpy.parameter import Parameter
+from rclpy.qos import qos_profile_sensor_data
+from sensor_msgs.msg import LaserScan
+from turtlelib import DetectorConfig, LidarConfig, Transform2D, arena_walls, simulate_scan
+from visualization_msgs.msg import Marker, MarkerArray
+
+from nuslam.landmarks_node import LandmarksNode
+from nuslam_test_tools import matched, node_inputs_matched, record_rosout, stamp, stamp_ns, warnings_of
+
+pytestmark = pytest.mark.ros
+
+LDS01 = LidarConfig(noise=0.01, resolution=0.01)
+# [x, y, r] in base_scan (m): one small ahead-left, one larger behind-left
+CYLINDERS = np.array([[1.0, 0.3, 0.05], [-0.6, 1.1, 0.08]])
+# the arena's walls, seen from a sensor off its centre
+WALLS = (Transform2D(0.4, -0.3, 0.2).inverse() @ arena_walls(5.0, 5.0).reshape(-1, 2)).reshape(-1, 4)
+GREEN = (0.1, 0.8, 0.2, 1.0)
+CENTRE_TOL_M = 0.015
+RADIUS_TOL_M = 0.01
+T0_NS = 1_700_000_000_123_456_789  # an epoch-sized stamp with every nanosecond digit used
+
+
+def scan_ranges(circles=CYLINDERS, walls=WALLS, seed: int = 7) -> np.ndarray:
+    return simulate_scan(Transform2D(), circles, walls, LDS01, np.random.default_rng(seed))
+
+
+def scan_msg(t_ns: int, ranges, frame_id: str = "base_scan", **layout) -> LaserScan:
+    """An LDS-01 LaserScan of ``ranges``; ``layout`` overrides angle_min, angle_increment, range_min, ..."""
+    msg = LaserScan()
+    msg.header.stamp = stamp(t_ns)
+    msg.header.frame_id = frame_id
+    msg.angle_min = LDS01.angle_min
+    msg.angle_max = LDS01.angle_min + (LDS01.samples - 1) * LDS01.angle_increment
+    msg.angle_increment = LDS01.angle_increment
+    msg.time_increment = 0.2 / 360
+    msg.scan_time = 0.2
+    msg.range_min = LDS01.range_min
+    msg.range_max = LDS01.range_max
+    for name, value in layout.items():
+        setattr(msg, name, value)
+    msg.ranges = [float(r) for r in ranges]
+    return msg
+
+
+def cylinders_of(array: MarkerArray) -> list[Marker]:
+    return [marker for marker in array.markers if marker.action == Marker.ADD]
+
+
+class Rig:
+    """landmarks plus a helper node publishing scans and recording both outputs and /rosout."""
+
+    def __init__(self, ros, **parameters) -> None:
+        self.ros = ros
+        overrides = [Parameter(name, value=value) for name, value in parameters.items()]
+        self.node = ros.add(LandmarksNode(context=ros.context, parameter_overrides=overrides))
+        helper = ros.node("landmarks_test_helper")
+        self.landmarks: list[MarkerArray] = []
+        self.clusters: list[MarkerArray] = []
+        self.logs = record_rosout(helper)
+        self.scan = helper.create_publisher(LaserScan, "scan", qos_profile_sensor_data)
+        endpoints = [
+            self.scan,
+            helper.create_subscription(MarkerArray, "landmarks", self.landmarks.append, 10),
+            helper.create_subscription(MarkerArray, "landmarks/clusters", self.clusters.append, 10),
+        ]
+        assert ros.spin_until(lambda: matched(*endpoints) and node_inputs_matched(self.node), 10.0)
+
+    def send(self, msg: LaserScan) -> MarkerArray:
+        """Publish a scan and return the `landmarks` array it causes (and wait for its clusters)."""
+        count = len(self.landmarks)
+        self.scan.publish(msg)
+        assert self.ros.spin_until(lambda: len(self.landmarks) > count, 5.0), "no landmarks"
+        wanted = msg.header.stamp
+        assert self.ros.spin_until(lambda: any(c.markers[0].header.stamp == wanted for c in self.clusters), 5.0)
+        return self.landmarks[-1]
+
+    def warnings(self, at_least: int = 0) -> list[str]:
+        """The node's warnings so far (waiting up to 2 s for ``at_least`` of them, then 0.1 s for more)."""
+        self.ros.spin_until(lambda: len(warnings_of(self.logs, "landmarks")) >= at_least, 2.0)
+        self.ros.spin_for(0.1)
+        return warnings_of(self.logs, "landmarks")
+
+
+def assert_header(array: MarkerArray, t_ns: int, frame_id: str = "base_scan") -> None:
+    assert array.markers, "an array always holds at least its DELETEALL"
+    for marker in array.markers:
+        assert marker.header.frame_id == frame_id
+        assert stamp_ns(marker.header.stamp) == t_ns
+
+
+def test_two_cylinders_give_a_deleteall_then_a_cylinder_each_at_its_centre_with_its_diameter(ros):
+    rig = Rig(ros)
+    array = rig.send(scan_msg(T0_NS, scan_ranges()))
+    assert_header(array, T0_NS)
+    assert array.markers[0].action == Marker.DELETEALL
+    found = cylinders_of(array)
+    assert len(array.markers) == 1 + len(found)
+    assert len(found) == 2, "the walls are no cylinders"
+    assert sorted(marker.id for marker in found) == [0, 1]
+    assert len({(marker.ns, marker.id) for marker in found}) == 2
+    # pair each true cylinder with the nearest detection
+    for x, y, r in CYLINDERS:
+        marker = min(found, key=lambda m: math.hypot(m.pose.position.x - x, m.pose.position.y - y))
+        assert marker.type == Marker.CYLINDER
+        assert math.hypot(marker.pose.position.x - x, marker.pose.position.y - y) < CENTRE_TOL_M
+        assert marker.scale.x == marker.scale.y
+        assert marker.scale.x == pytest.approx(2 * r, abs=2 * RADIUS_TOL_M)
+        assert marker.scale.z > 0.0 and marker.pose.position.z == pytest.approx(0.5 * marker.scale.z)
+        assert marker.pose.orientation.w == 1.0
+        assert (marker.color.r, marker.color.g, marker.color.b, marker.color.a) == pytest.approx(GREEN)
+    assert rig.warnings() == []
+
+
+def test_a_scan_in_another_frame_keeps_its_frame_and_each_scan_gets_its_own_array(ros):
+    rig = Rig(ros)
+    first = rig.send(scan_msg(T0_NS, scan_ranges(), frame_id="robot/base_scan"))
+    # the second scan: only the far cylinder, moved
+    moved = np.array([[-0.2, -1.5, 0.08]])
+    second = rig.send(scan_msg(T0_NS + 200_000_000, scan_ranges(moved, seed=8), frame_id="robot/base_scan"))
+    assert_header(first, T0_NS, "robot/base_scan")
+    assert_header(second, T0_NS + 200_000_000, "robot/base_scan")
+    assert len(cylinders_of(first)) == 2
+    (only,) = cylinders_of(second)
+    assert (only.pose.position.x, only.pose.position.y) == pytest.approx((-0.2, -1.5), abs=CENTRE_TOL_M)
+    assert second.markers[0].action == Marker.DELETEALL, "clears the first scan's two cylinders"
+
+
+@pytest.mark.parametrize(
+    "ranges",
+    [
+        pytest.param(np.zeros(LDS01.samples), id="no returns"),
+        pytest.param(scan_ranges(circles=np.empty((0, 3))), id="walls only"),
+    ],
+)
+def test_a_scan_without_cylinders_gives_an_array_with_only_the_deleteall(ros, ranges):
+    rig = Rig(ros)
+    array = rig.send(scan_msg(T0_NS, ranges))
+    assert_header(array, T0_NS)
+    assert [marker.action for marker in array.markers] == [Marker.DELETEALL]
+    assert rig.warnings() == []
+
+
+def test_clusters_are_points_markers_green_on_the_cylinders_and_grey_elsewhere(ros):
+    rig = Rig(ros)
+    rig.send(scan_msg(T0_NS, scan_ranges()))
+    (clusters,) = rig.clusters
+    assert_header(clusters, T0_NS)
+    assert clusters.markers[0].action == Marker.DELETEALL
+    points = clusters.markers[1:]
+    assert len(points) >= 4, "two cylinders and the walls (split where cylinders hide them)"
+    assert all(marker.type == Marker.POINTS and marker.action == Marker.ADD for marker in points)
+    assert sorted(marker.id for marker in points) == list(range(len(points)))
+    green = [m for m in points if (m.color.r, m.color.g, m.color.b, m.color.a) == pytest.approx(GREEN)]
+    grey = [m for m in points if m not in green]
+    assert len(green) == 2 and len(grey) == len(points) - 2
+    for marker in grey:
+        assert marker.color.g < 0.7 and marker.color.r == pytest.approx(marker.color.g), "grey"
+    for x, y, r in CYLINDERS:
+        # the green cluster on this cylinder: its points lie on the circle
+        near = [m for m in green if math.hypot(m.points[0].x - x, m.points[0].y - y) < 2 * r]
+        assert len(near) == 1
+        xy = np.array([(p.x, p.y) for p in near[0].points])
+        assert len(xy) >= 4
+        assert np.abs(np.hypot(xy[:, 0] - x, xy[:, 1] - y) - r).max() < 0.03
+    # every point of the scan is drawn exactly once
+    assert sum(len(m.points) for m in points) == int(np.count_nonzero(scan_ranges()))
+    for marker in grey:
+        xy = np.array([(p.x, p.y) for p in marker.points])
+        for x, y, r in CYLINDERS:
+            assert np.hypot(xy[:, 0] - x, xy[:, 1] - y).min() > r + 0.05, "wall points, far from cylinders"
+
+
+BAD_SCANS = {
+    # kind: layout overrides, part of the warning
+    "NaN angle_increment": ({"angle_increment": math.nan}, "angle_increment"),
+    "zero angle_increment": ({"angle_increment": 0.0}, "angle_increment"),
+    "infinite angle_min": ({"angle_min": -math.inf}, "angle_min"),
+    "range_min == range_max": ({"range_min": 3.5}, "range_min < range_max"),
+    "range_min > range_max": ({"range_min": 4.0}, "range_min < range_max"),
+    "NaN range_max": ({"range_max": math.nan}, "range_min < range_max"),
+    "no beams": ({"ranges": []}, "non-empty"),
+}
+
+
+@pytest.mark.parametrize("kind", BAD_SCANS)
+def test_a_bad_scan_is_skipped_with_a_warning_and_the_next_good_scan_is_processed(ros, kind):
+    layout, reason = BAD_SCANS[kind]
+    rig = Rig(ros)
+    rig.send(scan_msg(T0_NS, scan_ranges()))
+    bad = scan_msg(T0_NS + 100_000_000, scan_ranges(), **{k: v for k, v in layout.items() if k != "ranges"})
+    if "ranges" in layout:
+        bad.ranges = layout["ranges"]
+    rig.scan.publish(bad)
+    # a topic keeps its order: the next array answers this good scan
+    after = rig.send(scan_msg(T0_NS + 200_000_000, scan_ranges(seed=9)))
+    assert_header(after, T0_NS + 200_000_000)
+    assert len(cylinders_of(after)) == 2
+    stamps = [stamp_ns(array.markers[0].header.stamp) for array in rig.landmarks]
+    assert stamps == [T0_NS, T0_NS + 200_000_000], "nothing published for the bad scan"
+    assert [stamp_ns(array.markers[0].header.stamp) for array in rig.clusters] == stamps
+    warnings = rig.warnings(at_least=1)
+    assert len(warnings) == 1
+    assert "scan skipped" in warnings[0] and reason in warnings[0]
+
+
+def test_a_max_radius_below_both_cylinders_detects_nothing(ros):
+    rig = Rig(ros, max_radius=0.04)
+    array = rig.send(scan_msg(T0_NS, scan_ranges()))
+    assert [marker.action for marker in array.markers] == [Marker.DELETEALL]
+    (clusters,) = rig.clusters
+    assert all(marker.color.g < 0.7 for marker in clusters.markers[1:]), "every cluster grey"
+    assert rig.node.config.max_radius == 0.04
+
+
+def test_a_max_radius_between_the_cylinders_keeps_only_the_small_one(ros):
+    rig = Rig(ros, max_radius=0.065, cluster_threshold=0.08)
+    (only,) = cylinders_of(rig.send(scan_msg(T0_NS, scan_ranges())))
+    x, y, r = CYLINDERS[0]
+    assert (only.pose.position.x, only.pose.position.y) == pytest.approx((x, y), abs=CENTRE_TOL_M)
+    assert only.scale.x == pytest.approx(2 * r, abs=2 * RADIUS_TOL_M)
+    assert rig.node.config.cluster_threshold == 0.08
+
+
+def test_the_default_parameters_are_the_detector_defaults(ros):
+    node = ros.add(LandmarksNode(context=ros.context))
+    assert node.config == DetectorConfig()
+    assert node.get_parameter("min_points").value == DetectorConfig().min_points
+
+
+def invalid(name: str, value, message: str):
+    """A parametrize row: the parameter ``name`` set to an invalid ``value``, and part of the error."""
+    return pytest.param(Parameter(name, value=value), message, id=f"{name}={value!r}")
+
+
+@pytest.mark.parametrize(
+    "parameter, message",
+    [
+        invalid("min_radius", 0.3, "min_radius < max_radius"),
+        invalid("min_points", 2, "min_points"),
+        invalid("cluster_threshold", -0.1, "cluster_threshold"),
+        invalid("max_inscribed_angle", 4.0, "max_inscribed_angle"),
+        invalid("cluster_threshold", "far", "cluster_threshold must be of type float"),
+    ],
+)
+def test_an_invalid_parameter_raises_value_error_at_construction(ros, parameter, message):
+    with pytest.raises(ValueError, match=message):
+        LandmarksNode(context=ros.context, parameter_overrides=[parameter])

@@ -1,0 +1,622 @@
+"""slam in process with real rclpy: joint_states and landmark MarkerArrays in; slam/odom, slam/path and
+slam/map out.
+
+Expected values come from turtlelib, never from the node: the pose from `DiffDrive.step` composed over the
+joint_states intervals from the start pose (x0, y0, theta0), the landmarks from their true places, and for
+late observations a `turtlelib.EkfSlam` + `SlamTimeline` fed the same samples directly.
+
+Motion is along arcs of constant wheel speeds, so the true pose at any time t (also between samples) is
+``DiffDrive.step(T0, w_left (t - t0), w_right (t - t0))``: the filter's predictions may split such an arc
+anywhere without changing where it ends.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from nav_msgs.msg import Odometry, Path
+from rclpy.parameter import Parameter
+from rclpy.qos import qos_profile_sensor_data
+from sensor_msgs.msg import JointState, LaserScan
+from turtlelib import EkfSlam, LidarConfig, SlamConfig, SlamTimeline, TimelineConfig, Transform2D, simulate_scan
+from turtlelib.range_bearing import observations_from_points
+from visualization_msgs.msg import Marker, MarkerArray
+
+from nuslam.landmarks_node import LandmarksNode
+from nuslam.slam_node import SlamNode
+from nuslam_test_tools import (
+    cylinder_array,
+    matched,
+    node_inputs_matched,
+    record_rosout,
+    stamp,
+    stamp_ns,
+    warnings_of,
+)
+from nuturtle_description.conversions import covariance_from_6x6, stamp_seconds, yaw_from_quaternion
+from nuturtle_description.robot_params import burger_params
+
+pytestmark = pytest.mark.ros
+
+DRIVE = burger_params().diff_drive()
+R_WHEEL = DRIVE.wheel_radius
+T_BODY_SENSOR = Transform2D(-0.032, 0.0, 0.0)  # the LDS-01 on the Burger (sensor_x default)
+WHEELS = ("wheel_left_joint", "wheel_right_joint")
+S = 1_000_000_000  # ns per s
+EPOCH_NS = 1_700_000_000_123_456_789  # an epoch-sized stamp with every nanosecond digit used
+# true landmarks in map: id -> (x, y)
+LANDMARKS = {3: (1.2, 0.4), 7: (0.5, -1.0), 12: (-0.6, 0.8)}
+GREEN = (0.1, 0.8, 0.2, 1.0)
+TOL = 1e-9
+
+
+def wheel_speeds(vx: float, omega: float) -> tuple[float, float]:
+    """(left, right) wheel speeds (rad/s) of a body twist."""
+    half_track = 0.5 * DRIVE.track_width
+    return (vx - omega * half_track) / R_WHEEL, (vx + omega * half_track) / R_WHEEL
+
+
+class Arc:
+    """Constant wheel speeds from pose ``T0`` and wheel angles ``phi0`` at ``t0_ns``."""
+
+    def __init__(self, T0: Transform2D, t0_ns: int, vx: float, omega: float, phi0=(0.0, 0.0)) -> None:
+        self.T0, self.t0_ns, self.phi0 = T0, t0_ns, phi0
+        self.speeds = wheel_speeds(vx, omega)
+
+    def angles(self, t_ns: int) -> tuple[float, float]:
+        dt = (t_ns - self.t0_ns) / S
+        return self.phi0[0] + self.speeds[0] * dt, self.phi0[1] + self.speeds[1] * dt
+
+    def pose(self, t_ns: int) -> Transform2D:
+        dt = (t_ns - self.t0_ns) / S
+        return DRIVE.step(self.T0, self.speeds[0] * dt, self.speeds[1] * dt)
+
+
+def joint_state(t_ns: int, positions, names=WHEELS) -> JointState:
+    msg = JointState(name=list(names), position=[float(p) for p in positions])
+    msg.header.stamp = stamp(t_ns)
+    return msg
+
+
+def relative(T_world_frame: Transform2D, landmarks=LANDMARKS) -> list[tuple[int, float, float]]:
+    """``(id, x, y)`` of the landmarks in a frame at ``T_world_frame``: ``T_frame_world @ p_world``."""
+    ids = list(landmarks)
+    xy = T_world_frame.inverse() @ np.array([landmarks[i] for i in ids])
+    return [(i, float(x), float(y)) for i, (x, y) in zip(ids, xy)]
+
+
+def pose_of(odom: Odometry) -> tuple[float, float, float]:
+    pose = odom.pose.pose
+    return pose.position.x, pose.position.y, yaw_from_quaternion(pose.orientation)
+
+
+def close_pose(odom: Odometry, T: Transform2D, tol: float = TOL) -> bool:
+    x, y, yaw = pose_of(odom)
+    return (
+        abs(x - T.x) <= tol and abs(y - T.y) <= tol and abs(math.remainder(yaw - T.theta, math.tau)) <= tol
+    )
+
+
+def mapped(array: MarkerArray, ns: str = "landmarks") -> dict[int, Marker]:
+    markers = [m for m in array.markers if m.ns == ns and m.action == Marker.ADD]
+    by_id = {m.id: m for m in markers}
+    assert len(by_id) == len(markers), f"an id drawn twice in ns {ns}"
+    return by_id
+
+
+def rgba(marker: Marker) -> tuple[float, float, float, float]:
+    return marker.color.r, marker.color.g, marker.color.b, marker.color.a
+
+
+class Rig:
+    """slam plus a helper node publishing joint_states and observations and recording every output."""
+
+    def __init__(self, ros, **parameters) -> None:
+        self.ros = ros
+        overrides = [Parameter(name, value=value) for name, value in parameters.items()]
+        self.node = ros.add(SlamNode(context=ros.context, parameter_overrides=overrides))
+        helper = ros.node("slam_test_helper")
+        self.helper = helper
+        self.odoms: list[Odometry] = []
+        self.maps: list[MarkerArray] = []
+        self.paths: list[Path] = []
+        self.logs = record_rosout(helper)
+        self.joint_states = helper.create_publisher(JointState, "joint_states", 10)
+        topic = "fake_sensor" if parameters.get("association") == "known" else "landmarks"
+        self.observations = helper.create_publisher(MarkerArray, topic, 10)
+        endpoints = [
+            self.joint_states,
+            self.observations,
+            helper.create_subscription(Odometry, "slam/odom", self.odoms.append, 100),
+            helper.create_subscription(MarkerArray, "slam/map", self.maps.append, 100),
+            helper.create_subscription(Path, "slam/path", self.paths.append, 100),
+        ]
+        assert ros.spin_until(lambda: matched(*endpoints) and node_inputs_matched(self.node), 10.0)
+
+    def wheels(self, t_ns: int, positions, names=WHEELS) -> Odometry:
+        """Publish joint_states and return the odom it causes."""
+        count = len(self.odoms)
+        self.joint_states.publish(joint_state(t_ns, positions, names))
+        assert self.ros.spin_until(lambda: len(self.odoms) > count, 5.0), "no odom"
+        return self.odoms[-1]
+
+    def observe(self, msg: MarkerArray) -> MarkerArray:
+        """Publish an observation array and return the map it causes."""
+        count = len(self.maps)
+        self.observations.publish(msg)
+        assert self.ros.spin_until(lambda: len(self.maps) > count, 5.0), "no map"
+        return self.maps[-1]
+
+    def warnings(self, at_least: int = 0) -> list[str]:
+        """The node's warnings so far (waiting up to 2 s for ``at_least`` of them, then 0.1 s for more)."""
+        self.ros.spin_until(lambda: len(warnings_of(self.logs, "slam")) >= at_least, 2.0)
+        self.ros.spin_for(0.1)
+        return warnings_of(self.logs, "slam")
+
+
+def assert_map_header(array: MarkerArray, t_ns: int) -> None:
+    assert array.markers[0].action == Marker.DELETEALL
+    for marker in array.markers:
+        assert marker.header.frame_id == "map"
+        assert stamp_ns(marker.header.stamp) == t_ns, "stamped with the observation's own stamp"
+
+
+def assert_covariance(odom: Odometry) -> np.ndarray:
+    """The (x, y, yaw) block, checked: only those entries of the 6x6 set, symmetric, PSD."""
+    P6 = np.array(odom.pose.covariance).reshape(6, 6)
+    P = covariance_from_6x6(odom.pose.covariance)
+    rest = P6.copy()
+    rest[np.ix_([0, 1, 5], [0, 1, 5])] = 0.0
+    assert np.all(rest == 0.0), "z, roll and pitch are not estimated"
+    assert np.array_equal(P, P.T)
+    assert np.linalg.eigvalsh(P).min() >= -1e-15
+    return P
+
+
+# --- odometry ----------------------------------------------------------------------------------------------
+
+
+def test_straight_drive_then_arc_follow_the_kinematics_from_the_start_pose_with_a_growing_covariance(ros):
+    T0 = Transform2D(0.5, -0.25, 0.7)
+    rig = Rig(ros, x0=T0.x, y0=T0.y, theta0=T0.theta)
+    t_ns, phi = 50 * S, (2.0, -1.0)  # any start angles: only increments count
+    first = rig.wheels(t_ns, phi)
+    assert close_pose(first, T0)
+    assert (first.header.frame_id, first.child_frame_id) == ("map", "base_footprint")
+    assert stamp_ns(first.header.stamp) == t_ns
+    assert np.all(assert_covariance(first) == 0.0), "initial_xy_std = initial_theta_std = 0"
+    # 0.5 s steps: 4 straight (5 cm each), then 4 along an arc (10 cm and 0.4 rad each)
+    steps = [(0.05 / R_WHEEL,) * 2] * 4 + [wheel_speeds(0.1, 0.4)] * 4
+    T, traces = T0, [0.0]
+    for dphi_left, dphi_right in steps:
+        t_ns += S // 2
+        phi = (phi[0] + dphi_left, phi[1] + dphi_right)
+        T = DRIVE.step(T, dphi_left, dphi_right)
+        odom = rig.wheels(t_ns, phi)
+        assert stamp_ns(odom.header.stamp) == t_ns
+        assert (odom.header.frame_id, odom.child_frame_id) == ("map", "base_footprint")
+        assert close_pose(odom, T), (pose_of(odom), T)
+        twist = DRIVE.body_twist(dphi_left, dphi_right)
+        assert odom.twist.twist.linear.x == pytest.approx(twist.vx / 0.5, abs=TOL)
+        assert odom.twist.twist.angular.z == pytest.approx(twist.omega / 0.5, abs=TOL)
+        P = assert_covariance(odom)
+        assert np.all(np.diag(P) > 0.0)
+        traces.append(float(np.trace(P)))
+    assert all(b > a for a, b in zip(traces, traces[1:])), f"no observations: the covariance grows {traces}"
+    # the end of the hand-made trajectory: 0.2 m along 0.7 rad, then a 0.25 m-radius arc through 1.6 rad
+    assert T.theta == pytest.approx(0.7 + 1.6)
+    # the path (frame map) keeps every pose: each step is more than path_min_step_m
+    assert rig.ros.spin_until(lambda: len(rig.paths) == 1 + len(steps), 5.0), "a path per kept pose"
+    path = rig.paths[-1]
+    assert path.header.frame_id == "map"
+    assert len(path.poses) == 1 + len(steps)
+    last = path.poses[-1].pose
+    assert (last.position.x, last.position.y) == pytest.approx((T.x, T.y), abs=TOL)
+    assert rig.warnings() == []
+
+
+def test_initial_pose_standard_deviations_set_the_first_covariance(ros):
+    rig = Rig(ros, initial_xy_std=0.1, initial_theta_std=0.05, x0=-1.0)
+    odom = rig.wheels(S, (0.0, 0.0))
+    assert close_pose(odom, Transform2D(-1.0, 0.0, 0.0))
+    assert assert_covariance(odom) == pytest.approx(np.diag([0.01, 0.01, 0.0025]), abs=1e-15)
+
+
+# --- known association ---------------------------------------------------------------------------------------
+
+
+def test_known_association_maps_the_fake_sensor_landmarks_at_their_true_places(ros):
+    T0 = Transform2D(0.2, 0.1, -0.4)
+    rig = Rig(ros, association="known", x0=T0.x, y0=T0.y, theta0=T0.theta, landmark_radius=0.05)
+    arc = Arc(T0, EPOCH_NS, vx=0.15, omega=0.3, phi0=(10.0, 20.0))
+    rig.wheels(EPOCH_NS, arc.angles(EPOCH_NS))
+    # first sighting from the start pose, stamped at the first joint_states
+    first = rig.observe(cylinder_array("base_footprint", EPOCH_NS, relative(T0)))
+    maps = [(EPOCH_NS, first)]
+    # then drive at 10 Hz, each observation stamped between the last two samples
+    for k in range(1, 9):
+        t_ns = EPOCH_NS + k * S // 10
+        rig.wheels(t_ns, arc.angles(t_ns))
+        t_obs = t_ns - S // 20
+        maps.append((t_obs, rig.observe(cylinder_array("base_footprint", t_obs, relative(arc.pose(t_obs))))))
+    major_axes = []
+    for t_obs, array in maps:
+        assert_map_header(array, t_obs)
+        cylinders, ellipses = mapped(array, "landmarks"), mapped(array, "covariance")
+        assert len(array.markers) == 1 + len(cylinders) + len(ellipses)
+        assert sorted(cylinders) == sorted(ellipses) == sorted(LANDMARKS), "marker id = landmark id"
+        for landmark_id, (x, y) in LANDMARKS.items():
+            cylinder, ellipse = cylinders[landmark_id], ellipses[landmark_id]
+            assert cylinder.type == Marker.CYLINDER and ellipse.type == Marker.CYLINDER
+            assert (cylinder.pose.position.x, cylinder.pose.position.y) == pytest.approx((x, y), abs=1e-6)
+            assert (ellipse.pose.position.x, ellipse.pose.position.y) == pytest.approx((x, y), abs=1e-6)
+            assert cylinder.scale.x == cylinder.scale.y == pytest.approx(0.1), "2 landmark_radius"
+            assert rgba(cylinder) == pytest.approx(GREEN)
+            assert ellipse.scale.x >= ellipse.scale.y > 0.0 and ellipse.scale.z < 0.05, "a flat ellipse"
+            assert rgba(ellipse)[:3] == pytest.approx(GREEN[:3]) and rgba(ellipse)[3] < 1.0
+            major_axes.append((t_obs, landmark_id, ellipse.scale.x))
+    # first sighting with an exact pose: Sigma = fake_sensor_std^2 I, a 2-sigma circle of diameter 4 std
+    first_ellipses = mapped(first, "covariance")
+    for ellipse in first_ellipses.values():
+        assert (ellipse.scale.x, ellipse.scale.y) == pytest.approx((0.04, 0.04), abs=1e-9)
+    # more sightings never make a landmark less certain, and eight more make it clearly more certain
+    for landmark_id in LANDMARKS:
+        axes = [axis for _, i, axis in major_axes if i == landmark_id]
+        assert all(b <= a + 1e-12 for a, b in zip(axes, axes[1:]))
+        assert axes[-1] < 0.8 * axes[0]
+    # consistent observations leave the pose on the true arc
+    t_end = EPOCH_NS + 8 * S // 10
+    assert close_pose(rig.odoms[-1], arc.pose(t_end), 1e-6)
+    assert rig.warnings() == []
+
+
+def test_an_unseen_landmark_joins_the_map_when_first_observed(ros):
+    rig = Rig(ros, association="known")
+    rig.wheels(S, (0.0, 0.0))
+    first = rig.observe(cylinder_array("base_footprint", S, relative(Transform2D(), {3: LANDMARKS[3]})))
+    assert sorted(mapped(first)) == [3]
+    # nothing visible: an array with only its DELETEALL still gives a map (the same one)
+    empty = rig.observe(cylinder_array("base_footprint", S, []))
+    assert sorted(mapped(empty)) == [3]
+    both = rig.observe(cylinder_array("base_footprint", S, relative(Transform2D(), LANDMARKS)))
+    assert sorted(mapped(both)) == [3, 7, 12]
+    for landmark_id, xy in LANDMARKS.items():
+        marker = mapped(both)[landmark_id]
+        assert (marker.pose.position.x, marker.pose.position.y) == pytest.approx(xy, abs=1e-9)
+        assert marker.scale.x == pytest.approx(0.076), "default landmark_radius 0.038"
+
+
+# --- unknown association -------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("frame_id", ["base_scan", "base_footprint"])
+def test_unknown_association_maps_each_landmark_once_after_confirm_count_sightings(ros, frame_id):
+    T0 = Transform2D(-0.3, 0.2, 1.0)
+    rig = Rig(ros, x0=T0.x, y0=T0.y, theta0=T0.theta)  # association unknown, confirm_count 5 by default
+    arc = Arc(T0, 5 * S, vx=0.1, omega=-0.2)
+    offset = T_BODY_SENSOR if frame_id == "base_scan" else Transform2D()
+    counts = []
+    for k in range(8):
+        t_ns = 5 * S + k * S // 5
+        rig.wheels(t_ns, arc.angles(t_ns))
+        # the landmarks node's arrays carry no ids that mean anything: number them per scan, shuffled
+        seen = relative(arc.pose(t_ns) @ offset)
+        seen = [(j, x, y) for j, (_, x, y) in enumerate(seen[k % 3 :] + seen[: k % 3])]
+        array = rig.observe(cylinder_array(frame_id, t_ns, seen))
+        assert_map_header(array, t_ns)
+        cylinders = mapped(array)
+        counts.append(len(cylinders))
+        assert sorted(mapped(array, "covariance")) == sorted(cylinders)
+        if len(cylinders) == 3:
+            assert sorted(cylinders) == [0, 1, 2], "each landmark once, numbered as created"
+            found = sorted((m.pose.position.x, m.pose.position.y) for m in cylinders.values())
+            assert np.array(found) == pytest.approx(np.array(sorted(LANDMARKS.values())), abs=1e-6)
+    assert counts == [0, 0, 0, 0, 3, 3, 3, 3], "tentative until the 5th sighting"
+    assert close_pose(rig.odoms[-1], arc.pose(5 * S + 7 * S // 5), 1e-6)
+    assert rig.warnings() == []
+
+
+def test_confirm_count_sets_the_sightings_that_confirm_a_landmark(ros):
+    rig = Rig(ros, confirm_count=2)
+    rig.wheels(S, (0.0, 0.0))
+    counts = [
+        len(mapped(rig.observe(cylinder_array("base_scan", S, relative(T_BODY_SENSOR))))) for _ in range(3)
+    ]
+    assert counts == [0, 3, 3]
+
+
+def test_scans_through_the_landmarks_node_map_the_cylinders_of_a_simulated_lidar(ros):
+    """The real chain: LDS-01 scans (1 cm noise) -> landmarks -> slam, while driving an arc."""
+    ros.add(LandmarksNode(context=ros.context))
+    rig = Rig(ros)
+    scans = rig.helper.create_publisher(LaserScan, "scan", qos_profile_sensor_data)
+    assert ros.spin_until(lambda: matched(scans), 10.0)
+    lidar = LidarConfig(noise=0.01, resolution=0.01)
+    circles = np.array([(x, y, 0.05) for x, y in LANDMARKS.values()])
+    rng = np.random.default_rng(3)
+    arc = Arc(Transform2D(), S, vx=0.1, omega=0.3)
+    for k in range(7):
+        t_ns = S + k * S // 5
+        rig.wheels(t_ns, arc.angles(t_ns))
+        scan = LaserScan(angle_min=0.0, angle_increment=lidar.angle_increment, range_min=0.12, range_max=3.5)
+        scan.angle_max = (lidar.samples - 1) * lidar.angle_increment
+        scan.header.stamp, scan.header.frame_id = stamp(t_ns), "base_scan"
+        T_world_sensor = arc.pose(t_ns) @ T_BODY_SENSOR
+        scan.ranges = simulate_scan(T_world_sensor, circles, np.empty((0, 4)), lidar, rng).tolist()
+        count = len(rig.maps)
+        scans.publish(scan)
+        assert ros.spin_until(lambda: len(rig.maps) > count, 5.0), "no map for this scan"
+        assert_map_header(rig.maps[-1], t_ns)
+    cylinders = mapped(rig.maps[-1])
+    assert len(cylinders) == 3
+    for x, y in LANDMARKS.values():
+        nearest = min(math.hypot(m.pose.position.x - x, m.pose.position.y - y) for m in cylinders.values())
+        assert nearest < 0.02
+    assert rig.warnings() == []
+
+
+# --- time alignment -----------------------------------------------------------------------------------------
+
+
+def test_late_and_early_observations_are_applied_at_their_own_stamps(ros):
+    """Driving fast at 20 Hz, observations arrive 0.1-0.2 s after the joint_states of their stamp (and one
+    before); the node must match a turtlelib filter fed the same samples, and the map the truth."""
+    T0 = Transform2D(0.1, -0.2, 0.3)
+    rig = Rig(ros, association="known", x0=T0.x, y0=T0.y, theta0=T0.theta)
+    config, timeline_config = SlamConfig(), TimelineConfig()
+    slam = EkfSlam(config, DRIVE, T0)
+    timeline = SlamTimeline(slam, timeline_config)
+    arc = Arc(T0, EPOCH_NS, vx=0.22, omega=0.6)
+    rng = np.random.default_rng(11)
+    fake_std = 0.01
+
+    def observation(t_obs: int) -> tuple[MarkerArray, list]:
+        """The fake sensor at t_obs (5 mm noise per axis) and what the node makes of it, for the reference."""
+        noise = rng.normal(0.0, 0.005, (len(LANDMARKS), 2))
+        seen = [(i, x + dx, y + dy) for (i, x, y), (dx, dy) in zip(relative(arc.pose(t_obs)), noise)]
+        ids = np.array([i for i, _, _ in seen])
+        p_sensor = T_BODY_SENSOR.inverse() @ np.array([(x, y) for _, x, y in seen])
+        z, R = observations_from_points(p_sensor, np.broadcast_to(fake_std**2 * np.eye(2), (3, 2, 2)))
+        return cylinder_array("base_footprint", t_obs, seen), [stamp_seconds(stamp(t_obs)), z, R, ids]
+
+    def check_map(array: MarkerArray, t_obs: int) -> None:
+        assert_map_header(array, t_obs)
+        cylinders = mapped(array)
+        assert sorted(cylinders) == list(slam.landmark_ids) == sorted(LANDMARKS)
+        for landmark_id, xy in zip(slam.landmark_ids, slam.landmarks):
+            marker = cylinders[int(landmark_id)]
+            assert (marker.pose.position.x, marker.pose.position.y) == pytest.approx(tuple(xy), abs=TOL)
+            truth = LANDMARKS[int(landmark_id)]
+            assert math.dist((marker.pose.position.x, marker.pose.position.y), truth) < 0.015
+
+    dt_ns = S // 20
+    late = {8: 4, 14: 2, 20: 3, 26: 4}  # sample k: its observation arrives after sample k + delay
+    waiting = []
+    for k in range(36):
+        t_ns = EPOCH_NS + k * dt_ns
+        odom = rig.wheels(t_ns, arc.angles(t_ns))
+        timeline.add_wheels(stamp_seconds(stamp(t_ns)), *arc.angles(t_ns))
+        T_ref, P_ref = timeline.latest_pose()
+        assert close_pose(odom, T_ref), (k, pose_of(odom), T_ref)
+        assert covariance_from_6x6(odom.pose.covariance) == pytest.approx(P_ref, abs=1e-12)
+        if k in late:
+            waiting.append((k + late[k], t_ns))
+        if k == 30:
+            # between samples, in the filter's window: 0.125 s back
+            waiting.append((k, t_ns - 5 * dt_ns // 2))
+        for t_obs in [t for due, t in waiting if due == k]:
+            msg, args = observation(t_obs)
+            timeline.add_observations(*args)
+            check_map(rig.observe(msg), t_obs)
+        if k == 32:
+            # early: stamped 20 ms after this sample, applied once the next one reaches it
+            t_obs = t_ns + dt_ns * 2 // 5
+            msg, args = observation(t_obs)
+            assert timeline.add_observations(*args) == []
+            rig.observations.publish(msg)
+            rig.ros.spin_for(0.2)
+            count = len(rig.maps)
+            t_next = t_ns + dt_ns
+            rig.wheels(t_next, arc.angles(t_next))
+            timeline.add_wheels(stamp_seconds(stamp(t_next)), *arc.angles(t_next))
+            assert rig.ros.spin_until(lambda: len(rig.maps) > count, 5.0)
+            check_map(rig.maps[-1], t_obs)
+            break
+    assert len(rig.maps) == len(late) + 2
+    # the same filter: the final pose and its covariance
+    T_ref, P_ref = timeline.latest_pose()
+    assert close_pose(rig.odoms[-1], T_ref)
+    assert covariance_from_6x6(rig.odoms[-1].pose.covariance) == pytest.approx(P_ref, abs=1e-12)
+    assert rig.warnings() == []
+
+
+def test_a_late_observation_of_a_fast_robot_is_placed_from_the_pose_at_its_stamp(ros):
+    """0.5 m/s, the observation 0.2 s late: applied at the pose of its delivery it would misplace the
+    landmarks by about 10 cm."""
+    rig = Rig(ros, association="known")
+    arc = Arc(Transform2D(), 7 * S, vx=0.5, omega=0.0)
+    for k in range(6):
+        rig.wheels(7 * S + k * S // 20, arc.angles(7 * S + k * S // 20))
+    t_obs = 7 * S + S // 20  # sample 1, delivered after sample 5
+    array = rig.observe(cylinder_array("base_footprint", t_obs, relative(arc.pose(t_obs))))
+    for landmark_id, xy in LANDMARKS.items():
+        marker = mapped(array)[landmark_id]
+        assert (marker.pose.position.x, marker.pose.position.y) == pytest.approx(xy, abs=1e-6)
+
+
+# --- bad input ----------------------------------------------------------------------------------------------
+
+
+BAD_JOINT_STATES = {
+    # kind: (message, part of the warning)
+    "unknown joint names": (joint_state(2 * S, (5.0, 5.0), names=("left", "right")), "missing"),
+    "one wheel missing": (joint_state(2 * S, (5.0,), names=WHEELS[:1]), "'wheel_right_joint' is missing"),
+    "NaN position": (joint_state(2 * S, (math.nan, 5.0)), "non-finite"),
+    "infinite position": (joint_state(2 * S, (5.0, math.inf)), "non-finite"),
+    "fewer positions than names": (JointState(name=list(WHEELS), position=[5.0]), "2 joint names but 1 values"),
+    "more positions than names": (JointState(name=list(WHEELS), position=[5.0] * 3), "2 joint names but 3 values"),
+}
+
+
+@pytest.mark.parametrize("kind", BAD_JOINT_STATES)
+def test_bad_joint_states_are_skipped_with_a_warning_and_the_node_keeps_going(ros, kind):
+    bad, reason = BAD_JOINT_STATES[kind]
+    rig = Rig(ros)
+    rig.wheels(S, (0.0, 0.0))
+    for _ in range(3):
+        rig.joint_states.publish(bad)
+    # a topic keeps its order: the next odom answers this good message, driven from the first one
+    dphi = 0.1 / R_WHEEL
+    odom = rig.wheels(3 * S, (dphi, dphi))
+    assert close_pose(odom, Transform2D(0.1, 0.0, 0.0))
+    assert stamp_ns(odom.header.stamp) == 3 * S
+    assert len(rig.odoms) == 2, "no odom for the bad messages"
+    warnings = rig.warnings(at_least=1)
+    assert len(warnings) == 1, "three bad messages, one throttled warning"
+    assert "joint_states skipped" in warnings[0] and reason in warnings[0]
+
+
+@pytest.mark.parametrize("dt_ns", [S // 20, S], ids=["20 Hz", "1 Hz"])
+def test_finite_angles_whose_increment_overflows_are_skipped_and_taken_as_the_new_reference(ros, dt_ns):
+    """At 20 Hz the filter (0.25 s behind) has not reached the bad interval yet, at 1 Hz it has: either
+    way the sample is refused, later samples drive on from it and observations are still applied."""
+    rig = Rig(ros, association="known")
+    t_ns = S
+    rig.wheels(t_ns, (0.0, 0.0))
+    rig.wheels(t_ns + dt_ns, (0.0, 0.0))
+    rig.joint_states.publish(joint_state(t_ns + 2 * dt_ns, (1e308, -1e308)))  # the turn rate overflows
+    rig.joint_states.publish(joint_state(t_ns + 3 * dt_ns, (0.0, 0.0)))  # and back: overflows again
+    dphi = 0.1 / R_WHEEL
+    odom = rig.wheels(t_ns + 4 * dt_ns, (dphi, dphi))
+    assert close_pose(odom, Transform2D(0.1, 0.0, 0.0))
+    assert len(rig.odoms) == 3, "no odom for the refused samples"
+    odom = rig.wheels(t_ns + 10 * dt_ns, (dphi, dphi))  # standing, the filter catches up
+    array = rig.observe(cylinder_array("base_footprint", t_ns + 10 * dt_ns, relative(Transform2D(0.1, 0.0, 0.0))))
+    for landmark_id, xy in LANDMARKS.items():
+        marker = mapped(array)[landmark_id]
+        assert (marker.pose.position.x, marker.pose.position.y) == pytest.approx(xy, abs=1e-9)
+    warnings = rig.warnings(at_least=1)
+    assert len(warnings) == 1, warnings
+    assert "joint_states skipped" in warnings[0] and "taking it as the new reference" in warnings[0]
+
+
+def observation_case(kind: str, frame_id: str) -> tuple[MarkerArray, str]:
+    """A bad observation array (stamps in the node's time, filter at 1.75 s) and part of its warning."""
+    good = relative(T_BODY_SENSOR if frame_id == "base_scan" else Transform2D())
+    if kind == "unknown frame":
+        return cylinder_array("odom", 2 * S, good), "'odom'"
+    if kind == "NaN position":
+        return cylinder_array(frame_id, 2 * S, [good[0], (good[1][0], math.nan, 0.5), good[2]]), "non-finite"
+    if kind == "stale":
+        # the filter runs max_observation_delay (0.25 s) behind the newest joint_states (2 s)
+        return cylinder_array(frame_id, 2 * S - 300_000_000, good), "stale observation"
+    if kind == "mixed frames":
+        msg = cylinder_array(frame_id, 2 * S, good)
+        msg.markers[2].header.frame_id = "base_link"
+        return msg, "share frame and stamp"
+    if kind == "empty array":
+        return MarkerArray(), "empty MarkerArray"
+    raise AssertionError(kind)
+
+
+@pytest.mark.parametrize(
+    "association, frame_id", [("known", "base_footprint"), ("unknown", "base_scan")], ids=["fake_sensor", "landmarks"]
+)
+@pytest.mark.parametrize("kind", ["unknown frame", "NaN position", "stale", "mixed frames", "empty array"])
+def test_bad_observations_are_skipped_with_a_warning_and_the_next_one_applied(ros, association, frame_id, kind):
+    rig = Rig(ros, association=association, confirm_count=1)
+    rig.wheels(S, (0.0, 0.0))
+    rig.wheels(2 * S, (0.0, 0.0))  # standing: the filter is at 1.75 s
+    bad, reason = observation_case(kind, frame_id)
+    for _ in range(3):
+        rig.observations.publish(bad)
+    # the next map answers this good array: the robot is at the origin
+    good = cylinder_array(frame_id, 2 * S, relative(T_BODY_SENSOR if frame_id == "base_scan" else Transform2D()))
+    array = rig.observe(good)
+    assert len(rig.maps) == 1, "no map for the bad arrays"
+    assert_map_header(array, 2 * S)
+    found = sorted((m.pose.position.x, m.pose.position.y) for m in mapped(array).values())
+    assert np.array(found) == pytest.approx(np.array(sorted(LANDMARKS.values())), abs=1e-9)
+    if association == "known":
+        assert sorted(mapped(array)) == sorted(LANDMARKS)
+    warnings = rig.warnings(at_least=1)
+    topic = "fake_sensor" if association == "known" else "landmarks"
+    assert len(warnings) == 1, warnings
+    assert f"{topic} skipped" in warnings[0] and reason in warnings[0]
+
+
+def test_time_going_backwards_restarts_the_timeline_there_keeping_the_estimate(ros):
+    rig = Rig(ros, association="known")
+    dphi = 0.1 / R_WHEEL
+    rig.wheels(10 * S, (0.0, 0.0))
+    rig.wheels(10 * S + S // 2, (dphi, dphi))  # 0.1 m
+    rig.wheels(11 * S, (dphi, dphi))  # standing for longer than max_observation_delay
+    rig.observe(cylinder_array("base_footprint", 11 * S, relative(Transform2D(0.1, 0.0, 0.0))))
+    # a restarted simulator: time and wheel angles start again; no odom for this message
+    rig.joint_states.publish(joint_state(S // 2, (0.0, 0.0)))
+    odom = rig.wheels(S, (2 * dphi, 2 * dphi))  # 0.2 m more from the new start
+    assert close_pose(odom, Transform2D(0.3, 0.0, 0.0))
+    assert stamp_ns(odom.header.stamp) == S
+    assert len(rig.odoms) == 4
+    # observations in the new time base are applied; the map is kept
+    array = rig.observe(cylinder_array("base_footprint", S, relative(Transform2D(0.3, 0.0, 0.0))))
+    assert_map_header(array, S)
+    for landmark_id, xy in LANDMARKS.items():
+        marker = mapped(array)[landmark_id]
+        assert (marker.pose.position.x, marker.pose.position.y) == pytest.approx(xy, abs=1e-9)
+    warnings = rig.warnings(at_least=1)
+    assert len(warnings) == 1 and "time went backwards" in warnings[0]
+    assert "restarting the timeline there" in warnings[0]
+
+
+def test_time_going_backwards_while_driving_keeps_the_motion_up_to_the_newest_sample(ros):
+    rig = Rig(ros)
+    dphi = 0.1 / R_WHEEL
+    rig.wheels(10 * S, (0.0, 0.0))
+    odom = rig.wheels(10 * S + S // 2, (dphi, dphi))  # 0.1 m, the filter 0.25 s behind
+    assert close_pose(odom, Transform2D(0.1, 0.0, 0.0))
+    rig.joint_states.publish(joint_state(S // 2, (0.0, 0.0)))  # the clock jumps back right after
+    odom = rig.wheels(S, (dphi, dphi))  # 0.1 m more
+    assert close_pose(odom, Transform2D(0.2, 0.0, 0.0), 1e-6), pose_of(odom)
+
+
+# --- parameters ----------------------------------------------------------------------------------------------
+
+
+def invalid(name: str, value, message: str):
+    """A parametrize row: the parameter ``name`` set to an invalid ``value``, and part of the error."""
+    return pytest.param(Parameter(name, value=value), message, id=f"{name}={value!r}")
+
+
+@pytest.mark.parametrize(
+    "parameter, message",
+    [
+        invalid("association", "maybe", "association must be one of"),
+        invalid("fake_sensor_std", -0.01, "fake_sensor_std"),
+        invalid("fake_sensor_std", 0.0, "fake_sensor_std"),
+        invalid("landmark_radius", math.nan, "landmark_radius"),
+        invalid("map_id", "odom", "distinct"),
+        invalid("sensor_id", "base_footprint", "distinct"),
+        invalid("body_id", "", "non-empty"),
+        invalid("x0", math.inf, "x0 must be finite"),
+        invalid("matcher", "greedy", "matcher"),
+        invalid("confirm_count", 0, "confirm_count"),
+        invalid("max_observation_delay", -0.1, "max_observation_delay"),
+        invalid("wheel_right", "wheel_left_joint", "must differ"),
+        invalid("wheel_radius", -0.033, "wheel_radius"),
+        invalid("theta0", "north", "theta0 must be of type float"),
+    ],
+)
+def test_an_invalid_parameter_raises_value_error_at_construction(ros, parameter, message):
+    with pytest.raises(ValueError, match=message):
+        SlamNode(context=ros.context, parameter_overrides=[parameter])
+
+
+def test_the_default_parameters(ros):
+    node = ros.add(SlamNode(context=ros.context))
+    assert node.node_config.association == "unknown"
+    assert node.config == SlamConfig()
+    assert node.timeline.config == TimelineConfig()
+    assert node.get_parameter("wheel_radius").value == R_WHEEL
