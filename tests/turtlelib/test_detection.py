@@ -309,6 +309,32 @@ def test_detect_with_clusters_returns_the_detections_and_every_cluster():
     np.testing.assert_array_equal(clusters.beam_index, expected.beam_index)
 
 
+def test_each_detection_names_the_cluster_it_was_fitted_to():
+    rng = np.random.default_rng(4)
+    lidar = LDS01_NOISY
+    for _ in range(5):
+        scene = random_scene(rng)
+        ranges = simulate_scan(scene.T_world_sensor, scene.circles, scene.walls, lidar, rng)
+        detections, clusters = LandmarkDetector(CONFIG).detect_with_clusters(
+            ranges, 0.0, lidar.angle_increment, 0.12, 3.5
+        )
+        assert len(detections) > 0
+        assert len(set(detections.cluster_index.tolist())) == len(detections)
+        for centre, radius, n, k in zip(
+            detections.p_sensor, detections.radius, detections.n_points, detections.cluster_index
+        ):
+            points = clusters.points(int(k))
+            assert len(points) == n
+            # the cluster's points lie on the fitted circle (1 cm noise, 1 cm resolution)
+            np.testing.assert_allclose(np.linalg.norm(points - centre, axis=1), radius, atol=0.04)
+
+
+def test_detections_built_without_cluster_indices_mark_them_unknown():
+    one = np.ones(1)
+    detections = Detections(np.zeros((1, 2)), one, np.ones(1, dtype=np.intp), one, one, one, np.zeros((1, 2, 2)))
+    np.testing.assert_array_equal(detections.cluster_index, [-1])
+
+
 def test_a_scan_without_candidates_gives_empty_detections():
     detections = detect(np.zeros(360))
     assert len(detections) == 0
