@@ -110,6 +110,8 @@ def test_landmarks_within_range():
     assert landmarks_within_range(true_xy, path_xy, 1.5).tolist() == [False, False, True]
     assert landmarks_within_range(true_xy, path_xy, 2.0).tolist() == [True, False, True]
     assert not landmarks_within_range(true_xy, np.zeros((0, 2)), 10.0).any()
+    # one range per landmark (closest approaches 2, 4, 1 m)
+    assert landmarks_within_range(true_xy, path_xy, np.array([2.0, 3.9, 0.9])).tolist() == [True, False, False]
 
 
 def test_pose_nees_monte_carlo_matches_chi2():

@@ -165,9 +165,10 @@ def associate_landmarks(
 
 
 def landmarks_within_range(
-    true_xy: NDArray[np.float64], path_xy: NDArray[np.float64], range_m: float
+    true_xy: NDArray[np.float64], path_xy: NDArray[np.float64], range_m: float | NDArray[np.float64]
 ) -> NDArray[np.bool_]:
-    """Mask (M,) of the true landmarks that came within ``range_m`` of some point of the path (N, 2)."""
+    """Mask (M,) of the true landmarks that came within ``range_m`` (one for all, or (M,) per landmark) of
+    some point of the path (N, 2)."""
     true_xy = np.asarray(true_xy, dtype=np.float64).reshape(-1, 2)
     path_xy = np.asarray(path_xy, dtype=np.float64).reshape(-1, 2)
     if path_xy.shape[0] == 0:
@@ -232,7 +233,7 @@ class RunData:
 
     ``truth``, ``odom``, ``slam`` pose series; ``slam_covariances`` (K, 3, 3) the (x, y, theta) covariance
     of each SLAM pose; ``mapped_xy`` (n, 2) the final map; ``true_xy`` (M, 2) the true cylinder centres;
-    ``sensor_range_m`` the range within which a cylinder counts as seen; ``gate_m`` the association gate.
+    ``sensor_range_m`` the range within which a cylinder counts as seen (one for all, or (M,) per cylinder); ``gate_m`` the association gate.
     """
 
     truth: PoseSeries
@@ -241,7 +242,7 @@ class RunData:
     slam_covariances: NDArray[np.float64]
     mapped_xy: NDArray[np.float64]
     true_xy: NDArray[np.float64]
-    sensor_range_m: float
+    sensor_range_m: float | NDArray[np.float64]
     gate_m: float
 
     def __post_init__(self) -> None:

@@ -292,9 +292,18 @@ def slam_snapshot(slam_node: Any) -> SlamSnapshot:
     )
 
 
-def _sensor_range_m(system: _System, options: DemoOptions) -> float:
-    """How close a cylinder must come to count as seen: the fake sensor's range (known association) or
-    the SLAM observation range (unknown)."""
+def _sensor_range_m(system: _System, options: DemoOptions) -> float | np.ndarray:
+    """How close each cylinder must come to count as seen (m): the fake sensor's range (known association),
+    or (unknown) the farthest distance at which the LiDAR puts ``min_points`` beams on it, within SLAM's
+    and the LiDAR's range. A cylinder of radius r at distance d spans about 2 r / d rad, so it is hit by
+    about 2 r / (d angle_increment) beams::
+
+        d_max = min(max_range, range_max, 2 r / (min_points angle_increment))
+    """
+    simulation = system.nusim.simulation
     if options.association == "known":
-        return system.nusim.simulation.config.noise.max_range
-    return float(system.slam.config.max_range)
+        return simulation.config.noise.max_range
+    lidar = simulation.config.lidar
+    radius_m = simulation.circles[:, 2]
+    detectable_m = 2.0 * radius_m / (system.landmarks.config.min_points * lidar.angle_increment)
+    return np.minimum(detectable_m, min(float(system.slam.config.max_range), lidar.range_max))
