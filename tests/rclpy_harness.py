@@ -1,4 +1,5 @@
-"""Helpers for tests that run real rclpy nodes in process (no mocks).
+"""Helpers for tests that run real rclpy nodes in process (no mocks), and the /rosout and matching checks
+they share.
 
 Each test gets its own rclpy Context and a single-threaded executor; `spin_until` spins it until a
 predicate holds or a wall-clock timeout passes.
@@ -11,9 +12,13 @@ from collections.abc import Callable
 from typing import Any
 
 import rclpy
+from rcl_interfaces.msg import Log
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.publisher import Publisher
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.subscription import Subscription
 
 
 class RosHarness:
@@ -53,3 +58,30 @@ class RosHarness:
             node.destroy_node()
         self.executor.shutdown()
         rclpy.try_shutdown(context=self.context)
+
+
+def record_rosout(helper: Node) -> list[Log]:
+    """Every /rosout message from now on (transient local: also the ones sent before matching)."""
+    logs: list[Log] = []
+    qos = QoSProfile(
+        depth=1000, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
+    )
+    helper.create_subscription(Log, "/rosout", logs.append, qos)
+    return logs
+
+
+def warnings_of(logs: list[Log], logger_name: str) -> list[str]:
+    """The texts of the WARN messages of ``logger_name`` and its child loggers (``slam.fake_sensor``)."""
+    return [
+        log.msg
+        for log in logs
+        if (log.name == logger_name or log.name.startswith(logger_name + ".")) and log.level == Log.WARN
+    ]
+
+
+def matched(*endpoints: Publisher | Subscription) -> bool:
+    """True once every publisher has a subscriber and every subscription a publisher."""
+    return all(
+        (e.get_subscription_count() if isinstance(e, Publisher) else e.get_publisher_count()) > 0
+        for e in endpoints
+    )

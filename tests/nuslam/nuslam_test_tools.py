@@ -1,15 +1,12 @@
-"""Shared pieces of the nuslam node tests: stamps, marker arrays, /rosout recording, endpoint matching."""
+"""Shared pieces of the nuslam node tests: stamps, marker arrays, input matching (the /rosout recording and
+endpoint matching are rclpy_harness's)."""
 
 from __future__ import annotations
 
 from collections.abc import Iterable
 
 from builtin_interfaces.msg import Time
-from rcl_interfaces.msg import Log
 from rclpy.node import Node
-from rclpy.publisher import Publisher
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.subscription import Subscription
 from visualization_msgs.msg import Marker, MarkerArray
 
 
@@ -42,33 +39,6 @@ def cylinder_array(frame_id: str, t_ns: int, points: Iterable[tuple[int, float, 
         marker.color.g = marker.color.a = 1.0
         markers.append(marker)
     return MarkerArray(markers=markers)
-
-
-def record_rosout(helper: Node) -> list[Log]:
-    """Every /rosout message from now on (transient local: also the ones sent before matching)."""
-    logs: list[Log] = []
-    qos = QoSProfile(
-        depth=1000, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
-    )
-    helper.create_subscription(Log, "/rosout", logs.append, qos)
-    return logs
-
-
-def warnings_of(logs: list[Log], logger_name: str) -> list[str]:
-    """The texts of the WARN messages of ``logger_name`` and its child loggers (``slam.fake_sensor``)."""
-    return [
-        log.msg
-        for log in logs
-        if (log.name == logger_name or log.name.startswith(logger_name + ".")) and log.level == Log.WARN
-    ]
-
-
-def matched(*endpoints: Publisher | Subscription) -> bool:
-    """True once every publisher has a subscriber and every subscription a publisher."""
-    return all(
-        (e.get_subscription_count() if isinstance(e, Publisher) else e.get_publisher_count()) > 0
-        for e in endpoints
-    )
 
 
 def node_inputs_matched(node: Node) -> bool:

@@ -18,7 +18,8 @@ from turtlelib import DetectorConfig, LidarConfig, Transform2D, arena_walls, sim
 from visualization_msgs.msg import Marker, MarkerArray
 
 from nuslam.landmarks_node import LandmarksNode
-from nuslam_test_tools import matched, node_inputs_matched, record_rosout, stamp, stamp_ns, warnings_of
+from nuslam_test_tools import node_inputs_matched, stamp, stamp_ns
+from rclpy_harness import matched, record_rosout, warnings_of
 
 pytestmark = pytest.mark.ros
 

@@ -26,15 +26,8 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from nuslam.landmarks_node import LandmarksNode
 from nuslam.slam_node import SlamNode
-from nuslam_test_tools import (
-    cylinder_array,
-    matched,
-    node_inputs_matched,
-    record_rosout,
-    stamp,
-    stamp_ns,
-    warnings_of,
-)
+from nuslam_test_tools import cylinder_array, node_inputs_matched, stamp, stamp_ns
+from rclpy_harness import matched, record_rosout, warnings_of
 from nuturtle_description.conversions import covariance_from_6x6, stamp_seconds, yaw_from_quaternion
 from nuturtle_description.robot_params import burger_params
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 
 import pytest
-from control_test_tools import matched
+from rclpy_harness import matched
 from geometry_msgs.msg import Twist
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient

@@ -12,7 +12,7 @@ import subprocess
 import sys
 
 import pytest
-from control_test_tools import matched, record_rosout, warnings_of
+from rclpy_harness import matched, record_rosout, warnings_of
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry, Path
 from rclpy.parameter import Parameter

@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 
 import pytest
-from control_test_tools import matched, record_rosout, warnings_of
+from rclpy_harness import matched, record_rosout, warnings_of
 from geometry_msgs.msg import Twist
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
