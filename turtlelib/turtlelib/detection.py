@@ -48,6 +48,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .circle_fit import hyper_fit_sets, range_sensor_step, rms_residual
+from .validation import finite_real
 
 # A scan is a full turn when the angular gap from its last beam back to its first is at most this many
 # beam increments.
@@ -63,11 +64,9 @@ _BEFORE_AFTER_SIDE = np.array([0, 1])
 
 def _real_field(owner: object, name: str) -> float:
     """The field as a float; ValueError unless it is a finite real number (bools excluded)."""
-    value = getattr(owner, name)
-    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
-        raise ValueError(f"detector {name} must be a finite number, got {value!r}")
-    object.__setattr__(owner, name, float(value))
-    return float(value)
+    value = finite_real(f"detector {name}", getattr(owner, name))
+    object.__setattr__(owner, name, value)
+    return value
 
 
 def _int_field(owner: object, name: str, lowest: int, highest: int) -> int:

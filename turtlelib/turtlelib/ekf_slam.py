@@ -43,10 +43,9 @@ landmark ids) raises ValueError and leaves the filter unchanged.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from enum import IntEnum
-from numbers import Integral, Real
+from numbers import Integral
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -57,6 +56,7 @@ from .kinematics import DiffDrive
 from .landmark_tracks import LandmarkTracks
 from .range_bearing import landmarks_from_observations, predict_observations, residual
 from .slam_state import ROBOT_DIM, SlamState
+from .validation import finite_real, integer
 from .wheel_noise import wheel_slip_covariance
 
 MATCHERS = ("nn", "jcbb")
@@ -103,21 +103,21 @@ class SlamConfig:
 
     def __post_init__(self) -> None:
         for name in ("sensor_x", "sensor_y", "sensor_theta"):
-            _real(name, getattr(self, name))
+            finite_real(name, getattr(self, name))
         for name in ("wheel_noise", "initial_xy_std", "initial_theta_std"):
-            if _real(name, getattr(self, name)) < 0.0:
+            if finite_real(name, getattr(self, name)) < 0.0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
         for name in ("range_std", "bearing_std", "max_range"):
-            if _real(name, getattr(self, name)) <= 0.0:
+            if finite_real(name, getattr(self, name)) <= 0.0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)!r}")
         if self.matcher not in MATCHERS:
             raise ValueError(f"matcher must be one of {MATCHERS}, got {self.matcher!r}")
-        gate_associate = _real("gate_associate", self.gate_associate)
-        gate_new = _real("gate_new", self.gate_new)
+        gate_associate = finite_real("gate_associate", self.gate_associate)
+        gate_new = finite_real("gate_new", self.gate_new)
         if not 0.0 < gate_associate < gate_new < 1.0:
             raise ValueError(f"need 0 < gate_associate < gate_new < 1, got {gate_associate!r}, {gate_new!r}")
         for name in ("confirm_count", "tentative_timeout", "jcbb_max_nodes"):
-            if _integer(name, getattr(self, name)) < 1:
+            if integer(name, getattr(self, name)) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)!r}")
         if self.tentative_timeout < self.confirm_count - 1:
             raise ValueError(
@@ -578,18 +578,6 @@ class EkfSlam:
         """State indices of the pose and the confirmed landmarks (in id order)."""
         first = ROBOT_DIM + 2 * self._tracks.slots_by_id(confirmed=True)
         return np.concatenate([np.arange(ROBOT_DIM), (first[:, None] + np.arange(2)).ravel()])
-
-
-def _real(name: str, value: object) -> float:
-    if isinstance(value, bool) or not isinstance(value, Real) or not math.isfinite(value):
-        raise ValueError(f"{name} must be a finite number, got {value!r}")
-    return float(value)
-
-
-def _integer(name: str, value: object) -> int:
-    if isinstance(value, bool) or not isinstance(value, Integral):
-        raise ValueError(f"{name} must be an integer, got {value!r}")
-    return int(value)
 
 
 def _landmark_ids(ids: ArrayLike) -> NDArray[np.int64]:

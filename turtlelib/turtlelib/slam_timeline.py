@@ -29,15 +29,14 @@ whatever pose is current, so the filter runs a little behind the newest wheel sa
 from __future__ import annotations
 
 import bisect
-import math
 from dataclasses import dataclass
-from numbers import Integral, Real
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .ekf_slam import Association, EkfSlam
 from .geometry import Transform2D
+from .validation import finite_real, integer
 
 
 @dataclass(frozen=True)
@@ -50,12 +49,10 @@ class TimelineConfig:
     max_pending_observations: int = 20
 
     def __post_init__(self) -> None:
-        delay = self.max_observation_delay
-        if isinstance(delay, bool) or not isinstance(delay, Real) or not (math.isfinite(delay) and delay >= 0):
-            raise ValueError(f"max_observation_delay must be finite and >= 0, got {delay!r}")
-        pending = self.max_pending_observations
-        if isinstance(pending, bool) or not isinstance(pending, Integral) or pending < 1:
-            raise ValueError(f"max_pending_observations must be an int >= 1, got {pending!r}")
+        if finite_real("max_observation_delay", self.max_observation_delay) < 0.0:
+            raise ValueError(f"max_observation_delay must be >= 0, got {self.max_observation_delay!r}")
+        if integer("max_pending_observations", self.max_pending_observations) < 1:
+            raise ValueError(f"max_pending_observations must be >= 1, got {self.max_pending_observations!r}")
 
 
 @dataclass(frozen=True, eq=False)
@@ -105,7 +102,7 @@ class SlamTimeline:
 
         ValueError (nothing changed) for non-finite values or a time earlier than the newest sample.
         """
-        t_s, phi_left_rad, phi_right_rad = _finite("wheel sample", t_s, phi_left_rad, phi_right_rad)
+        t_s, phi_left_rad, phi_right_rad = _finite_sample(t_s, phi_left_rad, phi_right_rad)
         t_w = self.latest_time_s
         if t_w is not None and t_s < t_w:
             raise ValueError(f"time went backwards: wheel sample at {t_s!r} s after one at {t_w!r} s")
@@ -131,7 +128,7 @@ class SlamTimeline:
         reverse), before the first wheel sample, for a stale stamp (``t_s < t_f``), or when
         ``max_pending_observations`` are already waiting.
         """
-        (t_s,) = _finite("observation stamp", t_s)
+        t_s = finite_real("observation stamp", t_s)
         z, R, landmark_ids = self.slam.checked_observations(z, R, ids)
         if self._t_f is None:
             raise ValueError("no wheel sample yet: an observation cannot be placed in time")
@@ -159,7 +156,7 @@ class SlamTimeline:
         wheel sample, so no motion is lost (as far as it can be: the estimate stops before a sample whose
         increment the motion model refuses, e.g. a corrupt reading); observations still waiting are dropped.
         """
-        t_s, phi_left_rad, phi_right_rad = _finite("wheel sample", t_s, phi_left_rad, phi_right_rad)
+        t_s, phi_left_rad, phi_right_rad = _finite_sample(t_s, phi_left_rad, phi_right_rad)
         if self._t_f is not None:
             try:
                 self._advance_to(self._times[-1])
@@ -223,10 +220,10 @@ class SlamTimeline:
         return l0 + s * (l1 - l0), r0 + s * (r1 - r0)
 
 
-def _finite(what: str, *values: float) -> tuple[float, ...]:
-    floats = []
-    for value in values:
-        if isinstance(value, bool) or not isinstance(value, Real) or not math.isfinite(value):
-            raise ValueError(f"{what} values must be finite numbers, got {values!r}")
-        floats.append(float(value))
-    return tuple(floats)
+def _finite_sample(t_s: object, phi_left_rad: object, phi_right_rad: object) -> tuple[float, float, float]:
+    """A wheel sample as floats; ValueError unless every value is a finite number."""
+    return (
+        finite_real("wheel sample time", t_s),
+        finite_real("wheel sample angle (left)", phi_left_rad),
+        finite_real("wheel sample angle (right)", phi_right_rad),
+    )
