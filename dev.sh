@@ -33,7 +33,7 @@ export RMW_IMPLEMENTATION=${RMW_IMPLEMENTATION:-rmw_fastrtps_cpp}
 cmd=${1:-}
 shift || true
 case "$cmd" in
-  run)  setup; exec "$py" -P -m nuslam.demo "$@" ;;  # -P: the source folders must not shadow the installed packages
+  run)  setup; exec "$py" -P -m nuturtle_demo "$@" ;;  # -P: the source folders must not shadow the installed packages
   test) setup; exec "$py" -P -m pytest "$@" ;;
   setup) setup ;;
   *) echo "usage: ./dev.sh run|test|setup [args]" >&2; exit 2 ;;

@@ -45,7 +45,7 @@ SIZES = (10, 20, 100, 500, 1000, 2000)
 OBSERVATIONS_PER_STEP = 10
 ROUNDS = 5
 BURGER = DiffDrive(wheel_radius=0.033, track_width=0.16)
-CONFIG = SlamConfig(range_std=0.01, bearing_std=0.002, max_range=1e3, confirm_count=1, initial_xy_std=0.01)
+CONFIG = SlamConfig(sensor_x=-0.032, range_std=0.01, bearing_std=0.002, max_range=1e3, confirm_count=1, initial_xy_std=0.01)
 WHEEL_STEP_RAD = 0.1  # both wheels: 3.3 mm forward per step
 
 

@@ -1,6 +1,6 @@
 """Benchmark: the simulation + SLAM demo over several seeds, in both data-association modes.
 
-Each run is `python -m nuslam.demo --seed S --association A` (the default world and route, two minutes of
+Each run is `python -m nuturtle_demo --seed S --association A` (the default world and route, two minutes of
 robot time unless --duration says otherwise), run one after the other in this process; every run's
 outputs stay in --out/<association>-seed<S>/. Prints one markdown row per run and a summary row per mode
 (mean and worst) with the demo's targets: SLAM final position error <= 2 cm and heading <= 0.02 rad,
@@ -22,7 +22,7 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from nuslam.demo.run import ASSOCIATIONS, DemoOptions, run_demo  # noqa: E402
+from nuturtle_demo.run import ASSOCIATIONS, DemoOptions, run_demo  # noqa: E402
 
 HEADER = (
     "run", "SLAM pos (m)", "SLAM heading (rad)", "odom pos (m)", "ATE SLAM / odom (m)",

@@ -25,14 +25,13 @@ setup(
     zip_safe=True,
     maintainer="nuturtle team",
     maintainer_email="team@nuturtle.dev",
-    description="LiDAR landmark detection and EKF SLAM (known and unknown data association) nodes, and the simulation + SLAM demo.",
+    description="LiDAR landmark detection and EKF SLAM (known and unknown data association) nodes.",
     license="Apache-2.0",
     tests_require=["pytest"],
     entry_points={
         "console_scripts": [
             "landmarks = nuslam.landmarks_node:main",
             "slam = nuslam.slam_node:main",
-            "demo = nuslam.demo.cli:main"
         ],
     },
 )

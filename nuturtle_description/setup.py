@@ -25,7 +25,7 @@ setup(
     zip_safe=True,
     maintainer="nuturtle team",
     maintainer_email="team@nuturtle.dev",
-    description="TurtleBot3 Burger description (URDF), its constants, and the suite's shared parameter/message helpers.",
+    description="TurtleBot3 Burger description (URDF), and its constants (wheels, motors, encoders, LiDAR mount).",
     license="Apache-2.0",
     tests_require=["pytest"],
     entry_points={

@@ -17,11 +17,13 @@ from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
 
+def _share(package, *parts):
+    return os.path.join(get_package_share_directory(package), *parts)
+
+
 def generate_launch_description() -> LaunchDescription:
-    diff_params = os.path.join(
-        get_package_share_directory("nuturtle_description"), "config", "diff_params.yaml"
-    )
-    basic_world = os.path.join(get_package_share_directory("nusim"), "config", "basic_world.yaml")
+    diff_params = _share("nuturtle_description", "config", "diff_params.yaml")
+    basic_world = _share("nusim", "config", "basic_world.yaml")
     return LaunchDescription(
         [
             DeclareLaunchArgument(

@@ -51,22 +51,25 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState, LaserScan
 from std_srvs.srv import Empty
+from turtlelib import Twist2D
 from turtlelib.scan_model import LidarConfig
 from visualization_msgs.msg import Marker, MarkerArray
 
-from nuturtle_control.path_trail import PathTrail, PathTrailConfig
-from nuturtle_control.wheel_joints import WheelJoints, wheel_values
-from nuturtle_description.conversions import (
+from turtlelib.path_trail import PathTrail, PathTrailConfig
+from nuturtle_ros_common.wheel_joints import WheelJoints, wheel_values
+from nuturtle_ros_common.conversions import (
+    odometry_message,
     pose_from_transform,
     stamp_from_seconds,
     transform_from_pose,
     transform_stamped,
 )
-from nuturtle_description.markers import MARKER_HEIGHT_M, cylinder_marker, set_color
-from nuturtle_description.node_main import run_node
+from nuturtle_ros_common.markers import MARKER_HEIGHT_M, cylinder_marker, set_color
+from nuturtle_ros_common.node_main import run_node
 from nuturtle_description.robot_params import RobotParams, burger_params
-from nuturtle_description.ros_params import declare_dataclass
-from nuturtle_description.tf_compat import OptionalTfBroadcaster
+from nuturtle_ros_common.ros_params import declare_dataclass
+from nuturtle_ros_common.tf_compat import OptionalTfBroadcaster
+from nuturtle_ros_common.throttle import WARN_THROTTLE_S
 
 from .simulation import (
     ArenaConfig,
@@ -85,8 +88,6 @@ SCAN_FRAME = "base_scan"
 WALL_THICKNESS_M = 0.1
 RED = (1.0, 0.0, 0.0, 1.0)
 YELLOW = (1.0, 0.85, 0.0, 1.0)
-# Minimum time between two warnings from the same place (s)
-WARN_THROTTLE_S = 2.0
 
 
 @dataclass(frozen=True)
@@ -243,14 +244,8 @@ class NusimNode(Node):
 
     def _publish_ground_truth(self, stamp: Time) -> None:
         T_world_body = self.simulation.T_world_body
-        omega, vx, vy = self.simulation.V_body
-        odom = Odometry(child_frame_id=TRUE_BODY_FRAME)
-        odom.header.stamp = stamp
-        odom.header.frame_id = WORLD_FRAME
-        odom.pose.pose = pose_from_transform(T_world_body)
-        odom.twist.twist.linear.x = float(vx)
-        odom.twist.twist.linear.y = float(vy)
-        odom.twist.twist.angular.z = float(omega)
+        V_body = Twist2D(*self.simulation.V_body)
+        odom = odometry_message(T_world_body, V_body, WORLD_FRAME, TRUE_BODY_FRAME, stamp)
         self._ground_truth_publisher.publish(odom)
         self._tf.send(transform_stamped(T_world_body, WORLD_FRAME, TRUE_BODY_FRAME, stamp))
         if self.trail.offer(T_world_body, PoseStamped(header=odom.header, pose=odom.pose.pose)):

@@ -31,7 +31,7 @@ turning (and its encoders keep counting, as on the real robot), and it never pas
 Sensors
 -------
 * LiDAR: ``turtlelib.scan_model.simulate_scan`` from ``T_world_scan = T_world_body @ T_body_scan``
-  (the LDS-01 at x = ``LIDAR_X`` m in base_footprint) against the cylinders and the walls.
+  (``T_body_scan``: the robot's ``lidar_x``, ``lidar_y``, ``lidar_yaw``) against the cylinders and the walls.
 * Fake landmark sensor: every cylinder with ``|p_body_j| <= max_range``, where
   ``p_body_j = T_world_body^-1 @ c_j``, reads ``p_body_j + e``, ``e ~ N(0, basic_sensor_variance I_2)``.
 
@@ -53,10 +53,6 @@ from turtlelib import DiffDrive, Transform2D
 from turtlelib.scan_model import LidarConfig, arena_walls, simulate_scan
 
 from nuturtle_description.robot_params import RobotParams
-from nuturtle_description.urdf import LIDAR_X
-
-# Pose of the LiDAR (base_scan) in base_footprint: x = LIDAR_X m behind the wheel axle, facing forward.
-T_BODY_SCAN = Transform2D(LIDAR_X, 0.0, 0.0)
 
 # The default world: eight cylinders of the course's radius, 0.75 to 1.85 m from the centre. On any circle
 # of radius 0.5 to 1.0 m through the origin (centre (0, +-radius)) the robot's disc (0.11 m) clears every
@@ -386,7 +382,7 @@ class Simulation:
 
     def scan(self) -> NDArray[np.float64]:
         """LiDAR ranges (m), shape (lidar.samples,), 0.0 for no return, from the true pose."""
-        T_world_scan = self.T_world_body @ T_BODY_SCAN
+        T_world_scan = self.T_world_body @ self.config.robot.T_body_scan
         return simulate_scan(T_world_scan, self.circles, self.walls, self.config.lidar, self._lidar_rng)
 
     def sense_landmarks(self) -> LandmarkReadings:

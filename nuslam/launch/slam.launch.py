@@ -1,19 +1,17 @@
 """EKF SLAM (for a full ROS 2 install): nuturtle_control's start_robot.launch.py plus landmarks and slam.
 
 Arguments
-    robot:=nusim|localhost        nusim (default): the simulator and every node on its /clock; localhost:
-                                  on the real robot (its bringup publishes joint_states and scan).
     association:=unknown|known    unknown (default): landmarks found in the LiDAR scan by the `landmarks`
                                   node; known: nusim's fake_sensor (simulator only).
-    cmd_src:=circle|teleop        what drives the robot (see start_robot.launch.py).
+    use_sim_time:=false|true      true against the simulator (every node on nusim's /clock).
+    cmd_src:=circle|teleop|none   what drives the robot (see start_robot.launch.py).
 
-    ros2 launch nuslam slam.launch.py                       # SLAM against nusim, unknown association
-    ros2 launch nuslam slam.launch.py association:=known    # SLAM against nusim, known association
-    ros2 launch nuslam slam.launch.py robot:=localhost cmd_src:=teleop   # on the robot
+    ros2 launch nuslam slam.launch.py cmd_src:=teleop        # on the robot (its bringup: joint_states, scan)
+    ros2 launch nuturtle_demo nusim_slam.launch.py           # the same against the simulator
 
 Every node reads the Burger's constants from nuturtle_description/config/diff_params.yaml and its own
-defaults from config/landmarks.yaml and config/slam.yaml. RViz shows nusim's ground truth in
-`nusim/world` (red), the wheel odometry `odom` (blue) and SLAM's pose, path and map in `map` (green).
+defaults from config/landmarks.yaml and config/slam.yaml; the launch arguments come last, so they win.
+RViz shows the wheel odometry `odom` (blue) and SLAM's pose, path and map in `map` (green).
 """
 
 import os
@@ -31,38 +29,45 @@ def _share(package, *parts):
 
 
 def _slam_nodes(context):
-    robot = LaunchConfiguration("robot").perform(context)
     association = LaunchConfiguration("association").perform(context)
-    if association == "known" and robot != "nusim":
-        raise RuntimeError("association:=known needs nusim's fake_sensor: use robot:=nusim")
-    clock = {"use_sim_time": robot == "nusim"}
+    clock = {"use_sim_time": LaunchConfiguration("use_sim_time").perform(context) == "true"}
     diff_params = _share("nuturtle_description", "config", "diff_params.yaml")
-    return [
-        Node(
-            package="nuslam",
-            executable="landmarks",
-            parameters=[_share("nuslam", "config", "landmarks.yaml"), clock],
-            output="screen",
-        ),
+    nodes = [
         Node(
             package="nuslam",
             executable="slam",
-            parameters=[diff_params, _share("nuslam", "config", "slam.yaml"), {"association": association}, clock],
+            parameters=[
+                diff_params,
+                _share("nuslam", "config", "slam.yaml"),
+                {"association": association, **clock},
+            ],
             output="screen",
         ),
     ]
+    if association == "unknown":
+        nodes.append(
+            Node(
+                package="nuslam",
+                executable="landmarks",
+                parameters=[_share("nuslam", "config", "landmarks.yaml"), clock],
+                output="screen",
+            )
+        )
+    return nodes
 
 
 def generate_launch_description() -> LaunchDescription:
     return LaunchDescription(
         [
-            DeclareLaunchArgument("robot", default_value="nusim", choices=["nusim", "localhost"]),
             DeclareLaunchArgument("association", default_value="unknown", choices=["unknown", "known"]),
-            DeclareLaunchArgument("cmd_src", default_value="circle", choices=["circle", "teleop"]),
+            DeclareLaunchArgument("use_sim_time", default_value="false", choices=["true", "false"]),
+            DeclareLaunchArgument("cmd_src", default_value="circle", choices=["circle", "teleop", "none"]),
             IncludeLaunchDescription(
-                PythonLaunchDescriptionSource(_share("nuturtle_control", "launch", "start_robot.launch.py")),
+                PythonLaunchDescriptionSource(
+                    _share("nuturtle_control", "launch", "start_robot.launch.py")
+                ),
                 launch_arguments={
-                    "robot": LaunchConfiguration("robot"),
+                    "use_sim_time": LaunchConfiguration("use_sim_time"),
                     "cmd_src": LaunchConfiguration("cmd_src"),
                 }.items(),
             ),

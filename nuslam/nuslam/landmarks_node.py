@@ -28,16 +28,15 @@ from sensor_msgs.msg import LaserScan
 from turtlelib import Clusters, DetectorConfig, Detections, LandmarkDetector
 from visualization_msgs.msg import Marker, MarkerArray
 
-from nuturtle_description.markers import cylinder_marker, delete_all_marker, set_color
-from nuturtle_description.node_main import run_node
-from nuturtle_description.ros_params import declare_dataclass
+from nuturtle_ros_common.markers import cylinder_marker, delete_all_marker, set_color
+from nuturtle_ros_common.node_main import run_node
+from nuturtle_ros_common.ros_params import declare_dataclass
+from nuturtle_ros_common.throttle import WARN_THROTTLE_S
 
 GREEN = (0.1, 0.8, 0.2, 1.0)
 GREY = (0.6, 0.6, 0.6, 0.8)
 # Size of a drawn cluster point (m)
 CLUSTER_POINT_M = 0.02
-# Minimum time between two warnings from the same place (s)
-WARN_THROTTLE_S = 2.0
 
 
 def landmark_markers(detections: Detections, msg: LaserScan) -> MarkerArray:

@@ -25,11 +25,12 @@ Publishes
         node's), so the odometry frame hangs under the map as REP 105 says.
 Parameters
     `SlamNodeConfig` (association, x0, y0, theta0, frame ids, fake_sensor_std, landmark_radius),
-    `turtlelib.SlamConfig` (wheel_noise, range_std, bearing_std, sensor_x/y/theta, matcher, gates,
+    `turtlelib.SlamConfig` (wheel_noise, range_std, bearing_std, matcher, gates,
     confirm_count, tentative_timeout, max_range, initial_*_std, jcbb_max_nodes), `turtlelib.TimelineConfig`
     (max_observation_delay, max_pending_observations), `RobotParams` (the Burger's by default),
-    `WheelJoints`, `PathTrailConfig`. Defaults in config/slam.yaml. Invalid values stop the node at
-    start-up with a message.
+    `WheelJoints`, `PathTrailConfig`. Defaults in config/slam.yaml. The filter's sensor mount
+    (`SlamConfig.sensor_x/y/theta`) is the robot's `lidar_x`, `lidar_y`, `lidar_yaw`. Invalid values stop
+    the node at start-up with a message.
 
 Bad input never stops the node: invalid joint_states, observations that are stale, non-finite, in an
 unknown frame or beyond the filter's checks are skipped with a throttled warning; a joint_states stamp
@@ -47,36 +48,34 @@ from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Odometry, Path
 from numpy.typing import NDArray
-from rclpy.impl.rcutils_logger import RcutilsLogger
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from turtlelib import EkfSlam, SlamConfig, SlamTimeline, TimelineConfig, Transform2D, Twist2D
 from turtlelib.range_bearing import observations_from_points
 from visualization_msgs.msg import MarkerArray
 
-from nuturtle_control.path_trail import PathTrail, PathTrailConfig
-from nuturtle_control.wheel_joints import WheelJoints, wheel_values
-from nuturtle_control.wheel_odometry import WheelOdometry
-from nuturtle_description.conversions import (
-    planar_covariance_6x6,
+from turtlelib.path_trail import PathTrail, PathTrailConfig
+from nuturtle_ros_common.wheel_joints import WheelJoints, wheel_values
+from turtlelib.wheel_odometry import WheelOdometry
+from nuturtle_ros_common.conversions import (
+    odometry_message,
     pose_from_transform,
     stamp_from_seconds,
     stamp_seconds,
     transform_stamped,
 )
-from nuturtle_description.markers import cylinder_marker, delete_all_marker, ellipse_marker, marker_positions
-from nuturtle_description.node_main import run_node
+from nuturtle_ros_common.markers import cylinder_marker, delete_all_marker, ellipse_marker, marker_positions
+from nuturtle_ros_common.node_main import run_node
 from nuturtle_description.robot_params import RobotParams, burger_params
-from nuturtle_description.ros_params import declare_dataclass
-from nuturtle_description.tf_compat import OptionalTfBroadcaster
+from nuturtle_ros_common.ros_params import declare_dataclass
+from nuturtle_ros_common.tf_compat import OptionalTfBroadcaster
+from nuturtle_ros_common.throttle import SourceWarnings
 
 ASSOCIATIONS = ("known", "unknown")
 GREEN = (0.1, 0.8, 0.2, 1.0)
 GREEN_TRANSLUCENT = (0.1, 0.8, 0.2, 0.35)
 # Drawn confidence region of a mapped landmark (standard deviations)
 ELLIPSE_SIGMA = 2.0
-# Minimum time between two warnings from the same place (s)
-WARN_THROTTLE_S = 2.0
 
 
 @dataclass(frozen=True)
@@ -126,9 +125,12 @@ class SlamNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("slam", **kwargs)
         self.node_config = declare_dataclass(self, SlamNodeConfig)
-        self.config = declare_dataclass(self, SlamConfig)
-        timeline_config = declare_dataclass(self, TimelineConfig)
         robot = declare_dataclass(self, RobotParams, overrides=vars(burger_params()))
+        # the sensor mount is the robot's: written once, in its description
+        T_body_scan = robot.T_body_scan
+        sensor_mount = {"sensor_x": T_body_scan.x, "sensor_y": T_body_scan.y, "sensor_theta": T_body_scan.theta}
+        self.config = declare_dataclass(self, SlamConfig, fixed=sensor_mount)
+        timeline_config = declare_dataclass(self, TimelineConfig)
         self.joints = declare_dataclass(self, WheelJoints)
         self.trail: PathTrail[PoseStamped] = PathTrail(declare_dataclass(self, PathTrailConfig))
         drive = robot.diff_drive()
@@ -146,7 +148,7 @@ class SlamNode(Node):
         # stamped with these, not with a stamp rebuilt from seconds (a float holds an epoch-sized time to
         # about 0.2 us only, so the map's stamp would differ from the scan's)
         self._waiting_stamps: dict[float, Time] = {}
-        self._loggers: dict[str, RcutilsLogger] = {}
+        self._warnings = SourceWarnings(self.get_logger())
 
         self._odom_publisher = self.create_publisher(Odometry, "~/odom", 10)
         self._path_publisher = self.create_publisher(Path, "~/path", 10)
@@ -164,12 +166,12 @@ class SlamNode(Node):
         try:
             phi_left_rad, phi_right_rad = wheel_values(self.joints, msg.name, msg.position)
         except ValueError as error:
-            self._warn("joint_states", f"joint_states skipped: {error}")
+            self._warnings.warn("joint_states", f"joint_states skipped: {error}")
             return
         t_s = stamp_seconds(msg.header.stamp)
         latest_s = self.timeline.latest_time_s
         if latest_s is not None and t_s < latest_s:
-            self._warn(
+            self._warnings.warn(
                 "joint_states",
                 f"time went backwards ({t_s:.9f} s < {latest_s:.9f} s): restarting the timeline there",
             )
@@ -185,7 +187,7 @@ class SlamNode(Node):
             # finite angles whose increment the kinematics cannot take (a turn rate that overflows): the
             # timeline may hold the sample already and would fail on it again at every later sample, so
             # start afresh from it, as the odometry node does
-            self._warn("joint_states", f"joint_states skipped: {error}; taking it as the new reference")
+            self._warnings.warn("joint_states", f"joint_states skipped: {error}; taking it as the new reference")
             self._restart(t_s, phi_left_rad, phi_right_rad)
             return
         map_stamp = self._waiting_stamps.get(applied[-1][0]) if applied else None
@@ -202,7 +204,7 @@ class SlamNode(Node):
             z, R = observations_from_points(p_sensor, covariance)
             applied = self.timeline.add_observations(t_s, z, R, ids)
         except (ValueError, np.linalg.LinAlgError) as error:
-            self._warn("fake_sensor", f"fake_sensor skipped: {error}")
+            self._warnings.warn("fake_sensor", f"fake_sensor skipped: {error}")
             return
         self._observation_added(t_s, msg, applied)
 
@@ -212,7 +214,7 @@ class SlamNode(Node):
             z, _ = observations_from_points(p_sensor, np.zeros((len(ids), 2, 2)))
             applied = self.timeline.add_observations(t_s, z)
         except (ValueError, np.linalg.LinAlgError) as error:
-            self._warn("landmarks", f"landmarks skipped: {error}")
+            self._warnings.warn("landmarks", f"landmarks skipped: {error}")
             return
         self._observation_added(t_s, msg, applied)
 
@@ -258,14 +260,7 @@ class SlamNode(Node):
         self, stamp: Time, V_body: Twist2D, T_map_body: Transform2D, P_pose: NDArray[np.float64]
     ) -> None:
         frames = self.node_config
-        odom = Odometry()
-        odom.header.stamp = stamp
-        odom.header.frame_id = frames.map_id
-        odom.child_frame_id = frames.body_id
-        odom.pose.pose = pose_from_transform(T_map_body)
-        odom.pose.covariance = planar_covariance_6x6(P_pose)
-        odom.twist.twist.linear.x = V_body.vx
-        odom.twist.twist.angular.z = V_body.omega
+        odom = odometry_message(T_map_body, V_body, frames.map_id, frames.body_id, stamp, P_pose)
         self._odom_publisher.publish(odom)
         if self._tf.available:
             T_map_odom = T_map_body @ self.odometry.T_odom_body.inverse()
@@ -288,12 +283,6 @@ class SlamNode(Node):
             )
         self._map_publisher.publish(MarkerArray(markers=markers))
 
-    def _warn(self, source: str, text: str) -> None:
-        """A warning throttled per ``source`` (a child logger each: rclpy throttles per logger and call site)."""
-        logger = self._loggers.get(source)
-        if logger is None:
-            logger = self._loggers[source] = self.get_logger().get_child(source)
-        logger.warning(text, throttle_duration_sec=WARN_THROTTLE_S)
 
 
 def main(args: list[str] | None = None) -> None:

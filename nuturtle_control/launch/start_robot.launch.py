@@ -1,14 +1,14 @@
-"""Drive the Burger (for a full ROS 2 install): turtle_control + odometry, a command source, and nusim.
+"""Drive the Burger (for a full ROS 2 install): turtle_control + odometry and a command source.
 
 Arguments
-    robot:=nusim|localhost   nusim (default): start the simulator (nusim/config/basic_world.yaml) and run
-                             every node on its /clock; localhost: the real robot (its bringup publishes
-                             joint_states and takes wheel_cmd), no simulator, wall-clock time.
-    cmd_src:=circle|teleop   circle (default): the `circle` node publishes cmd_vel (config/circle.yaml);
-                             teleop: teleop_twist_keyboard in its own terminal (xterm).
+    use_sim_time:=false|true      true when the robot is simulated (every node on nusim's /clock).
+    cmd_src:=circle|teleop|none   circle (default): the `circle` node publishes cmd_vel (config/circle.yaml);
+                                  teleop: teleop_twist_keyboard in its own terminal (xterm); none: nothing
+                                  (another node or `ros2 topic pub` drives).
 
-Every node gets the Burger's constants from nuturtle_description/config/diff_params.yaml and its own
-defaults from this package's config/<node>.yaml.
+The simulator is not started here (this package installs on the robot without it): the simulated system
+is `ros2 launch nuturtle_demo nusim_slam.launch.py`. Every node gets the Burger's constants from
+nuturtle_description/config/diff_params.yaml and its own defaults from this package's config/<node>.yaml.
 """
 
 import os
@@ -20,49 +20,38 @@ from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
 
-def _config(package, name):
-    return os.path.join(get_package_share_directory(package), "config", name)
+def _share(package, *parts):
+    return os.path.join(get_package_share_directory(package), *parts)
 
 
 def _nodes(context):
-    robot = LaunchConfiguration("robot").perform(context)
     cmd_src = LaunchConfiguration("cmd_src").perform(context)
-    simulated = robot == "nusim"
-    diff_params = _config("nuturtle_description", "diff_params.yaml")
-    clock = {"use_sim_time": simulated}
+    clock = {"use_sim_time": LaunchConfiguration("use_sim_time").perform(context) == "true"}
+    diff_params = _share("nuturtle_description", "config", "diff_params.yaml")
     nodes = [
         Node(
             package="nuturtle_control",
             executable="turtle_control",
-            parameters=[diff_params, _config("nuturtle_control", "turtle_control.yaml"), clock],
+            parameters=[diff_params, _share("nuturtle_control", "config", "turtle_control.yaml"), clock],
             output="screen",
         ),
         Node(
             package="nuturtle_control",
             executable="odometry",
-            parameters=[diff_params, _config("nuturtle_control", "odometry.yaml"), clock],
+            parameters=[diff_params, _share("nuturtle_control", "config", "odometry.yaml"), clock],
             output="screen",
         ),
     ]
-    if simulated:
-        nodes.append(
-            Node(
-                package="nusim",
-                executable="nusim",
-                parameters=[diff_params, _config("nusim", "basic_world.yaml")],
-                output="screen",
-            )
-        )
     if cmd_src == "circle":
         nodes.append(
             Node(
                 package="nuturtle_control",
                 executable="circle",
-                parameters=[_config("nuturtle_control", "circle.yaml"), clock],
+                parameters=[_share("nuturtle_control", "config", "circle.yaml"), clock],
                 output="screen",
             )
         )
-    else:
+    elif cmd_src == "teleop":
         nodes.append(
             Node(
                 package="teleop_twist_keyboard",
@@ -79,15 +68,15 @@ def generate_launch_description() -> LaunchDescription:
     return LaunchDescription(
         [
             DeclareLaunchArgument(
-                "robot",
-                default_value="nusim",
-                choices=["nusim", "localhost"],
-                description="nusim: simulated robot; localhost: the real robot this runs on",
+                "use_sim_time",
+                default_value="false",
+                choices=["true", "false"],
+                description="true: run on /clock (simulated robot)",
             ),
             DeclareLaunchArgument(
                 "cmd_src",
                 default_value="circle",
-                choices=["circle", "teleop"],
+                choices=["circle", "teleop", "none"],
                 description="what publishes cmd_vel",
             ),
             OpaqueFunction(function=_nodes),

@@ -27,8 +27,8 @@ from rclpy.parameter import Parameter
 from std_srvs.srv import Empty
 from turtlelib import Twist2D
 
-from nuturtle_description.node_main import run_node
-from nuturtle_description.ros_params import declare_dataclass, replace_from_parameters
+from nuturtle_ros_common.node_main import run_node
+from nuturtle_ros_common.ros_params import declare_dataclass, replace_from_parameters
 
 
 @dataclass(frozen=True)

@@ -35,23 +35,23 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from turtlelib import Transform2D, Twist2D
 
-from nuturtle_description.conversions import (
+from nuturtle_ros_common.conversions import (
+    odometry_message,
     pose_from_transform,
     stamp_seconds,
     transform_from_pose,
     transform_stamped,
 )
-from nuturtle_description.node_main import run_node
+from nuturtle_ros_common.node_main import run_node
 from nuturtle_description.robot_params import RobotParams, burger_params
-from nuturtle_description.ros_params import declare_dataclass
-from nuturtle_description.tf_compat import OptionalTfBroadcaster
+from nuturtle_ros_common.ros_params import declare_dataclass
+from nuturtle_ros_common.tf_compat import OptionalTfBroadcaster
 
-from .path_trail import PathTrail, PathTrailConfig
-from .wheel_joints import WheelJoints, wheel_values
-from .wheel_odometry import WheelOdometry
+from turtlelib.path_trail import PathTrail, PathTrailConfig
+from nuturtle_ros_common.wheel_joints import WheelJoints, wheel_values
+from nuturtle_ros_common.throttle import WARN_THROTTLE_S
+from turtlelib.wheel_odometry import WheelOdometry
 
-# Minimum time between two warnings from the same place (s)
-WARN_THROTTLE_S = 2.0
 
 
 @dataclass(frozen=True)
@@ -118,14 +118,8 @@ class OdometryNode(Node):
         self._publish(self.odometry.T_odom_body, V_body, msg.header.stamp)
 
     def _publish(self, T_odom_body: Transform2D, V_body: Twist2D, stamp: Time) -> None:
-        odom = Odometry()
-        odom.header.stamp = stamp
-        odom.header.frame_id = self.frames.odom_id
-        odom.child_frame_id = self.frames.body_id
-        odom.pose.pose = pose_from_transform(T_odom_body)
-        odom.twist.twist.linear.x = V_body.vx
-        odom.twist.twist.linear.y = V_body.vy
-        odom.twist.twist.angular.z = V_body.omega
+        frames = self.frames
+        odom = odometry_message(T_odom_body, V_body, frames.odom_id, frames.body_id, stamp)
         self._odom_publisher.publish(odom)
         self._tf.send(transform_stamped(T_odom_body, self.frames.odom_id, self.frames.body_id, stamp))
         if self.trail.offer(T_odom_body, PoseStamped(header=odom.header, pose=odom.pose.pose)):

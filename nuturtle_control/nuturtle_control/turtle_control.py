@@ -27,15 +27,14 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from turtlelib import Twist2D
 
-from nuturtle_description.node_main import run_node
+from nuturtle_ros_common.node_main import run_node
 from nuturtle_description.robot_params import RobotParams, burger_params
-from nuturtle_description.ros_params import declare_dataclass
+from nuturtle_ros_common.ros_params import declare_dataclass
 
-from .wheel_joints import WheelJoints
-from .wheel_limits import limit_wheel_speeds
+from nuturtle_ros_common.wheel_joints import WheelJoints
+from nuturtle_ros_common.throttle import WARN_THROTTLE_S
+from turtlelib.wheel_limits import limit_wheel_speeds
 
-# Minimum time between two warnings from the same place (s)
-WARN_THROTTLE_S = 2.0
 
 
 class TurtleControlNode(Node):

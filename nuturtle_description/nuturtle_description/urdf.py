@@ -1,6 +1,6 @@
 """The TurtleBot3 Burger's URDF, generated from the same constants the nodes use.
 
-One source of truth: the wheel radius, track width and collision radius come from `RobotParams`
+One source of truth: the wheel radius, track width, collision radius and LiDAR mount come from `RobotParams`
 (config/diff_params.yaml), so the drawn robot and the kinematics can never disagree. Frames follow
 REP 105 and the stock robot: base_footprint → base_link → {wheel_left_link, wheel_right_link,
 base_scan}; the wheel joints are named `wheel_left_joint` and `wheel_right_joint`.
@@ -25,14 +25,16 @@ COLORS = {
 # Burger geometry that the kinematics do not use (m), from the stock robot's description.
 BASE_HEIGHT = 0.14
 WHEEL_WIDTH = 0.018
-LIDAR_X = -0.032
-LIDAR_Z = 0.172
+# base_link above base_footprint (m)
+BASE_LINK_Z = 0.010
 LIDAR_RADIUS = 0.035
 LIDAR_HEIGHT = 0.04
 
 
-def _origin(x: float = 0.0, y: float = 0.0, z: float = 0.0, roll: float = 0.0) -> str:
-    return f'<origin xyz="{x:.12g} {y:.12g} {z:.12g}" rpy="{roll:.12g} 0 0"/>'
+def _origin(
+    x: float = 0.0, y: float = 0.0, z: float = 0.0, roll: float = 0.0, yaw: float = 0.0
+) -> str:
+    return f'<origin xyz="{x:.12g} {y:.12g} {z:.12g}" rpy="{roll:.12g} 0 {yaw:.12g}"/>'
 
 
 def _cylinder_link(name: str, radius: float, length: float, origin: str, material: str) -> str:
@@ -82,13 +84,13 @@ def burger_urdf(params: RobotParams, color: str = "purple") -> str:
         + _cylinder_link("base_scan", LIDAR_RADIUS, LIDAR_HEIGHT, _origin(), "dark")
     )
     joints = (
-        _joint("base_joint", "fixed", "base_footprint", "base_link", _origin(z=0.010))
+        _joint("base_joint", "fixed", "base_footprint", "base_link", _origin(z=BASE_LINK_Z))
         + _joint(
             "wheel_left_joint",
             "continuous",
             "base_link",
             "wheel_left_link",
-            _origin(y=half_track, z=radius - 0.010),
+            _origin(y=half_track, z=radius - BASE_LINK_Z),
             "0 1 0",
         )
         + _joint(
@@ -96,10 +98,21 @@ def burger_urdf(params: RobotParams, color: str = "purple") -> str:
             "continuous",
             "base_link",
             "wheel_right_link",
-            _origin(y=-half_track, z=radius - 0.010),
+            _origin(y=-half_track, z=radius - BASE_LINK_Z),
             "0 1 0",
         )
-        + _joint("scan_joint", "fixed", "base_link", "base_scan", _origin(x=LIDAR_X, z=LIDAR_Z))
+        + _joint(
+            "scan_joint",
+            "fixed",
+            "base_link",
+            "base_scan",
+            _origin(
+                x=params.lidar_x,
+                y=params.lidar_y,
+                z=params.lidar_z - BASE_LINK_Z,
+                yaw=params.lidar_yaw,
+            ),
+        )
     )
     return (
         '<?xml version="1.0"?>\n'

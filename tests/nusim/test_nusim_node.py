@@ -25,8 +25,9 @@ from std_srvs.srv import Empty
 from turtlelib import DiffDrive, Transform2D
 from visualization_msgs.msg import Marker, MarkerArray
 
-from nuturtle_description.conversions import pose_from_transform, stamp_seconds, yaw_from_quaternion
-from nuturtle_description.robot_params import burger_params, diff_params_path, load_ros_yaml
+from nuturtle_ros_common.conversions import pose_from_transform, stamp_seconds, yaw_from_quaternion
+from nuturtle_description.robot_params import burger_params, diff_params_path
+from nuturtle_ros_common.ros_files import load_ros_yaml
 from nusim.nusim_node import NusimNode, NusimTiming
 from nusim.simulation import ArenaConfig, NoiseConfig, Obstacles, default_lidar
 

@@ -28,14 +28,14 @@ from nuslam.landmarks_node import LandmarksNode
 from nuslam.slam_node import SlamNode
 from nuslam_test_tools import cylinder_array, node_inputs_matched, stamp, stamp_ns
 from rclpy_harness import matched, record_rosout, warnings_of
-from nuturtle_description.conversions import covariance_from_6x6, stamp_seconds, yaw_from_quaternion
+from nuturtle_ros_common.conversions import covariance_from_6x6, stamp_seconds, yaw_from_quaternion
 from nuturtle_description.robot_params import burger_params
 
 pytestmark = pytest.mark.ros
 
 DRIVE = burger_params().diff_drive()
 R_WHEEL = DRIVE.wheel_radius
-T_BODY_SENSOR = Transform2D(-0.032, 0.0, 0.0)  # the LDS-01 on the Burger (sensor_x default)
+T_BODY_SENSOR = Transform2D(-0.032, 0.0, 0.0)  # the LDS-01 on the Burger (its lidar_x)
 WHEELS = ("wheel_left_joint", "wheel_right_joint")
 S = 1_000_000_000  # ns per s
 EPOCH_NS = 1_700_000_000_123_456_789  # an epoch-sized stamp with every nanosecond digit used
@@ -358,7 +358,7 @@ def test_late_and_early_observations_are_applied_at_their_own_stamps(ros):
     before); the node must match a turtlelib filter fed the same samples, and the map the truth."""
     T0 = Transform2D(0.1, -0.2, 0.3)
     rig = Rig(ros, association="known", x0=T0.x, y0=T0.y, theta0=T0.theta)
-    config, timeline_config = SlamConfig(), TimelineConfig()
+    config, timeline_config = SlamConfig(sensor_x=T_BODY_SENSOR.x), TimelineConfig()
     slam = EkfSlam(config, DRIVE, T0)
     timeline = SlamTimeline(slam, timeline_config)
     arc = Arc(T0, EPOCH_NS, vx=0.22, omega=0.6)
@@ -610,6 +610,8 @@ def test_an_invalid_parameter_raises_value_error_at_construction(ros, parameter,
 def test_the_default_parameters(ros):
     node = ros.add(SlamNode(context=ros.context))
     assert node.node_config.association == "unknown"
-    assert node.config == SlamConfig()
+    # the sensor mount is the robot's (lidar_x ...), not a parameter of the filter's own
+    assert node.config == SlamConfig(sensor_x=T_BODY_SENSOR.x)
+    assert not node.has_parameter("sensor_x")
     assert node.timeline.config == TimelineConfig()
     assert node.get_parameter("wheel_radius").value == R_WHEEL

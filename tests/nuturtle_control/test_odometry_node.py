@@ -19,7 +19,7 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
 from nuturtle_control.odometry import OdometryNode
-from nuturtle_description.conversions import quaternion_from_yaw, yaw_from_quaternion
+from nuturtle_ros_common.conversions import quaternion_from_yaw, yaw_from_quaternion
 
 pytestmark = pytest.mark.ros
 

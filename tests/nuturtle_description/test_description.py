@@ -1,26 +1,23 @@
-"""nuturtle_description: the generated URDF, the Burger's constants, and dataclass <-> ROS parameters."""
+"""nuturtle_description: the generated URDF and the Burger's constants."""
 
 from __future__ import annotations
 
 import ast
 import math
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from rclpy.parameter import Parameter
 
 from nuturtle_description.robot_params import (
     RobotParams,
     burger_params,
     diff_params_path,
-    load_ros_yaml,
 )
-from nuturtle_description.ros_params import declare_dataclass, replace_from_parameters
 from nuturtle_description.urdf import COLORS, burger_urdf
+from turtlelib import Transform2D
 
 PACKAGE = Path(__file__).resolve().parents[2] / "nuturtle_description"
 TOL = 1e-12
@@ -76,7 +73,7 @@ def test_burger_urdf_dimensions_and_joints_equal_the_parameters():
         )
     assert urdf.cylinder("base_link")[0] == pytest.approx(0.11, abs=TOL)
     assert urdf.joints["scan_joint"].get("type") == "fixed"
-    assert urdf.position_in_footprint("base_scan")[:2] == pytest.approx([-0.032, 0.0], abs=TOL)
+    assert urdf.position_in_footprint("base_scan") == pytest.approx([-0.032, 0.0, 0.182], abs=TOL)
 
 
 @settings(max_examples=30)
@@ -151,7 +148,12 @@ def test_burger_params_are_the_yaml_values():
         motor_cmd_per_rad_sec=41.6666667,
         encoder_ticks_per_rad=651.8986469,
         collision_radius=0.11,
+        lidar_x=-0.032,
+        lidar_y=0.0,
+        lidar_z=0.182,
+        lidar_yaw=0.0,
     )
+    assert params.T_body_scan == Transform2D(-0.032, 0.0, 0.0)
     assert params.max_wheel_speed == pytest.approx(6.36, abs=1e-8)
     drive = params.diff_drive()
     assert (drive.wheel_radius, drive.track_width) == (0.033, 0.16)
@@ -177,106 +179,11 @@ def test_robot_params_reject_invalid_values(name, value):
         RobotParams(**{name: value})
 
 
-def test_load_ros_yaml_reads_the_wildcard_or_first_node_entry(tmp_path):
-    wildcard = tmp_path / "wildcard.yaml"
-    wildcard.write_text("/**:\n  ros__parameters:\n    a: 1\n    b: [1.0, 2.0]\n")
-    assert load_ros_yaml(wildcard) == {"a": 1, "b": [1.0, 2.0]}
-    named = tmp_path / "named.yaml"
-    named.write_text("odometry:\n  ros__parameters:\n    body_id: base\n")
-    assert load_ros_yaml(named) == {"body_id": "base"}
-    for text in ("", "odometry:\n  other: 1\n"):
-        empty = tmp_path / "empty.yaml"
-        empty.write_text(text)
-        with pytest.raises(ValueError, match="no ros__parameters"):
-            load_ros_yaml(empty)
-
-
-# ---------------------------------------------------------------------------- dataclass parameters
-
-
-@dataclass(frozen=True)
-class Example:
-    """Every supported field type; `gain` must be > 0."""
-
-    gain: float = 1.5
-    count: int = 3
-    label: str = "x"
-    enabled: bool = False
-    weights: tuple[float, ...] = (1.0, 2.0)
-
-    def __post_init__(self) -> None:
-        if not self.gain > 0:
-            raise ValueError(f"gain must be > 0, got {self.gain!r}")
-
-
-def test_declare_dataclass_declares_every_field_with_its_default(ros):
-    node = ros.node("declare_defaults")
-    config = declare_dataclass(node, Example)
-    assert config == Example()
-    assert node.get_parameter("gain").value == 1.5
-    assert list(node.get_parameter("weights").value) == [1.0, 2.0]
-
-
-def test_declare_dataclass_takes_overrides_and_parameter_values(ros):
-    node = ros.node(
-        "declare_overrides",
-        parameter_overrides=[
-            Parameter("robot.wheel_radius", value=0.05),
-            Parameter("robot.track_width", value=1),  # int where a float is expected
-        ],
-    )
-    params = declare_dataclass(node, RobotParams, prefix="robot.", overrides=vars(burger_params()))
-    assert params.wheel_radius == 0.05
-    assert params.track_width == 1.0 and isinstance(params.track_width, float)
-    assert params.motor_cmd_max == 265 and params.collision_radius == 0.11  # from the YAML overrides
-    assert node.has_parameter("robot.encoder_ticks_per_rad")
-
-
-def test_declare_dataclass_converts_every_field_type(ros):
-    node = ros.node(
-        "declare_types",
-        parameter_overrides=[
-            Parameter("gain", value=2),
-            Parameter("count", value=7),
-            Parameter("label", value="y"),
-            Parameter("enabled", value=True),
-            Parameter("weights", value=[3, 4, 5]),
-        ],
-    )
-    config = declare_dataclass(node, Example)
-    assert config == Example(gain=2.0, count=7, label="y", enabled=True, weights=(3.0, 4.0, 5.0))
-    assert isinstance(config.gain, float) and all(isinstance(w, float) for w in config.weights)
-
-
-@pytest.mark.parametrize(
-    "parameter",
-    [
-        Parameter("gain", value="big"),
-        Parameter("gain", value=True),
-        Parameter("count", value=2.5),
-        Parameter("label", value=1),
-        Parameter("enabled", value=1),
-        Parameter("weights", value=["a", "b"]),
-        Parameter("gain", value=-1.0),  # the right type, refused by the dataclass
-    ],
-    ids=lambda p: f"{p.name}={p.value!r}",
-)
-def test_declare_dataclass_rejects_wrong_types_and_invalid_values(ros, parameter):
-    node = ros.node("declare_invalid", parameter_overrides=[parameter])
-    with pytest.raises(ValueError, match=parameter.name):
-        declare_dataclass(node, Example)
-
-
-def test_replace_from_parameters_coerces_validates_and_ignores_other_names():
-    config = Example()
-    changed = replace_from_parameters(
-        config, [Parameter("gain", value=4), Parameter("use_sim_time", value=True)]
-    )
-    assert changed == Example(gain=4.0) and config == Example()
-    parameters = [Parameter("a.count", value=9), Parameter("count", value=1)]
-    prefixed = replace_from_parameters(config, parameters, prefix="a.")
-    assert prefixed == Example(count=9)
-    with pytest.raises(ValueError, match="gain"):
-        replace_from_parameters(config, [Parameter("gain", value=0.0)])
-    with pytest.raises(ValueError, match="label"):
-        replace_from_parameters(config, [Parameter("label", value=2.0)])
+@pytest.mark.parametrize("name", ["lidar_x", "lidar_y", "lidar_yaw", "lidar_z"])
+@pytest.mark.parametrize("value", [math.nan, math.inf, "0.1", True, None])
+def test_robot_params_reject_a_non_finite_lidar_mount(name, value):
+    with pytest.raises(ValueError, match=name):
+        RobotParams(**{name: value})
+    if name == "lidar_z":
+        with pytest.raises(ValueError, match="lidar_z must be finite and >= 0"):
+            RobotParams(lidar_z=-0.1)

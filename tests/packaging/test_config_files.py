@@ -1,47 +1,72 @@
-"""Every node's config/<node>.yaml holds exactly the node's defaults: running with it is the same as
-running with no arguments (the robot's constants live in nuturtle_description/config/diff_params.yaml)."""
+"""Every node's config file holds exactly what the node declares, with the node's defaults: running with it
+is the same as running with no arguments. The robot's constants are declared from
+nuturtle_description/config/diff_params.yaml, the one place they are written (real rclpy nodes)."""
 
 from __future__ import annotations
 
-import dataclasses
+import array
 from pathlib import Path
 
 import pytest
-from turtlelib import DetectorConfig, SlamConfig, TimelineConfig
 
-from nuslam.slam_node import SlamNodeConfig
-from nuturtle_control.circle import CircleConfig
-from nuturtle_control.odometry import OdometryFrames
-from nuturtle_control.path_trail import PathTrailConfig
-from nuturtle_control.wheel_joints import WheelJoints
-from nuturtle_description.robot_params import load_ros_yaml
-from nuturtle_description.ros_params import field_defaults
+from nuslam.landmarks_node import LandmarksNode
+from nuslam.slam_node import SlamNode
+from nusim.nusim_node import NusimNode
+from nuturtle_control.circle import CircleNode
+from nuturtle_control.odometry import OdometryNode
+from nuturtle_control.turtle_control import TurtleControlNode
+from nuturtle_ros_common.ros_files import load_ros_yaml
 
 ROOT = Path(__file__).resolve().parents[2]
+# parameters rclpy declares on every node
+ROS_OWN = {"use_sim_time", "start_type_description_service"}
+DIFF_PARAMS = ROOT / "nuturtle_description" / "config" / "diff_params.yaml"
 
-NODE_CONFIGS = {
-    ("nuturtle_control", "turtle_control"): [WheelJoints],
-    ("nuturtle_control", "odometry"): [WheelJoints, OdometryFrames, PathTrailConfig],
-    ("nuturtle_control", "circle"): [CircleConfig],
-    ("nuslam", "landmarks"): [DetectorConfig],
-    ("nuslam", "slam"): [SlamNodeConfig, SlamConfig, TimelineConfig, WheelJoints, PathTrailConfig],
+# node class, its config file, whether it declares the robot's constants
+NODES = {
+    "nusim": (NusimNode, ROOT / "nusim" / "config" / "basic_world.yaml", True),
+    "turtle_control": (TurtleControlNode, ROOT / "nuturtle_control" / "config" / "turtle_control.yaml", True),
+    "odometry": (OdometryNode, ROOT / "nuturtle_control" / "config" / "odometry.yaml", True),
+    "circle": (CircleNode, ROOT / "nuturtle_control" / "config" / "circle.yaml", False),
+    "landmarks": (LandmarksNode, ROOT / "nuslam" / "config" / "landmarks.yaml", False),
+    "slam": (SlamNode, ROOT / "nuslam" / "config" / "slam.yaml", True),
 }
 
 
-@pytest.mark.parametrize(("package", "node"), NODE_CONFIGS)
-def test_config_yaml_holds_exactly_the_node_defaults(package, node):
-    values = load_ros_yaml(ROOT / package / "config" / f"{node}.yaml")
-    configs = NODE_CONFIGS[package, node]
-    defaults = {}
-    for cls in configs:
-        defaults.update(field_defaults(cls))
-    assert values == defaults
-    for cls in configs:  # and the values build valid configs
-        cls(**{field.name: values[field.name] for field in dataclasses.fields(cls)})
+def flatten(values: dict, prefix: str = "") -> dict:
+    """Nested YAML groups (``obstacles: {x: ...}``) as dotted parameter names (``obstacles.x``)."""
+    flat = {}
+    for key, value in values.items():
+        if isinstance(value, dict):
+            flat.update(flatten(value, f"{prefix}{key}."))
+        else:
+            flat[f"{prefix}{key}"] = value
+    return flat
 
 
-@pytest.mark.parametrize(("package", "node"), NODE_CONFIGS)
-def test_a_node_declares_no_parameter_name_twice(package, node):
-    """A node declares its configs in one namespace: a field name in two of them would collide."""
-    names = [field.name for cls in NODE_CONFIGS[package, node] for field in dataclasses.fields(cls)]
-    assert len(names) == len(set(names))
+def comparable(value):
+    if isinstance(value, (list, tuple, array.array)):
+        return [float(v) for v in value]
+    return value
+
+
+@pytest.mark.parametrize("name", NODES)
+def test_config_file_holds_exactly_the_declared_parameters_and_their_defaults(ros, name):
+    cls, config_file, robot = NODES[name]
+    node = ros.add(cls(context=ros.context))
+    declared = {
+        parameter: comparable(node.get_parameter(parameter).value)
+        for parameter in node.list_parameters([], 0).names
+        if parameter not in ROS_OWN
+    }
+    expected = {key: comparable(value) for key, value in flatten(load_ros_yaml(config_file)).items()}
+    if robot:
+        robot_constants = load_ros_yaml(DIFF_PARAMS)
+        assert not robot_constants.keys() & expected.keys(), "robot constants belong in diff_params.yaml"
+        expected.update(robot_constants)
+    assert declared.keys() == expected.keys()
+    for parameter, value in expected.items():
+        if isinstance(value, str | bool):
+            assert declared[parameter] == value, parameter
+        else:
+            assert declared[parameter] == pytest.approx(value, rel=1e-9), parameter

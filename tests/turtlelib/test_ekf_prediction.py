@@ -24,7 +24,7 @@ headings = st.floats(-PI, PI, allow_nan=False)
 
 
 def filter_at(pose: Transform2D, pose_std=(0.01, 0.02, 0.03), wheel_noise=0.05) -> EkfSlam:
-    config = SlamConfig(wheel_noise=wheel_noise, confirm_count=1)
+    config = SlamConfig(sensor_x=-0.032, wheel_noise=wheel_noise, confirm_count=1)
     slam = EkfSlam(config, BURGER, pose)
     # a correlated, full-rank starting covariance
     A = np.array([[1.0, 0.3, -0.2], [0.0, 1.0, 0.5], [0.0, 0.0, 1.0]]) * np.array(pose_std)

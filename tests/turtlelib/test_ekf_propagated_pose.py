@@ -23,7 +23,7 @@ poses = st.builds(Transform2D, st.floats(-5.0, 5.0), st.floats(-5.0, 5.0), st.fl
 
 def filter_with_map(pose: Transform2D, mode="known", wheel_noise=0.05) -> EkfSlam:
     """Landmarks mapped from an uncertain pose, then moved on: a full, correlated covariance."""
-    config = SlamConfig(wheel_noise=wheel_noise, initial_xy_std=0.03, initial_theta_std=0.05, confirm_count=1)
+    config = SlamConfig(sensor_x=-0.032, wheel_noise=wheel_noise, initial_xy_std=0.03, initial_theta_std=0.05, confirm_count=1)
     slam = EkfSlam(config, BURGER, pose)
     z, _, _ = predict_observations(pose.as_array(), pose @ LANDMARKS, config.T_body_sensor)
     if mode == "known":
@@ -69,7 +69,7 @@ def test_propagated_pose_is_what_predict_gives(pose, left, right, wheel_noise):
 
 def test_propagated_pose_hand_case():
     # from the origin with a certain pose, both wheels 10 rad: 0.33 m straight ahead, covariance = Q only
-    slam = EkfSlam(SlamConfig(wheel_noise=0.1), BURGER)
+    slam = EkfSlam(SlamConfig(sensor_x=-0.032, wheel_noise=0.1), BURGER)
     T, P = slam.propagated_pose(10.0, 10.0)
     assert T.x == pytest.approx(0.33, abs=1e-15)
     assert T.y == 0.0 and T.theta == 0.0
@@ -127,7 +127,7 @@ def test_checked_observations_returns_validated_arrays():
     np.testing.assert_array_equal(ids, [4, 1])
     # default R from the config, one per observation
     _, R, _ = slam.checked_observations(GOOD_Z, ids=[0, 1])
-    config = SlamConfig()
+    config = SlamConfig(sensor_x=-0.032)
     default_R = np.diag([config.range_std**2, config.bearing_std**2])
     np.testing.assert_array_equal(R, np.tile(default_R, (2, 1, 1)))
     # no observations is valid
@@ -135,7 +135,7 @@ def test_checked_observations_returns_validated_arrays():
     assert z.shape == (0, 2) and R.shape == (0, 2, 2) and ids.shape == (0,)
     assert_same(before, snapshot(slam))
     # a filter without an association mode yet takes either kind
-    fresh = EkfSlam(SlamConfig(), BURGER)
+    fresh = EkfSlam(SlamConfig(sensor_x=-0.032), BURGER)
     assert fresh.checked_observations(GOOD_Z)[2] is None
     assert fresh.checked_observations(GOOD_Z, ids=[0, 1])[2] is not None
 

@@ -20,7 +20,7 @@ BURGER = DiffDrive(wheel_radius=0.033, track_width=0.16)
 MATCHED, NEW, REJECTED = ObservationStatus.MATCHED, ObservationStatus.NEW, ObservationStatus.REJECTED
 
 
-def observe(slam_or_pose, landmarks, config=SlamConfig()):
+def observe(slam_or_pose, landmarks, config=SlamConfig(sensor_x=-0.032)):
     pose = slam_or_pose.pose if isinstance(slam_or_pose, EkfSlam) else slam_or_pose
     z, _, _ = predict_observations(pose.as_array(), np.asarray(landmarks, dtype=float), config.T_body_sensor)
     return z
@@ -44,8 +44,10 @@ def assert_same(before, after):
 # --- configuration -----------------------------------------------------------------------------------------
 
 
-def test_default_config_matches_the_burger():
-    config = SlamConfig()
+def test_default_config_knows_no_robot():
+    """The filter's defaults describe no robot: the sensor sits at the body origin unless told."""
+    assert SlamConfig().T_body_sensor == Transform2D()
+    config = SlamConfig(sensor_x=-0.032)
     assert config.T_body_sensor == Transform2D(-0.032, 0.0, 0.0)
     np.testing.assert_array_equal(
         config.measurement_covariance(2),
@@ -89,7 +91,7 @@ def test_config_rejects_invalid_values(field, value):
 
 
 def test_initial_filter():
-    config = SlamConfig(initial_xy_std=0.1, initial_theta_std=0.2)
+    config = SlamConfig(sensor_x=-0.032, initial_xy_std=0.1, initial_theta_std=0.2)
     slam = EkfSlam(config, BURGER, Transform2D(1.0, 2.0, 3.0))
     assert slam.pose == Transform2D(1.0, 2.0, 3.0)
     np.testing.assert_allclose(slam.pose_covariance, np.diag([0.01, 0.01, 0.04]))
@@ -103,20 +105,20 @@ def test_initial_filter():
 
 def test_new_landmark_from_the_inverse_model():
     # robot at the origin facing +x with the LDS-01 at x = -0.032: 1 m at +90 deg is (-0.032, 1)
-    slam = EkfSlam(SlamConfig(), BURGER)
+    slam = EkfSlam(SlamConfig(sensor_x=-0.032), BURGER)
     result = slam.update_known([3], [[1.0, 0.5 * PI]])
     np.testing.assert_array_equal(result.status, [NEW])
     np.testing.assert_array_equal(result.landmark_ids, [3])
     np.testing.assert_allclose(slam.landmarks, [[-0.032, 1.0]], atol=1e-15)
     # with a certain pose the landmark covariance is G_z R G_z^T: range along y, bearing (1 m) along -x
-    config = SlamConfig()
+    config = SlamConfig(sensor_x=-0.032)
     np.testing.assert_allclose(
         slam.landmark_covariances[0], np.diag([config.bearing_std**2, config.range_std**2]), atol=1e-18
     )
 
 
 def test_views_are_ordered_by_id_and_consistent():
-    slam = EkfSlam(SlamConfig(initial_xy_std=0.05, initial_theta_std=0.05), BURGER)
+    slam = EkfSlam(SlamConfig(sensor_x=-0.032, initial_xy_std=0.05, initial_theta_std=0.05), BURGER)
     world = np.array([[1.0, 0.5], [2.0, -1.0], [-1.0, 1.5], [0.5, -2.0]])
     ids = np.array([7, 2, 11, 5])
     slam.update_known(ids, observe(slam, world))
@@ -141,7 +143,7 @@ def test_views_are_ordered_by_id_and_consistent():
 
 
 def test_landmark_estimate_of_an_unknown_id_raises():
-    slam = EkfSlam(SlamConfig(), BURGER)
+    slam = EkfSlam(SlamConfig(sensor_x=-0.032), BURGER)
     slam.update_known([1], [[1.0, 0.0]])
     for bad in (0, 2, -1, 1.0, "1"):
         with pytest.raises(ValueError):
@@ -149,12 +151,12 @@ def test_landmark_estimate_of_an_unknown_id_raises():
 
 
 def test_observations_beyond_max_range_are_rejected():
-    slam = EkfSlam(SlamConfig(max_range=2.0), BURGER)
+    slam = EkfSlam(SlamConfig(sensor_x=-0.032, max_range=2.0), BURGER)
     result = slam.update_known([0, 1], [[1.0, 0.0], [2.5, 1.0]])
     np.testing.assert_array_equal(result.status, [NEW, REJECTED])
     np.testing.assert_array_equal(result.landmark_ids, [0, -1])
     np.testing.assert_array_equal(slam.landmark_ids, [0])
-    result = EkfSlam(SlamConfig(max_range=2.0), BURGER).update_unknown([[1.0, 0.0], [2.5, 1.0]])
+    result = EkfSlam(SlamConfig(sensor_x=-0.032, max_range=2.0), BURGER).update_unknown([[1.0, 0.0], [2.5, 1.0]])
     np.testing.assert_array_equal(result.status, [NEW, REJECTED])
 
 
@@ -162,7 +164,7 @@ def test_observations_beyond_max_range_are_rejected():
 
 
 def test_tentative_landmark_is_confirmed_after_confirm_count_sightings():
-    config = SlamConfig(confirm_count=3, tentative_timeout=5)
+    config = SlamConfig(sensor_x=-0.032, confirm_count=3, tentative_timeout=5)
     slam = EkfSlam(config, BURGER)
     landmark = [[1.0, 0.5]]
     first = slam.update_unknown(observe(slam, landmark))
@@ -184,7 +186,7 @@ def test_tentative_landmark_is_confirmed_after_confirm_count_sightings():
 
 
 def test_unconfirmed_landmark_is_dropped_after_the_timeout():
-    config = SlamConfig(confirm_count=2, tentative_timeout=3)
+    config = SlamConfig(sensor_x=-0.032, confirm_count=2, tentative_timeout=3)
     slam = EkfSlam(config, BURGER)
     landmarks = [[1.0, 0.5], [-1.0, 2.0]]
     first = slam.update_unknown(observe(slam, landmarks))
@@ -204,14 +206,14 @@ def test_unconfirmed_landmark_is_dropped_after_the_timeout():
 
 
 def test_confirm_count_one_maps_at_once():
-    slam = EkfSlam(SlamConfig(confirm_count=1), BURGER)
+    slam = EkfSlam(SlamConfig(sensor_x=-0.032, confirm_count=1), BURGER)
     result = slam.update_unknown(observe(slam, [[1.0, 0.5], [2.0, -1.0]]))
     np.testing.assert_array_equal(result.confirmed_ids, result.landmark_ids)
     np.testing.assert_array_equal(slam.landmark_ids, result.landmark_ids)
 
 
 def test_observation_between_the_gates_is_discarded():
-    config = SlamConfig(confirm_count=1, range_std=0.01, bearing_std=0.01)
+    config = SlamConfig(sensor_x=-0.032, confirm_count=1, range_std=0.01, bearing_std=0.01)
     slam = EkfSlam(config, BURGER)
     slam.update_unknown([[1.0, 0.0]])
     # S = 2 R here (certain pose): a range off by 4 sigma_S gives D2 = 16, between 9.2 and 18.4
@@ -223,7 +225,7 @@ def test_observation_between_the_gates_is_discarded():
 
 
 def test_two_detections_in_one_scan_never_start_two_landmarks_on_one_spot():
-    slam = EkfSlam(SlamConfig(confirm_count=1), BURGER)
+    slam = EkfSlam(SlamConfig(sensor_x=-0.032, confirm_count=1), BURGER)
     result = slam.update_unknown([[1.0, 0.0], [1.005, 0.001], [2.0, 1.0]])
     np.testing.assert_array_equal(result.status, [NEW, REJECTED, NEW])
     assert len(slam.landmark_ids) == 2
@@ -231,7 +233,7 @@ def test_two_detections_in_one_scan_never_start_two_landmarks_on_one_spot():
 
 def test_tentative_landmarks_do_not_steal_from_confirmed_ones():
     # a tentative landmark right next to a confirmed one gets no sightings and expires
-    config = SlamConfig(confirm_count=2, tentative_timeout=3, range_std=0.01, bearing_std=0.01)
+    config = SlamConfig(sensor_x=-0.032, confirm_count=2, tentative_timeout=3, range_std=0.01, bearing_std=0.01)
     slam = EkfSlam(config, BURGER)
     slam.update_unknown([[1.0, 0.0]])
     confirmed = int(slam.update_unknown([[1.0, 0.0]]).confirmed_ids[0])
@@ -247,7 +249,7 @@ def test_tentative_landmarks_do_not_steal_from_confirmed_ones():
 def test_update_keeps_the_heading_wrapped():
     # a landmark mapped from a certain pose; then the robot, believed at heading pi - 0.001 (+- 0.05),
     # sees it as if its heading were pi + 0.01: the corrected heading crosses pi and must wrap
-    slam = EkfSlam(SlamConfig(range_std=0.001, bearing_std=0.001), BURGER)
+    slam = EkfSlam(SlamConfig(sensor_x=-0.032, range_std=0.001, bearing_std=0.001), BURGER)
     slam.update_known([0], [[2.0, 0.0]])
     believed = Transform2D(0.0, 0.0, PI - 0.001)
     slam.reset(believed, np.diag([1e-8, 1e-8, 0.05**2]), keep_map=True)
@@ -261,7 +263,7 @@ def test_update_keeps_the_heading_wrapped():
 
 
 def test_reset_empties_the_map_or_keeps_it():
-    slam = EkfSlam(SlamConfig(initial_xy_std=0.1), BURGER)
+    slam = EkfSlam(SlamConfig(sensor_x=-0.032, initial_xy_std=0.1), BURGER)
     slam.update_known([0, 1], [[1.0, 0.0], [2.0, 1.0]])
     landmarks, blocks = slam.landmarks, slam.landmark_covariances
     pose_cov = np.diag([0.04, 0.09, 0.01])
@@ -278,7 +280,7 @@ def test_reset_empties_the_map_or_keeps_it():
 
 
 def test_one_association_mode_per_filter():
-    slam = EkfSlam(SlamConfig(), BURGER)
+    slam = EkfSlam(SlamConfig(sensor_x=-0.032), BURGER)
     slam.update_known([0], [[1.0, 0.0]])
     before = snapshot(slam)
     with pytest.raises(ValueError):
@@ -301,7 +303,7 @@ def test_one_association_mode_per_filter():
     ],
 )
 def test_reset_rejects_bad_input(pose, covariance):
-    slam = EkfSlam(SlamConfig(), BURGER)
+    slam = EkfSlam(SlamConfig(sensor_x=-0.032), BURGER)
     slam.update_known([0], [[1.0, 0.0]])
     before = snapshot(slam)
     with pytest.raises(ValueError):
@@ -330,7 +332,7 @@ BAD_OBSERVATIONS = [
 
 
 def filter_with_map(mode):
-    slam = EkfSlam(SlamConfig(initial_xy_std=0.01, confirm_count=2), BURGER)
+    slam = EkfSlam(SlamConfig(sensor_x=-0.032, initial_xy_std=0.01, confirm_count=2), BURGER)
     z = observe(slam, [[1.0, 0.2], [1.5, -0.8]])
     if mode == "known":
         slam.update_known([0, 1], z)
@@ -393,7 +395,7 @@ motions = st.tuples(st.floats(-5.0, 10.0), st.floats(-5.0, 10.0))
 @given(st.lists(st.tuples(motions, observation_batches), min_size=1, max_size=8), st.booleans())
 def test_any_valid_sequence_keeps_the_covariance_symmetric_positive_definite(steps, known):
     # arbitrary (even mutually inconsistent) observations never break the filter's numerics
-    slam = EkfSlam(SlamConfig(initial_xy_std=0.01, initial_theta_std=0.01, confirm_count=1), BURGER)
+    slam = EkfSlam(SlamConfig(sensor_x=-0.032, initial_xy_std=0.01, initial_theta_std=0.01, confirm_count=1), BURGER)
     for (left, right), batch in steps:
         slam.predict(left, right)
         unique = {landmark_id: (r, b) for landmark_id, r, b in batch}

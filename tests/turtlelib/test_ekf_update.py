@@ -19,7 +19,7 @@ from turtlelib.wheel_noise import wheel_slip_covariance
 
 PI = math.pi
 BURGER = DiffDrive(wheel_radius=0.033, track_width=0.16)
-CONFIG = SlamConfig(wheel_noise=0.05, max_range=50.0, initial_xy_std=0.02, initial_theta_std=0.01)
+CONFIG = SlamConfig(sensor_x=-0.032, wheel_noise=0.05, max_range=50.0, initial_xy_std=0.02, initial_theta_std=0.01)
 SENSOR = CONFIG.T_body_sensor
 
 

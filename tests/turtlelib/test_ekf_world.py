@@ -30,7 +30,7 @@ PREDICTIONS_PER_SCAN = 4
 SLIP_SUBSTEPS = 4
 N_SCANS = int(round(2.0 * PI / TWIST.omega / SCAN_PERIOD_S))
 RANGE_STD, BEARING_STD = 0.02, 0.02
-CONFIG = SlamConfig(wheel_noise=0.05, range_std=RANGE_STD, bearing_std=BEARING_STD, max_range=2.5)
+CONFIG = SlamConfig(sensor_x=-0.032, wheel_noise=0.05, range_std=RANGE_STD, bearing_std=BEARING_STD, max_range=2.5)
 
 
 class World:
@@ -121,6 +121,7 @@ def test_average_pose_nees_stays_in_the_chi2_band(known):
 def test_an_overconfident_filter_fails_the_nees_band():
     # the same check must catch a filter that believes its odometry 5x more than it should
     overconfident = SlamConfig(
+        sensor_x=CONFIG.sensor_x,
         wheel_noise=CONFIG.wheel_noise / 5.0,
         range_std=RANGE_STD,
         bearing_std=BEARING_STD,

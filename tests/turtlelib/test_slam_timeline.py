@@ -21,7 +21,7 @@ from turtlelib.range_bearing import predict_observations
 
 PI = math.pi
 BURGER = DiffDrive(wheel_radius=0.033, track_width=0.16)
-CONFIG = SlamConfig(initial_xy_std=0.02, initial_theta_std=0.03, wheel_noise=0.08)
+CONFIG = SlamConfig(sensor_x=-0.032, initial_xy_std=0.02, initial_theta_std=0.03, wheel_noise=0.08)
 LANDMARKS = np.array([[1.5, 0.5], [0.6, -1.2], [-0.8, 1.1]])
 MEAN_ATOL = 1e-9
 

@@ -71,7 +71,7 @@ class SlamConfig:
     * ``range_std`` (m), ``bearing_std`` (rad), > 0: default observation noise ``R = diag(range_std^2,
       bearing_std^2)`` when an update is given no ``R``.
     * ``sensor_x``, ``sensor_y`` (m), ``sensor_theta`` (rad): ``T_body_sensor``, the sensor mounting in the
-      body frame (the LDS-01 of the Burger sits at x = -0.032 m).
+      body frame (default: at the body origin; the robot's description says where it is).
     * ``matcher``: how unknown association pairs observations with landmarks, ``'nn'`` (nearest neighbour)
       or ``'jcbb'`` (joint compatibility branch and bound).
     * ``gate_associate`` < ``gate_new``, both in (0, 1): chi2 probabilities (2 dof) of the association gate
@@ -88,7 +88,7 @@ class SlamConfig:
     wheel_noise: float = 0.05
     range_std: float = 0.02
     bearing_std: float = 0.02
-    sensor_x: float = -0.032
+    sensor_x: float = 0.0
     sensor_y: float = 0.0
     sensor_theta: float = 0.0
     matcher: str = "nn"

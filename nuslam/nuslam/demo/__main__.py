@@ -1,7 +1,0 @@
-"""``python -m nuslam.demo``: the simulation + SLAM demo (see nuslam.demo.cli)."""
-
-import sys
-
-from .cli import main
-
-sys.exit(main())

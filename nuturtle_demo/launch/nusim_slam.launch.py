@@ -1,0 +1,47 @@
+"""The simulated system (for a full ROS 2 install): nusim, then control, odometry, landmarks and slam on
+its /clock (nuslam's slam.launch.py with use_sim_time:=true).
+
+Arguments
+    association:=unknown|known    unknown (default): LiDAR landmarks; known: nusim's fake_sensor.
+    cmd_src:=circle|teleop|none   what drives the robot (see nuturtle_control's start_robot.launch.py).
+    world:=<path>                 nusim's world (default: nusim/config/basic_world.yaml).
+
+    ros2 launch nuturtle_demo nusim_slam.launch.py association:=known
+
+RViz shows nusim's ground truth in `nusim/world` (red), the wheel odometry `odom` (blue) and SLAM's pose,
+path and map in `map` (green).
+"""
+
+import os
+
+from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument, IncludeLaunchDescription
+from launch.launch_description_sources import PythonLaunchDescriptionSource
+from launch.substitutions import LaunchConfiguration
+
+
+def _share(package, *parts):
+    return os.path.join(get_package_share_directory(package), *parts)
+
+
+def generate_launch_description() -> LaunchDescription:
+    return LaunchDescription(
+        [
+            DeclareLaunchArgument("association", default_value="unknown", choices=["unknown", "known"]),
+            DeclareLaunchArgument("cmd_src", default_value="circle", choices=["circle", "teleop", "none"]),
+            DeclareLaunchArgument("world", default_value=_share("nusim", "config", "basic_world.yaml")),
+            IncludeLaunchDescription(
+                PythonLaunchDescriptionSource(_share("nusim", "launch", "nusim.launch.py")),
+                launch_arguments={"config_file": LaunchConfiguration("world")}.items(),
+            ),
+            IncludeLaunchDescription(
+                PythonLaunchDescriptionSource(_share("nuslam", "launch", "slam.launch.py")),
+                launch_arguments={
+                    "association": LaunchConfiguration("association"),
+                    "cmd_src": LaunchConfiguration("cmd_src"),
+                    "use_sim_time": "true",
+                }.items(),
+            ),
+        ]
+    )

@@ -1,0 +1,302 @@
+"""One headless simulation + SLAM run: every node in this process on one executor, then metrics, figures
+and the recording.
+
+The system (real rclpy nodes talking over DDS, all in one process and one SingleThreadedExecutor)::
+
+    driver --cmd_vel--> turtle_control --wheel_cmd--> nusim --joint_states--> odometry --odom-->
+                                                        |   --scan--> landmarks --landmarks--> slam
+                                                        |   --fake_sensor-------------------> slam (known)
+                                                        +-- /clock, nusim/ground_truth --> demo_monitor
+    recorder: every topic -> run.mcap
+
+nusim runs on a steady wall timer at ``rate * realtime_factor`` Hz and publishes /clock; every other node
+uses simulation time. The executor runs whatever is ready after each physics step, so the estimators
+keep pace with the simulation whatever ``realtime_factor`` asks (a busy machine only slows the run).
+
+Frames: SLAM is started at the simulator's start pose ``(x0, y0, theta0)``, so ``map`` = ``nusim/world``;
+odometry starts at the identity of ``odom`` on that same pose, so ``T_world_odom = T_world_start``.
+
+Order of start-up: every node is built, the recorder subscribes to every topic, and only then is nusim
+added to the executor, so the recording holds the run from its first physics step.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.signals import SignalHandlerOptions
+
+from nusim.nusim_node import NusimNode
+from nuturtle_control.odometry import OdometryNode
+from nuturtle_control.turtle_control import TurtleControlNode
+from nuturtle_ros_common.ros_files import share_file
+
+from . import plots
+from .driver import FigureEightDriver
+from .metrics import RunData, RunMetrics, evaluate_run, odom_in_world, pose_errors
+from .monitor import RunMonitor
+from .params import load_world, matched_wheel_noise, params_file, to_parameters
+from .recorder import Ros2McapWriter, TopicRecorder
+
+ASSOCIATIONS = ("known", "unknown")
+# Landmarks closer than this to a true cylinder count as that cylinder (m)
+LANDMARK_GATE_M = 0.2
+# Wall time to wait for the recorder to subscribe to every topic before the simulation starts (s)
+DISCOVERY_TIMEOUT_S = 10.0
+# Wall time to let the last messages arrive after the simulation stops (s)
+DRAIN_S = 0.3
+# Topics the recorder must hold before nusim starts (the rest follow as they appear)
+REQUIRED_TOPICS = (
+    "/cmd_vel", "/wheel_cmd", "/odom", "/landmarks", "/slam/odom", "/slam/path", "/slam/map",
+)  # fmt: skip
+
+
+def default_world() -> Path:
+    """nuturtle_demo/config/demo_world.yaml: from the ament index (colcon install) or the source tree."""
+    return share_file("nuturtle_demo", "config", "demo_world.yaml")
+
+
+@dataclass(frozen=True)
+class DemoOptions:
+    """What to run: ``association`` known | unknown; ``world`` a nusim params file; ``seed`` (int >= 0)
+    of every noise stream; ``duration_s`` of simulation time (> 0); ``out_dir`` for the outputs;
+    ``realtime`` paces the simulation at real time, otherwise it runs up to ``max_realtime_factor`` (> 0)
+    times faster; ``progress`` shows a progress bar on stderr. ValueError for invalid values."""
+
+    association: str = "unknown"
+    world: Path = field(default_factory=default_world)
+    seed: int = 0
+    duration_s: float = 120.0
+    out_dir: Path = Path("out/latest")
+    realtime: bool = False
+    max_realtime_factor: float = 20.0
+    progress: bool = True
+
+    def __post_init__(self) -> None:
+        if self.association not in ASSOCIATIONS:
+            raise ValueError(f"association must be one of {ASSOCIATIONS}, got {self.association!r}")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
+            raise ValueError(f"seed must be an int >= 0, got {self.seed!r}")
+        for name in ("duration_s", "max_realtime_factor"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f"{name} must be finite and > 0, got {value!r}")
+        if not Path(self.world).is_file():
+            raise ValueError(f"world file {self.world} does not exist")
+
+    @property
+    def realtime_factor(self) -> float:
+        return 1.0 if self.realtime else self.max_realtime_factor
+
+
+@dataclass(frozen=True)
+class DemoResult:
+    metrics: RunMetrics
+    out_dir: Path
+    recorded_topics: list[str]
+    message_count: int
+    interrupted: bool
+
+
+class _System:
+    """The nodes of one run, built in one context (see the module docstring)."""
+
+    def __init__(self, options: DemoOptions, context: Context, writer: Ros2McapWriter) -> None:
+        sim_time = [Parameter("use_sim_time", value=True)]
+        world = load_world(options.world)
+        world.update(seed=options.seed, realtime_factor=options.realtime_factor)
+        self.nusim = NusimNode(context=context, parameter_overrides=to_parameters(world))
+        self.recorder = TopicRecorder(writer, context=context, parameter_overrides=sim_time)
+        self.monitor = RunMonitor(context=context, parameter_overrides=sim_time)
+        self.driver = FigureEightDriver(context=context, parameter_overrides=sim_time)
+        self.turtle_control = TurtleControlNode(context=context, parameter_overrides=sim_time)
+        self.odometry = OdometryNode(context=context, parameter_overrides=sim_time)
+        self.landmarks, self.slam = _slam_nodes(self, options, context, sim_time)
+
+    @property
+    def nodes(self) -> list[Node]:
+        return [
+            self.nusim, self.turtle_control, self.odometry, self.landmarks, self.slam, self.driver,
+            self.recorder, self.monitor,
+        ]  # fmt: skip
+
+    @property
+    def sim_time_s(self) -> float:
+        return self.nusim.step_count / self.nusim.timing.rate
+
+
+def _slam_nodes(system: _System, options: DemoOptions, context: Context, sim_time: list[Parameter]):
+    """The landmarks and slam nodes, SLAM started at nusim's start pose with matched process noise."""
+    from nuslam.landmarks_node import LandmarksNode
+    from nuslam.slam_node import SlamNode
+
+    simulation = system.nusim.simulation
+    T_start = simulation.config.arena.T_world_start
+    left_rad_s, right_rad_s = system.driver.route.wheel_speeds_rad_s
+    wheel_noise = matched_wheel_noise(
+        simulation.config.noise.slip_fraction, 0.5 * (abs(left_rad_s) + abs(right_rad_s)), system.nusim.timing.rate
+    )
+    slam_values = {
+        "association": options.association,
+        "x0": T_start.x,
+        "y0": T_start.y,
+        "theta0": T_start.theta,
+        "wheel_noise": wheel_noise,
+    }
+    landmarks = LandmarksNode(context=context, parameter_overrides=sim_time)
+    slam = SlamNode(context=context, parameter_overrides=sim_time + to_parameters(slam_values))
+    return landmarks, slam
+
+
+def _spin_until(executor: SingleThreadedExecutor, predicate, timeout_s: float) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        executor.spin_once(timeout_sec=0.05)
+    return predicate()
+
+
+def _progress_bar(options: DemoOptions):
+    from tqdm import tqdm
+
+    return tqdm(
+        total=round(options.duration_s, 1), unit="sim s", file=sys.stderr, disable=not options.progress,
+        bar_format="{l_bar}{bar}| {n:.1f}/{total:.1f} sim s [{elapsed}<{remaining}{postfix}]",
+    )  # fmt: skip
+
+
+def run_demo(options: DemoOptions) -> DemoResult:
+    """Run the system for ``options.duration_s`` of simulation time and write every output (module
+    docstring, docs/demo.md). Ctrl-C ends the run early; the outputs then cover the time simulated."""
+    out_dir = Path(options.out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    context = Context()
+    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    executor = SingleThreadedExecutor(context=context)
+    writer = Ros2McapWriter(out_dir / "run.mcap")
+    system: _System | None = None
+    interrupted = False
+    try:
+        system = _System(options, context, writer)
+        for node in system.nodes:
+            if node is not system.nusim:
+                executor.add_node(node)
+        if not _spin_until(
+            executor, lambda: set(REQUIRED_TOPICS) <= set(system.recorder.recorded_topics), DISCOVERY_TIMEOUT_S
+        ):
+            missing = sorted(set(REQUIRED_TOPICS) - set(system.recorder.recorded_topics))
+            raise RuntimeError(f"the recorder did not discover {missing} within {DISCOVERY_TIMEOUT_S} s")
+        executor.add_node(system.nusim)
+        wall_start = time.monotonic()
+        with _progress_bar(options) as progress:
+            try:
+                while system.sim_time_s < options.duration_s:
+                    executor.spin_once(timeout_sec=0.1)
+                    now_s = min(system.sim_time_s, options.duration_s)
+                    if now_s - progress.n >= 0.5 or now_s >= options.duration_s:
+                        wall_s = time.monotonic() - wall_start
+                        progress.set_postfix_str(f"{now_s / max(wall_s, 1e-9):.1f}x real time", refresh=False)
+                        progress.update(round(now_s - progress.n, 1))
+            except KeyboardInterrupt:
+                interrupted = True
+        wall_seconds = time.monotonic() - wall_start
+        sim_seconds = system.sim_time_s
+        executor.remove_node(system.nusim)
+        system.driver.stop()
+        _spin_until(executor, lambda: False, DRAIN_S)
+        writer.close()
+        (out_dir / "config.yaml").write_text(params_file(system.nodes), encoding="utf-8")
+        metrics = _evaluate_and_plot(system, options, out_dir, sim_seconds, wall_seconds)
+        return DemoResult(
+            metrics, out_dir, sorted(system.recorder.recorded_topics), writer.message_count, interrupted
+        )
+    finally:
+        writer.close()
+        for node in system.nodes if system else []:
+            node.destroy_node()
+        executor.shutdown()
+        rclpy.try_shutdown(context=context)
+
+
+def _evaluate_and_plot(
+    system: _System, options: DemoOptions, out_dir: Path, sim_seconds: float, wall_seconds: float
+) -> RunMetrics:
+    simulation = system.nusim.simulation
+    T_world_start = simulation.config.arena.T_world_start
+    truth = system.monitor.truth()
+    odom = odom_in_world(system.monitor.odom(), T_world_start)
+    slam = system.monitor.slam()
+    slam_covariances = system.monitor.slam_covariances()
+    snapshot = slam_snapshot(system.slam)
+    data = RunData(
+        truth=truth,
+        odom=odom,
+        slam=slam,
+        slam_covariances=slam_covariances,
+        mapped_xy=snapshot.landmarks_xy,
+        true_xy=simulation.circles[:, :2],
+        sensor_range_m=_sensor_range_m(system, options),
+        gate_m=LANDMARK_GATE_M,
+    )
+    metrics = evaluate_run(data, sim_seconds=sim_seconds, wall_seconds=wall_seconds)
+    (out_dir / "metrics.json").write_text(json.dumps(metrics.as_dict(), indent=2) + "\n", encoding="utf-8")
+    arena = simulation.config.arena
+    plots.plot_trajectory(
+        out_dir / "trajectory.png", truth, odom, slam, simulation.circles, snapshot.landmarks_xy,
+        snapshot.landmark_covariances, (arena.arena_x_length, arena.arena_y_length),
+    )  # fmt: skip
+    covered = slam.within(truth.t_s[0], truth.t_s[-1])
+    sigmas = np.sqrt(np.clip(np.diagonal(slam_covariances[covered], axis1=1, axis2=2), 0.0, None))
+    plots.plot_errors(out_dir / "errors.png", slam.t_s[covered], pose_errors(slam, truth), sigmas)
+    plots.plot_covariance(out_dir / "covariance.png", snapshot.covariance)
+    return metrics
+
+
+@dataclass(frozen=True)
+class SlamSnapshot:
+    """The filter's final state: ``covariance`` (N, N) of ``[x, y, theta, m_0x, m_0y, ...]``,
+    ``landmarks_xy`` (n, 2) and their ``landmark_covariances`` (n, 2, 2)."""
+
+    covariance: np.ndarray
+    landmarks_xy: np.ndarray
+    landmark_covariances: np.ndarray
+
+
+def slam_snapshot(slam_node: Any) -> SlamSnapshot:
+    """Read the final state straight from the in-process slam node's filter."""
+    ekf = slam_node.slam
+    return SlamSnapshot(
+        covariance=np.array(ekf.covariance),
+        landmarks_xy=np.array(ekf.landmarks).reshape(-1, 2),
+        landmark_covariances=np.array(ekf.landmark_covariances).reshape(-1, 2, 2),
+    )
+
+
+def _sensor_range_m(system: _System, options: DemoOptions) -> float | np.ndarray:
+    """How close each cylinder must come to count as seen (m): the fake sensor's range (known association),
+    or (unknown) the farthest distance at which the LiDAR puts ``min_points`` beams on it, within SLAM's
+    and the LiDAR's range. A cylinder of radius r at distance d spans about 2 r / d rad, so it is hit by
+    about 2 r / (d angle_increment) beams::
+
+        d_max = min(max_range, range_max, 2 r / (min_points angle_increment))
+    """
+    simulation = system.nusim.simulation
+    if options.association == "known":
+        return simulation.config.noise.max_range
+    lidar = simulation.config.lidar
+    radius_m = simulation.circles[:, 2]
+    detectable_m = 2.0 * radius_m / (system.landmarks.config.min_points * lidar.angle_increment)
+    return np.minimum(detectable_m, min(float(system.slam.config.max_range), lidar.range_max))

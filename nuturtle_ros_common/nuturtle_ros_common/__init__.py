@@ -1,0 +1,1 @@
+"""nuturtle_ros_common: the rclpy glue the suite's nodes share (conversions, markers, parameters, entry point, TF)."""

@@ -1,0 +1,104 @@
+"""Conversions between turtlelib values and standard ROS messages (planar, REP 103 units and frames)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import Pose, Quaternion, TransformStamped
+from nav_msgs.msg import Odometry
+from numpy.typing import NDArray
+from turtlelib import Transform2D, Twist2D
+
+
+def quaternion_from_yaw(yaw_rad: float) -> Quaternion:
+    """Rotation about +z by yaw: q = (0, 0, sin(yaw/2), cos(yaw/2))."""
+    return Quaternion(x=0.0, y=0.0, z=math.sin(yaw_rad / 2.0), w=math.cos(yaw_rad / 2.0))
+
+
+def yaw_from_quaternion(q: Quaternion) -> float:
+    """Yaw of a quaternion (rotation about z of its ZYX Euler decomposition), for any non-zero norm.
+
+    yaw = atan2(2 (w z + x y), w^2 + x^2 - y^2 - z^2): both arguments scale with |q|^2, so a
+    hand-written, unnormalised quaternion such as (0, 0, 1, 1) gives the yaw it means (pi/2).
+    """
+    return math.atan2(
+        2.0 * (q.w * q.z + q.x * q.y), q.w * q.w + q.x * q.x - q.y * q.y - q.z * q.z
+    )
+
+
+def pose_from_transform(T: Transform2D) -> Pose:
+    pose = Pose()
+    pose.position.x = T.x
+    pose.position.y = T.y
+    pose.orientation = quaternion_from_yaw(T.theta)
+    return pose
+
+
+def transform_from_pose(pose: Pose) -> Transform2D:
+    """The planar part of a 3D pose (x, y, yaw); raises ValueError when non-finite."""
+    return Transform2D(pose.position.x, pose.position.y, yaw_from_quaternion(pose.orientation))
+
+
+def transform_stamped(
+    T_parent_child: Transform2D, parent: str, child: str, stamp: Time
+) -> TransformStamped:
+    msg = TransformStamped()
+    msg.header.stamp = stamp
+    msg.header.frame_id = parent
+    msg.child_frame_id = child
+    msg.transform.translation.x = T_parent_child.x
+    msg.transform.translation.y = T_parent_child.y
+    msg.transform.rotation = quaternion_from_yaw(T_parent_child.theta)
+    return msg
+
+
+def planar_covariance_6x6(P_xyt: NDArray[np.float64]) -> list[float]:
+    """Embed a (3, 3) covariance of (x, y, yaw) into ROS's row-major 6x6 (x, y, z, roll, pitch, yaw)."""
+    P6 = np.zeros((6, 6))
+    index = [0, 1, 5]
+    P6[np.ix_(index, index)] = P_xyt
+    return P6.ravel().tolist()
+
+
+def covariance_from_6x6(values) -> NDArray[np.float64]:
+    """The (x, y, yaw) block of a ROS 6x6 covariance."""
+    P6 = np.asarray(values, dtype=float).reshape(6, 6)
+    index = [0, 1, 5]
+    return P6[np.ix_(index, index)]
+
+
+def odometry_message(
+    T_parent_child: Transform2D,
+    V_child: Twist2D,
+    parent: str,
+    child: str,
+    stamp: Time,
+    P_xyt: NDArray[np.float64] | None = None,
+) -> Odometry:
+    """nav_msgs/Odometry: the pose ``T_parent_child`` (in ``parent``), the body twist ``V_child``
+    (rad/s, m/s, in ``child``, as REP 105 says) and, when given, the (3, 3) covariance ``P_xyt`` of
+    (x, y, yaw) in the 6x6 (the rest zero; no covariance given: all zero, "not estimated")."""
+    odom = Odometry(child_frame_id=child)
+    odom.header.stamp = stamp
+    odom.header.frame_id = parent
+    odom.pose.pose = pose_from_transform(T_parent_child)
+    if P_xyt is not None:
+        odom.pose.covariance = planar_covariance_6x6(P_xyt)
+    odom.twist.twist.linear.x = V_child.vx
+    odom.twist.twist.linear.y = V_child.vy
+    odom.twist.twist.angular.z = V_child.omega
+    return odom
+
+
+def stamp_seconds(stamp: Time) -> float:
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+def stamp_from_seconds(seconds: float) -> Time:
+    """The stamp nearest to `seconds` (rounded to the nanosecond; 0 <= nanosec < 1e9)."""
+    sec = math.floor(seconds)
+    # the fraction (exact) in ns; one that rounds up to 1e9 carries into sec
+    carry, nanosec = divmod(round((seconds - sec) * 1e9), 1_000_000_000)
+    return Time(sec=int(sec + carry), nanosec=int(nanosec))

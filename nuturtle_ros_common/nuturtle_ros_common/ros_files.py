@@ -1,0 +1,42 @@
+"""Files of ROS packages: a package's share folder, and the parameters of a ROS parameter file.
+
+No rclpy here: these are read by launch files, command-line tools and nodes alike.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import yaml
+
+
+def share_file(package: str, *parts: str) -> Path:
+    """``share/<package>/<parts...>``: from the ament index (a colcon install) when it holds the file,
+    else from the package's source folder (a pip editable install, where the import package
+    ``<package>/<package>/`` sits next to ``config/``, ``launch/``). The path may not exist."""
+    try:
+        from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
+    except ImportError:  # no ament_index_python: never installed by colcon
+        pass
+    else:
+        try:
+            candidate = Path(get_package_share_directory(package)).joinpath(*parts)
+            if candidate.exists():
+                return candidate
+        except (PackageNotFoundError, OSError):
+            pass  # not installed, or no ament index at all (AMENT_PREFIX_PATH unset: OSError)
+    spec = importlib.util.find_spec(package)
+    if spec is None or spec.origin is None:
+        raise LookupError(f"package {package!r} is neither in the ament index nor importable")
+    return Path(spec.origin).resolve().parents[1].joinpath(*parts)
+
+
+def load_ros_yaml(path: Path) -> dict:
+    """The ``ros__parameters`` of a ROS parameter file (wildcard ``/**`` or the first node entry)."""
+    with open(path, encoding="utf-8") as stream:
+        document = yaml.safe_load(stream) or {}
+    for entry in document.values():
+        if isinstance(entry, dict) and "ros__parameters" in entry:
+            return dict(entry["ros__parameters"])
+    raise ValueError(f"{path} holds no ros__parameters")

@@ -1,0 +1,90 @@
+"""nuturtle_ros_common.conversions: quaternions, poses, stamps and covariances."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import Pose, Quaternion
+from hypothesis import given
+from hypothesis import strategies as st
+from turtlelib import Transform2D
+
+from nuturtle_ros_common.conversions import (
+    covariance_from_6x6,
+    planar_covariance_6x6,
+    pose_from_transform,
+    quaternion_from_yaw,
+    stamp_from_seconds,
+    stamp_seconds,
+    transform_from_pose,
+    transform_stamped,
+    yaw_from_quaternion,
+)
+
+angles = st.floats(-math.pi, math.pi)
+
+
+def test_hand_computed_quaternions():
+    q = quaternion_from_yaw(math.pi / 2)
+    assert (q.x, q.y, q.z, q.w) == pytest.approx((0.0, 0.0, math.sqrt(0.5), math.sqrt(0.5)), abs=1e-15)
+    assert yaw_from_quaternion(Quaternion(x=0.0, y=0.0, z=1.0, w=0.0)) == pytest.approx(math.pi)
+    # written by hand, not normalised: (0, 0, 1, 1) means 90 degrees
+    assert yaw_from_quaternion(Quaternion(x=0.0, y=0.0, z=1.0, w=1.0)) == pytest.approx(math.pi / 2)
+
+
+@given(angles, st.floats(1e-3, 1e3))
+def test_yaw_round_trip_at_any_quaternion_scale(yaw, scale):
+    q = quaternion_from_yaw(yaw)
+    scaled = Quaternion(x=0.0, y=0.0, z=scale * q.z, w=scale * q.w)
+    assert math.remainder(yaw_from_quaternion(scaled) - yaw, math.tau) == pytest.approx(0.0, abs=1e-12)
+
+
+@given(st.floats(-100, 100), st.floats(-100, 100), angles)
+def test_pose_round_trip(x, y, theta):
+    T = Transform2D(x, y, theta)
+    back = transform_from_pose(pose_from_transform(T))
+    assert (back.x, back.y) == (x, y)
+    assert math.remainder(back.theta - T.theta, math.tau) == pytest.approx(0.0, abs=1e-12)
+
+
+def test_non_finite_pose_is_a_value_error():
+    pose = Pose()
+    pose.position.x = math.nan
+    with pytest.raises(ValueError):
+        transform_from_pose(pose)
+
+
+def test_transform_stamped_fields():
+    stamp = Time(sec=3, nanosec=5)
+    msg = transform_stamped(Transform2D(1.0, 2.0, 0.5), "odom", "base_footprint", stamp)
+    assert (msg.header.frame_id, msg.child_frame_id) == ("odom", "base_footprint")
+    assert msg.header.stamp == stamp
+    assert (msg.transform.translation.x, msg.transform.translation.y) == (1.0, 2.0)
+    assert yaw_from_quaternion(msg.transform.rotation) == pytest.approx(0.5)
+
+
+def test_stamp_from_seconds_carries_a_fraction_that_rounds_up_to_a_second():
+    assert stamp_from_seconds(1.9999999999) == Time(sec=2, nanosec=0)
+    assert stamp_from_seconds(3.25) == Time(sec=3, nanosec=250_000_000)
+    assert stamp_from_seconds(-0.5) == Time(sec=-1, nanosec=500_000_000)
+
+
+@given(st.integers(0, 2**31 - 2), st.integers(0, 999_999_999))
+def test_stamp_round_trip_within_float_resolution(sec, nanosec):
+    seconds = stamp_seconds(Time(sec=sec, nanosec=nanosec))
+    back = stamp_from_seconds(seconds)
+    assert 0 <= back.nanosec < 1_000_000_000
+    error_ns = (back.sec - sec) * 1_000_000_000 + (back.nanosec - nanosec)
+    assert abs(error_ns) <= max(1, math.ulp(seconds) * 1e9)
+
+
+def test_planar_covariance_embedding_round_trip():
+    P = np.array([[1.0, 0.1, 0.2], [0.1, 2.0, 0.3], [0.2, 0.3, 3.0]])
+    values = planar_covariance_6x6(P)
+    assert len(values) == 36
+    P6 = np.reshape(values, (6, 6))
+    assert P6[0, 0] == 1.0 and P6[5, 5] == 3.0 and P6[0, 5] == 0.2 and P6[2, 2] == 0.0
+    np.testing.assert_array_equal(covariance_from_6x6(values), P)
