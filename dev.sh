@@ -1,27 +1,52 @@
 #!/usr/bin/env bash
 # One entry point for a fresh machine (only Python 3.11 + pip needed):
 #   ./dev.sh run  [demo options]   set up .venv if needed, then run the simulation + SLAM demo
-#   ./dev.sh test [pytest options] set up .venv if needed, then run the whole test suite
-# Set-up is idempotent: the install is redone only when pyproject.toml changes.
+#   ./dev.sh test                  set up if needed, then everything CI checks: ruff (format and lint),
+#                                  turtlelib's tests in a venv without ROS (.venv-core), the whole suite
+#   ./dev.sh test [pytest options] set up if needed, then only pytest with these options
+#   ./dev.sh lint                  ruff format --check and ruff check
+# Set-up is idempotent: an install is redone only when pyproject.toml changes.
 set -euo pipefail
 cd "$(dirname "$0")"
 root=$PWD
-venv=$root/.venv
-py=$venv/bin/python
-stamp=$venv/.installed-pyproject.sha256
 
-setup() {
+# setup VENV EXTRAS: create VENV if missing and install the project with EXTRAS, unless already done
+setup_venv() {
+  local venv=$1 extras=$2
+  local py=$venv/bin/python stamp=$venv/.installed-pyproject.sha256
   if [ ! -x "$py" ]; then
     echo "[dev.sh] creating $venv"
     "${PYTHON:-python3.11}" -m venv "$venv" 2>/dev/null || python3 -m venv "$venv"
   fi
+  local want
   want=$(sha256sum pyproject.toml | cut -d' ' -f1)
   if [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$want" ]; then
     return 0
   fi
-  echo "[dev.sh] installing the ROS 2 Jazzy wheels and the project into .venv"
-  "$py" -m pip install --quiet --disable-pip-version-check -e ".[ros,demo,test]"
+  echo "[dev.sh] installing the project [$extras] into $venv"
+  "$py" -m pip install --quiet --disable-pip-version-check -e ".[$extras]"
   echo "$want" > "$stamp"
+}
+
+venv=$root/.venv
+py=$venv/bin/python
+setup() { setup_venv "$venv" "ros,demo,test"; }
+
+lint() {
+  echo "[dev.sh] ruff format --check and ruff check"
+  "$venv/bin/ruff" format --check --quiet .
+  "$venv/bin/ruff" check --quiet .
+}
+
+# turtlelib's tests where ROS is not installed: numpy, scipy, pytest and hypothesis only
+core_tests() {
+  setup_venv "$root/.venv-core" "core-test"
+  echo "[dev.sh] tests/turtlelib in .venv-core (no ROS)"
+  if "$root/.venv-core/bin/python" -c "import rclpy" 2>/dev/null; then
+    echo "[dev.sh] .venv-core must not have rclpy" >&2
+    exit 1
+  fi
+  "$root/.venv-core/bin/python" -P -m pytest -q -p no:cacheprovider tests/turtlelib
 }
 
 # Shared-machine hygiene: one BLAS thread (2-core machines stall on small matrices otherwise),
@@ -32,9 +57,16 @@ export RMW_IMPLEMENTATION=${RMW_IMPLEMENTATION:-rmw_fastrtps_cpp}
 
 cmd=${1:-}
 shift || true
+# -P: the source folders must not shadow the installed packages
 case "$cmd" in
-  run)  setup; exec "$py" -P -m nuturtle_demo "$@" ;;  # -P: the source folders must not shadow the installed packages
-  test) setup; exec "$py" -P -m pytest "$@" ;;
+  run) setup; exec "$py" -P -m nuturtle_demo "$@" ;;
+  test)
+    setup
+    if [ $# -gt 0 ]; then exec "$py" -P -m pytest "$@"; fi
+    core_tests
+    exec "$py" -P -m pytest
+    ;;
+  lint) setup; lint ;;
   setup) setup ;;
-  *) echo "usage: ./dev.sh run|test|setup [args]" >&2; exit 2 ;;
+  *) echo "usage: ./dev.sh run|test|lint|setup [args]" >&2; exit 2 ;;
 esac

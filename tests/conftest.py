@@ -18,6 +18,7 @@ _ros_home = tempfile.mkdtemp(prefix="nuturtle-test-ros-")
 os.environ["ROS_HOME"] = _ros_home
 os.environ["ROS_LOG_DIR"] = os.path.join(_ros_home, "log")
 
+import importlib.abc  # noqa: E402
 import importlib.util  # noqa: E402
 import sys  # noqa: E402
 
@@ -30,13 +31,18 @@ _tests_dir = os.path.dirname(os.path.abspath(__file__))
 _shadowing = {_tests_dir, os.path.dirname(_tests_dir)}
 sys.path[:] = [entry for entry in sys.path if os.path.abspath(entry or os.curdir) not in _shadowing]
 
-# The rclpy test harness stays importable as `rclpy_harness` without this folder on sys.path, and is only
-# executed (importing rclpy) when a test first uses it.
-_spec = importlib.util.spec_from_file_location("rclpy_harness", os.path.join(_tests_dir, "rclpy_harness.py"))
-_spec.loader = importlib.util.LazyLoader(_spec.loader)
-sys.modules["rclpy_harness"] = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(sys.modules["rclpy_harness"])
+class _TestHelpers(importlib.abc.MetaPathFinder):
+    """Finds the helper modules of this folder (``rclpy_harness``) without the folder on sys.path; they
+    are imported (rclpy with them) only by the tests that use them."""
 
+    def find_spec(self, name, path, target=None):
+        candidate = os.path.join(_tests_dir, f"{name}.py")
+        if path is None and os.path.isfile(candidate):
+            return importlib.util.spec_from_file_location(name, candidate)
+        return None
+
+
+sys.meta_path.append(_TestHelpers())
 
 @pytest.fixture
 def ros():
