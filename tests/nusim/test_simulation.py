@@ -277,6 +277,24 @@ def test_the_robot_never_overlaps_or_passes_through_anything(start, commands, dt
 # --- sensors --------------------------------------------------------------------------------------------
 
 
+def test_scan_is_cast_from_the_robot_s_lidar_mount():
+    """Another robot's mount (lidar_x, lidar_y, lidar_yaw in its description) moves the scan with it."""
+    config = SimulationConfig(
+        arena=ArenaConfig(0.0, 0.0, 0.0, 4.0, 3.0),
+        obstacles=Obstacles((1.0,), (0.0,), (0.05,)),
+        robot=RobotParams(lidar_x=0.1, lidar_y=0.2, lidar_yaw=math.pi / 2),
+        noise=QUIET,
+        lidar=EXACT_LIDAR,
+    )
+    ranges = Simulation(config).scan()
+    # the sensor at (0.1, 0.2) facing +y: beam 0 hits the wall y = 1.5, beam 90 (towards -x) the wall
+    # x = -2, beam 270 (towards +x) passes 0.2 m beside the cylinder of radius 0.05 and hits x = 2
+    assert ranges[0] == pytest.approx(1.5 - 0.2, abs=1e-12)
+    assert ranges[90] == pytest.approx(2.0 + 0.1, abs=1e-12)
+    assert ranges[270] == pytest.approx(2.0 - 0.1, abs=1e-12)
+    assert ranges[180] == pytest.approx(1.5 + 0.2, abs=1e-12)
+
+
 def test_scan_at_a_known_pose_matches_the_arena():
     # arena 4 m x 3 m, a cylinder of radius 0.05 m at (1, 0); robot at the origin facing +x
     sim = world(obstacles=((1.0,), (0.0,), (0.05,)))

@@ -615,3 +615,14 @@ def test_the_default_parameters(ros):
     assert not node.has_parameter("sensor_x")
     assert node.timeline.config == TimelineConfig()
     assert node.get_parameter("wheel_radius").value == R_WHEEL
+
+
+def test_the_filter_s_sensor_mount_is_the_robot_s_lidar_mount(ros):
+    """Written once: another robot's lidar_x, lidar_y, lidar_yaw (its diff_params) move the filter's sensor."""
+    overrides = [
+        Parameter("lidar_x", value=0.1),
+        Parameter("lidar_y", value=-0.05),
+        Parameter("lidar_yaw", value=math.pi),
+    ]
+    node = ros.add(SlamNode(context=ros.context, parameter_overrides=overrides))
+    assert node.config.T_body_sensor == Transform2D(0.1, -0.05, math.pi)
