@@ -4,6 +4,7 @@ Every bag is read back independently of rosbags (which writes it), see bag_readi
 the MCAP layer, rclpy's deserialize_message with the real message classes for the CDR, yaml for metadata.yaml.
 """
 
+import sys
 import threading
 
 import numpy as np
@@ -192,20 +193,25 @@ def test_bag_writer_replaces_only_a_bag(tmp_path):
 def test_bag_writer_is_thread_safe(tmp_path):
     threads_n, messages_n = 4, 300
     start = threading.Barrier(threads_n)
-    with BagWriter(tmp_path / "run") as writer:
-        for i in range(threads_n):
-            writer.add_topic(f"/t{i}", JOINTS)
 
-        def produce(i: int) -> None:
-            start.wait()
-            for k in range(messages_n):
-                writer.write(f"/t{i}", serialize_message(JointState(position=[float(i), float(k)])), k)
+    def produce(writer: BagWriter, i: int) -> None:
+        start.wait()
+        for k in range(messages_n):
+            writer.write(f"/t{i}", serialize_message(JointState(position=[float(i), float(k)])), k)
 
-        threads = [threading.Thread(target=produce, args=(i,)) for i in range(threads_n)]
-        for thread in threads:
-            thread.start()
-        for thread in threads:
-            thread.join()
+    switch_interval_s = sys.getswitchinterval()
+    sys.setswitchinterval(1e-6)  # switch threads every microsecond, so that unguarded writes interleave
+    try:
+        with BagWriter(tmp_path / "run") as writer:
+            for i in range(threads_n):
+                writer.add_topic(f"/t{i}", JOINTS)
+            threads = [threading.Thread(target=produce, args=(writer, i)) for i in range(threads_n)]
+            for thread in threads:
+                thread.start()
+            for thread in threads:
+                thread.join()
+    finally:
+        sys.setswitchinterval(switch_interval_s)
     assert writer.message_count == threads_n * messages_n
     bag = read_bag(tmp_path / "run")
     assert bag.metadata["message_count"] == threads_n * messages_n
