@@ -1,6 +1,6 @@
-"""The one-command simulation + SLAM demo: headless run of every node, metrics, figures, MCAP recording.
+"""The one-command simulation + SLAM demo: headless run of every node, metrics, figures, rosbag2 recording.
 
 Modules: ``cli`` (command line), ``run`` (the run), ``driver`` (figure-eight route node), ``monitor``
-(pose streams), ``metrics`` (pure accuracy/consistency metrics), ``recorder`` (rosbag2-layout MCAP),
+(pose streams), ``metrics`` (pure accuracy/consistency metrics), ``recorder`` (rosbag2 bag, MCAP storage),
 ``plots`` (figures, matplotlib imported lazily), ``params`` (parameter files). See docs/demo.md.
 """

@@ -2,7 +2,8 @@
 
 Runs nusim, turtle_control, odometry, landmarks, slam and a figure-eight driver headless for two minutes of
 robot time, faster than real time, then writes metrics.json, trajectory.png, errors.png, covariance.png,
-run.mcap and config.yaml into the output folder and prints a results table (docs/demo.md).
+the rosbag2 bag run/ (every topic: metadata.yaml + run.mcap) and config.yaml into the output folder and
+prints a results table (docs/demo.md).
 """
 
 from __future__ import annotations
@@ -13,13 +14,16 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from .metrics import RunMetrics
-from .run import ASSOCIATIONS, DemoOptions, DemoResult, default_world, run_demo
+from .run import ASSOCIATIONS, BAG_NAME, DemoOptions, DemoResult, default_world, run_demo
 
 # (metrics.json key, label, format, target text, check) of the printed table
 TARGETS = (
-    ("final_position_error_slam_m", "final position error, SLAM (m)", "{:.4f}", "<= 0.02", lambda v: v <= 0.02),
-    ("final_heading_error_slam_rad", "final heading error, SLAM (rad)", "{:.4f}", "<= 0.02", lambda v: v <= 0.02),
-    ("final_position_error_odom_m", "final position error, odometry (m)", "{:.4f}", ">= 0.2", lambda v: v >= 0.2),
+    ("final_position_error_slam_m", "final position error, SLAM (m)", "{:.4f}", "<= 0.02",
+     lambda v: v <= 0.02),
+    ("final_heading_error_slam_rad", "final heading error, SLAM (rad)", "{:.4f}", "<= 0.02",
+     lambda v: v <= 0.02),
+    ("final_position_error_odom_m", "final position error, odometry (m)", "{:.4f}", ">= 0.2",
+     lambda v: v >= 0.2),
     ("final_heading_error_odom_rad", "final heading error, odometry (rad)", "{:.4f}", "", None),
     ("ate_rmse_slam_m", "ATE RMSE, SLAM (m)", "{:.4f}", "", None),
     ("ate_rmse_odom_m", "ATE RMSE, odometry (m)", "{:.4f}", "", None),
@@ -34,8 +38,8 @@ TARGETS = (
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(
         prog="python -m nuturtle_demo",
-        description="Headless simulation + EKF SLAM demo of the TurtleBot3 Burger: metrics, plots and an "
-        "MCAP recording of every topic.",
+        description="Headless simulation + EKF SLAM demo of the TurtleBot3 Burger: metrics, plots and a "
+        "rosbag2 (MCAP) recording of every topic.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     parser.add_argument("--association", choices=ASSOCIATIONS, default="unknown",
@@ -44,11 +48,14 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--world", type=Path, default=default_world(), help="nusim params YAML")
     parser.add_argument("--seed", type=int, default=0, help="seed of every noise stream of the simulator")
     parser.add_argument("--duration", type=float, default=120.0, help="simulation (robot) seconds to run")
-    parser.add_argument("--out", type=Path, default=Path("out/latest"), help="output folder (files are replaced)")
+    parser.add_argument("--out", type=Path, default=Path("out/latest"),
+                        help="output folder (its files and its bag run/ are replaced)")  # fmt: skip
     parser.add_argument("--realtime", action="store_true",
-                        help="pace the simulation at real time (to watch it live) instead of as fast as it goes")  # fmt: skip
+                        help="pace the simulation at real time (to watch it live) "
+                        "instead of as fast as it goes")  # fmt: skip
     parser.add_argument("--max-realtime-factor", type=float, default=20.0,
-                        help="upper bound on simulated seconds per wall second when not --realtime")  # fmt: skip
+                        help="upper bound on simulated seconds per wall second "
+                        "when not --realtime")  # fmt: skip
     parser.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     return parser.parse_args(argv)
 
@@ -85,8 +92,10 @@ def report(result: DemoResult, options: DemoOptions) -> str:
         "" if not result.interrupted else "interrupted: the figures cover the time simulated so far",
         results_table(result.metrics),
         "",
-        f"{result.message_count} messages on {len(result.recorded_topics)} topics recorded",
-        f"outputs in {result.out_dir}/: metrics.json trajectory.png errors.png covariance.png run.mcap config.yaml",
+        f"{result.message_count} messages on {len(result.recorded_topics)} topics recorded in the "
+        f"rosbag2 bag {result.out_dir / BAG_NAME}/ (ros2 bag info / ros2 bag play)",
+        f"outputs in {result.out_dir}/: metrics.json trajectory.png errors.png covariance.png "
+        f"{BAG_NAME}/ config.yaml",
     ]
     return "\n".join(line for line in lines if line is not None)
 

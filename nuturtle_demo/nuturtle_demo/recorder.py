@@ -1,256 +1,196 @@
-"""Record every ROS topic into one MCAP file laid out as rosbag2 writes it (`ros2 bag record -a -s mcap`).
+"""Record every ROS topic into one rosbag2 bag directory, as ``ros2 bag record -a -s mcap`` does, written by
+the ``rosbags`` library.
 
-File layout (MCAP profile ``ros2``)
------------------------------------
-* one Schema per message type: name ``pkg/msg/Name``, encoding ``ros2msg``, data = the type's ``.msg``
-  text followed by each type it depends on (recursively, each once), every one introduced by a line of
-  80 ``=`` and ``MSG: pkg/Name``, exactly the concatenation rosbag2 stores;
-* one Channel per topic: message encoding ``cdr``, metadata ``offered_qos_profiles`` (the publishers'
-  QoS as rosbag2's YAML) and ``topic_type_hash`` when the middleware reports it;
-* Messages: the CDR bytes as received (rclpy ``raw=True`` subscriptions, never deserialised), with
-  ``log_time = publish_time =`` the recorder node's clock at reception (ns); with ``use_sim_time`` that
-  is simulation time, like ``ros2 bag record --use-sim-time``.
+Output: a bag directory ``DIR/``
+--------------------------------
+* ``DIR/metadata.yaml``: rosbag2 metadata version 9, ``storage_identifier: mcap``; per topic its type, its
+  ``serialization_format: cdr``, the QoS profiles its publishers offered (``offered_qos_profiles``), the
+  RIHS01 ``type_description_hash`` and its message count; the bag's ``message_count``, ``starting_time``
+  and ``duration``;
+* ``DIR/<DIR name>.mcap``: MCAP with profile ``ros2`` and zstd-compressed chunks; one schema per message
+  type (name ``pkg/msg/Name``, encoding ``ros2msg``: the type's definition followed by every type it
+  depends on, each introduced by a line of 80 ``=`` and ``MSG: pkg/Name``); one channel per topic
+  (message encoding ``cdr``, metadata ``offered_qos_profiles``); the messages are the CDR bytes as
+  received (rclpy ``raw=True`` subscriptions, never deserialised), each stamped (log time = publish time)
+  with the recorder node's clock at reception, in ns: with ``use_sim_time`` that is simulation time, like
+  ``ros2 bag record --use-sim-time``.
 
-Pieces: :class:`MessageDefinitions` (the schema texts), :class:`Ros2McapWriter` (the file, usable without a
-ROS graph), :class:`TopicRecorder` (an rclpy node that discovers every topic with a publisher, subscribes
-with a QoS that hears all its publishers, and writes what arrives).
+Reading it
+----------
+* ``ros2 bag info DIR`` and ``ros2 bag play DIR`` on a ROS 2 install (Jazzy or later);
+* ``rosbags.highlevel.AnyReader([Path(DIR)])`` in Python, ``reader.deserialize(raw, connection.msgtype)``;
+* Foxglove opens ``DIR/<DIR name>.mcap``.
 
-Readers: the ``rosbags`` library (``rosbags.highlevel.AnyReader`` on the ``.mcap`` file), Foxglove,
-``ros2 bag play`` / ``ros2 bag info`` on a full ROS install.
-
-Message definitions come from the ``.msg`` files installed with the message packages
-(``<prefix>/share/<pkg>/msg/<Name>.msg``), searched under the ``AMENT_PREFIX_PATH`` prefixes, the Python
-prefix and the prefix that holds the package's Python module.
+Pieces: :class:`BagWriter` (the bag, usable without a ROS graph), :func:`recording_qos` (the QoS that
+hears every publisher of a topic), :class:`TopicRecorder` (an rclpy node that discovers every topic with a
+publisher and writes what arrives). Message definitions and type hashes come from rosbags' Jazzy
+typestore, so a topic whose type it does not know (or knows in another version) is left out.
 """
 
 from __future__ import annotations
 
 import importlib
-import importlib.util
-import os
-import re
-import sys
 import threading
-from collections.abc import Iterable
+from collections.abc import Collection, Iterable, Sequence
 from pathlib import Path
 from types import TracebackType
 from typing import Any
 
-import yaml
-from mcap.writer import CompressionType, Writer
 from rclpy.clock import Clock, ClockType
+from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rosbags.interfaces import (
+    Connection,
+    Qos,
+    QosDurability,
+    QosHistory,
+    QosLiveliness,
+    QosReliability,
+    QosTime,
+)
+from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
+from rosbags.typesys import Stores, TypesysError, get_typestore
+from rosbags.typesys.store import Typestore
 
-MCAP_PROFILE = "ros2"
-LIBRARY = "nuturtle_demo.recorder"
-SCHEMA_ENCODING = "ros2msg"
+BAG_VERSION = 9
+METADATA_FILE = "metadata.yaml"
 MESSAGE_ENCODING = "cdr"
-SEPARATOR = "=" * 80
+# rosbag2 reads custom_data as a map of strings (yaml-cpp rejects the null rosbags writes for none)
+CUSTOM_DATA = {"recorded_by": __name__}
 # Queue of each recording subscription: room for bursts when the executor falls behind
 RECORD_DEPTH = 200
-# ROS 2 .msg primitive types (and ROS 1's time/duration): they have no definition of their own
-PRIMITIVES = frozenset(
-    "bool byte char float32 float64 int8 uint8 int16 uint16 int32 uint32 int64 uint64 string wstring "
-    "time duration".split()
-)
-# a field's type: its name, then an optional string bound (string<=N) and array suffix ([], [N], [<=N])
-FIELD_TYPE = re.compile(r"^(?P<base>[A-Za-z0-9_/]+?)(<=\d+)?(\[[^\]]*\])?$")
+NS_PER_S = 1_000_000_000
 
 
-def split_type_name(type_name: str) -> tuple[str, str]:
-    """``'pkg/msg/Name'`` or ``'pkg/Name'`` -> ``('pkg', 'Name')``; ValueError for anything else."""
-    parts = type_name.split("/")
-    if len(parts) == 3 and parts[1] == "msg" or len(parts) == 2:
-        if all(parts):
-            return parts[0], parts[-1]
-    raise ValueError(f"not a message type name: {type_name!r}")
+def _bag_time(duration: Duration) -> QosTime:
+    return QosTime(*divmod(int(duration.nanoseconds), NS_PER_S))
 
 
-def field_types(msg_text: str, package: str) -> list[str]:
-    """The non-primitive field types of a ``.msg`` text, as ``pkg/Name``, in order of appearance.
-
-    Comments and constants (``TYPE NAME=VALUE``) are skipped; a bare ``Name`` is in ``package``.
-    """
-    types: list[str] = []
-    for raw_line in msg_text.splitlines():
-        line = raw_line.split("#", 1)[0].strip()
-        if not line:
-            continue
-        tokens = line.split()
-        if len(tokens) < 2 or "=" in tokens[1] or (len(tokens) > 2 and tokens[2].startswith("=")):
-            continue
-        match = FIELD_TYPE.match(tokens[0])
-        if match is None:
-            raise ValueError(f"cannot parse the field type of {raw_line!r}")
-        base = match.group("base")
-        if base in PRIMITIVES:
-            continue
-        name = base if "/" in base else f"{package}/{base}"
-        types.append("/".join(split_type_name(name)))
-    return types
-
-
-class MessageDefinitions:
-    """``.msg`` texts and rosbag2-style full definitions of message types, found on disk and cached."""
-
-    def __init__(self, search_prefixes: Iterable[Path] | None = None) -> None:
-        self._extra_prefixes = [Path(p) for p in search_prefixes or ()]
-        self._texts: dict[str, str] = {}
-
-    def _prefixes(self, package: str) -> list[Path]:
-        prefixes = list(self._extra_prefixes)
-        prefixes += [Path(p) for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p]
-        prefixes.append(Path(sys.prefix))
-        spec = importlib.util.find_spec(package)
-        if spec is not None and spec.origin is not None:
-            # <prefix>/lib/pythonX.Y/site-packages/<package>/__init__.py
-            prefixes += list(Path(spec.origin).resolve().parents)
-        return prefixes
-
-    def msg_text(self, type_name: str) -> str:
-        """The ``.msg`` file of ``type_name`` as installed; LookupError when no prefix has it."""
-        package, name = split_type_name(type_name)
-        key = f"{package}/{name}"
-        if key not in self._texts:
-            for prefix in self._prefixes(package):
-                candidate = prefix / "share" / package / "msg" / f"{name}.msg"
-                if candidate.is_file():
-                    self._texts[key] = candidate.read_text(encoding="utf-8")
-                    break
-            else:
-                raise LookupError(f"no {package}/msg/{name}.msg under share/ of any ROS prefix")
-        return self._texts[key]
-
-    def full_definition(self, type_name: str) -> str:
-        """The type's ``.msg`` text, then each dependency (depth first, each once) as
-        ``\\n`` + 80 ``=`` + ``\\nMSG: pkg/Name\\n`` + its ``.msg`` text: rosbag2's ``ros2msg`` schema."""
-        package, name = split_type_name(type_name)
-        root = f"{package}/{name}"
-        order: list[str] = []
-        stack = list(reversed(field_types(self.msg_text(root), package)))
-        while stack:
-            dependency = stack.pop()
-            if dependency == root or dependency in order:
-                continue
-            order.append(dependency)
-            dependency_package = dependency.split("/")[0]
-            stack += reversed(field_types(self.msg_text(dependency), dependency_package))
-        text = self.msg_text(root)
-        for dependency in order:
-            text += f"\n{SEPARATOR}\nMSG: {dependency}\n{self.msg_text(dependency)}"
-        return text
-
-
-def message_class(type_name: str) -> type:
-    """The generated Python class of ``pkg/msg/Name`` (ImportError/AttributeError when not installed)."""
-    package, name = split_type_name(type_name)
-    return getattr(importlib.import_module(f"{package}.msg"), name)
-
-
-def qos_profiles_yaml(profiles: Iterable[Any]) -> str:
-    """rosbag2's ``offered_qos_profiles`` YAML of rclpy QoSProfile objects (policy names in lower case,
-    durations as ``{sec, nsec}``)."""
-
-    def policy(value: Any) -> str:
-        return value.name.lower()
-
-    def duration(value: Any) -> dict[str, int]:
-        sec, nsec = divmod(int(value.nanoseconds), 1_000_000_000)
-        return {"sec": sec, "nsec": nsec}
-
-    return yaml.safe_dump(
-        [
-            {
-                "history": policy(p.history),
-                "depth": int(p.depth),
-                "reliability": policy(p.reliability),
-                "durability": policy(p.durability),
-                "deadline": duration(p.deadline),
-                "lifespan": duration(p.lifespan),
-                "liveliness": policy(p.liveliness),
-                "liveliness_lease_duration": duration(p.liveliness_lease_duration),
-                "avoid_ros_namespace_conventions": bool(p.avoid_ros_namespace_conventions),
-            }
-            for p in profiles
-        ],
-        sort_keys=False,
+def _bag_qos(profile: QoSProfile) -> Qos:
+    """rosbags' form of an rclpy QoS profile (policies matched by name, durations as sec + nsec)."""
+    return Qos(
+        history=QosHistory[profile.history.name],
+        depth=int(profile.depth),
+        reliability=QosReliability[profile.reliability.name],
+        durability=QosDurability[profile.durability.name],
+        deadline=_bag_time(profile.deadline),
+        lifespan=_bag_time(profile.lifespan),
+        liveliness=QosLiveliness[profile.liveliness.name],
+        liveliness_lease_duration=_bag_time(profile.liveliness_lease_duration),
+        avoid_ros_namespace_conventions=bool(profile.avoid_ros_namespace_conventions),
     )
 
 
-class Ros2McapWriter:
-    """An MCAP file in the rosbag2 layout (module docstring); thread safe; use as a context manager.
+def _remove_bag(path: Path) -> None:
+    """Delete the bag directory ``path`` (metadata.yaml and .mcap files only); FileExistsError when
+    ``path`` is anything else."""
+    entries = list(path.iterdir()) if path.is_dir() else None
+    if entries is None or not all(
+        entry.is_file() and (entry.name == METADATA_FILE or entry.suffix == ".mcap") for entry in entries
+    ):
+        raise FileExistsError(f"{path} exists and is not a rosbag2 MCAP bag: not replacing it")
+    for entry in entries:
+        entry.unlink()
+    path.rmdir()
 
-    ``add_topic(topic, type_name, ...)`` once per topic, then ``write(topic, cdr_bytes, log_time_ns)``.
+
+class BagWriter:
+    """A rosbag2 bag directory at ``path`` (module docstring) written through ``rosbags.rosbag2.Writer``;
+    thread safe; use as a context manager.
+
+    ``add_topic(topic, type_name, offered_qos_profiles)`` once per topic, then ``write(topic, cdr_bytes,
+    timestamp_ns)``; ``close()`` (idempotent) finishes the .mcap file and writes metadata.yaml. ``path``
+    must not exist (FileExistsError), unless ``overwrite`` and it is a bag, which is then replaced.
+    ``typestore`` (default: rosbags' ROS 2 Jazzy types) gives the definitions and type hashes.
     """
 
-    def __init__(self, path: str | Path, definitions: MessageDefinitions | None = None) -> None:
+    def __init__(self, path: str | Path, typestore: Typestore | None = None, overwrite: bool = False) -> None:
         self.path = Path(path)
-        self.definitions = definitions or MessageDefinitions()
-        self._stream = open(self.path, "wb")  # noqa: SIM115 (closed in close())
-        self._writer = Writer(self._stream, compression=CompressionType.ZSTD)
-        self._writer.start(profile=MCAP_PROFILE, library=LIBRARY)
-        self._schemas: dict[str, int] = {}
-        self._channels: dict[str, int] = {}
-        self._sequence: dict[str, int] = {}
+        self.typestore = typestore or get_typestore(Stores.ROS2_JAZZY)
+        if self.path.exists():
+            if not overwrite:
+                raise FileExistsError(f"{self.path} exists already")
+            _remove_bag(self.path)
+        self._bag = Writer(self.path, version=BAG_VERSION, storage_plugin=StoragePlugin.MCAP)
+        self._bag.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
+        for key, value in CUSTOM_DATA.items():
+            self._bag.set_custom_data(key, value)
+        self._bag.open()
+        self._connections: dict[str, Connection] = {}
+        self._counts: dict[str, int] = {}
         self._lock = threading.Lock()
-        self.message_count = 0
         self.closed = False
 
     @property
     def topics(self) -> list[str]:
-        return list(self._channels)
+        """The registered topics, in order of registration."""
+        return list(self._connections)
+
+    @property
+    def message_counts(self) -> dict[str, int]:
+        """Messages written so far, by topic."""
+        with self._lock:
+            return dict(self._counts)
+
+    @property
+    def message_count(self) -> int:
+        """Messages written so far, all topics."""
+        return sum(self.message_counts.values())
 
     def add_topic(
-        self, topic: str, type_name: str, offered_qos_profiles: str = "", type_hash: str = ""
+        self,
+        topic: str,
+        type_name: str,
+        offered_qos_profiles: Sequence[QoSProfile] = (),
+        type_hashes: Collection[str] = (),
     ) -> None:
-        """Register ``topic`` of ``type_name`` (``pkg/msg/Name``); ValueError when already there,
-        LookupError when its definition cannot be found."""
-        with self._lock:
-            if topic in self._channels:
-                raise ValueError(f"topic {topic!r} is already recorded")
-            if type_name not in self._schemas:
-                definition = self.definitions.full_definition(type_name)
-                self._schemas[type_name] = self._writer.register_schema(
-                    name=type_name, encoding=SCHEMA_ENCODING, data=definition.encode("utf-8")
-                )
-            metadata = {"offered_qos_profiles": offered_qos_profiles}
-            if type_hash:
-                metadata["topic_type_hash"] = type_hash
-            self._channels[topic] = self._writer.register_channel(
-                topic=topic,
-                message_encoding=MESSAGE_ENCODING,
-                schema_id=self._schemas[type_name],
-                metadata=metadata,
-            )
-            self._sequence[topic] = 0
+        """Register ``topic`` of ``type_name`` (``pkg/msg/Name``) with the QoS profiles its publishers offer.
 
-    def write(self, topic: str, data: bytes, log_time_ns: int) -> None:
-        """Append one CDR-serialised message of a registered topic (KeyError otherwise)."""
+        ``type_hashes``: the publishers' RIHS01 hashes of the type (``RIHS01_<hex>``), each of which must
+        be the typestore's. ValueError when the topic is already there; LookupError when the typestore
+        does not know the type or knows another definition of it.
+        """
+        with self._lock:
+            if topic in self._connections:
+                raise ValueError(f"topic {topic!r} is already recorded")
+            try:
+                known_hash = self.typestore.hash_rihs01(type_name)
+            except (KeyError, TypesysError) as error:
+                raise LookupError(f"the typestore does not know {type_name}") from error
+            foreign = sorted(set(type_hashes) - {known_hash})
+            if foreign:
+                raise LookupError(
+                    f"the publishers' {type_name} ({', '.join(foreign)}) is not the typestore's "
+                    f"({known_hash})"
+                )
+            self._connections[topic] = self._bag.add_connection(
+                topic,
+                type_name,
+                typestore=self.typestore,
+                serialization_format=MESSAGE_ENCODING,
+                offered_qos_profiles=[_bag_qos(profile) for profile in offered_qos_profiles],
+            )
+            self._counts[topic] = 0
+
+    def write(self, topic: str, data: bytes, timestamp_ns: int) -> None:
+        """Append one CDR-serialised message of a registered topic (KeyError otherwise) stamped
+        ``timestamp_ns``; ignored once closed."""
         with self._lock:
             if self.closed:
                 return
-            channel_id = self._channels[topic]
-            self._sequence[topic] += 1
-            self._writer.add_message(
-                channel_id=channel_id,
-                log_time=int(log_time_ns),
-                data=bytes(data),
-                publish_time=int(log_time_ns),
-                sequence=self._sequence[topic] % 2**32,
-            )
-            self.message_count += 1
+            self._bag.write(self._connections[topic], int(timestamp_ns), data)
+            self._counts[topic] += 1
 
     def close(self) -> None:
-        """Write the summary and index and close the file (idempotent)."""
+        """Finish the .mcap file (summary and index) and write metadata.yaml (idempotent)."""
         with self._lock:
             if self.closed:
                 return
             self.closed = True
-            self._writer.finish()
-            self._stream.close()
+            self._bag.close()
 
-    def __enter__(self) -> Ros2McapWriter:
+    def __enter__(self) -> BagWriter:
         return self
 
     def __exit__(
@@ -259,11 +199,20 @@ class Ros2McapWriter:
         self.close()
 
 
-def recording_qos(offered: list[Any]) -> QoSProfile:
+def message_class(type_name: str) -> type:
+    """The generated Python class of ``pkg/msg/Name``: ValueError for another form of name,
+    ImportError/AttributeError when it is not installed."""
+    package, interface, name = type_name.split("/")
+    return getattr(importlib.import_module(f"{package}.{interface}"), name)
+
+
+def recording_qos(offered: Iterable[QoSProfile]) -> QoSProfile:
     """The QoS that hears every publisher, as rosbag2 chooses it: reliable only if all publishers are,
-    transient local only if all are (so latched messages are delivered), keep last ``RECORD_DEPTH``."""
-    reliable = all(p.reliability == ReliabilityPolicy.RELIABLE for p in offered)
-    latched = all(p.durability == DurabilityPolicy.TRANSIENT_LOCAL for p in offered)
+    transient local only if all are (so latched messages are delivered; a transient-local subscription
+    would not match a volatile publisher), keep last ``RECORD_DEPTH``."""
+    profiles = list(offered)
+    reliable = all(p.reliability == ReliabilityPolicy.RELIABLE for p in profiles)
+    latched = all(p.durability == DurabilityPolicy.TRANSIENT_LOCAL for p in profiles)
     return QoSProfile(
         history=HistoryPolicy.KEEP_LAST,
         depth=RECORD_DEPTH,
@@ -274,17 +223,17 @@ def recording_qos(offered: list[Any]) -> QoSProfile:
 
 class TopicRecorder(Node):
     """Node ``recorder``: subscribes (raw CDR) to every topic that has a publisher and writes each message
-    to a :class:`Ros2McapWriter` stamped with this node's clock (pass ``use_sim_time`` to record in
-    simulation time).
+    to a :class:`BagWriter`, stamped with this node's clock at reception (pass ``use_sim_time`` to record
+    in simulation time).
 
     Topics are discovered at start and then every ``discovery_period_s`` (wall time); topics in
-    ``exclude``, with several types, or whose type has no Python class or ``.msg`` file here are left out
-    with a warning. kwargs go to rclpy's Node.
+    ``exclude``, with several types, or whose type has no Python class here or is not the writer's
+    typestore's are left out with one warning each. kwargs go to rclpy's Node.
     """
 
     def __init__(
         self,
-        writer: Ros2McapWriter,
+        writer: BagWriter,
         exclude: Iterable[str] = (),
         discovery_period_s: float = 0.2,
         **kwargs: Any,
@@ -312,16 +261,11 @@ class TopicRecorder(Node):
             if len(type_names) != 1:
                 self._leave_out(topic, f"it has several types {type_names}")
                 continue
-            type_name = type_names[0]
-            type_hash = str(publishers[0].topic_type_hash)
+            offered = [p.qos_profile for p in publishers]
+            hashes = {str(p.topic_type_hash) for p in publishers} - {"INVALID"}
             try:
-                message_type = message_class(type_name)
-                self.writer.add_topic(
-                    topic,
-                    type_name,
-                    qos_profiles_yaml(p.qos_profile for p in publishers),
-                    "" if type_hash == "INVALID" else type_hash,
-                )
+                message_type = message_class(type_names[0])
+                self.writer.add_topic(topic, type_names[0], offered, hashes)
             except (ImportError, AttributeError, LookupError, ValueError) as error:
                 self._leave_out(topic, str(error))
                 continue
@@ -329,7 +273,7 @@ class TopicRecorder(Node):
                 message_type,
                 topic,
                 lambda data, topic=topic: self._on_message(topic, data),
-                recording_qos([p.qos_profile for p in publishers]),
+                recording_qos(offered),
                 raw=True,
             )
 

@@ -7,7 +7,7 @@ The system (real rclpy nodes talking over DDS, all in one process and one Single
                                                         |   --scan--> landmarks --landmarks--> slam
                                                         |   --fake_sensor-------------------> slam (known)
                                                         +-- /clock, nusim/ground_truth --> demo_monitor
-    recorder: every topic -> run.mcap
+    recorder: every topic -> the rosbag2 bag run/ (metadata.yaml, run.mcap)
 
 nusim runs on a steady wall timer at ``rate * realtime_factor`` Hz and publishes /clock; every other node
 uses simulation time. The executor runs whatever is ready after each physics step, so the estimators
@@ -48,9 +48,11 @@ from .driver import FigureEightDriver
 from .metrics import RunData, RunMetrics, evaluate_run, odom_in_world, pose_errors
 from .monitor import RunMonitor
 from .params import load_world, matched_wheel_noise, params_file, to_parameters
-from .recorder import Ros2McapWriter, TopicRecorder
+from .recorder import BagWriter, TopicRecorder
 
 ASSOCIATIONS = ("known", "unknown")
+# The recording: a rosbag2 bag directory in the output folder
+BAG_NAME = "run"
 # Landmarks closer than this to a true cylinder count as that cylinder (m)
 LANDMARK_GATE_M = 0.2
 # Wall time to wait for the recorder to subscribe to every topic before the simulation starts (s)
@@ -113,7 +115,7 @@ class DemoResult:
 class _System:
     """The nodes of one run, built in one context (see the module docstring)."""
 
-    def __init__(self, options: DemoOptions, context: Context, writer: Ros2McapWriter) -> None:
+    def __init__(self, options: DemoOptions, context: Context, writer: BagWriter) -> None:
         sim_time = [Parameter("use_sim_time", value=True)]
         world = load_world(options.world)
         world.update(seed=options.seed, realtime_factor=options.realtime_factor)
@@ -146,7 +148,9 @@ def _slam_nodes(system: _System, options: DemoOptions, context: Context, sim_tim
     T_start = simulation.config.arena.T_world_start
     left_rad_s, right_rad_s = system.driver.route.wheel_speeds_rad_s
     wheel_noise = matched_wheel_noise(
-        simulation.config.noise.slip_fraction, 0.5 * (abs(left_rad_s) + abs(right_rad_s)), system.nusim.timing.rate
+        simulation.config.noise.slip_fraction,
+        0.5 * (abs(left_rad_s) + abs(right_rad_s)),
+        system.nusim.timing.rate,
     )
     slam_values = {
         "association": options.association,
@@ -183,10 +187,10 @@ def run_demo(options: DemoOptions) -> DemoResult:
     docstring, docs/demo.md). Ctrl-C ends the run early; the outputs then cover the time simulated."""
     out_dir = Path(options.out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
+    writer = BagWriter(out_dir / BAG_NAME, overwrite=True)
     context = Context()
     rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
     executor = SingleThreadedExecutor(context=context)
-    writer = Ros2McapWriter(out_dir / "run.mcap")
     system: _System | None = None
     interrupted = False
     try:
@@ -194,9 +198,11 @@ def run_demo(options: DemoOptions) -> DemoResult:
         for node in system.nodes:
             if node is not system.nusim:
                 executor.add_node(node)
-        if not _spin_until(
-            executor, lambda: set(REQUIRED_TOPICS) <= set(system.recorder.recorded_topics), DISCOVERY_TIMEOUT_S
-        ):
+
+        def subscribed() -> bool:
+            return set(REQUIRED_TOPICS) <= set(system.recorder.recorded_topics)
+
+        if not _spin_until(executor, subscribed, DISCOVERY_TIMEOUT_S):
             missing = sorted(set(REQUIRED_TOPICS) - set(system.recorder.recorded_topics))
             raise RuntimeError(f"the recorder did not discover {missing} within {DISCOVERY_TIMEOUT_S} s")
         executor.add_node(system.nusim)

@@ -25,7 +25,6 @@ THIRD_PARTY = {
     "matplotlib": ("python3-matplotlib", "matplotlib"),
     "tqdm": ("python3-tqdm", "tqdm"),
     "rosbags": ("python3-rosbags-pip", "rosbags"),
-    "mcap": ("python3-mcap-pip", "mcap"),
 }
 # Python modules that are ROS packages of the same name (rclpy, message packages, launch)
 ROS_MODULE_SUFFIXES = ("_msgs", "_srvs", "_interfaces")
