@@ -53,6 +53,7 @@ from sensor_msgs.msg import JointState, LaserScan
 from std_srvs.srv import Empty
 from turtlelib import Twist2D
 from turtlelib.scan_model import LidarConfig
+from turtlelib.validation import positive, store
 from visualization_msgs.msg import Marker, MarkerArray
 
 from turtlelib.path_trail import PathTrail, PathTrailConfig
@@ -102,11 +103,9 @@ class NusimTiming:
     fake_sensor_rate: float = 5.0
 
     def __post_init__(self) -> None:
-        for name in ("rate", "realtime_factor", "joint_states_rate", "scan_rate", "fake_sensor_rate"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0.0):
-                raise ValueError(f"{name} must be finite and > 0, got {value!r}")
-        for name in ("joint_states_rate", "scan_rate", "fake_sensor_rate"):
+        streams = ("joint_states_rate", "scan_rate", "fake_sensor_rate")
+        store(self, ("rate", "realtime_factor", *streams), positive)
+        for name in streams:
             if getattr(self, name) > self.rate:
                 raise ValueError(
                     f"{name} ({getattr(self, name)} Hz) cannot exceed the physics rate ({self.rate} Hz)"

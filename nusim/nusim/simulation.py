@@ -43,14 +43,15 @@ how often one sensor is read does not change another's noise.
 from __future__ import annotations
 
 import math
-import numbers
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 from numpy.typing import NDArray
 from turtlelib import DiffDrive, Transform2D
 from turtlelib.scan_model import LidarConfig, arena_walls, simulate_scan
+from turtlelib.validation import finite_real, in_range, integer, non_negative, positive, store
 
 from nuturtle_description.robot_params import RobotParams
 
@@ -60,26 +61,6 @@ from nuturtle_description.robot_params import RobotParams
 DEFAULT_OBSTACLE_R_M = 0.038
 DEFAULT_OBSTACLES_X = (1.4, -1.4, 1.3, -1.3, 0.0, 0.0, 1.2, -1.2)
 DEFAULT_OBSTACLES_Y = (0.3, -0.3, -1.2, 1.2, 0.75, -0.75, 1.4, -1.4)
-
-
-def _finite(name: str, value: object) -> float:
-    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
-        raise ValueError(f"{name} must be a finite number, got {value!r}")
-    return float(value)
-
-
-def _positive(name: str, value: object) -> float:
-    value = _finite(name, value)
-    if value <= 0.0:
-        raise ValueError(f"{name} must be > 0, got {value!r}")
-    return value
-
-
-def _non_negative(name: str, value: object) -> float:
-    value = _finite(name, value)
-    if value < 0.0:
-        raise ValueError(f"{name} must be >= 0, got {value!r}")
-    return value
 
 
 @dataclass(frozen=True)
@@ -93,10 +74,8 @@ class ArenaConfig:
     arena_y_length: float = 5.0
 
     def __post_init__(self) -> None:
-        for name in ("x0", "y0", "theta0"):
-            object.__setattr__(self, name, _finite(name, getattr(self, name)))
-        for name in ("arena_x_length", "arena_y_length"):
-            object.__setattr__(self, name, _positive(name, getattr(self, name)))
+        store(self, ("x0", "y0", "theta0"), finite_real)
+        store(self, ("arena_x_length", "arena_y_length"), positive)
 
     @property
     def T_world_start(self) -> Transform2D:
@@ -120,21 +99,18 @@ class Obstacles:
     r: tuple[float, ...] = (DEFAULT_OBSTACLE_R_M,) * len(DEFAULT_OBSTACLES_X)
 
     def __post_init__(self) -> None:
-        for name in ("x", "y", "r"):
+        for name, check in (("x", finite_real), ("y", finite_real), ("r", positive)):
             values = getattr(self, name)
             if isinstance(values, (str, bytes)) or not isinstance(values, Sequence):
                 raise ValueError(f"obstacles.{name} must be a list of numbers, got {values!r}")
             object.__setattr__(
-                self, name, tuple(_finite(f"obstacles.{name}[{j}]", v) for j, v in enumerate(values))
+                self, name, tuple(check(f"obstacles.{name}[{j}]", v) for j, v in enumerate(values))
             )
         if not len(self.x) == len(self.y) == len(self.r):
             raise ValueError(
                 "obstacles.x, obstacles.y and obstacles.r must have the same length, got "
                 f"{len(self.x)}, {len(self.y)} and {len(self.r)}"
             )
-        for j, radius_m in enumerate(self.r):
-            if radius_m <= 0.0:
-                raise ValueError(f"obstacles.r[{j}] must be > 0, got {radius_m!r}")
 
     def circles(self) -> NDArray[np.float64]:
         """Rows ``[x, y, r]`` (m), shape (M, 3)."""
@@ -157,15 +133,11 @@ class NoiseConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        for name in ("input_noise", "basic_sensor_variance"):
-            object.__setattr__(self, name, _non_negative(name, getattr(self, name)))
-        slip = _non_negative("slip_fraction", self.slip_fraction)
-        if slip >= 1.0:
-            raise ValueError(f"slip_fraction must be < 1 (a wheel cannot slip backwards), got {slip!r}")
-        object.__setattr__(self, "slip_fraction", slip)
-        object.__setattr__(self, "max_range", _positive("max_range", self.max_range))
-        if isinstance(self.seed, bool) or not isinstance(self.seed, numbers.Integral) or self.seed < 0:
-            raise ValueError(f"seed must be an int >= 0, got {self.seed!r}")
+        store(self, ("input_noise", "basic_sensor_variance"), non_negative)
+        # slip_fraction < 1: a wheel cannot slip backwards
+        store(self, ("slip_fraction",), partial(in_range, low=0.0, high=1.0, open_high=True))
+        store(self, ("max_range",), positive)
+        store(self, ("seed",), partial(integer, minimum=0))
 
 
 def default_lidar() -> LidarConfig:
@@ -322,7 +294,7 @@ class Simulation:
 
     def step(self, dt_s: float) -> None:
         """Advance the world by ``dt_s`` s (> 0): wheel noise, encoders, slip, arc motion, collisions."""
-        dt_s = _positive("dt_s", dt_s)
+        dt_s = positive("dt_s", dt_s)
         noise = self.config.noise
         w = self.commanded_speed_rad_s
         # w'' = w' + n,  n ~ N(0, input_noise^2), on turning wheels only

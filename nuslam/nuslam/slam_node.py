@@ -39,7 +39,6 @@ earlier than the last restarts the timeline there (a restarted simulator or a lo
 
 from __future__ import annotations
 
-import math
 import sys
 from dataclasses import dataclass
 
@@ -52,6 +51,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from turtlelib import EkfSlam, SlamConfig, SlamTimeline, TimelineConfig, Transform2D, Twist2D
 from turtlelib.range_bearing import observations_from_points
+from turtlelib.validation import finite_real, names, one_of, positive, store
 from visualization_msgs.msg import MarkerArray
 
 from turtlelib.path_trail import PathTrail, PathTrailConfig
@@ -101,18 +101,11 @@ class SlamNodeConfig:
     landmark_radius: float = 0.038
 
     def __post_init__(self) -> None:
-        if self.association not in ASSOCIATIONS:
-            raise ValueError(f"association must be one of {ASSOCIATIONS}, got {self.association!r}")
-        for name in ("x0", "y0", "theta0"):
-            if not math.isfinite(getattr(self, name)):
-                raise ValueError(f"{name} must be finite, got {getattr(self, name)!r}")
-        for name in ("fake_sensor_std", "landmark_radius"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0.0):
-                raise ValueError(f"{name} must be finite and > 0, got {value!r}")
-        frames = [self.map_id, self.odom_id, self.body_id, self.sensor_id]
-        if not all(isinstance(frame, str) and frame for frame in frames) or len(set(frames)) != 4:
-            raise ValueError(f"map_id, odom_id, body_id and sensor_id must be distinct, non-empty, got {frames}")
+        one_of("association", self.association, ASSOCIATIONS)
+        store(self, ("x0", "y0", "theta0"), finite_real)
+        store(self, ("fake_sensor_std", "landmark_radius"), positive)
+        frames = ("map_id", "odom_id", "body_id", "sensor_id")
+        names("frame id", **{name: getattr(self, name) for name in frames})
 
     @property
     def T_map_body0(self) -> Transform2D:

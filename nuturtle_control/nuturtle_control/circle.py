@@ -26,6 +26,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_srvs.srv import Empty
 from turtlelib import Twist2D
+from turtlelib.validation import finite_real, positive, store
 
 from nuturtle_ros_common.node_main import run_node
 from nuturtle_ros_common.ros_params import declare_dataclass, replace_from_parameters
@@ -40,12 +41,8 @@ class CircleConfig:
     velocity: float = 0.1
 
     def __post_init__(self) -> None:
-        for name in ("frequency", "radius"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0.0):
-                raise ValueError(f"{name} must be finite and > 0, got {value!r}")
-        if not math.isfinite(self.velocity):
-            raise ValueError(f"velocity must be finite, got {self.velocity!r}")
+        store(self, ("frequency", "radius"), positive)
+        store(self, ("velocity",), finite_real)
         if not math.isfinite(self.velocity / self.radius):
             raise ValueError(f"velocity / radius overflows: {self.velocity!r} / {self.radius!r}")
 

@@ -50,6 +50,7 @@ from nuturtle_ros_common.tf_compat import OptionalTfBroadcaster
 from turtlelib.path_trail import PathTrail, PathTrailConfig
 from nuturtle_ros_common.wheel_joints import WheelJoints, wheel_values
 from nuturtle_ros_common.throttle import WARN_THROTTLE_S
+from turtlelib.validation import names
 from turtlelib.wheel_odometry import WheelOdometry
 
 
@@ -62,12 +63,7 @@ class OdometryFrames:
     odom_id: str = "odom"
 
     def __post_init__(self) -> None:
-        for name in ("body_id", "odom_id"):
-            value = getattr(self, name)
-            if not isinstance(value, str) or not value:
-                raise ValueError(f"{name} must be a non-empty frame id, got {value!r}")
-        if self.body_id == self.odom_id:
-            raise ValueError(f"body_id and odom_id must differ, both are {self.body_id!r}")
+        names("frame id", body_id=self.body_id, odom_id=self.odom_id)
 
 
 class OdometryNode(Node):

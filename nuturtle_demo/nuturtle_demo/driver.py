@@ -50,6 +50,7 @@ from geometry_msgs.msg import Twist
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from turtlelib import Transform2D, Twist2D
+from turtlelib.validation import non_negative, positive, store
 
 from nuturtle_control.circle import twist_message
 from nuturtle_ros_common.conversions import transform_from_pose
@@ -74,14 +75,8 @@ class RouteConfig:
     feedback: bool = True
 
     def __post_init__(self) -> None:
-        for name in ("radius", "velocity", "rate"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not (math.isfinite(value) and value > 0.0):
-                raise ValueError(f"{name} must be finite and > 0, got {value!r}")
-        for name in ("start_delay", "k_x", "k_y", "k_theta"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not (math.isfinite(value) and value >= 0.0):
-                raise ValueError(f"{name} must be finite and >= 0, got {value!r}")
+        store(self, ("radius", "velocity", "rate"), positive)
+        store(self, ("start_delay", "k_x", "k_y", "k_theta"), non_negative)
 
 
 @dataclass(frozen=True)

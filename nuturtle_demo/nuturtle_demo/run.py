@@ -23,10 +23,10 @@ added to the executor, so the recording holds the run from its first physics ste
 from __future__ import annotations
 
 import json
-import math
 import sys
 import time
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -37,6 +37,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
+from turtlelib.validation import integer, one_of, positive, store
 
 from nusim.nusim_node import NusimNode
 from nuturtle_control.odometry import OdometryNode
@@ -87,14 +88,9 @@ class DemoOptions:
     progress: bool = True
 
     def __post_init__(self) -> None:
-        if self.association not in ASSOCIATIONS:
-            raise ValueError(f"association must be one of {ASSOCIATIONS}, got {self.association!r}")
-        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
-            raise ValueError(f"seed must be an int >= 0, got {self.seed!r}")
-        for name in ("duration_s", "max_realtime_factor"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0.0):
-                raise ValueError(f"{name} must be finite and > 0, got {value!r}")
+        one_of("association", self.association, ASSOCIATIONS)
+        store(self, ("seed",), partial(integer, minimum=0))
+        store(self, ("duration_s", "max_realtime_factor"), positive)
         if not Path(self.world).is_file():
             raise ValueError(f"world file {self.world} does not exist")
 

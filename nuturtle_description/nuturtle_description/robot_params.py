@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 from nuturtle_ros_common.ros_files import load_ros_yaml, share_file
@@ -43,7 +44,7 @@ class RobotParams:
     def __post_init__(self) -> None:
         store(self, ("wheel_radius", "track_width", "motor_cmd_per_rad_sec"), positive)
         store(self, ("encoder_ticks_per_rad", "collision_radius"), positive)
-        store(self, ("motor_cmd_max",), lambda name, value: integer(name, value, minimum=1))
+        store(self, ("motor_cmd_max",), partial(integer, minimum=1))
         store(self, ("lidar_x", "lidar_y", "lidar_yaw"), finite_real)
         store(self, ("lidar_z",), non_negative)
 

@@ -11,6 +11,8 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from turtlelib.validation import names
+
 
 @dataclass(frozen=True)
 class WheelJoints:
@@ -20,12 +22,7 @@ class WheelJoints:
     wheel_right: str = "wheel_right_joint"
 
     def __post_init__(self) -> None:
-        for name in ("wheel_left", "wheel_right"):
-            value = getattr(self, name)
-            if not isinstance(value, str) or not value:
-                raise ValueError(f"{name} must be a non-empty joint name, got {value!r}")
-        if self.wheel_left == self.wheel_right:
-            raise ValueError(f"wheel_left and wheel_right must differ, both are {self.wheel_left!r}")
+        names("joint name", wheel_left=self.wheel_left, wheel_right=self.wheel_right)
 
     @property
     def names(self) -> list[str]:

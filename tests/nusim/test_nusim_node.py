@@ -316,9 +316,9 @@ def test_parameters_from_the_world_file_give_the_default_world(ros):
 @pytest.mark.parametrize(
     ("overrides", "message"),
     [
-        ({"arena_x_length": -1.0}, "arena_x_length must be > 0"),
+        ({"arena_x_length": -1.0}, "arena_x_length must be finite and > 0"),
         ({"obstacles.x": [1.0, 2.0]}, "same length, got 2, 8 and 8"),
-        ({"obstacles.r": [0.0] * 8}, r"obstacles.r\[0\] must be > 0"),
+        ({"obstacles.r": [0.0] * 8}, r"obstacles.r\[0\] must be finite and > 0"),
         ({"obstacles.x": "nowhere"}, "parameter obstacles.x must be of type tuple"),
         ({"x0": 1.41, "y0": 0.3}, "overlaps obstacle 0"),
         ({"x0": 3.0}, "is not inside the arena"),
@@ -326,7 +326,7 @@ def test_parameters_from_the_world_file_give_the_default_world(ros):
         ({"realtime_factor": -2.0}, "realtime_factor must be finite and > 0"),
         ({"joint_states_rate": 200.0}, r"joint_states_rate \(200.0 Hz\) cannot exceed the physics rate"),
         ({"lidar.samples": 0}, "lidar samples must be >= 1"),
-        ({"slip_fraction": 1.5}, "slip_fraction must be < 1"),
+        ({"slip_fraction": 1.5}, r"slip_fraction must be in \[0.0, 1.0\)"),
         ({"collision_radius": 0.0}, "collision_radius must be finite and > 0"),
     ],
 )
@@ -342,7 +342,7 @@ def test_executable_with_an_invalid_parameter_exits_1_with_the_reason(tmp_path):
         cwd=tmp_path, capture_output=True, text=True, timeout=60,
     )
     assert result.returncode == 1, result.stderr
-    assert "invalid configuration: arena_x_length must be > 0, got -1.0" in result.stderr
+    assert "invalid configuration: arena_x_length must be finite and > 0, got -1.0" in result.stderr
     assert "Traceback" not in result.stderr
 
 

@@ -394,19 +394,19 @@ def test_teleport_refuses_poses_in_collision_and_reset_returns_to_the_start():
 @pytest.mark.parametrize(
     ("build", "message"),
     [
-        (lambda: ArenaConfig(arena_x_length=-1.0), "arena_x_length must be > 0"),
-        (lambda: ArenaConfig(arena_y_length=0.0), "arena_y_length must be > 0"),
+        (lambda: ArenaConfig(arena_x_length=-1.0), "arena_x_length must be finite and > 0"),
+        (lambda: ArenaConfig(arena_y_length=0.0), "arena_y_length must be finite and > 0"),
         (lambda: ArenaConfig(x0=math.nan), "x0 must be a finite number"),
         (lambda: Obstacles((1.0, 2.0), (0.0,), (0.1, 0.1)), "same length, got 2, 1 and 2"),
-        (lambda: Obstacles((1.0,), (0.0,), (0.0,)), r"obstacles.r\[0\] must be > 0"),
+        (lambda: Obstacles((1.0,), (0.0,), (0.0,)), r"obstacles.r\[0\] must be finite and > 0"),
         (lambda: Obstacles((math.inf,), (0.0,), (0.1,)), r"obstacles.x\[0\] must be a finite number"),
         (lambda: Obstacles("abc", (0.0,), (0.1,)), "obstacles.x must be a list of numbers"),
-        (lambda: NoiseConfig(input_noise=-0.1), "input_noise must be >= 0"),
-        (lambda: NoiseConfig(slip_fraction=1.0), "slip_fraction must be < 1"),
-        (lambda: NoiseConfig(basic_sensor_variance=-1e-4), "basic_sensor_variance must be >= 0"),
-        (lambda: NoiseConfig(max_range=0.0), "max_range must be > 0"),
-        (lambda: NoiseConfig(seed=-1), "seed must be an int >= 0"),
-        (lambda: NoiseConfig(seed=1.5), "seed must be an int >= 0"),
+        (lambda: NoiseConfig(input_noise=-0.1), "input_noise must be finite and >= 0"),
+        (lambda: NoiseConfig(slip_fraction=1.0), r"slip_fraction must be in \[0.0, 1.0\)"),
+        (lambda: NoiseConfig(basic_sensor_variance=-1e-4), "basic_sensor_variance must be finite and >= 0"),
+        (lambda: NoiseConfig(max_range=0.0), "max_range must be finite and > 0"),
+        (lambda: NoiseConfig(seed=-1), "seed must be >= 0"),
+        (lambda: NoiseConfig(seed=1.5), "seed must be an integer"),
         (
             lambda: SimulationConfig(obstacles=Obstacles((0.05,), (0.0,), (0.038,))),
             r"start \(x0, y0\) = \(0.0, 0.0\) m with collision_radius 0.11 m overlaps obstacle 0",
@@ -431,5 +431,5 @@ def test_invalid_configurations_raise_with_their_reason(build, message):
 
 
 def test_step_rejects_a_non_positive_time_step():
-    with pytest.raises(ValueError, match="dt_s must be > 0"):
+    with pytest.raises(ValueError, match="dt_s must be finite and > 0"):
         world().step(0.0)

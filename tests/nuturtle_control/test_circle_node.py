@@ -134,8 +134,8 @@ def test_parameter_changes_apply_at_run_time_and_resume_after_stop(ros):
     "values, reason",
     [
         (dict(radius=-0.5), "radius must be finite and > 0"),
-        (dict(radius=math.inf), "radius must be finite and > 0"),
-        (dict(velocity=math.nan), "velocity must be finite"),
+        (dict(radius=math.inf), "radius must be a finite number"),
+        (dict(velocity=math.nan), "velocity must be a finite number"),
         (dict(frequency=0.0), "frequency must be finite and > 0"),
         (dict(radius="big"), "radius must be of type float"),
     ],

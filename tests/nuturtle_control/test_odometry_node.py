@@ -18,7 +18,7 @@ from nav_msgs.msg import Odometry, Path
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
-from nuturtle_control.odometry import OdometryNode
+from nuturtle_control.odometry import OdometryFrames, OdometryNode
 from nuturtle_ros_common.conversions import quaternion_from_yaw, yaw_from_quaternion
 
 pytestmark = pytest.mark.ros
@@ -236,3 +236,16 @@ def test_executable_with_an_invalid_parameter_exits_1_with_the_reason(tmp_path):
     assert result.returncode == 1, result.stderr
     assert "wheel_radius must be finite and > 0, got -1.0" in result.stderr
     assert "Traceback" not in result.stderr
+
+
+@pytest.mark.parametrize(
+    "fields, message",
+    [
+        (dict(body_id=""), "body_id must be a non-empty frame id, got ''"),
+        (dict(odom_id=None), "odom_id must be a non-empty frame id, got None"),
+        (dict(odom_id="base_footprint"), "body_id, odom_id must be distinct frame ids"),
+    ],
+)
+def test_odometry_frames_must_be_non_empty_and_distinct(fields, message):
+    with pytest.raises(ValueError, match=message):
+        OdometryFrames(**fields)

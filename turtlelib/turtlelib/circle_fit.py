@@ -50,6 +50,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .validation import finite_real, positive, store
+
 # |A0| / |A| at or below this (scaled frame) means the fitted curve is a line (radius / spread > 5e9).
 COLLINEAR_TOL = 1e-10
 # Floor on the eigenvalues of the scaled moment matrix (whose largest is >= 1) before taking Y^-1.
@@ -82,13 +84,8 @@ class Circle:
     radius: float
 
     def __post_init__(self) -> None:
-        for name in ("x", "y", "radius"):
-            value = float(getattr(self, name))
-            if not math.isfinite(value):
-                raise ValueError(f"circle {name} must be finite, got {value!r}")
-            object.__setattr__(self, name, value)
-        if self.radius <= 0.0:
-            raise ValueError(f"circle radius must be > 0, got {self.radius}")
+        store(self, ("x", "y"), finite_real, prefix="circle ")
+        store(self, ("radius",), positive, prefix="circle ")
 
     @property
     def centre(self) -> NDArray[np.float64]:

@@ -41,14 +41,14 @@ Pipeline (all in the sensor frame; m, rad)
 from __future__ import annotations
 
 import math
-import numbers
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .circle_fit import hyper_fit_sets, range_sensor_step, rms_residual
-from .validation import finite_real
+from .validation import finite_real, in_range, integer, non_negative, positive, store
 
 # A scan is a full turn when the angular gap from its last beam back to its first is at most this many
 # beam increments.
@@ -60,22 +60,6 @@ _LARGEST_RANGE = float(np.finfo(np.float64).max)
 # _ScanGeometry.bisectors.
 _BEFORE_AFTER = np.array([-1, 1])
 _BEFORE_AFTER_SIDE = np.array([0, 1])
-
-
-def _real_field(owner: object, name: str) -> float:
-    """The field as a float; ValueError unless it is a finite real number (bools excluded)."""
-    value = finite_real(f"detector {name}", getattr(owner, name))
-    object.__setattr__(owner, name, value)
-    return value
-
-
-def _int_field(owner: object, name: str, lowest: int, highest: int) -> int:
-    """The field as an int in [lowest, highest]; ValueError otherwise (bools excluded)."""
-    value = getattr(owner, name)
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or not lowest <= value <= highest:
-        raise ValueError(f"detector {name} must be an int in [{lowest}, {highest}], got {value!r}")
-    object.__setattr__(owner, name, int(value))
-    return int(value)
 
 
 @dataclass(frozen=True)
@@ -124,21 +108,23 @@ class DetectorConfig:
     bearing_std: float = 0.006
 
     def __post_init__(self) -> None:
-        _int_field(self, "min_points", 3, 2**31 - 1)
-        _int_field(self, "min_silhouette_edges", 0, 2)
-        positive = ("cluster_threshold", "max_residual", "max_inscribed_angle_std", "beam_range_std")
-        for name in (*positive, "range_std", "bearing_std"):
-            if _real_field(self, name) <= 0.0:
-                raise ValueError(f"detector {name} must be > 0, got {getattr(self, name)}")
-        if _real_field(self, "silhouette_tolerance") < 0.0:
-            raise ValueError(f"detector silhouette_tolerance must be >= 0, got {self.silhouette_tolerance}")
-        if not 0.0 < _real_field(self, "min_cos_incidence") <= 1.0:
-            raise ValueError(f"detector min_cos_incidence must lie in (0, 1], got {self.min_cos_incidence}")
-        if not 0.0 <= _real_field(self, "min_radius") < _real_field(self, "max_radius"):
-            raise ValueError(f"need 0 <= min_radius < max_radius, got {self.min_radius}, {self.max_radius}")
-        low, high = _real_field(self, "min_inscribed_angle"), _real_field(self, "max_inscribed_angle")
-        if not 0.0 <= low < high <= math.pi:
-            raise ValueError(f"need 0 <= min_inscribed_angle < max_inscribed_angle <= pi, got {low}, {high}")
+        prefix = "detector "
+        store(self, ("min_points",), partial(integer, minimum=3, maximum=2**31 - 1), prefix)
+        store(self, ("min_silhouette_edges",), partial(integer, minimum=0, maximum=2), prefix)
+        positive_fields = ("cluster_threshold", "max_residual", "max_inscribed_angle_std", "beam_range_std")
+        store(self, (*positive_fields, "range_std", "bearing_std"), positive, prefix)
+        store(self, ("silhouette_tolerance", "min_radius"), non_negative, prefix)
+        store(self, ("max_radius",), finite_real, prefix)
+        store(self, ("min_cos_incidence",), partial(in_range, low=0.0, high=1.0, open_low=True), prefix)
+        angles = ("min_inscribed_angle", "max_inscribed_angle")
+        store(self, angles, partial(in_range, low=0.0, high=math.pi), prefix)
+        if not self.min_radius < self.max_radius:
+            raise ValueError(f"need min_radius < max_radius, got {self.min_radius}, {self.max_radius}")
+        if not self.min_inscribed_angle < self.max_inscribed_angle:
+            raise ValueError(
+                "need min_inscribed_angle < max_inscribed_angle, got "
+                f"{self.min_inscribed_angle}, {self.max_inscribed_angle}"
+            )
 
 
 @dataclass(frozen=True, eq=False)

@@ -45,6 +45,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from enum import IntEnum
+from functools import partial
 from numbers import Integral
 
 import numpy as np
@@ -56,7 +57,7 @@ from .kinematics import DiffDrive
 from .landmark_tracks import LandmarkTracks
 from .range_bearing import landmarks_from_observations, predict_observations, residual
 from .slam_state import ROBOT_DIM, SlamState
-from .validation import finite_real, integer
+from .validation import finite_real, in_range, integer, non_negative, one_of, positive, store
 from .wheel_noise import wheel_slip_covariance
 
 MATCHERS = ("nn", "jcbb")
@@ -102,23 +103,16 @@ class SlamConfig:
     jcbb_max_nodes: int = 10_000
 
     def __post_init__(self) -> None:
-        for name in ("sensor_x", "sensor_y", "sensor_theta"):
-            finite_real(name, getattr(self, name))
-        for name in ("wheel_noise", "initial_xy_std", "initial_theta_std"):
-            if finite_real(name, getattr(self, name)) < 0.0:
-                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
-        for name in ("range_std", "bearing_std", "max_range"):
-            if finite_real(name, getattr(self, name)) <= 0.0:
-                raise ValueError(f"{name} must be > 0, got {getattr(self, name)!r}")
-        if self.matcher not in MATCHERS:
-            raise ValueError(f"matcher must be one of {MATCHERS}, got {self.matcher!r}")
-        gate_associate = finite_real("gate_associate", self.gate_associate)
-        gate_new = finite_real("gate_new", self.gate_new)
-        if not 0.0 < gate_associate < gate_new < 1.0:
-            raise ValueError(f"need 0 < gate_associate < gate_new < 1, got {gate_associate!r}, {gate_new!r}")
-        for name in ("confirm_count", "tentative_timeout", "jcbb_max_nodes"):
-            if integer(name, getattr(self, name)) < 1:
-                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)!r}")
+        store(self, ("sensor_x", "sensor_y", "sensor_theta"), finite_real)
+        store(self, ("wheel_noise", "initial_xy_std", "initial_theta_std"), non_negative)
+        store(self, ("range_std", "bearing_std", "max_range"), positive)
+        one_of("matcher", self.matcher, MATCHERS)
+        probability = partial(in_range, low=0.0, high=1.0, open_low=True, open_high=True)
+        store(self, ("gate_associate", "gate_new"), probability)
+        if not self.gate_associate < self.gate_new:
+            raise ValueError(f"need gate_associate < gate_new, got {self.gate_associate}, {self.gate_new}")
+        counts = ("confirm_count", "tentative_timeout", "jcbb_max_nodes")
+        store(self, counts, partial(integer, minimum=1))
         if self.tentative_timeout < self.confirm_count - 1:
             raise ValueError(
                 f"tentative_timeout ({self.tentative_timeout}) must leave room for confirm_count "

@@ -68,6 +68,14 @@ def normalize_angles(angles: ArrayLike) -> NDArray[np.float64]:
 
 
 def _finite_float(name: str, value: float) -> float:
+    """``float(value)``; ValueError unless it is finite.
+
+    Not :func:`turtlelib.validation.finite_real`: Twist2D and Transform2D are built in every filter step,
+    odometry update and simulated physics step, and finite_real's ``numbers.Real`` (ABC) isinstance check
+    costs about 0.6-1.1 us per field against 0.15-0.2 us for this ``float()`` (measured with timeit),
+    which makes their construction (about 2.5 us) about twice as slow. So, unlike finite_real, this
+    accepts whatever ``float()`` converts (bools, numeric strings, 0-d arrays), as it always has.
+    """
     value = float(value)
     if not math.isfinite(value):
         raise ValueError(f"{name} must be finite, got {value!r}")

@@ -27,6 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .geometry import SMALL_ANGLE_RAD, Transform2D, Twist2D, integrate_twist
+from .validation import finite_real, positive, store
 
 
 @dataclass(frozen=True)
@@ -40,10 +41,7 @@ class DiffDrive:
     track_width: float
 
     def __post_init__(self) -> None:
-        for name in ("wheel_radius", "track_width"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0.0):
-                raise ValueError(f"{name} must be finite and > 0, got {value!r}")
+        store(self, ("wheel_radius", "track_width"), positive)
 
     def body_twist(self, dphi_left: float, dphi_right: float) -> Twist2D:
         """Forward kinematics ``V_b = F dphi``.
@@ -53,7 +51,7 @@ class DiffDrive:
 
         Non-finite wheel values raise ValueError.
         """
-        dphi_left, dphi_right = _finite_wheels(dphi_left, dphi_right)
+        dphi_left, dphi_right = finite_real("dphi_left", dphi_left), finite_real("dphi_right", dphi_right)
         r, d = self.wheel_radius, self.track_width
         # omega = r (dphi_r - dphi_l) / d,  vx = r (dphi_l + dphi_r) / 2,  vy = 0
         return Twist2D(r * (dphi_right - dphi_left) / d, 0.5 * r * (dphi_left + dphi_right), 0.0)
@@ -95,9 +93,10 @@ class DiffDrive:
         (``dphi_left == dphi_right``) is smooth. ``theta_or_T`` is the old heading (rad) or the old pose;
         non-finite headings or wheel increments raise ValueError.
         """
-        theta = theta_or_T.theta if isinstance(theta_or_T, Transform2D) else float(theta_or_T)
-        if not math.isfinite(theta):
-            raise ValueError(f"heading must be finite, got {theta!r}")
+        if isinstance(theta_or_T, Transform2D):
+            theta = theta_or_T.theta
+        else:
+            theta = finite_real("heading", theta_or_T)
         twist = self.body_twist(dphi_left, dphi_right)
         u, omega = twist.vx, twist.omega
         c, s = math.cos(theta), math.sin(theta)
@@ -122,13 +121,6 @@ class DiffDrive:
         du_domega_dphi = np.array([[0.5 * r, 0.5 * r], [-r / d, r / d]])
         G_wheels = dq_du_domega @ du_domega_dphi
         return G_pose, G_wheels
-
-
-def _finite_wheels(dphi_left: float, dphi_right: float) -> tuple[float, float]:
-    dphi_left, dphi_right = float(dphi_left), float(dphi_right)
-    if not (math.isfinite(dphi_left) and math.isfinite(dphi_right)):
-        raise ValueError(f"wheel values must be finite, got ({dphi_left!r}, {dphi_right!r})")
-    return dphi_left, dphi_right
 
 
 def _arc_derivative(omega: float) -> NDArray[np.float64]:

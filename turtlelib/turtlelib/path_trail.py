@@ -11,9 +11,11 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass
+from functools import partial
 from typing import Generic, TypeVar
 
 from .geometry import Transform2D, normalize_angle
+from .validation import integer, non_negative, store
 
 Item = TypeVar("Item")
 
@@ -21,19 +23,15 @@ Item = TypeVar("Item")
 @dataclass(frozen=True)
 class PathTrailConfig:
     """Decimation of a path: ``path_min_step_m`` (m) and ``path_min_turn_rad`` (rad) finite and >= 0,
-    ``path_max_poses`` >= 1 (ValueError otherwise)."""
+    ``path_max_poses`` an integer >= 1 (ValueError otherwise)."""
 
     path_min_step_m: float = 0.02
     path_min_turn_rad: float = 0.1
     path_max_poses: int = 3000
 
     def __post_init__(self) -> None:
-        for name in ("path_min_step_m", "path_min_turn_rad"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0.0):
-                raise ValueError(f"{name} must be finite and >= 0, got {value!r}")
-        if self.path_max_poses < 1:
-            raise ValueError(f"path_max_poses must be >= 1, got {self.path_max_poses!r}")
+        store(self, ("path_min_step_m", "path_min_turn_rad"), non_negative)
+        store(self, ("path_max_poses",), partial(integer, minimum=1))
 
 
 class PathTrail(Generic[Item]):

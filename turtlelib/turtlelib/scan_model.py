@@ -24,13 +24,14 @@ nothing.
 from __future__ import annotations
 
 import math
-import numbers
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .geometry import Transform2D
+from .validation import finite_real, integer, non_negative, positive, store
 
 # Tolerance on samples * angle_increment <= 2 pi (beams may not wrap past a full turn).
 _FULL_TURN_SLACK_RAD = 1e-9
@@ -60,26 +61,16 @@ class LidarConfig:
     resolution: float = 0.0
 
     def __post_init__(self) -> None:
-        for name in ("range_min", "range_max", "angle_min", "angle_increment", "noise", "resolution"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
-                raise ValueError(f"lidar {name} must be a finite number, got {value!r}")
-            object.__setattr__(self, name, float(value))
-        if isinstance(self.samples, bool) or not isinstance(self.samples, numbers.Integral):
-            raise ValueError(f"lidar samples must be an int, got {self.samples!r}")
-        if self.samples < 1:
-            raise ValueError(f"lidar samples must be >= 1, got {self.samples}")
-        object.__setattr__(self, "samples", int(self.samples))
-        if not 0.0 <= self.range_min < self.range_max:
-            raise ValueError(f"need 0 <= range_min < range_max, got {self.range_min}, {self.range_max}")
-        if self.angle_increment <= 0.0:
-            raise ValueError(f"lidar angle_increment must be > 0, got {self.angle_increment}")
+        store(self, ("range_max", "angle_min"), finite_real, prefix="lidar ")
+        store(self, ("range_min", "noise", "resolution"), non_negative, prefix="lidar ")
+        store(self, ("angle_increment",), positive, prefix="lidar ")
+        store(self, ("samples",), partial(integer, minimum=1), prefix="lidar ")
+        if not self.range_min < self.range_max:
+            raise ValueError(f"need range_min < range_max, got {self.range_min}, {self.range_max}")
         if self.samples * self.angle_increment > 2.0 * math.pi + _FULL_TURN_SLACK_RAD:
             raise ValueError(
                 f"samples * angle_increment = {self.samples * self.angle_increment} exceeds a full turn"
             )
-        if self.noise < 0.0 or self.resolution < 0.0:
-            raise ValueError(f"lidar noise and resolution must be >= 0, got {self.noise}, {self.resolution}")
 
     def angles(self) -> NDArray[np.float64]:
         """Beam directions ``phi_b = angle_min + b * angle_increment`` (rad), shape (samples,)."""

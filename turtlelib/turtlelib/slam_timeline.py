@@ -30,13 +30,14 @@ from __future__ import annotations
 
 import bisect
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .ekf_slam import Association, EkfSlam
 from .geometry import Transform2D
-from .validation import finite_real, integer
+from .validation import finite_real, integer, non_negative, store
 
 
 @dataclass(frozen=True)
@@ -49,10 +50,8 @@ class TimelineConfig:
     max_pending_observations: int = 20
 
     def __post_init__(self) -> None:
-        if finite_real("max_observation_delay", self.max_observation_delay) < 0.0:
-            raise ValueError(f"max_observation_delay must be >= 0, got {self.max_observation_delay!r}")
-        if integer("max_pending_observations", self.max_pending_observations) < 1:
-            raise ValueError(f"max_pending_observations must be >= 1, got {self.max_pending_observations!r}")
+        store(self, ("max_observation_delay",), non_negative)
+        store(self, ("max_pending_observations",), partial(integer, minimum=1))
 
 
 @dataclass(frozen=True, eq=False)
