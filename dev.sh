@@ -63,6 +63,7 @@ case "$cmd" in
   test)
     setup
     if [ $# -gt 0 ]; then exec "$py" -P -m pytest "$@"; fi
+    lint
     core_tests
     exec "$py" -P -m pytest
     ;;

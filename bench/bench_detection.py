@@ -26,6 +26,7 @@ sys.path[:0] = [str(ROOT / "bench"), str(ROOT / "tests" / "turtlelib")]  # bench
 
 from bench_docs import write_section  # noqa: E402
 from detection_scenes import random_scene, score  # noqa: E402
+
 from turtlelib import DetectorConfig, LandmarkDetector, LidarConfig, simulate_scan  # noqa: E402
 
 BEAM_COUNTS = (100, 360, 1000)

@@ -20,24 +20,24 @@ import os
 
 os.environ["OPENBLAS_NUM_THREADS"] = "1"  # before numpy loads OpenBLAS
 
-import argparse  # noqa: E402
-import dataclasses  # noqa: E402
-import math  # noqa: E402
-import platform  # noqa: E402
-import sys  # noqa: E402
-import time  # noqa: E402
-from pathlib import Path  # noqa: E402
+import argparse
+import dataclasses
+import math
+import platform
+import sys
+import time
+from pathlib import Path
 
-import numpy as np  # noqa: E402
+import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench_docs, also under python -P
 
-from bench_docs import write_section  # noqa: E402
+from bench_docs import write_section
 
-from turtlelib import DiffDrive, Transform2D  # noqa: E402
-from turtlelib.ekf_slam import EkfSlam, ObservationStatus, SlamConfig  # noqa: E402
-from turtlelib.range_bearing import predict_observations  # noqa: E402
-from turtlelib.slam_state import MIRROR_BLOCK  # noqa: E402
+from turtlelib import DiffDrive, Transform2D
+from turtlelib.ekf_slam import EkfSlam, ObservationStatus, SlamConfig
+from turtlelib.range_bearing import predict_observations
+from turtlelib.slam_state import MIRROR_BLOCK
 
 ROOT = Path(__file__).resolve().parents[1]
 HEADING = "## EKF SLAM"
@@ -45,7 +45,9 @@ SIZES = (10, 20, 100, 500, 1000, 2000)
 OBSERVATIONS_PER_STEP = 10
 ROUNDS = 5
 BURGER = DiffDrive(wheel_radius=0.033, track_width=0.16)
-CONFIG = SlamConfig(sensor_x=-0.032, range_std=0.01, bearing_std=0.002, max_range=1e3, confirm_count=1, initial_xy_std=0.01)
+CONFIG = SlamConfig(
+    sensor_x=-0.032, range_std=0.01, bearing_std=0.002, max_range=1e3, confirm_count=1, initial_xy_std=0.01
+)
 WHEEL_STEP_RAD = 0.1  # both wheels: 3.3 mm forward per step
 
 

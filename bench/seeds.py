@@ -16,13 +16,13 @@ import os
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy loads OpenBLAS
 
-import argparse  # noqa: E402
-import platform  # noqa: E402
-from pathlib import Path  # noqa: E402
+import argparse
+import platform
+from pathlib import Path
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from nuturtle_demo.run import ASSOCIATIONS, DemoOptions, run_demo  # noqa: E402
+from nuturtle_demo.run import ASSOCIATIONS, DemoOptions, run_demo
 
 HEADER = (
     "run", "SLAM pos (m)", "SLAM heading (rad)", "odom pos (m)", "ATE SLAM / odom (m)",
@@ -82,7 +82,8 @@ def main() -> None:
     args = parser.parse_args()
     print(
         f"{args.seeds} seeds x {len(ASSOCIATIONS)} association modes, {args.duration:g} s of robot time each "
-        f"(OPENBLAS_NUM_THREADS=1; {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()})\n"
+        f"(OPENBLAS_NUM_THREADS=1; {platform.machine()}, {os.cpu_count()} cores, "
+        f"Python {platform.python_version()})\n"
     )
     print("| " + " | ".join(HEADER) + " |")
     print("|" + "---|" * len(HEADER))
@@ -95,7 +96,10 @@ def main() -> None:
             )  # fmt: skip
             metrics = run_demo(options).metrics.as_dict()
             runs.append(metrics)
-            print(row(f"{association}, seed {seed}", metrics, "yes" if meets_targets(metrics) else "no"), flush=True)
+            print(
+                row(f"{association}, seed {seed}", metrics, "yes" if meets_targets(metrics) else "no"),
+                flush=True,
+            )
         met = sum(meets_targets(m) for m in runs)
         print(row(f"**{association}, mean**", summary(runs, "mean"), f"{met}/{len(runs)}"))
         print(row(f"**{association}, worst**", summary(runs, "worst"), ""))

@@ -25,12 +25,13 @@ setup(
     zip_safe=True,
     maintainer="nuturtle team",
     maintainer_email="team@nuturtle.dev",
-    description="Simulator of a TurtleBot3 Burger in an arena of cylinders: wheel commands in, encoders, LaserScan, fake landmark sensor and ground truth out.",
+    description=(
+        "Simulator of a TurtleBot3 Burger in an arena of cylinders: wheel commands in, encoders, "
+        "LaserScan, fake landmark sensor and ground truth out."
+    ),
     license="Apache-2.0",
     tests_require=["pytest"],
     entry_points={
-        "console_scripts": [
-            "nusim = nusim.nusim_node:main"
-        ],
+        "console_scripts": ["nusim = nusim.nusim_node:main"],
     },
 )

@@ -25,14 +25,16 @@ setup(
     zip_safe=True,
     maintainer="nuturtle team",
     maintainer_email="team@nuturtle.dev",
-    description="Twist to wheel commands, wheel odometry and a circle-driving node for the TurtleBot3 Burger.",
+    description=(
+        "Twist to wheel commands, wheel odometry and a circle-driving node for the TurtleBot3 Burger."
+    ),
     license="Apache-2.0",
     tests_require=["pytest"],
     entry_points={
         "console_scripts": [
             "turtle_control = nuturtle_control.turtle_control:main",
             "odometry = nuturtle_control.odometry:main",
-            "circle = nuturtle_control.circle:main"
+            "circle = nuturtle_control.circle:main",
         ],
     },
 )

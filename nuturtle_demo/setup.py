@@ -25,7 +25,10 @@ setup(
     zip_safe=True,
     maintainer="nuturtle team",
     maintainer_email="team@nuturtle.dev",
-    description="The simulation + SLAM demo: the headless run, its route driver, the rosbag2 recorder, metrics and figures.",
+    description=(
+        "The simulation + SLAM demo: the headless run, its route driver, the rosbag2 recorder, "
+        "metrics and figures."
+    ),
     license="Apache-2.0",
     tests_require=["pytest"],
     entry_points={

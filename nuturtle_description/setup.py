@@ -1,4 +1,4 @@
-"""ament_python build of the nuturtle_description package (colcon); pip installs use the root pyproject.toml."""
+"""ament_python build of the nuturtle_description package (colcon); pip uses the root pyproject.toml."""
 
 from glob import glob
 
@@ -25,12 +25,12 @@ setup(
     zip_safe=True,
     maintainer="nuturtle team",
     maintainer_email="team@nuturtle.dev",
-    description="TurtleBot3 Burger description (URDF), and its constants (wheels, motors, encoders, LiDAR mount).",
+    description=(
+        "TurtleBot3 Burger description (URDF), and its constants (wheels, motors, encoders, LiDAR mount)."
+    ),
     license="Apache-2.0",
     tests_require=["pytest"],
     entry_points={
-        "console_scripts": [
-
-        ],
+        "console_scripts": [],
     },
 )

@@ -1,4 +1,4 @@
-"""ament_python build of the nuturtle_ros_common package (colcon); pip installs use the root pyproject.toml."""
+"""ament_python build of the nuturtle_ros_common package (colcon); pip uses the root pyproject.toml."""
 
 from glob import glob
 
@@ -25,12 +25,13 @@ setup(
     zip_safe=True,
     maintainer="nuturtle team",
     maintainer_email="team@nuturtle.dev",
-    description="The suite's shared rclpy glue: message conversions, markers, parameter declaration, the node entry point, optional TF, wheel joints.",
+    description=(
+        "The suite's shared rclpy glue: message conversions, markers, parameter declaration, the "
+        "node entry point, optional TF, wheel joints."
+    ),
     license="Apache-2.0",
     tests_require=["pytest"],
     entry_points={
-        "console_scripts": [
-
-        ],
+        "console_scripts": [],
     },
 )

@@ -31,6 +31,7 @@ _tests_dir = os.path.dirname(os.path.abspath(__file__))
 _shadowing = {_tests_dir, os.path.dirname(_tests_dir)}
 sys.path[:] = [entry for entry in sys.path if os.path.abspath(entry or os.curdir) not in _shadowing]
 
+
 class _TestHelpers(importlib.abc.MetaPathFinder):
     """Finds the helper modules of this folder (``rclpy_harness``) without the folder on sys.path; they
     are imported (rclpy with them) only by the tests that use them."""
@@ -43,6 +44,7 @@ class _TestHelpers(importlib.abc.MetaPathFinder):
 
 
 sys.meta_path.append(_TestHelpers())
+
 
 @pytest.fixture
 def ros():

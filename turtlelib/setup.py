@@ -25,12 +25,13 @@ setup(
     zip_safe=True,
     maintainer="nuturtle team",
     maintainer_email="team@nuturtle.dev",
-    description="Pure numpy SE(2) geometry, diff-drive kinematics, LiDAR landmark detection and EKF SLAM maths (no ROS).",
+    description=(
+        "Pure numpy SE(2) geometry, diff-drive kinematics, LiDAR landmark detection and EKF SLAM "
+        "maths (no ROS)."
+    ),
     license="Apache-2.0",
     tests_require=["pytest"],
     entry_points={
-        "console_scripts": [
-
-        ],
+        "console_scripts": [],
     },
 )

@@ -51,26 +51,25 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState, LaserScan
 from std_srvs.srv import Empty
-from turtlelib import Twist2D
-from turtlelib.scan_model import LidarConfig
-from turtlelib.validation import positive, store
 from visualization_msgs.msg import Marker, MarkerArray
 
-from turtlelib.path_trail import PathTrail, PathTrailConfig
-from nuturtle_ros_common.wheel_joints import WheelJoints, wheel_values
+from nuturtle_description.robot_params import RobotParams, burger_params
 from nuturtle_ros_common.conversions import (
     odometry_message,
-    pose_from_transform,
     stamp_from_seconds,
     transform_from_pose,
     transform_stamped,
 )
 from nuturtle_ros_common.markers import MARKER_HEIGHT_M, cylinder_marker, set_color
 from nuturtle_ros_common.node_main import run_node
-from nuturtle_description.robot_params import RobotParams, burger_params
 from nuturtle_ros_common.ros_params import declare_dataclass
 from nuturtle_ros_common.tf_compat import OptionalTfBroadcaster
 from nuturtle_ros_common.throttle import WARN_THROTTLE_S
+from nuturtle_ros_common.wheel_joints import WheelJoints, wheel_values
+from turtlelib import Twist2D
+from turtlelib.path_trail import PathTrail, PathTrailConfig
+from turtlelib.scan_model import LidarConfig
+from turtlelib.validation import positive, store
 
 from .simulation import (
     ArenaConfig,
@@ -273,7 +272,7 @@ class NusimNode(Node):
             cylinder_marker(
                 BODY_FRAME, stamp, "fake_sensor", int(j), float(x), float(y), float(radii_m[j]), YELLOW
             )
-            for j, (x, y) in zip(readings.ids, readings.p_body)
+            for j, (x, y) in zip(readings.ids, readings.p_body, strict=True)
         ]
         for j in sorted(set(range(radii_m.size)) - set(readings.ids.tolist())):
             marker = Marker(ns="fake_sensor", id=j, action=Marker.DELETE)

@@ -49,11 +49,11 @@ from functools import partial
 
 import numpy as np
 from numpy.typing import NDArray
+
+from nuturtle_description.robot_params import RobotParams
 from turtlelib import DiffDrive, Transform2D
 from turtlelib.scan_model import LidarConfig, arena_walls, simulate_scan
 from turtlelib.validation import finite_real, in_range, integer, non_negative, positive, store
-
-from nuturtle_description.robot_params import RobotParams
 
 # The default world: eight cylinders of the course's radius, 0.75 to 1.85 m from the centre. On any circle
 # of radius 0.5 to 1.0 m through the origin (centre (0, +-radius)) the robot's disc (0.11 m) clears every
@@ -168,7 +168,9 @@ class SimulationConfig:
                     f"{self.arena.arena_x_length} m x {self.arena.arena_y_length} m arena"
                 )
         collision = first_collision(
-            self.arena.T_world_start.translation, self.obstacles.circles(), self.arena.half_extents_m,
+            self.arena.T_world_start.translation,
+            self.obstacles.circles(),
+            self.arena.half_extents_m,
             self.robot.collision_radius,
         )
         if collision is not None:
@@ -311,7 +313,10 @@ class Simulation:
         T_end = self.drive.step(T_start, dphi[0], dphi[1])
         d_world = T_end.translation - T_start.translation
         s = contact_fraction(
-            T_start.translation, d_world, self.circles, self.config.arena.half_extents_m,
+            T_start.translation,
+            d_world,
+            self.circles,
+            self.config.arena.half_extents_m,
             self.config.robot.collision_radius,
         )
         if s < 1.0:
@@ -334,7 +339,9 @@ class Simulation:
     def teleport(self, T_world_body: Transform2D) -> None:
         """Put the robot at ``T_world_body`` (the encoders keep their count); ValueError if not free."""
         collision = first_collision(
-            T_world_body.translation, self.circles, self.config.arena.half_extents_m,
+            T_world_body.translation,
+            self.circles,
+            self.config.arena.half_extents_m,
             self.config.robot.collision_radius,
         )
         if collision is not None:

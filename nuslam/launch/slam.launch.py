@@ -63,9 +63,7 @@ def generate_launch_description() -> LaunchDescription:
             DeclareLaunchArgument("use_sim_time", default_value="false", choices=["true", "false"]),
             DeclareLaunchArgument("cmd_src", default_value="circle", choices=["circle", "teleop", "none"]),
             IncludeLaunchDescription(
-                PythonLaunchDescriptionSource(
-                    _share("nuturtle_control", "launch", "start_robot.launch.py")
-                ),
+                PythonLaunchDescriptionSource(_share("nuturtle_control", "launch", "start_robot.launch.py")),
                 launch_arguments={
                     "use_sim_time": LaunchConfiguration("use_sim_time"),
                     "cmd_src": LaunchConfiguration("cmd_src"),

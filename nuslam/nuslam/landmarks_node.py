@@ -25,13 +25,13 @@ from geometry_msgs.msg import Point
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import LaserScan
-from turtlelib import Clusters, DetectorConfig, Detections, LandmarkDetector
 from visualization_msgs.msg import Marker, MarkerArray
 
 from nuturtle_ros_common.markers import cylinder_marker, delete_all_marker, set_color
 from nuturtle_ros_common.node_main import run_node
 from nuturtle_ros_common.ros_params import declare_dataclass
 from nuturtle_ros_common.throttle import WARN_THROTTLE_S
+from turtlelib import Clusters, Detections, DetectorConfig, LandmarkDetector
 
 GREEN = (0.1, 0.8, 0.2, 1.0)
 GREY = (0.6, 0.6, 0.6, 0.8)
@@ -43,8 +43,10 @@ def landmark_markers(detections: Detections, msg: LaserScan) -> MarkerArray:
     """The `landmarks` array of one scan: DELETEALL, then a CYLINDER per detection."""
     frame_id, stamp = msg.header.frame_id, msg.header.stamp
     markers = [delete_all_marker(frame_id, stamp)]
-    for k, ((x, y), radius_m) in enumerate(zip(detections.p_sensor, detections.radius)):
-        markers.append(cylinder_marker(frame_id, stamp, "landmarks", k, float(x), float(y), float(radius_m), GREEN))
+    for k, ((x, y), radius_m) in enumerate(zip(detections.p_sensor, detections.radius, strict=True)):
+        markers.append(
+            cylinder_marker(frame_id, stamp, "landmarks", k, float(x), float(y), float(radius_m), GREEN)
+        )
     return MarkerArray(markers=markers)
 
 

@@ -49,27 +49,26 @@ from nav_msgs.msg import Odometry, Path
 from numpy.typing import NDArray
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
-from turtlelib import EkfSlam, SlamConfig, SlamTimeline, TimelineConfig, Transform2D, Twist2D
-from turtlelib.range_bearing import observations_from_points
-from turtlelib.validation import finite_real, names, one_of, positive, store
 from visualization_msgs.msg import MarkerArray
 
-from turtlelib.path_trail import PathTrail, PathTrailConfig
-from nuturtle_ros_common.wheel_joints import WheelJoints, wheel_values
-from turtlelib.wheel_odometry import WheelOdometry
+from nuturtle_description.robot_params import RobotParams, burger_params
 from nuturtle_ros_common.conversions import (
     odometry_message,
-    pose_from_transform,
     stamp_from_seconds,
     stamp_seconds,
     transform_stamped,
 )
 from nuturtle_ros_common.markers import cylinder_marker, delete_all_marker, ellipse_marker, marker_positions
 from nuturtle_ros_common.node_main import run_node
-from nuturtle_description.robot_params import RobotParams, burger_params
 from nuturtle_ros_common.ros_params import declare_dataclass
 from nuturtle_ros_common.tf_compat import OptionalTfBroadcaster
 from nuturtle_ros_common.throttle import SourceWarnings
+from nuturtle_ros_common.wheel_joints import WheelJoints, wheel_values
+from turtlelib import EkfSlam, SlamConfig, SlamTimeline, TimelineConfig, Transform2D, Twist2D
+from turtlelib.path_trail import PathTrail, PathTrailConfig
+from turtlelib.range_bearing import observations_from_points
+from turtlelib.validation import finite_real, names, one_of, positive, store
+from turtlelib.wheel_odometry import WheelOdometry
 
 ASSOCIATIONS = ("known", "unknown")
 GREEN = (0.1, 0.8, 0.2, 1.0)
@@ -121,7 +120,11 @@ class SlamNode(Node):
         robot = declare_dataclass(self, RobotParams, overrides=vars(burger_params()))
         # the sensor mount is the robot's: written once, in its description
         T_body_scan = robot.T_body_scan
-        sensor_mount = {"sensor_x": T_body_scan.x, "sensor_y": T_body_scan.y, "sensor_theta": T_body_scan.theta}
+        sensor_mount = {
+            "sensor_x": T_body_scan.x,
+            "sensor_y": T_body_scan.y,
+            "sensor_theta": T_body_scan.theta,
+        }
         self.config = declare_dataclass(self, SlamConfig, fixed=sensor_mount)
         timeline_config = declare_dataclass(self, TimelineConfig)
         self.joints = declare_dataclass(self, WheelJoints)
@@ -180,7 +183,9 @@ class SlamNode(Node):
             # finite angles whose increment the kinematics cannot take (a turn rate that overflows): the
             # timeline may hold the sample already and would fail on it again at every later sample, so
             # start afresh from it, as the odometry node does
-            self._warnings.warn("joint_states", f"joint_states skipped: {error}; taking it as the new reference")
+            self._warnings.warn(
+                "joint_states", f"joint_states skipped: {error}; taking it as the new reference"
+            )
             self._restart(t_s, phi_left_rad, phi_right_rad)
             return
         map_stamp = self._waiting_stamps.get(applied[-1][0]) if applied else None
@@ -193,7 +198,9 @@ class SlamNode(Node):
         try:
             t_s, ids, p_sensor, rotation = self._observed_points(msg)
             # Sigma_sensor = R_sf Sigma R_sf^T
-            covariance = np.broadcast_to(rotation @ self._fake_sensor_covariance @ rotation.T, (len(ids), 2, 2))
+            covariance = np.broadcast_to(
+                rotation @ self._fake_sensor_covariance @ rotation.T, (len(ids), 2, 2)
+            )
             z, R = observations_from_points(p_sensor, covariance)
             applied = self.timeline.add_observations(t_s, z, R, ids)
         except (ValueError, np.linalg.LinAlgError) as error:
@@ -230,7 +237,9 @@ class SlamNode(Node):
         sample has been applied (or refused)."""
         latest_s = self.timeline.latest_time_s
         if latest_s is not None:
-            self._waiting_stamps = {t_s: stamp for t_s, stamp in self._waiting_stamps.items() if t_s > latest_s}
+            self._waiting_stamps = {
+                t_s: stamp for t_s, stamp in self._waiting_stamps.items() if t_s > latest_s
+            }
 
     def _observed_points(
         self, msg: MarkerArray
@@ -266,16 +275,19 @@ class SlamNode(Node):
         markers = [delete_all_marker(map_id, stamp)]
         radius_m = self.node_config.landmark_radius
         for landmark_id, xy, covariance in zip(
-            self.slam.landmark_ids.tolist(), self.slam.landmarks, self.slam.landmark_covariances
+            self.slam.landmark_ids.tolist(), self.slam.landmarks, self.slam.landmark_covariances, strict=True
         ):
             markers.append(
-                cylinder_marker(map_id, stamp, "landmarks", landmark_id, float(xy[0]), float(xy[1]), radius_m, GREEN)
+                cylinder_marker(
+                    map_id, stamp, "landmarks", landmark_id, float(xy[0]), float(xy[1]), radius_m, GREEN
+                )
             )
             markers.append(
-                ellipse_marker(map_id, stamp, "covariance", landmark_id, xy, covariance, ELLIPSE_SIGMA, GREEN_TRANSLUCENT)
+                ellipse_marker(
+                    map_id, stamp, "covariance", landmark_id, xy, covariance, ELLIPSE_SIGMA, GREEN_TRANSLUCENT
+                )
             )
         self._map_publisher.publish(MarkerArray(markers=markers))
-
 
 
 def main(args: list[str] | None = None) -> None:

@@ -25,11 +25,11 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_srvs.srv import Empty
-from turtlelib import Twist2D
-from turtlelib.validation import finite_real, positive, store
 
 from nuturtle_ros_common.node_main import run_node
 from nuturtle_ros_common.ros_params import declare_dataclass, replace_from_parameters
+from turtlelib import Twist2D
+from turtlelib.validation import finite_real, positive, store
 
 
 @dataclass(frozen=True)

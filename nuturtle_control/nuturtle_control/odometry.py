@@ -33,26 +33,23 @@ from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry, Path
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
-from turtlelib import Transform2D, Twist2D
 
+from nuturtle_description.robot_params import RobotParams, burger_params
 from nuturtle_ros_common.conversions import (
     odometry_message,
-    pose_from_transform,
     stamp_seconds,
     transform_from_pose,
     transform_stamped,
 )
 from nuturtle_ros_common.node_main import run_node
-from nuturtle_description.robot_params import RobotParams, burger_params
 from nuturtle_ros_common.ros_params import declare_dataclass
 from nuturtle_ros_common.tf_compat import OptionalTfBroadcaster
-
-from turtlelib.path_trail import PathTrail, PathTrailConfig
-from nuturtle_ros_common.wheel_joints import WheelJoints, wheel_values
 from nuturtle_ros_common.throttle import WARN_THROTTLE_S
+from nuturtle_ros_common.wheel_joints import WheelJoints, wheel_values
+from turtlelib import Transform2D, Twist2D
+from turtlelib.path_trail import PathTrail, PathTrailConfig
 from turtlelib.validation import names
 from turtlelib.wheel_odometry import WheelOdometry
-
 
 
 @dataclass(frozen=True)
@@ -86,9 +83,7 @@ class OdometryNode(Node):
         try:
             phi_left_rad, phi_right_rad = wheel_values(self.joints, msg.name, msg.position)
         except ValueError as error:
-            self.get_logger().warning(
-                f"joint_states skipped: {error}", throttle_duration_sec=WARN_THROTTLE_S
-            )
+            self.get_logger().warning(f"joint_states skipped: {error}", throttle_duration_sec=WARN_THROTTLE_S)
             return
         t_s = stamp_seconds(msg.header.stamp)
         reference_time_s = self.odometry.reference_time_s
@@ -133,9 +128,7 @@ class OdometryNode(Node):
         try:
             T_odom_body = transform_from_pose(msg.pose.pose)
         except ValueError as error:
-            self.get_logger().warning(
-                f"initialpose skipped: {error}", throttle_duration_sec=WARN_THROTTLE_S
-            )
+            self.get_logger().warning(f"initialpose skipped: {error}", throttle_duration_sec=WARN_THROTTLE_S)
             return
         self.odometry.T_odom_body = T_odom_body
         self.trail.clear()

@@ -25,16 +25,14 @@ import sys
 from geometry_msgs.msg import Twist
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
-from turtlelib import Twist2D
 
-from nuturtle_ros_common.node_main import run_node
 from nuturtle_description.robot_params import RobotParams, burger_params
+from nuturtle_ros_common.node_main import run_node
 from nuturtle_ros_common.ros_params import declare_dataclass
-
-from nuturtle_ros_common.wheel_joints import WheelJoints
 from nuturtle_ros_common.throttle import WARN_THROTTLE_S
+from nuturtle_ros_common.wheel_joints import WheelJoints
+from turtlelib import Twist2D
 from turtlelib.wheel_limits import limit_wheel_speeds
-
 
 
 class TurtleControlNode(Node):
@@ -49,13 +47,10 @@ class TurtleControlNode(Node):
         self.create_subscription(Twist, "cmd_vel", self._on_cmd_vel, 10)
 
     def _on_cmd_vel(self, msg: Twist) -> None:
-        components = (
-            msg.linear.x, msg.linear.y, msg.linear.z, msg.angular.x, msg.angular.y, msg.angular.z
-        )
+        components = (msg.linear.x, msg.linear.y, msg.linear.z, msg.angular.x, msg.angular.y, msg.angular.z)
         if not all(math.isfinite(value) for value in components):
             self.get_logger().warning(
-                f"cmd_vel skipped: non-finite component in linear {components[:3]}, "
-                f"angular {components[3:]}",
+                f"cmd_vel skipped: non-finite component in linear {components[:3]}, angular {components[3:]}",
                 throttle_duration_sec=WARN_THROTTLE_S,
             )
             return
@@ -73,9 +68,7 @@ class TurtleControlNode(Node):
                 left_rad_s, right_rad_s, self.robot.max_wheel_speed
             )
         except ValueError as error:  # finite but so large that the wheel speeds overflow
-            self.get_logger().warning(
-                f"cmd_vel skipped: {error}", throttle_duration_sec=WARN_THROTTLE_S
-            )
+            self.get_logger().warning(f"cmd_vel skipped: {error}", throttle_duration_sec=WARN_THROTTLE_S)
             return
         if scale < 1.0:
             self.get_logger().warning(

@@ -49,14 +49,14 @@ import numpy as np
 from geometry_msgs.msg import Twist
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
-from turtlelib import Transform2D, Twist2D
-from turtlelib.validation import non_negative, positive, store
 
 from nuturtle_control.circle import twist_message
+from nuturtle_description.robot_params import RobotParams, burger_params
 from nuturtle_ros_common.conversions import transform_from_pose
 from nuturtle_ros_common.node_main import run_node
-from nuturtle_description.robot_params import RobotParams, burger_params
 from nuturtle_ros_common.ros_params import declare_dataclass
+from turtlelib import Transform2D, Twist2D
+from turtlelib.validation import non_negative, positive, store
 
 
 @dataclass(frozen=True)
@@ -98,7 +98,9 @@ class FigureEight:
         drive = robot.diff_drive()
         step_rad_s = 1.0 / robot.motor_cmd_per_rad_sec
         # phi_dot = H(0) V_b, rounded to the motor's speed resolution
-        wheel_rad_s = np.array(drive.wheel_speeds(Twist2D(route.velocity / route.radius, route.velocity, 0.0)))
+        wheel_rad_s = np.array(
+            drive.wheel_speeds(Twist2D(route.velocity / route.radius, route.velocity, 0.0))
+        )
         left_rad_s, right_rad_s = np.round(wheel_rad_s / step_rad_s) * step_rad_s
         if max(abs(left_rad_s), abs(right_rad_s)) > robot.max_wheel_speed:
             raise ValueError(

@@ -35,6 +35,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
+
 from turtlelib import Transform2D, normalize_angles
 from turtlelib.consistency import chi2_bounds, nees
 
@@ -233,7 +234,8 @@ class RunData:
 
     ``truth``, ``odom``, ``slam`` pose series; ``slam_covariances`` (K, 3, 3) the (x, y, theta) covariance
     of each SLAM pose; ``mapped_xy`` (n, 2) the final map; ``true_xy`` (M, 2) the true cylinder centres;
-    ``sensor_range_m`` the range within which a cylinder counts as seen (one for all, or (M,) per cylinder); ``gate_m`` the association gate.
+    ``sensor_range_m`` the range within which a cylinder counts as seen (one for all, or (M,) per cylinder);
+    ``gate_m`` the association gate.
     """
 
     truth: PoseSeries

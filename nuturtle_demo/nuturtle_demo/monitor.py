@@ -38,7 +38,12 @@ class _Stream:
 
     def add(self, msg: Odometry, covariance: NDArray[np.float64] | None = None) -> None:
         pose = msg.pose.pose
-        row = (stamp_seconds(msg.header.stamp), pose.position.x, pose.position.y, yaw_from_quaternion(pose.orientation))
+        row = (
+            stamp_seconds(msg.header.stamp),
+            pose.position.x,
+            pose.position.y,
+            yaw_from_quaternion(pose.orientation),
+        )
         replace = bool(self.rows) and row[0] <= self.rows[-1][0]
         if replace:
             self.rows[-1] = row

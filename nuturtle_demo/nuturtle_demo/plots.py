@@ -40,7 +40,9 @@ def ellipse_points(
     t = np.linspace(0.0, 2.0 * math.pi, samples)
     unit = np.vstack([np.cos(t), np.sin(t)])
     # p = c + n V sqrt(Lambda) u
-    return (np.asarray(center)[:, None] + n_sigma * V @ (np.sqrt(np.maximum(eigenvalues, 0.0))[:, None] * unit)).T
+    return (
+        np.asarray(center)[:, None] + n_sigma * V @ (np.sqrt(np.maximum(eigenvalues, 0.0))[:, None] * unit)
+    ).T
 
 
 def plot_trajectory(
@@ -71,7 +73,7 @@ def plot_trajectory(
     axes.plot(*truth.xy[0], "k^", markersize=8, label="start")
     mapped_xy = np.asarray(mapped_xy).reshape(-1, 2)
     covariances = np.asarray(mapped_covariances).reshape(-1, 2, 2)
-    for center, covariance in zip(mapped_xy, covariances):
+    for center, covariance in zip(mapped_xy, covariances, strict=True):
         axes.plot(*ellipse_points(center, covariance, LANDMARK_SIGMAS).T, color=SLAM_COLOR, linewidth=1.0)
     axes.plot(*mapped_xy.T, "+", color=SLAM_COLOR, markersize=9, label="mapped landmarks (2σ)")
     axes.set_aspect("equal")
@@ -94,7 +96,7 @@ def plot_errors(
     figure = _figure(8.0, 7.0)
     labels = ("x error (m)", "y error (m)", "heading error (rad)")
     axes_list = figure.subplots(3, 1, sharex=True)
-    for k, (axes, label) in enumerate(zip(axes_list, labels)):
+    for k, (axes, label) in enumerate(zip(axes_list, labels, strict=True)):
         axes.fill_between(t_s, -2 * sigmas[:, k], 2 * sigmas[:, k], color=SLAM_COLOR, alpha=0.2, label="±2σ")
         axes.plot(t_s, errors[:, k], color=SLAM_COLOR, linewidth=1.0, label="SLAM error")
         axes.axhline(0.0, color="black", linewidth=0.5)

@@ -37,12 +37,12 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
-from turtlelib.validation import integer, one_of, positive, store
 
 from nusim.nusim_node import NusimNode
 from nuturtle_control.odometry import OdometryNode
 from nuturtle_control.turtle_control import TurtleControlNode
 from nuturtle_ros_common.ros_files import share_file
+from turtlelib.validation import integer, one_of, positive, store
 
 from . import plots
 from .driver import FigureEightDriver

@@ -43,7 +43,9 @@ def _nodes(context):
 def generate_launch_description() -> LaunchDescription:
     return LaunchDescription(
         [
-            DeclareLaunchArgument("color", default_value="purple", choices=["red", "green", "blue", "purple"]),
+            DeclareLaunchArgument(
+                "color", default_value="purple", choices=["red", "green", "blue", "purple"]
+            ),
             DeclareLaunchArgument("use_jsp", default_value="true"),
             DeclareLaunchArgument("use_rviz", default_value="false"),
             OpaqueFunction(function=_nodes),

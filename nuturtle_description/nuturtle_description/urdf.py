@@ -31,9 +31,7 @@ LIDAR_RADIUS = 0.035
 LIDAR_HEIGHT = 0.04
 
 
-def _origin(
-    x: float = 0.0, y: float = 0.0, z: float = 0.0, roll: float = 0.0, yaw: float = 0.0
-) -> str:
+def _origin(x: float = 0.0, y: float = 0.0, z: float = 0.0, roll: float = 0.0, yaw: float = 0.0) -> str:
     return f'<origin xyz="{x:.12g} {y:.12g} {z:.12g}" rpy="{roll:.12g} 0 {yaw:.12g}"/>'
 
 
@@ -75,12 +73,8 @@ def burger_urdf(params: RobotParams, color: str = "purple") -> str:
             _origin(z=BASE_HEIGHT / 2.0),
             color,
         )
-        + _cylinder_link(
-            "wheel_left_link", radius, WHEEL_WIDTH, _origin(roll=1.5707963267948966), "dark"
-        )
-        + _cylinder_link(
-            "wheel_right_link", radius, WHEEL_WIDTH, _origin(roll=1.5707963267948966), "dark"
-        )
+        + _cylinder_link("wheel_left_link", radius, WHEEL_WIDTH, _origin(roll=1.5707963267948966), "dark")
+        + _cylinder_link("wheel_right_link", radius, WHEEL_WIDTH, _origin(roll=1.5707963267948966), "dark")
         + _cylinder_link("base_scan", LIDAR_RADIUS, LIDAR_HEIGHT, _origin(), "dark")
     )
     joints = (

@@ -9,6 +9,7 @@ from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Pose, Quaternion, TransformStamped
 from nav_msgs.msg import Odometry
 from numpy.typing import NDArray
+
 from turtlelib import Transform2D, Twist2D
 
 
@@ -23,9 +24,7 @@ def yaw_from_quaternion(q: Quaternion) -> float:
     yaw = atan2(2 (w z + x y), w^2 + x^2 - y^2 - z^2): both arguments scale with |q|^2, so a
     hand-written, unnormalised quaternion such as (0, 0, 1, 1) gives the yaw it means (pi/2).
     """
-    return math.atan2(
-        2.0 * (q.w * q.z + q.x * q.y), q.w * q.w + q.x * q.x - q.y * q.y - q.z * q.z
-    )
+    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), q.w * q.w + q.x * q.x - q.y * q.y - q.z * q.z)
 
 
 def pose_from_transform(T: Transform2D) -> Pose:
@@ -41,9 +40,7 @@ def transform_from_pose(pose: Pose) -> Transform2D:
     return Transform2D(pose.position.x, pose.position.y, yaw_from_quaternion(pose.orientation))
 
 
-def transform_stamped(
-    T_parent_child: Transform2D, parent: str, child: str, stamp: Time
-) -> TransformStamped:
+def transform_stamped(T_parent_child: Transform2D, parent: str, child: str, stamp: Time) -> TransformStamped:
     msg = TransformStamped()
     msg.header.stamp = stamp
     msg.header.frame_id = parent

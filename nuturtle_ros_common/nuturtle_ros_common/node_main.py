@@ -1,4 +1,6 @@
-"""The one `main` every node uses: init, spin, stop cleanly; invalid parameters stop start-up with a message."""
+"""The one `main` every node uses: init, spin, stop cleanly; invalid parameters stop start-up with a
+message.
+"""
 
 from __future__ import annotations
 

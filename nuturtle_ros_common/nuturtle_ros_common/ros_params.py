@@ -71,9 +71,7 @@ def declare_dataclass(
     for name, default in defaults.items():
         if isinstance(default, tuple):
             default = list(default)
-        parameter = node.declare_parameter(
-            prefix + name, default, ParameterDescriptor(dynamic_typing=True)
-        )
+        parameter = node.declare_parameter(prefix + name, default, ParameterDescriptor(dynamic_typing=True))
         like = defaults[name]
         values[name] = _coerce(parameter.value, like, prefix + name)
     return cls(**values)

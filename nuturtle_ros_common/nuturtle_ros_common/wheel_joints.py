@@ -30,9 +30,7 @@ class WheelJoints:
         return [self.wheel_left, self.wheel_right]
 
 
-def wheel_values(
-    joints: WheelJoints, names: Sequence[str], values: Sequence[float]
-) -> tuple[float, float]:
+def wheel_values(joints: WheelJoints, names: Sequence[str], values: Sequence[float]) -> tuple[float, float]:
     """``(left, right)``: the entries of ``values`` at the wheel joints' positions in ``names``.
 
     ``names`` and ``values`` are a JointState's parallel arrays (e.g. ``name`` and ``position``); other
@@ -47,8 +45,7 @@ def wheel_values(
         count = names.count(joint)
         if count != 1:
             raise ValueError(
-                f"joint {joint!r} is {'missing' if count == 0 else 'listed more than once'} "
-                f"(joints: {names})"
+                f"joint {joint!r} is {'missing' if count == 0 else 'listed more than once'} (joints: {names})"
             )
         value = float(values[names.index(joint)])
         if not math.isfinite(value):

@@ -15,21 +15,22 @@ from pathlib import Path
 import numpy as np
 import pytest
 from geometry_msgs.msg import PoseWithCovarianceStamped
-from nav_msgs.msg import Odometry, Path as PathMsg
+from nav_msgs.msg import Odometry
+from nav_msgs.msg import Path as PathMsg
 from rcl_interfaces.msg import Log
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState, LaserScan
 from std_srvs.srv import Empty
-from turtlelib import DiffDrive, Transform2D
 from visualization_msgs.msg import Marker, MarkerArray
 
-from nuturtle_ros_common.conversions import pose_from_transform, stamp_seconds, yaw_from_quaternion
-from nuturtle_description.robot_params import burger_params, diff_params_path
-from nuturtle_ros_common.ros_files import load_ros_yaml
 from nusim.nusim_node import NusimNode, NusimTiming
 from nusim.simulation import ArenaConfig, NoiseConfig, Obstacles, default_lidar
+from nuturtle_description.robot_params import burger_params, diff_params_path
+from nuturtle_ros_common.conversions import pose_from_transform, stamp_seconds, yaw_from_quaternion
+from nuturtle_ros_common.ros_files import load_ros_yaml
+from turtlelib import DiffDrive, Transform2D
 
 pytestmark = pytest.mark.ros
 
@@ -181,7 +182,9 @@ def test_fake_sensor_reports_landmarks_in_range_by_id_and_deletes_the_others(ros
             "obstacles.y": [0.0, 1.5, 0.0],
             "obstacles.r": [0.05, 0.04, 0.05],
         },
-        arena_x_length=8.0, arena_y_length=8.0, basic_sensor_variance=1e-6,
+        arena_x_length=8.0,
+        arena_y_length=8.0,
+        basic_sensor_variance=1e-6,
     )
     rig.spin_until(lambda: bool(rig.fake_sensor))
     markers = {m.id: m for m in rig.fake_sensor[-1].markers}
@@ -293,11 +296,16 @@ def test_the_default_parameters_are_the_basic_world_yaml():
     flat.update({f"obstacles.{k}": v for k, v in world["obstacles"].items()})
     flat.update({f"lidar.{k}": v for k, v in world["lidar"].items()})
     defaults = {
-        **vars(NusimTiming()), **vars(ArenaConfig()), **vars(NoiseConfig()),
+        **vars(NusimTiming()),
+        **vars(ArenaConfig()),
+        **vars(NoiseConfig()),
         **{f"obstacles.{k}": list(v) for k, v in vars(Obstacles()).items()},
         **{f"lidar.{k}": v for k, v in vars(default_lidar()).items()},
-        "wheel_left": "wheel_left_joint", "wheel_right": "wheel_right_joint",
-        "path_min_step_m": 0.02, "path_min_turn_rad": 0.1, "path_max_poses": 3000,
+        "wheel_left": "wheel_left_joint",
+        "wheel_right": "wheel_right_joint",
+        "path_min_step_m": 0.02,
+        "path_min_turn_rad": 0.1,
+        "path_max_poses": 3000,
     }
     assert flat == defaults
 
@@ -339,7 +347,10 @@ def test_executable_with_an_invalid_parameter_exits_1_with_the_reason(tmp_path):
     # cwd outside the repository: its package folders would shadow the installed packages
     result = subprocess.run(
         [sys.executable, "-m", "nusim.nusim_node", "--ros-args", "-p", "arena_x_length:=-1.0"],
-        cwd=tmp_path, capture_output=True, text=True, timeout=60,
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=60,
     )
     assert result.returncode == 1, result.stderr
     assert "invalid configuration: arena_x_length must be finite and > 0, got -1.0" in result.stderr
@@ -348,9 +359,22 @@ def test_executable_with_an_invalid_parameter_exits_1_with_the_reason(tmp_path):
 
 def test_executable_runs_the_world_file_and_publishes_until_interrupted(ros, tmp_path):
     process = subprocess.Popen(
-        [sys.executable, "-m", "nusim.nusim_node", "--ros-args", "--params-file", str(diff_params_path()),
-         "--params-file", str(BASIC_WORLD), "-p", "realtime_factor:=5.0"],
-        cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+        [
+            sys.executable,
+            "-m",
+            "nusim.nusim_node",
+            "--ros-args",
+            "--params-file",
+            str(diff_params_path()),
+            "--params-file",
+            str(BASIC_WORLD),
+            "-p",
+            "realtime_factor:=5.0",
+        ],
+        cwd=tmp_path,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
     )
     try:
         helper = ros.node("nusim_process_listener")

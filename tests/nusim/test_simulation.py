@@ -14,10 +14,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from turtlelib import Transform2D
-from turtlelib.scan_model import LidarConfig
 
-from nuturtle_description.robot_params import RobotParams
 from nusim.simulation import (
     ArenaConfig,
     NoiseConfig,
@@ -27,6 +24,9 @@ from nusim.simulation import (
     contact_fraction,
     first_collision,
 )
+from nuturtle_description.robot_params import RobotParams
+from turtlelib import Transform2D
+from turtlelib.scan_model import LidarConfig
 
 R_WHEEL = 0.033
 TRACK = 0.16
@@ -257,7 +257,9 @@ def test_the_robot_never_overlaps_or_passes_through_anything(start, commands, dt
     if first_collision(np.array(start[:2]), circles, half, R_ROBOT) is not None:
         return
     sim = world(
-        obstacles=crowded, arena=(3.0, 3.0), start=start,
+        obstacles=crowded,
+        arena=(3.0, 3.0),
+        start=start,
         noise=NoiseConfig(input_noise=0.5, slip_fraction=0.3, seed=seed),
     )
     p_previous = sim.T_world_body.translation
@@ -364,9 +366,9 @@ def trace(seed: int) -> tuple[np.ndarray, ...]:
 
 def test_the_same_seed_reproduces_the_run_and_another_seed_does_not():
     first, again, other = trace(7), trace(7), trace(8)
-    for a, b in zip(first, again):
+    for a, b in zip(first, again, strict=True):
         np.testing.assert_array_equal(a, b)
-    for a, c in zip(first, other):
+    for a, c in zip(first, other, strict=True):
         assert not np.array_equal(a, c)
 
 

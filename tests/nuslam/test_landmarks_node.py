@@ -11,15 +11,15 @@ import math
 
 import numpy as np
 import pytest
+from nuslam_test_tools import node_inputs_matched, stamp, stamp_ns
 from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import LaserScan
-from turtlelib import DetectorConfig, LidarConfig, Transform2D, arena_walls, simulate_scan
 from visualization_msgs.msg import Marker, MarkerArray
 
 from nuslam.landmarks_node import LandmarksNode
-from nuslam_test_tools import node_inputs_matched, stamp, stamp_ns
 from rclpy_harness import matched, record_rosout, warnings_of
+from turtlelib import DetectorConfig, LidarConfig, Transform2D, arena_walls, simulate_scan
 
 pytestmark = pytest.mark.ros
 
@@ -85,7 +85,9 @@ class Rig:
         self.scan.publish(msg)
         assert self.ros.spin_until(lambda: len(self.landmarks) > count, 5.0), "no landmarks"
         wanted = msg.header.stamp
-        assert self.ros.spin_until(lambda: any(c.markers[0].header.stamp == wanted for c in self.clusters), 5.0)
+        assert self.ros.spin_until(
+            lambda: any(c.markers[0].header.stamp == wanted for c in self.clusters), 5.0
+        )
         return self.landmarks[-1]
 
     def warnings(self, at_least: int = 0) -> list[str]:

@@ -17,19 +17,27 @@ import math
 import numpy as np
 import pytest
 from nav_msgs.msg import Odometry, Path
+from nuslam_test_tools import cylinder_array, node_inputs_matched, stamp, stamp_ns
 from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import JointState, LaserScan
-from turtlelib import EkfSlam, LidarConfig, SlamConfig, SlamTimeline, TimelineConfig, Transform2D, simulate_scan
-from turtlelib.range_bearing import observations_from_points
 from visualization_msgs.msg import Marker, MarkerArray
 
 from nuslam.landmarks_node import LandmarksNode
 from nuslam.slam_node import SlamNode
-from nuslam_test_tools import cylinder_array, node_inputs_matched, stamp, stamp_ns
-from rclpy_harness import matched, record_rosout, warnings_of
-from nuturtle_ros_common.conversions import covariance_from_6x6, stamp_seconds, yaw_from_quaternion
 from nuturtle_description.robot_params import burger_params
+from nuturtle_ros_common.conversions import covariance_from_6x6, stamp_seconds, yaw_from_quaternion
+from rclpy_harness import matched, record_rosout, warnings_of
+from turtlelib import (
+    EkfSlam,
+    LidarConfig,
+    SlamConfig,
+    SlamTimeline,
+    TimelineConfig,
+    Transform2D,
+    simulate_scan,
+)
+from turtlelib.range_bearing import observations_from_points
 
 pytestmark = pytest.mark.ros
 
@@ -77,7 +85,7 @@ def relative(T_world_frame: Transform2D, landmarks=LANDMARKS) -> list[tuple[int,
     """``(id, x, y)`` of the landmarks in a frame at ``T_world_frame``: ``T_frame_world @ p_world``."""
     ids = list(landmarks)
     xy = T_world_frame.inverse() @ np.array([landmarks[i] for i in ids])
-    return [(i, float(x), float(y)) for i, (x, y) in zip(ids, xy)]
+    return [(i, float(x), float(y)) for i, (x, y) in zip(ids, xy, strict=True)]
 
 
 def pose_of(odom: Odometry) -> tuple[float, float, float]:
@@ -87,9 +95,7 @@ def pose_of(odom: Odometry) -> tuple[float, float, float]:
 
 def close_pose(odom: Odometry, T: Transform2D, tol: float = TOL) -> bool:
     x, y, yaw = pose_of(odom)
-    return (
-        abs(x - T.x) <= tol and abs(y - T.y) <= tol and abs(math.remainder(yaw - T.theta, math.tau)) <= tol
-    )
+    return abs(x - T.x) <= tol and abs(y - T.y) <= tol and abs(math.remainder(yaw - T.theta, math.tau)) <= tol
 
 
 def mapped(array: MarkerArray, ns: str = "landmarks") -> dict[int, Marker]:
@@ -168,7 +174,7 @@ def assert_covariance(odom: Odometry) -> np.ndarray:
     return P
 
 
-# --- odometry ----------------------------------------------------------------------------------------------
+# --- odometry -----------------------------------------------------------------------------------------------
 
 
 def test_straight_drive_then_arc_follow_the_kinematics_from_the_start_pose_with_a_growing_covariance(ros):
@@ -197,7 +203,9 @@ def test_straight_drive_then_arc_follow_the_kinematics_from_the_start_pose_with_
         P = assert_covariance(odom)
         assert np.all(np.diag(P) > 0.0)
         traces.append(float(np.trace(P)))
-    assert all(b > a for a, b in zip(traces, traces[1:])), f"no observations: the covariance grows {traces}"
+    assert all(b > a for a, b in zip(traces, traces[1:], strict=True)), (
+        f"no observations: the covariance grows {traces}"
+    )
     # the end of the hand-made trajectory: 0.2 m along 0.7 rad, then a 0.25 m-radius arc through 1.6 rad
     assert T.theta == pytest.approx(0.7 + 1.6)
     # the path (frame map) keeps every pose: each step is more than path_min_step_m
@@ -217,7 +225,7 @@ def test_initial_pose_standard_deviations_set_the_first_covariance(ros):
     assert assert_covariance(odom) == pytest.approx(np.diag([0.01, 0.01, 0.0025]), abs=1e-15)
 
 
-# --- known association ---------------------------------------------------------------------------------------
+# --- known association --------------------------------------------------------------------------------------
 
 
 def test_known_association_maps_the_fake_sensor_landmarks_at_their_true_places(ros):
@@ -257,7 +265,7 @@ def test_known_association_maps_the_fake_sensor_landmarks_at_their_true_places(r
     # more sightings never make a landmark less certain, and eight more make it clearly more certain
     for landmark_id in LANDMARKS:
         axes = [axis for _, i, axis in major_axes if i == landmark_id]
-        assert all(b <= a + 1e-12 for a, b in zip(axes, axes[1:]))
+        assert all(b <= a + 1e-12 for a, b in zip(axes, axes[1:], strict=True))
         assert axes[-1] < 0.8 * axes[0]
     # consistent observations leave the pose on the true arc
     t_end = EPOCH_NS + 8 * S // 10
@@ -281,7 +289,7 @@ def test_an_unseen_landmark_joins_the_map_when_first_observed(ros):
         assert marker.scale.x == pytest.approx(0.076), "default landmark_radius 0.038"
 
 
-# --- unknown association -------------------------------------------------------------------------------------
+# --- unknown association ------------------------------------------------------------------------------------
 
 
 @pytest.mark.parametrize("frame_id", ["base_scan", "base_footprint"])
@@ -340,7 +348,7 @@ def test_scans_through_the_landmarks_node_map_the_cylinders_of_a_simulated_lidar
         scan.ranges = simulate_scan(T_world_sensor, circles, np.empty((0, 4)), lidar, rng).tolist()
         count = len(rig.maps)
         scans.publish(scan)
-        assert ros.spin_until(lambda: len(rig.maps) > count, 5.0), "no map for this scan"
+        assert ros.spin_until(lambda count=count: len(rig.maps) > count, 5.0), "no map for this scan"
         assert_map_header(rig.maps[-1], t_ns)
     cylinders = mapped(rig.maps[-1])
     assert len(cylinders) == 3
@@ -368,7 +376,9 @@ def test_late_and_early_observations_are_applied_at_their_own_stamps(ros):
     def observation(t_obs: int) -> tuple[MarkerArray, list]:
         """The fake sensor at t_obs (5 mm noise per axis) and what the node makes of it, for the reference."""
         noise = rng.normal(0.0, 0.005, (len(LANDMARKS), 2))
-        seen = [(i, x + dx, y + dy) for (i, x, y), (dx, dy) in zip(relative(arc.pose(t_obs)), noise)]
+        seen = [
+            (i, x + dx, y + dy) for (i, x, y), (dx, dy) in zip(relative(arc.pose(t_obs)), noise, strict=True)
+        ]
         ids = np.array([i for i, _, _ in seen])
         p_sensor = T_BODY_SENSOR.inverse() @ np.array([(x, y) for _, x, y in seen])
         z, R = observations_from_points(p_sensor, np.broadcast_to(fake_std**2 * np.eye(2), (3, 2, 2)))
@@ -378,7 +388,7 @@ def test_late_and_early_observations_are_applied_at_their_own_stamps(ros):
         assert_map_header(array, t_obs)
         cylinders = mapped(array)
         assert sorted(cylinders) == list(slam.landmark_ids) == sorted(LANDMARKS)
-        for landmark_id, xy in zip(slam.landmark_ids, slam.landmarks):
+        for landmark_id, xy in zip(slam.landmark_ids, slam.landmarks, strict=True):
             marker = cylinders[int(landmark_id)]
             assert (marker.pose.position.x, marker.pose.position.y) == pytest.approx(tuple(xy), abs=TOL)
             truth = LANDMARKS[int(landmark_id)]
@@ -414,7 +424,7 @@ def test_late_and_early_observations_are_applied_at_their_own_stamps(ros):
             t_next = t_ns + dt_ns
             rig.wheels(t_next, arc.angles(t_next))
             timeline.add_wheels(stamp_seconds(stamp(t_next)), *arc.angles(t_next))
-            assert rig.ros.spin_until(lambda: len(rig.maps) > count, 5.0)
+            assert rig.ros.spin_until(lambda count=count: len(rig.maps) > count, 5.0)
             check_map(rig.maps[-1], t_obs)
             break
     assert len(rig.maps) == len(late) + 2
@@ -448,8 +458,14 @@ BAD_JOINT_STATES = {
     "one wheel missing": (joint_state(2 * S, (5.0,), names=WHEELS[:1]), "'wheel_right_joint' is missing"),
     "NaN position": (joint_state(2 * S, (math.nan, 5.0)), "non-finite"),
     "infinite position": (joint_state(2 * S, (5.0, math.inf)), "non-finite"),
-    "fewer positions than names": (JointState(name=list(WHEELS), position=[5.0]), "2 joint names but 1 values"),
-    "more positions than names": (JointState(name=list(WHEELS), position=[5.0] * 3), "2 joint names but 3 values"),
+    "fewer positions than names": (
+        JointState(name=list(WHEELS), position=[5.0]),
+        "2 joint names but 1 values",
+    ),
+    "more positions than names": (
+        JointState(name=list(WHEELS), position=[5.0] * 3),
+        "2 joint names but 3 values",
+    ),
 }
 
 
@@ -486,7 +502,9 @@ def test_finite_angles_whose_increment_overflows_are_skipped_and_taken_as_the_ne
     assert close_pose(odom, Transform2D(0.1, 0.0, 0.0))
     assert len(rig.odoms) == 3, "no odom for the refused samples"
     odom = rig.wheels(t_ns + 10 * dt_ns, (dphi, dphi))  # standing, the filter catches up
-    array = rig.observe(cylinder_array("base_footprint", t_ns + 10 * dt_ns, relative(Transform2D(0.1, 0.0, 0.0))))
+    array = rig.observe(
+        cylinder_array("base_footprint", t_ns + 10 * dt_ns, relative(Transform2D(0.1, 0.0, 0.0)))
+    )
     for landmark_id, xy in LANDMARKS.items():
         marker = mapped(array)[landmark_id]
         assert (marker.pose.position.x, marker.pose.position.y) == pytest.approx(xy, abs=1e-9)
@@ -515,10 +533,14 @@ def observation_case(kind: str, frame_id: str) -> tuple[MarkerArray, str]:
 
 
 @pytest.mark.parametrize(
-    "association, frame_id", [("known", "base_footprint"), ("unknown", "base_scan")], ids=["fake_sensor", "landmarks"]
+    "association, frame_id",
+    [("known", "base_footprint"), ("unknown", "base_scan")],
+    ids=["fake_sensor", "landmarks"],
 )
 @pytest.mark.parametrize("kind", ["unknown frame", "NaN position", "stale", "mixed frames", "empty array"])
-def test_bad_observations_are_skipped_with_a_warning_and_the_next_one_applied(ros, association, frame_id, kind):
+def test_bad_observations_are_skipped_with_a_warning_and_the_next_one_applied(
+    ros, association, frame_id, kind
+):
     rig = Rig(ros, association=association, confirm_count=1)
     rig.wheels(S, (0.0, 0.0))
     rig.wheels(2 * S, (0.0, 0.0))  # standing: the filter is at 1.75 s
@@ -526,7 +548,9 @@ def test_bad_observations_are_skipped_with_a_warning_and_the_next_one_applied(ro
     for _ in range(3):
         rig.observations.publish(bad)
     # the next map answers this good array: the robot is at the origin
-    good = cylinder_array(frame_id, 2 * S, relative(T_BODY_SENSOR if frame_id == "base_scan" else Transform2D()))
+    good = cylinder_array(
+        frame_id, 2 * S, relative(T_BODY_SENSOR if frame_id == "base_scan" else Transform2D())
+    )
     array = rig.observe(good)
     assert len(rig.maps) == 1, "no map for the bad arrays"
     assert_map_header(array, 2 * S)
@@ -575,7 +599,7 @@ def test_time_going_backwards_while_driving_keeps_the_motion_up_to_the_newest_sa
     assert close_pose(odom, Transform2D(0.2, 0.0, 0.0), 1e-6), pose_of(odom)
 
 
-# --- parameters ----------------------------------------------------------------------------------------------
+# --- parameters ---------------------------------------------------------------------------------------------
 
 
 def invalid(name: str, value, message: str):
@@ -618,7 +642,8 @@ def test_the_default_parameters(ros):
 
 
 def test_the_filter_s_sensor_mount_is_the_robot_s_lidar_mount(ros):
-    """Written once: another robot's lidar_x, lidar_y, lidar_yaw (its diff_params) move the filter's sensor."""
+    """Written once: another robot's lidar_x, lidar_y, lidar_yaw (its diff_params) move the filter's
+    sensor."""
     overrides = [
         Parameter("lidar_x", value=0.1),
         Parameter("lidar_y", value=-0.05),

@@ -5,13 +5,13 @@ from __future__ import annotations
 import math
 
 import pytest
-from rclpy_harness import matched
 from geometry_msgs.msg import Twist
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 from std_srvs.srv import Empty
 
 from nuturtle_control.circle import CircleConfig, CircleNode
+from rclpy_harness import matched
 
 pytestmark = pytest.mark.ros
 
@@ -57,10 +57,12 @@ class Rig:
         self.stop = helper.create_client(Empty, "circle/stop")
         self.parameters = AsyncParameterClient(helper, "circle")
         assert ros.spin_until(
-            lambda: matched(cmd_vel)
-            and self.reverse.service_is_ready()
-            and self.stop.service_is_ready()
-            and self.parameters.services_are_ready(),
+            lambda: (
+                matched(cmd_vel)
+                and self.reverse.service_is_ready()
+                and self.stop.service_is_ready()
+                and self.parameters.services_are_ready()
+            ),
             10.0,
         )
 

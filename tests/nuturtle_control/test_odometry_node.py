@@ -12,7 +12,6 @@ import subprocess
 import sys
 
 import pytest
-from rclpy_harness import matched, record_rosout, warnings_of
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry, Path
 from rclpy.parameter import Parameter
@@ -20,6 +19,7 @@ from sensor_msgs.msg import JointState
 
 from nuturtle_control.odometry import OdometryFrames, OdometryNode
 from nuturtle_ros_common.conversions import quaternion_from_yaw, yaw_from_quaternion
+from rclpy_harness import matched, record_rosout, warnings_of
 
 pytestmark = pytest.mark.ros
 
@@ -118,7 +118,7 @@ def test_path_is_decimated_and_ends_at_the_odometry_pose(ros):
     xs = [pose.pose.position.x for pose in path.poses]
     assert len(xs) == pytest.approx(11, abs=1)
     assert xs[0] == 0.0
-    assert all(b - a >= 0.02 - 1e-12 for a, b in zip(xs, xs[1:]))
+    assert all(b - a >= 0.02 - 1e-12 for a, b in zip(xs, xs[1:], strict=True))
     assert xs[-1] == pytest.approx(0.2, abs=0.02)
     assert len(rig.paths) == len(xs), "a path is published only when a pose is added"
 

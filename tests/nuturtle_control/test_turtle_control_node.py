@@ -10,12 +10,12 @@ from __future__ import annotations
 import math
 
 import pytest
-from rclpy_harness import matched, record_rosout, warnings_of
 from geometry_msgs.msg import Twist
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
 from nuturtle_control.turtle_control import TurtleControlNode
+from rclpy_harness import matched, record_rosout, warnings_of
 
 pytestmark = pytest.mark.ros
 

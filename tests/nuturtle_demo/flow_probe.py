@@ -20,7 +20,9 @@ def main() -> None:
     timeout_s, min_messages = float(sys.argv[1]), int(sys.argv[2])
     rclpy.init()
     node = rclpy.create_node("flow_probe")
-    seen = {topic: {"count": 0, "frames": set()} for topic in ("/scan", "/joint_states", "/odom", "/slam/odom")}
+    seen = {
+        topic: {"count": 0, "frames": set()} for topic in ("/scan", "/joint_states", "/odom", "/slam/odom")
+    }
 
     def on(topic, describe):
         def callback(msg):
@@ -29,7 +31,9 @@ def main() -> None:
 
         return callback
 
-    node.create_subscription(LaserScan, "scan", on("/scan", lambda m: m.header.frame_id), qos_profile_sensor_data)
+    node.create_subscription(
+        LaserScan, "scan", on("/scan", lambda m: m.header.frame_id), qos_profile_sensor_data
+    )
     node.create_subscription(JointState, "joint_states", on("/joint_states", lambda m: ",".join(m.name)), 10)
     for topic in ("/odom", "/slam/odom"):
         node.create_subscription(

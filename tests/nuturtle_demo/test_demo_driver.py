@@ -5,17 +5,16 @@ import math
 import numpy as np
 import pytest
 from geometry_msgs.msg import Twist
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from nav_msgs.msg import Odometry
 from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
-from turtlelib import Transform2D, Twist2D
-
-from hypothesis import given, settings
-from hypothesis import strategies as st
 
 from nuturtle_demo.driver import FigureEight, FigureEightDriver, RouteConfig, track
-from nuturtle_ros_common.conversions import pose_from_transform, stamp_from_seconds
 from nuturtle_description.robot_params import burger_params
+from nuturtle_ros_common.conversions import pose_from_transform, stamp_from_seconds
+from turtlelib import Transform2D, Twist2D
 
 
 @pytest.mark.parametrize("field", ["radius", "velocity", "rate"])
@@ -97,7 +96,9 @@ def test_figure_eight_refuses_what_the_motors_cannot_do():
 @pytest.mark.ros
 def test_open_loop_driver_waits_then_follows_sim_time_and_stops(ros):
     driver = ros.add(FigureEightDriver(context=ros.context, parameter_overrides=[
-        Parameter("use_sim_time", value=True), Parameter("radius", value=0.5), Parameter("velocity", value=0.1),
+        Parameter("use_sim_time", value=True),
+        Parameter("radius", value=0.5),
+        Parameter("velocity", value=0.1),
         Parameter("feedback", value=False), Parameter("start_delay", value=2.0),
     ]))  # fmt: skip
     helper = ros.node("helper")
@@ -144,7 +145,9 @@ def test_closed_loop_driver_steers_back_onto_the_route(ros):
     helper.create_subscription(Twist, "cmd_vel", received.append, 10)
     clock = helper.create_publisher(Clock, "/clock", 10)
     poses = helper.create_publisher(Odometry, "slam/odom", 10)
-    assert ros.spin_until(lambda: helper.count_subscribers("/clock") >= 1 and helper.count_subscribers("slam/odom") >= 1, 5.0)
+    assert ros.spin_until(
+        lambda: helper.count_subscribers("/clock") >= 1 and helper.count_subscribers("slam/odom") >= 1, 5.0
+    )
 
     def pose(x, y, theta):
         msg = Odometry()

@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from turtlelib import Transform2D
 
 from nuturtle_demo.metrics import (
     PoseSeries,
@@ -20,6 +19,7 @@ from nuturtle_demo.metrics import (
     pose_errors,
     pose_nees,
 )
+from turtlelib import Transform2D
 
 finite = st.floats(-10.0, 10.0, allow_nan=False)
 
@@ -54,12 +54,18 @@ def test_interpolate_at_own_stamps_returns_own_poses(rows):
 def test_odom_in_world_composes_with_the_start_pose():
     odom = PoseSeries(np.array([0.0, 1.0]), np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.3]]))
     world = odom_in_world(odom, Transform2D(1.0, 2.0, math.pi / 2))
-    np.testing.assert_allclose(world.poses, [[1.0, 2.0, math.pi / 2], [1.0, 3.0, math.pi / 2 + 0.3]], atol=1e-12)
+    np.testing.assert_allclose(
+        world.poses, [[1.0, 2.0, math.pi / 2], [1.0, 3.0, math.pi / 2 + 0.3]], atol=1e-12
+    )
 
 
 def test_pose_errors_and_ate_hand_computed():
-    truth = PoseSeries(np.array([0.0, 1.0, 2.0]), np.array([[0.0, 0.0, 3.1], [1.0, 0.0, 3.1], [2.0, 0.0, 3.1]]))
-    estimate = PoseSeries(np.array([0.5, 2.0, 3.0]), np.array([[0.5, 0.0, 3.1], [5.0, 4.0, -3.1]] + [[0.0, 0.0, 0.0]]))
+    truth = PoseSeries(
+        np.array([0.0, 1.0, 2.0]), np.array([[0.0, 0.0, 3.1], [1.0, 0.0, 3.1], [2.0, 0.0, 3.1]])
+    )
+    estimate = PoseSeries(
+        np.array([0.5, 2.0, 3.0]), np.array([[0.5, 0.0, 3.1], [5.0, 4.0, -3.1]] + [[0.0, 0.0, 0.0]])
+    )
     e = pose_errors(estimate, truth)
     # the estimate at t = 3 s lies beyond the truth and is left out
     assert e.shape == (2, 3)
@@ -74,7 +80,7 @@ def test_association_hand_case_with_duplicate_and_spurious():
     true_xy = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
     mapped_xy = np.array([[1.02, 0.0], [0.0, 0.03], [3.0, 3.0], [0.99, 0.05]])
     association = associate_landmarks(mapped_xy, true_xy, gate_m=0.2)
-    pairs = dict(zip(association.mapped_index.tolist(), association.true_index.tolist()))
+    pairs = dict(zip(association.mapped_index.tolist(), association.true_index.tolist(), strict=True))
     assert pairs == {0: 1, 1: 0}
     assert association.spurious.tolist() == [2]
     assert association.duplicates.tolist() == [3]
@@ -111,7 +117,11 @@ def test_landmarks_within_range():
     assert landmarks_within_range(true_xy, path_xy, 2.0).tolist() == [True, False, True]
     assert not landmarks_within_range(true_xy, np.zeros((0, 2)), 10.0).any()
     # one range per landmark (closest approaches 2, 4, 1 m)
-    assert landmarks_within_range(true_xy, path_xy, np.array([2.0, 3.9, 0.9])).tolist() == [True, False, False]
+    assert landmarks_within_range(true_xy, path_xy, np.array([2.0, 3.9, 0.9])).tolist() == [
+        True,
+        False,
+        False,
+    ]
 
 
 def test_pose_nees_monte_carlo_matches_chi2():

@@ -81,7 +81,9 @@ def test_matched_wheel_noise_monte_carlo_on_nusim():
     w_rad_s, rate_hz, steps, runs, slip = 4.0, 100.0, 100, 400, 0.3
     errors = []
     for seed in range(runs):
-        simulation = Simulation(SimulationConfig(noise=NoiseConfig(input_noise=0.0, slip_fraction=slip, seed=seed)))
+        simulation = Simulation(
+            SimulationConfig(noise=NoiseConfig(input_noise=0.0, slip_fraction=slip, seed=seed))
+        )
         simulation.command_wheels(w_rad_s, w_rad_s)
         for _ in range(steps):
             simulation.step(1.0 / rate_hz)

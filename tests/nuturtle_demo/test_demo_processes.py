@@ -29,7 +29,7 @@ def test_nodes_as_processes_flow_with_expected_types_and_frames(tmp_path):
     processes = {}
     try:
         for name, (module, *ros_args) in NODES.items():
-            log = open(tmp_path / f"{name}.log", "w")  # noqa: SIM115 (closed with the process)
+            log = open(tmp_path / f"{name}.log", "w")
             processes[name] = (
                 subprocess.Popen(
                     [sys.executable, "-m", module, "--ros-args", *ros_args],
@@ -38,7 +38,11 @@ def test_nodes_as_processes_flow_with_expected_types_and_frames(tmp_path):
                 log,
             )  # fmt: skip
         probe = subprocess.run(
-            [sys.executable, str(PROBE), "60", "10"], cwd=tmp_path, capture_output=True, text=True, timeout=120
+            [sys.executable, str(PROBE), "60", "10"],
+            cwd=tmp_path,
+            capture_output=True,
+            text=True,
+            timeout=120,
         )
         for name, (process, _) in processes.items():
             assert process.poll() is None, f"{name} exited: {(tmp_path / f'{name}.log').read_text()}"

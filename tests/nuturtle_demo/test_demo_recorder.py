@@ -24,7 +24,6 @@ from rclpy.qos import (
     qos_profile_sensor_data,
 )
 from rclpy.serialization import serialize_message
-from rclpy_harness import RosHarness, matched, record_rosout, warnings_of
 from rosbags.typesys import Stores, get_typestore
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState, LaserScan
@@ -32,6 +31,7 @@ from std_msgs.msg import String
 from visualization_msgs.msg import Marker, MarkerArray
 
 from nuturtle_demo.recorder import RECORD_DEPTH, BagWriter, TopicRecorder, recording_qos
+from rclpy_harness import RosHarness, matched, record_rosout, warnings_of
 
 SCAN = "sensor_msgs/msg/LaserScan"
 JOINTS = "sensor_msgs/msg/JointState"

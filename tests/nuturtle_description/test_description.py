@@ -50,7 +50,7 @@ class Urdf:
         xyz = [0.0, 0.0, 0.0]
         while link != "base_footprint":
             (joint,) = [j for j in self.joints.values() if j.find("child").get("link") == link]
-            xyz = [a + b for a, b in zip(xyz, floats(joint.find("origin").get("xyz")))]
+            xyz = [a + b for a, b in zip(xyz, floats(joint.find("origin").get("xyz")), strict=True)]
             link = joint.find("parent").get("link")
         return xyz
 
@@ -59,7 +59,11 @@ def test_burger_urdf_dimensions_and_joints_equal_the_parameters():
     params = burger_params()
     urdf = Urdf(burger_urdf(params))
     assert set(urdf.links) == {
-        "base_footprint", "base_link", "wheel_left_link", "wheel_right_link", "base_scan"
+        "base_footprint",
+        "base_link",
+        "wheel_left_link",
+        "wheel_right_link",
+        "base_scan",
     }
     for side, sign in (("left", 1.0), ("right", -1.0)):
         joint = urdf.joints[f"wheel_{side}_joint"]
@@ -77,9 +81,7 @@ def test_burger_urdf_dimensions_and_joints_equal_the_parameters():
 
 
 @settings(max_examples=30)
-@given(
-    st.floats(0.01, 0.5), st.floats(0.05, 1.0), st.floats(0.05, 1.0)
-)
+@given(st.floats(0.01, 0.5), st.floats(0.05, 1.0), st.floats(0.05, 1.0))
 def test_urdf_follows_any_robot_parameters(wheel_radius, track_width, collision_radius):
     params = RobotParams(
         wheel_radius=wheel_radius, track_width=track_width, collision_radius=collision_radius
@@ -127,8 +129,10 @@ def test_load_urdf_launch_offers_exactly_the_urdf_colours():
     (choices,) = [
         keyword.value
         for node in ast.walk(tree)
-        if isinstance(node, ast.Call) and getattr(node.func, "id", None) == "DeclareLaunchArgument"
-        and node.args and node.args[0].value == "color"
+        if isinstance(node, ast.Call)
+        and getattr(node.func, "id", None) == "DeclareLaunchArgument"
+        and node.args
+        and node.args[0].value == "color"
         for keyword in node.keywords
         if keyword.arg == "choices"
     ]

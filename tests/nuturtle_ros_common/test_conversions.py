@@ -10,7 +10,6 @@ from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Pose, Quaternion
 from hypothesis import given
 from hypothesis import strategies as st
-from turtlelib import Transform2D
 
 from nuturtle_ros_common.conversions import (
     covariance_from_6x6,
@@ -23,6 +22,7 @@ from nuturtle_ros_common.conversions import (
     transform_stamped,
     yaw_from_quaternion,
 )
+from turtlelib import Transform2D
 
 angles = st.floats(-math.pi, math.pi)
 

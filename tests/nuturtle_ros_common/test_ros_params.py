@@ -11,7 +11,6 @@ from nuturtle_description.robot_params import RobotParams, burger_params
 from nuturtle_ros_common.ros_params import declare_dataclass, replace_from_parameters
 
 
-
 @dataclass(frozen=True)
 class Example:
     """Every supported field type; `gain` must be > 0."""

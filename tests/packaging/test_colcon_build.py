@@ -22,6 +22,7 @@ import time
 from pathlib import Path
 
 import pytest
+
 from workspace import console_scripts, packages
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -124,7 +125,9 @@ def run_executable(install: Path, package: str, executable: str, workdir: Path) 
             deadline = time.monotonic() + NODE_ALIVE_S
             while time.monotonic() < deadline and process.poll() is None:
                 time.sleep(0.1)
-            assert process.poll() is None, f"{package} {executable} stopped:\n{process.communicate()[0][-3000:]}"
+            assert process.poll() is None, (
+                f"{package} {executable} stopped:\n{process.communicate()[0][-3000:]}"
+            )
             process.send_signal(signal.SIGINT)
             output, _ = process.communicate(timeout=30)
             assert process.returncode == 0, output[-3000:]

@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
+from nusim.nusim_node import NusimNode
 from nuslam.landmarks_node import LandmarksNode
 from nuslam.slam_node import SlamNode
-from nusim.nusim_node import NusimNode
 from nuturtle_control.circle import CircleNode
 from nuturtle_control.odometry import OdometryNode
 from nuturtle_control.turtle_control import TurtleControlNode

@@ -9,6 +9,7 @@ import tomllib
 from graphlib import CycleError, TopologicalSorter
 
 import pytest
+
 from workspace import (
     ROOT,
     THIRD_PARTY,
@@ -81,11 +82,15 @@ def test_every_third_party_python_dependency_is_installed_by_pyproject():
     requirements = list(project["dependencies"])
     for extra in project["optional-dependencies"].values():
         requirements.extend(extra)
-    distributions = {requirement.split(">")[0].split("=")[0].split("<")[0].strip().lower() for requirement in requirements}
+    distributions = {
+        requirement.split(">")[0].split("=")[0].split("<")[0].strip().lower() for requirement in requirements
+    }
     declared = set().union(*(package.exec_depends for package in packages().values()))
     for key, distribution in THIRD_PARTY.values():
         if key in declared:
-            assert distribution in distributions, f"{key} is declared but pyproject.toml never installs {distribution}"
+            assert distribution in distributions, (
+                f"{key} is declared but pyproject.toml never installs {distribution}"
+            )
 
 
 @pytest.mark.parametrize("name", PACKAGES)

@@ -89,7 +89,9 @@ class LaunchReferences:
 
 
 def launch_references(path: Path) -> LaunchReferences:
-    calls = [node for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))) if isinstance(node, ast.Call)]
+    calls = [
+        node for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))) if isinstance(node, ast.Call)
+    ]
     shared = set()
     nodes = set()
     for call in calls:

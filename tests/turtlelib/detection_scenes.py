@@ -19,6 +19,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+
 from turtlelib import LandmarkDetector, LidarConfig, Transform2D, arena_walls, cast_beams, simulate_scan
 
 LDS01_NOISY = LidarConfig(noise=0.01, resolution=0.01)

@@ -16,6 +16,7 @@ import pytest
 import scipy.linalg
 from hypothesis import given, settings
 from hypothesis import strategies as st
+
 from turtlelib import (
     Circle,
     CircleFits,

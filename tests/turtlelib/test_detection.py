@@ -9,10 +9,11 @@ import warnings
 import numpy as np
 import pytest
 from detection_scenes import LDS01_NOISY, Scene, beams_on_cylinders, random_scene, score
+
 from turtlelib import (
     Clusters,
-    DetectorConfig,
     Detections,
+    DetectorConfig,
     LandmarkDetector,
     LidarConfig,
     Transform2D,
@@ -190,7 +191,10 @@ def test_cluster_scan_rejects_invalid_input(ranges, angles, limits):
 # --- LandmarkDetector: hand-built scenes -------------------------------------------------------------
 
 
-def detect(ranges, lidar=LidarConfig(), config=CONFIG):
+LDS01 = LidarConfig()
+
+
+def detect(ranges, lidar=LDS01, config=CONFIG):
     limits = (lidar.range_min, lidar.range_max)
     return LandmarkDetector(config).detect(ranges, lidar.angle_min, lidar.angle_increment, *limits)
 
@@ -321,7 +325,7 @@ def test_each_detection_names_the_cluster_it_was_fitted_to():
         assert len(detections) > 0
         assert len(set(detections.cluster_index.tolist())) == len(detections)
         for centre, radius, n, k in zip(
-            detections.p_sensor, detections.radius, detections.n_points, detections.cluster_index
+            detections.p_sensor, detections.radius, detections.n_points, detections.cluster_index, strict=True
         ):
             points = clusters.points(int(k))
             assert len(points) == n
@@ -331,7 +335,9 @@ def test_each_detection_names_the_cluster_it_was_fitted_to():
 
 def test_detections_built_without_cluster_indices_mark_them_unknown():
     one = np.ones(1)
-    detections = Detections(np.zeros((1, 2)), one, np.ones(1, dtype=np.intp), one, one, one, np.zeros((1, 2, 2)))
+    detections = Detections(
+        np.zeros((1, 2)), one, np.ones(1, dtype=np.intp), one, one, one, np.zeros((1, 2, 2))
+    )
     np.testing.assert_array_equal(detections.cluster_index, [-1])
 
 

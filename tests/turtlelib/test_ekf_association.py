@@ -9,6 +9,7 @@ import math
 import numpy as np
 import pytest
 from scipy.stats import chi2
+
 from turtlelib.association import chi2_gate, joint_compatibility, mahalanobis_2d, nearest_neighbour
 
 

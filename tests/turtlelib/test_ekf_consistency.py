@@ -5,6 +5,7 @@ import math
 import numpy as np
 import pytest
 from scipy.stats import chi2
+
 from turtlelib.consistency import chi2_bounds, nees, nis
 
 

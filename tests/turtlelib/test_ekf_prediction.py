@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+
 from turtlelib import DiffDrive, Transform2D
 from turtlelib.ekf_slam import EkfSlam, SlamConfig
 from turtlelib.wheel_noise import MAX_STEP_TURN_RAD, wheel_slip_covariance

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+
 from turtlelib import DiffDrive, Transform2D
 from turtlelib.ekf_slam import EkfSlam, SlamConfig
 from turtlelib.range_bearing import predict_observations
@@ -23,7 +24,9 @@ poses = st.builds(Transform2D, st.floats(-5.0, 5.0), st.floats(-5.0, 5.0), st.fl
 
 def filter_with_map(pose: Transform2D, mode="known", wheel_noise=0.05) -> EkfSlam:
     """Landmarks mapped from an uncertain pose, then moved on: a full, correlated covariance."""
-    config = SlamConfig(sensor_x=-0.032, wheel_noise=wheel_noise, initial_xy_std=0.03, initial_theta_std=0.05, confirm_count=1)
+    config = SlamConfig(
+        sensor_x=-0.032, wheel_noise=wheel_noise, initial_xy_std=0.03, initial_theta_std=0.05, confirm_count=1
+    )
     slam = EkfSlam(config, BURGER, pose)
     z, _, _ = predict_observations(pose.as_array(), pose @ LANDMARKS, config.T_body_sensor)
     if mode == "known":

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+
 from turtlelib import Transform2D
 from turtlelib.range_bearing import landmarks_from_observations, predict_observations, residual
 

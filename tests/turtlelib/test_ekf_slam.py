@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+
 from turtlelib import DiffDrive, Transform2D
 from turtlelib.ekf_slam import EkfSlam, ObservationStatus, SlamConfig
 from turtlelib.range_bearing import predict_observations
@@ -20,7 +21,10 @@ BURGER = DiffDrive(wheel_radius=0.033, track_width=0.16)
 MATCHED, NEW, REJECTED = ObservationStatus.MATCHED, ObservationStatus.NEW, ObservationStatus.REJECTED
 
 
-def observe(slam_or_pose, landmarks, config=SlamConfig(sensor_x=-0.032)):
+BURGER_CONFIG = SlamConfig(sensor_x=-0.032)  # the LDS-01 behind the Burger's wheel axle
+
+
+def observe(slam_or_pose, landmarks, config=BURGER_CONFIG):
     pose = slam_or_pose.pose if isinstance(slam_or_pose, EkfSlam) else slam_or_pose
     z, _, _ = predict_observations(pose.as_array(), np.asarray(landmarks, dtype=float), config.T_body_sensor)
     return z
@@ -156,7 +160,9 @@ def test_observations_beyond_max_range_are_rejected():
     np.testing.assert_array_equal(result.status, [NEW, REJECTED])
     np.testing.assert_array_equal(result.landmark_ids, [0, -1])
     np.testing.assert_array_equal(slam.landmark_ids, [0])
-    result = EkfSlam(SlamConfig(sensor_x=-0.032, max_range=2.0), BURGER).update_unknown([[1.0, 0.0], [2.5, 1.0]])
+    result = EkfSlam(SlamConfig(sensor_x=-0.032, max_range=2.0), BURGER).update_unknown(
+        [[1.0, 0.0], [2.5, 1.0]]
+    )
     np.testing.assert_array_equal(result.status, [NEW, REJECTED])
 
 
@@ -233,7 +239,9 @@ def test_two_detections_in_one_scan_never_start_two_landmarks_on_one_spot():
 
 def test_tentative_landmarks_do_not_steal_from_confirmed_ones():
     # a tentative landmark right next to a confirmed one gets no sightings and expires
-    config = SlamConfig(sensor_x=-0.032, confirm_count=2, tentative_timeout=3, range_std=0.01, bearing_std=0.01)
+    config = SlamConfig(
+        sensor_x=-0.032, confirm_count=2, tentative_timeout=3, range_std=0.01, bearing_std=0.01
+    )
     slam = EkfSlam(config, BURGER)
     slam.update_unknown([[1.0, 0.0]])
     confirmed = int(slam.update_unknown([[1.0, 0.0]]).confirmed_ids[0])
@@ -395,7 +403,9 @@ motions = st.tuples(st.floats(-5.0, 10.0), st.floats(-5.0, 10.0))
 @given(st.lists(st.tuples(motions, observation_batches), min_size=1, max_size=8), st.booleans())
 def test_any_valid_sequence_keeps_the_covariance_symmetric_positive_definite(steps, known):
     # arbitrary (even mutually inconsistent) observations never break the filter's numerics
-    slam = EkfSlam(SlamConfig(sensor_x=-0.032, initial_xy_std=0.01, initial_theta_std=0.01, confirm_count=1), BURGER)
+    slam = EkfSlam(
+        SlamConfig(sensor_x=-0.032, initial_xy_std=0.01, initial_theta_std=0.01, confirm_count=1), BURGER
+    )
     for (left, right), batch in steps:
         slam.predict(left, right)
         unique = {landmark_id: (r, b) for landmark_id, r, b in batch}

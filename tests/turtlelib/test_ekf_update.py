@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 import pytest
+
 from turtlelib import DiffDrive, Transform2D
 from turtlelib.ekf_slam import EkfSlam, ObservationStatus, SlamConfig
 from turtlelib.range_bearing import landmarks_from_observations, predict_observations, residual
@@ -19,7 +20,9 @@ from turtlelib.wheel_noise import wheel_slip_covariance
 
 PI = math.pi
 BURGER = DiffDrive(wheel_radius=0.033, track_width=0.16)
-CONFIG = SlamConfig(sensor_x=-0.032, wheel_noise=0.05, max_range=50.0, initial_xy_std=0.02, initial_theta_std=0.01)
+CONFIG = SlamConfig(
+    sensor_x=-0.032, wheel_noise=0.05, max_range=50.0, initial_xy_std=0.02, initial_theta_std=0.01
+)
 SENSOR = CONFIG.T_body_sensor
 
 

@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 import pytest
+
 from turtlelib import DiffDrive, Transform2D, Twist2D
 from turtlelib.consistency import chi2_bounds, nees
 from turtlelib.ekf_slam import EkfSlam, ObservationStatus, SlamConfig
@@ -30,7 +31,9 @@ PREDICTIONS_PER_SCAN = 4
 SLIP_SUBSTEPS = 4
 N_SCANS = int(round(2.0 * PI / TWIST.omega / SCAN_PERIOD_S))
 RANGE_STD, BEARING_STD = 0.02, 0.02
-CONFIG = SlamConfig(sensor_x=-0.032, wheel_noise=0.05, range_std=RANGE_STD, bearing_std=BEARING_STD, max_range=2.5)
+CONFIG = SlamConfig(
+    sensor_x=-0.032, wheel_noise=0.05, range_std=RANGE_STD, bearing_std=BEARING_STD, max_range=2.5
+)
 
 
 class World:

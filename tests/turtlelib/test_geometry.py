@@ -12,6 +12,7 @@ import pytest
 import scipy.linalg
 from hypothesis import given
 from hypothesis import strategies as st
+
 from turtlelib import Transform2D, Twist2D, integrate_twist, normalize_angle, normalize_angles
 from turtlelib.geometry import SMALL_ANGLE_RAD
 
@@ -220,7 +221,7 @@ def test_points_agree_with_homogeneous_matrix(T_ab, points):
     assert p_a.shape == p_b.shape
     homogeneous = np.column_stack([p_b, np.ones(len(p_b))])
     np.testing.assert_allclose(p_a, (homogeneous @ T_ab.as_matrix().T)[:, :2], atol=1e-12)
-    for single_b, single_a in zip(p_b, p_a):
+    for single_b, single_a in zip(p_b, p_a, strict=True):
         result = T_ab @ single_b
         assert result.shape == (2,)
         np.testing.assert_allclose(result, single_a, atol=1e-12)

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+
 from turtlelib import DiffDrive, Transform2D, Twist2D
 from turtlelib.geometry import SMALL_ANGLE_RAD
 
@@ -226,9 +227,11 @@ def test_jacobian_series_and_closed_forms_agree_at_the_threshold():
     while math.nextafter(dphi_right, 0.0) - dphi_left >= SMALL_ANGLE_RAD:
         dphi_right = math.nextafter(dphi_right, 0.0)
     below_right = math.nextafter(dphi_right, 0.0)
-    assert drive.body_twist(dphi_left, below_right).omega < SMALL_ANGLE_RAD <= drive.body_twist(
-        dphi_left, dphi_right
-    ).omega
+    assert (
+        drive.body_twist(dphi_left, below_right).omega
+        < SMALL_ANGLE_RAD
+        <= drive.body_twist(dphi_left, dphi_right).omega
+    )
 
     below = drive.step_jacobians(0.7, dphi_left, below_right)
     above = drive.step_jacobians(0.7, dphi_left, dphi_right)

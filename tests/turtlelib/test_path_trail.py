@@ -7,8 +7,8 @@ import math
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
-from turtlelib import Transform2D, normalize_angle
 
+from turtlelib import Transform2D, normalize_angle
 from turtlelib.path_trail import PathTrail, PathTrailConfig
 
 
@@ -35,9 +35,7 @@ def test_drops_the_oldest_beyond_the_maximum_length_and_clear_starts_again():
     assert trail.offer(Transform2D(4.0, 0.0, 0.0), "again")  # the first after clear is always kept
 
 
-@given(
-    st.lists(st.tuples(st.floats(-1, 1), st.floats(-1, 1), st.floats(-3, 3)), min_size=1, max_size=60)
-)
+@given(st.lists(st.tuples(st.floats(-1, 1), st.floats(-1, 1), st.floats(-3, 3)), min_size=1, max_size=60))
 def test_consecutive_kept_poses_are_separated_by_a_threshold(poses):
     config = PathTrailConfig(path_min_step_m=0.2, path_min_turn_rad=0.3, path_max_poses=1000)
     trail = PathTrail(config)
@@ -46,7 +44,7 @@ def test_consecutive_kept_poses_are_separated_by_a_threshold(poses):
         trail.offer(T, T)
     kept = list(trail.items)
     assert kept[0] == Transform2D(*poses[0])
-    for a, b in zip(kept, kept[1:]):
+    for a, b in zip(kept, kept[1:], strict=True):
         step = math.hypot(b.x - a.x, b.y - a.y)
         turn = abs(normalize_angle(b.theta - a.theta))
         assert step >= config.path_min_step_m or turn >= config.path_min_turn_rad

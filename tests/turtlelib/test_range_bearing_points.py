@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+
 from turtlelib.range_bearing import observations_from_points
 
 PI = math.pi

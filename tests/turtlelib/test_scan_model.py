@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+
 from turtlelib import LidarConfig, Transform2D, arena_walls, cast_beams, simulate_scan
 
 PI = math.pi

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+
 from turtlelib import DiffDrive, SlamTimeline, TimelineConfig, Transform2D
 from turtlelib.ekf_slam import EkfSlam, ObservationStatus, SlamConfig
 from turtlelib.range_bearing import predict_observations
@@ -143,7 +144,7 @@ delays = st.one_of(st.just(0.0), st.floats(0.0, 0.3))
 def samples_from(dts, speeds):
     t, left, right = 0.0, 0.0, 0.0
     samples = [(t, left, right)]
-    for dt, (w_left, w_right) in zip(dts, speeds):
+    for dt, (w_left, w_right) in zip(dts, speeds, strict=True):
         t, left, right = t + dt, left + w_left * dt, right + w_right * dt
         samples.append((t, left, right))
     return samples
@@ -559,7 +560,9 @@ def test_latest_pose_follows_each_sample_interval_when_the_wheel_speeds_change()
     np.testing.assert_allclose(pose.as_array(), expected.pose.as_array(), rtol=0.0, atol=1e-12)
     np.testing.assert_allclose(P, expected.pose_covariance, rtol=0.0, atol=1e-12 * np.abs(P).max())
     # one arc from t_f straight to the newest sample would not be the same pose
-    one_arc, _ = timeline.slam.propagated_pose(later[-1][1] - angles_at(samples, t_f)[0], later[-1][2] - angles_at(samples, t_f)[1])
+    one_arc, _ = timeline.slam.propagated_pose(
+        later[-1][1] - angles_at(samples, t_f)[0], later[-1][2] - angles_at(samples, t_f)[1]
+    )
     assert np.abs(one_arc.as_array() - pose.as_array()).max() > 1e-4
 
 

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+
 from turtlelib.validation import finite_real, in_range, integer, names, non_negative, one_of, positive, store
 
 # not a real number, or one without a finite float (10**400 is beyond the float range)

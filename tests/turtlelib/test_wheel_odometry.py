@@ -7,6 +7,7 @@ import math
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+
 from turtlelib import DiffDrive, Transform2D
 from turtlelib.wheel_odometry import WheelOdometry
 
@@ -62,9 +63,7 @@ def test_invalid_samples_raise_and_leave_the_state_unchanged(sample):
     )
 
 
-increments = st.lists(
-    st.tuples(st.floats(-3.0, 3.0), st.floats(-3.0, 3.0)), min_size=1, max_size=20
-)
+increments = st.lists(st.tuples(st.floats(-3.0, 3.0), st.floats(-3.0, 3.0)), min_size=1, max_size=20)
 
 
 @given(

@@ -244,7 +244,8 @@ def refine_for_range_sensor(
     The step solves ``(J^T J) delta = -J^T e`` per set; from the isotropic hyper fit one step recovers
     most of the gain. A set keeps its input circle when the step is not finite, moves the centre or the
     radius by more than the input radius, or leaves a non-positive radius; sets without a finite circle
-    pass through unchanged. ``residual`` is the RMS geometric error of the returned circles. Same ``points``/``offsets`` layout as :func:`fit_circles`.
+    pass through unchanged. ``residual`` is the RMS geometric error of the returned circles. Same
+    ``points``/``offsets`` layout as :func:`fit_circles`.
     ValueError for ``range_std <= 0``, ``min_cos_incidence`` outside (0, 1], points at the origin, bad
     shapes, or ``edge_std`` that is not > 0.
     """

@@ -184,7 +184,14 @@ class Detections:
         k = self.radius.shape[0] if self.radius.ndim == 1 else -1
         if self.cluster_index is None:
             object.__setattr__(self, "cluster_index", np.full(max(k, 0), -1, dtype=np.intp))
-        vectors = (self.radius, self.n_points, self.residual, self.range_m, self.bearing_rad, self.cluster_index)
+        vectors = (
+            self.radius,
+            self.n_points,
+            self.residual,
+            self.range_m,
+            self.bearing_rad,
+            self.cluster_index,
+        )
         if (
             k < 0
             or any(v.shape != (k,) for v in vectors)

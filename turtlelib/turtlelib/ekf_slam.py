@@ -194,9 +194,7 @@ class EkfSlam:
         # P_qq' = G P_qq G^T + Q,  P_qm' = G P_qm
         self._state.predict(q_next, G, Q)
 
-    def propagated_pose(
-        self, dphi_left: float, dphi_right: float
-    ) -> tuple[Transform2D, NDArray[np.float64]]:
+    def propagated_pose(self, dphi_left: float, dphi_right: float) -> tuple[Transform2D, NDArray[np.float64]]:
         """The pose and its covariance (3, 3) :meth:`predict` would give, without changing the filter.
 
         ``q' = f(q, dphi)``, ``P_qq' = G P_qq G^T + Q``: O(1), for publishing the pose between filter steps.
@@ -220,7 +218,8 @@ class EkfSlam:
     def _motion(
         self, T_map_body: Transform2D, dphi_left: float, dphi_right: float
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-        """The motion model: the new pose ``q'`` (3,), its Jacobian ``G = dq'/dq`` and the noise ``Q`` (3, 3)."""
+        """The motion model: the new pose ``q'`` (3,), its Jacobian ``G = dq'/dq`` and the noise ``Q``
+        (3, 3)."""
         # q' = q (+) exp([F dphi])  (DiffDrive.step raises ValueError for non-finite increments)
         q_next = self._drive.step(T_map_body, dphi_left, dphi_right).as_array()
         # G = dq'/dq = [[1, 0, -dy], [0, 1, dx], [0, 0, 1]] (DiffDrive.step_jacobians' G_pose) with
@@ -228,7 +227,9 @@ class EkfSlam:
         G = np.eye(3)
         G[0, 2] = -(q_next[1] - T_map_body.y)
         G[1, 2] = q_next[0] - T_map_body.x
-        Q = wheel_slip_covariance(self._drive, T_map_body.theta, dphi_left, dphi_right, self._config.wheel_noise)
+        Q = wheel_slip_covariance(
+            self._drive, T_map_body.theta, dphi_left, dphi_right, self._config.wheel_noise
+        )
         return q_next, G, Q
 
     def update_known(self, ids: ArrayLike, z: ArrayLike, R: ArrayLike | None = None) -> Association:

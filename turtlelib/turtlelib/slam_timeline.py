@@ -96,7 +96,9 @@ class SlamTimeline:
         """Observations waiting for wheel samples that reach their time."""
         return len(self._pending)
 
-    def add_wheels(self, t_s: float, phi_left_rad: float, phi_right_rad: float) -> list[tuple[float, Association]]:
+    def add_wheels(
+        self, t_s: float, phi_left_rad: float, phi_right_rad: float
+    ) -> list[tuple[float, Association]]:
         """A wheel sample: angles (rad) at time ``t_s`` (s). The first only starts the timeline.
 
         ValueError (nothing changed) for non-finite values or a time earlier than the newest sample.
@@ -144,7 +146,8 @@ class SlamTimeline:
             return [self._apply(observation)]
         if len(self._pending) >= self.config.max_pending_observations:
             raise ValueError(
-                f"{len(self._pending)} observations already wait for wheel samples past {self._times[-1]:.9f} s"
+                f"{len(self._pending)} observations already wait for wheel samples past "
+                f"{self._times[-1]:.9f} s"
             )
         bisect.insort(self._pending, observation, key=lambda o: o.t_s)
         return []

@@ -11,9 +11,7 @@ from __future__ import annotations
 import math
 
 
-def limit_wheel_speeds(
-    left_rad_s: float, right_rad_s: float, max_rad_s: float
-) -> tuple[float, float, float]:
+def limit_wheel_speeds(left_rad_s: float, right_rad_s: float, max_rad_s: float) -> tuple[float, float, float]:
     """``(left', right', s)``: both wheel speeds (rad/s) scaled by ``s = min(1, max / max(|l|, |r|))``.
 
     ``|left'|, |right'| <= max_rad_s`` exactly (each wheel is ``max * (w / peak)`` with

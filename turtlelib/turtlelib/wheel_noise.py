@@ -54,7 +54,9 @@ def wheel_slip_covariance(
     twist = diff_drive.body_twist(dphi_left, dphi_right)
     u, omega = twist.vx, twist.omega
     if not abs(omega) <= MAX_STEP_TURN_RAD:
-        raise ValueError(f"a step turning the body by {omega!r} rad is not a motion (> {MAX_STEP_TURN_RAD} rad)")
+        raise ValueError(
+            f"a step turning the body by {omega!r} rad is not a motion (> {MAX_STEP_TURN_RAD} rad)"
+        )
     r, d = diff_drive.wheel_radius, diff_drive.track_width
     q_left, q_right = wheel_noise**2 * abs(dphi_left), wheel_noise**2 * abs(dphi_right)
     # Q_v = M Q_w M^T with M = [[r/2, r/2], [-r/d, r/d]]
