@@ -13,6 +13,7 @@ anywhere without changing where it ends.
 from __future__ import annotations
 
 import math
+from itertools import pairwise
 
 import numpy as np
 import pytest
@@ -203,9 +204,7 @@ def test_straight_drive_then_arc_follow_the_kinematics_from_the_start_pose_with_
         P = assert_covariance(odom)
         assert np.all(np.diag(P) > 0.0)
         traces.append(float(np.trace(P)))
-    assert all(b > a for a, b in zip(traces, traces[1:], strict=True)), (
-        f"no observations: the covariance grows {traces}"
-    )
+    assert all(b > a for a, b in pairwise(traces)), f"no observations: the covariance grows {traces}"
     # the end of the hand-made trajectory: 0.2 m along 0.7 rad, then a 0.25 m-radius arc through 1.6 rad
     assert T.theta == pytest.approx(0.7 + 1.6)
     # the path (frame map) keeps every pose: each step is more than path_min_step_m
@@ -265,7 +264,7 @@ def test_known_association_maps_the_fake_sensor_landmarks_at_their_true_places(r
     # more sightings never make a landmark less certain, and eight more make it clearly more certain
     for landmark_id in LANDMARKS:
         axes = [axis for _, i, axis in major_axes if i == landmark_id]
-        assert all(b <= a + 1e-12 for a, b in zip(axes, axes[1:], strict=True))
+        assert all(b <= a + 1e-12 for a, b in pairwise(axes))
         assert axes[-1] < 0.8 * axes[0]
     # consistent observations leave the pose on the true arc
     t_end = EPOCH_NS + 8 * S // 10

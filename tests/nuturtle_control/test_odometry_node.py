@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 import subprocess
 import sys
+from itertools import pairwise
 
 import pytest
 from geometry_msgs.msg import PoseWithCovarianceStamped
@@ -118,7 +119,7 @@ def test_path_is_decimated_and_ends_at_the_odometry_pose(ros):
     xs = [pose.pose.position.x for pose in path.poses]
     assert len(xs) == pytest.approx(11, abs=1)
     assert xs[0] == 0.0
-    assert all(b - a >= 0.02 - 1e-12 for a, b in zip(xs, xs[1:], strict=True))
+    assert all(b - a >= 0.02 - 1e-12 for a, b in pairwise(xs))
     assert xs[-1] == pytest.approx(0.2, abs=0.02)
     assert len(rig.paths) == len(xs), "a path is published only when a pose is added"
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from itertools import pairwise
 
 import pytest
 from hypothesis import given
@@ -44,7 +45,7 @@ def test_consecutive_kept_poses_are_separated_by_a_threshold(poses):
         trail.offer(T, T)
     kept = list(trail.items)
     assert kept[0] == Transform2D(*poses[0])
-    for a, b in zip(kept, kept[1:], strict=True):
+    for a, b in pairwise(kept):
         step = math.hypot(b.x - a.x, b.y - a.y)
         turn = abs(normalize_angle(b.theta - a.theta))
         assert step >= config.path_min_step_m or turn >= config.path_min_turn_rad

@@ -144,7 +144,7 @@ delays = st.one_of(st.just(0.0), st.floats(0.0, 0.3))
 def samples_from(dts, speeds):
     t, left, right = 0.0, 0.0, 0.0
     samples = [(t, left, right)]
-    for dt, (w_left, w_right) in zip(dts, speeds, strict=True):
+    for dt, (w_left, w_right) in zip(dts, speeds, strict=False):
         t, left, right = t + dt, left + w_left * dt, right + w_right * dt
         samples.append((t, left, right))
     return samples
