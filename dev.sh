@@ -42,10 +42,12 @@ lint() {
 core_tests() {
   setup_venv "$root/.venv-core" "core-test"
   echo "[dev.sh] tests/turtlelib in .venv-core (no ROS)"
-  if "$root/.venv-core/bin/python" -c "import rclpy" 2>/dev/null; then
-    echo "[dev.sh] .venv-core must not have rclpy" >&2
-    exit 1
-  fi
+  for module in rclpy yaml; do
+    if "$root/.venv-core/bin/python" -c "import $module" 2>/dev/null; then
+      echo "[dev.sh] .venv-core must hold numpy, scipy, pytest and hypothesis only, but has $module" >&2
+      exit 1
+    fi
+  done
   "$root/.venv-core/bin/python" -P -m pytest -q -p no:cacheprovider tests/turtlelib
 }
 
