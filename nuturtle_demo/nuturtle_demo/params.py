@@ -1,4 +1,4 @@
-"""ROS parameter files for the demo: read a world, build in-process parameter overrides, write the
+"""ROS parameter files for the demo: build in-process parameter overrides, write the
 effective configuration back out as a params file, and match SLAM's process noise to the world's slip.
 """
 
@@ -7,43 +7,13 @@ from __future__ import annotations
 import array
 import math
 from collections.abc import Iterable, Mapping
-from pathlib import Path
 from typing import Any
 
 import yaml
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from nuturtle_ros_common.ros_files import load_ros_yaml
-
-
-def flatten(nested: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
-    """``{'obstacles': {'x': [...]}}`` -> ``{'obstacles.x': [...]}`` (ROS parameter names)."""
-    flat: dict[str, Any] = {}
-    for key, value in nested.items():
-        name = f"{prefix}{key}"
-        if isinstance(value, Mapping):
-            flat.update(flatten(value, prefix=f"{name}."))
-        else:
-            flat[name] = value
-    return flat
-
-
-def nest(flat: Mapping[str, Any]) -> dict[str, Any]:
-    """The inverse of :func:`flatten`: dotted names become nested mappings."""
-    nested: dict[str, Any] = {}
-    for name, value in sorted(flat.items()):
-        *groups, leaf = name.split(".")
-        level = nested
-        for group in groups:
-            level = level.setdefault(group, {})
-        level[leaf] = value
-    return nested
-
-
-def load_world(path: str | Path) -> dict[str, Any]:
-    """The (flattened) parameters of a nusim params file (its ``/**`` or first node entry)."""
-    return flatten(load_ros_yaml(Path(path)))
+from nuturtle_ros_common.ros_files import nest
 
 
 def _ros_value(value: Any) -> Any:

@@ -41,14 +41,14 @@ from rclpy.signals import SignalHandlerOptions
 from nusim.nusim_node import NusimNode
 from nuturtle_control.odometry import OdometryNode
 from nuturtle_control.turtle_control import TurtleControlNode
-from nuturtle_ros_common.ros_files import share_file
+from nuturtle_ros_common.ros_files import load_ros_parameters, share_file
 from turtlelib.validation import integer, one_of, positive, store
 
 from . import plots
 from .driver import FigureEightDriver
 from .metrics import RunData, RunMetrics, evaluate_run, odom_in_world, pose_errors
 from .monitor import RunMonitor
-from .params import load_world, matched_wheel_noise, params_file, to_parameters
+from .params import matched_wheel_noise, params_file, to_parameters
 from .recorder import BagWriter, TopicRecorder
 
 ASSOCIATIONS = ("known", "unknown")
@@ -113,7 +113,7 @@ class _System:
 
     def __init__(self, options: DemoOptions, context: Context, writer: BagWriter) -> None:
         sim_time = [Parameter("use_sim_time", value=True)]
-        world = load_world(options.world)
+        world = load_ros_parameters(Path(options.world))
         world.update(seed=options.seed, realtime_factor=options.realtime_factor)
         self.nusim = NusimNode(context=context, parameter_overrides=to_parameters(world))
         self.recorder = TopicRecorder(writer, context=context, parameter_overrides=sim_time)

@@ -1,4 +1,5 @@
-"""Files of ROS packages: a package's share folder, and the parameters of a ROS parameter file.
+"""Files of ROS packages: a package's share folder, and the parameters of a ROS parameter file (nested
+YAML groups are dotted parameter names: ``obstacles: {x: [...]}`` is ``obstacles.x``).
 
 No rclpy here: these are read by launch files, command-line tools and nodes alike.
 """
@@ -6,7 +7,9 @@ No rclpy here: these are read by launch files, command-line tools and nodes alik
 from __future__ import annotations
 
 import importlib.util
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import yaml
 
@@ -40,3 +43,32 @@ def load_ros_yaml(path: Path) -> dict:
         if isinstance(entry, dict) and "ros__parameters" in entry:
             return dict(entry["ros__parameters"])
     raise ValueError(f"{path} holds no ros__parameters")
+
+
+def load_ros_parameters(path: Path) -> dict[str, Any]:
+    """The parameters of a ROS parameter file by their dotted names (:func:`load_ros_yaml`, flattened)."""
+    return flatten(load_ros_yaml(path))
+
+
+def flatten(nested: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    """``{'obstacles': {'x': [...]}}`` -> ``{'obstacles.x': [...]}`` (ROS parameter names)."""
+    flat: dict[str, Any] = {}
+    for key, value in nested.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, Mapping):
+            flat.update(flatten(value, prefix=f"{name}."))
+        else:
+            flat[name] = value
+    return flat
+
+
+def nest(flat: Mapping[str, Any]) -> dict[str, Any]:
+    """The inverse of :func:`flatten`: dotted names become nested mappings."""
+    nested: dict[str, Any] = {}
+    for name, value in sorted(flat.items()):
+        *groups, leaf = name.split(".")
+        level = nested
+        for group in groups:
+            level = level.setdefault(group, {})
+        level[leaf] = value
+    return nested

@@ -8,8 +8,6 @@ phi_right = (s + (pi / 2) d / 2) / r with r = 0.033 m, d = 0.16 m, and ends at (
 from __future__ import annotations
 
 import math
-import subprocess
-import sys
 from itertools import pairwise
 
 import pytest
@@ -223,20 +221,6 @@ def test_parameters_set_joint_names_frames_and_robot_constants(ros):
     odom = rig.send(joint_state(2.0, (2.0, -9.0, 2.0), names=names))  # 2 rad of a 5 cm wheel
     assert pose_of(odom) == pytest.approx((0.1, 0.0, 0.0), abs=TOL)
     assert (odom.header.frame_id, odom.child_frame_id) == ("robot/odom", "robot/base_footprint")
-
-
-def test_executable_with_an_invalid_parameter_exits_1_with_the_reason(tmp_path):
-    # cwd outside the repository: its package folders would shadow the installed packages
-    result = subprocess.run(
-        [sys.executable, "-m", "nuturtle_control.odometry", "--ros-args", "-p", "wheel_radius:=-1.0"],
-        cwd=tmp_path,
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
-    assert result.returncode == 1, result.stderr
-    assert "wheel_radius must be finite and > 0, got -1.0" in result.stderr
-    assert "Traceback" not in result.stderr
 
 
 @pytest.mark.parametrize(

@@ -6,31 +6,18 @@ import math
 import numpy as np
 import pytest
 import rclpy
-from hypothesis import given
-from hypothesis import strategies as st
 from rclpy.context import Context
 from rclpy.node import Node
 
 from nusim.simulation import NoiseConfig, Simulation, SimulationConfig
-from nuturtle_demo.params import flatten, load_world, matched_wheel_noise, nest, params_file, to_parameters
+from nuturtle_demo.params import matched_wheel_noise, params_file, to_parameters
 from nuturtle_demo.run import default_world
 from nuturtle_description.robot_params import burger_params
-
-names = st.text("abc", min_size=1, max_size=3)
-trees = st.recursive(
-    st.integers(-5, 5) | st.floats(-1, 1) | st.lists(st.floats(-1, 1), max_size=3),
-    lambda children: st.dictionaries(names, children, min_size=1, max_size=3),
-    max_leaves=8,
-)
-
-
-@given(st.dictionaries(names, trees, min_size=1, max_size=3))
-def test_nest_inverts_flatten(tree):
-    assert nest(flatten(tree)) == tree
+from nuturtle_ros_common.ros_files import load_ros_parameters
 
 
 def test_demo_world_loads_flat():
-    world = load_world(default_world())
+    world = load_ros_parameters(default_world())
     assert world["obstacles.x"][0] == 1.4 and len(world["obstacles.r"]) == 8
     assert world["lidar.samples"] == 360 and world["slip_fraction"] > 0.0
 

@@ -15,7 +15,7 @@ from nuslam.slam_node import SlamNode
 from nuturtle_control.circle import CircleNode
 from nuturtle_control.odometry import OdometryNode
 from nuturtle_control.turtle_control import TurtleControlNode
-from nuturtle_ros_common.ros_files import load_ros_yaml
+from nuturtle_ros_common.ros_files import load_ros_parameters, load_ros_yaml
 
 ROOT = Path(__file__).resolve().parents[2]
 # parameters rclpy declares on every node
@@ -33,17 +33,6 @@ NODES = {
 }
 
 
-def flatten(values: dict, prefix: str = "") -> dict:
-    """Nested YAML groups (``obstacles: {x: ...}``) as dotted parameter names (``obstacles.x``)."""
-    flat = {}
-    for key, value in values.items():
-        if isinstance(value, dict):
-            flat.update(flatten(value, f"{prefix}{key}."))
-        else:
-            flat[f"{prefix}{key}"] = value
-    return flat
-
-
 def comparable(value):
     if isinstance(value, (list, tuple, array.array)):
         return [float(v) for v in value]
@@ -59,7 +48,7 @@ def test_config_file_holds_exactly_the_declared_parameters_and_their_defaults(ro
         for parameter in node.list_parameters([], 0).names
         if parameter not in ROS_OWN
     }
-    expected = {key: comparable(value) for key, value in flatten(load_ros_yaml(config_file)).items()}
+    expected = {key: comparable(value) for key, value in load_ros_parameters(config_file).items()}
     if robot:
         robot_constants = load_ros_yaml(DIFF_PARAMS)
         assert not robot_constants.keys() & expected.keys(), "robot constants belong in diff_params.yaml"
