@@ -42,8 +42,8 @@ class RobotParams:
     lidar_yaw: float = 0.0
 
     def __post_init__(self) -> None:
-        store(self, ("wheel_radius", "track_width", "motor_cmd_per_rad_sec"), positive)
-        store(self, ("encoder_ticks_per_rad", "collision_radius"), positive)
+        positives = ("wheel_radius", "track_width", "motor_cmd_per_rad_sec", "encoder_ticks_per_rad")
+        store(self, (*positives, "collision_radius"), positive)
         store(self, ("motor_cmd_max",), partial(integer, minimum=1))
         store(self, ("lidar_x", "lidar_y", "lidar_yaw"), finite_real)
         store(self, ("lidar_z",), non_negative)
