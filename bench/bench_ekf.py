@@ -36,6 +36,7 @@ from bench_docs import write_section
 
 from turtlelib import DiffDrive, Transform2D
 from turtlelib.ekf_slam import EkfSlam, ObservationStatus, SlamConfig
+from turtlelib.motion_models import DiffDriveMotion
 from turtlelib.range_bearing import predict_observations
 from turtlelib.slam_state import MIRROR_BLOCK
 
@@ -45,10 +46,12 @@ SIZES = (10, 20, 100, 500, 1000, 2000)
 OBSERVATIONS_PER_STEP = 10
 ROUNDS = 5
 BURGER = DiffDrive(wheel_radius=0.033, track_width=0.16)
+MOTION = DiffDriveMotion(BURGER, wheel_noise=0.05)
 CONFIG = SlamConfig(
     sensor_x=-0.032, range_std=0.01, bearing_std=0.002, max_range=1e3, confirm_count=1, initial_xy_std=0.01
 )
 WHEEL_STEP_RAD = 0.1  # both wheels: 3.3 mm forward per step
+SCAN_PERIOD_NS = 200_000_000  # the stamps of unknown-association scans (5 Hz)
 
 
 def grid_world(n: int, rng: np.random.Generator) -> np.ndarray:
@@ -67,14 +70,14 @@ def observations(T_world_body: Transform2D, world: np.ndarray, ids: np.ndarray, 
 def mapped_filter(world: np.ndarray, mode: str, rng: np.random.Generator) -> EkfSlam:
     """A filter that has mapped every landmark of ``world`` from the origin, in batches of 10."""
     config = CONFIG if mode == "known" else dataclasses.replace(CONFIG, matcher=mode)
-    slam = EkfSlam(config, BURGER)
-    for first in range(0, len(world), OBSERVATIONS_PER_STEP):
+    slam = EkfSlam(config, MOTION)
+    for scan, first in enumerate(range(0, len(world), OBSERVATIONS_PER_STEP)):
         ids = np.arange(first, min(first + OBSERVATIONS_PER_STEP, len(world)))
         z = observations(Transform2D(), world, ids, rng)
         if mode == "known":
             slam.update_known(ids, z)
         else:
-            result = slam.update_unknown(z)
+            result = slam.update_unknown(z, stamp_ns=scan * SCAN_PERIOD_NS)
             if not np.all(result.status == ObservationStatus.NEW):
                 raise RuntimeError("the benchmark map could not be built unambiguously")
     return slam
@@ -87,6 +90,7 @@ def time_steps(n: int, mode: str, steps: int, seed: int = 1) -> float:
     world = grid_world(n, rng)
     slam = mapped_filter(world, mode, rng)
     truth = Transform2D()
+    scan = math.ceil(n / OBSERVATIONS_PER_STEP)  # the scans that built the map came first
     medians = []
     for _ in range(ROUNDS):
         times = []
@@ -95,12 +99,13 @@ def time_steps(n: int, mode: str, steps: int, seed: int = 1) -> float:
             ids = rng.choice(n, size=min(OBSERVATIONS_PER_STEP, n), replace=False)
             z = observations(truth, world, ids, rng)
             start = time.perf_counter()
-            slam.predict(WHEEL_STEP_RAD, WHEEL_STEP_RAD)
+            slam.predict((WHEEL_STEP_RAD, WHEEL_STEP_RAD))
             if mode == "known":
                 slam.update_known(ids, z)
             else:
-                result = slam.update_unknown(z)
+                result = slam.update_unknown(z, stamp_ns=scan * SCAN_PERIOD_NS)
             times.append(time.perf_counter() - start)
+            scan += 1
             if mode != "known" and np.any(result.status == ObservationStatus.NEW):
                 raise RuntimeError(f"a mapped landmark was taken for a new one at n = {n}")
         medians.append(float(np.median(times[3:])))

@@ -24,9 +24,10 @@ Publishes
         with ``T_odom_body`` the wheel odometry integrated from the same joint_states (the `odometry`
         node's), so the odometry frame hangs under the map as REP 105 says.
 Parameters
-    `SlamNodeConfig` (association, x0, y0, theta0, frame ids, fake_sensor_std, landmark_radius),
-    `turtlelib.SlamConfig` (wheel_noise, range_std, bearing_std, matcher, gates,
-    confirm_count, tentative_timeout, max_range, initial_*_std, jcbb_max_nodes), `turtlelib.TimelineConfig`
+    `SlamNodeConfig` (association, x0, y0, theta0, frame ids, fake_sensor_std, landmark_radius, and the
+    motion model's wheel_noise), `turtlelib.SlamConfig` (range_std, bearing_std, matcher, gates,
+    linearization, confirm_count, tentative_timeout, max_range, initial_*_std, jcbb_max_nodes),
+    `turtlelib.TimelineConfig`
     (max_observation_delay, max_pending_observations), `RobotParams` (the Burger's by default),
     `WheelJoints`, `PathTrailConfig`. Defaults in config/slam.yaml. The filter's sensor mount
     (`SlamConfig.sensor_x/y/theta`) is the robot's `lidar_x`, `lidar_y`, `lidar_yaw`. Invalid values stop
@@ -54,8 +55,8 @@ from visualization_msgs.msg import MarkerArray
 from nuturtle_description.robot_params import RobotParams, burger_params
 from nuturtle_ros_common.conversions import (
     odometry_message,
-    stamp_from_seconds,
-    stamp_seconds,
+    stamp_from_nanoseconds,
+    stamp_nanoseconds,
     transform_stamped,
 )
 from nuturtle_ros_common.markers import cylinder_marker, delete_all_marker, ellipse_marker, marker_positions
@@ -64,10 +65,19 @@ from nuturtle_ros_common.ros_params import declare_dataclass
 from nuturtle_ros_common.tf_compat import OptionalTfBroadcaster
 from nuturtle_ros_common.throttle import SourceWarnings
 from nuturtle_ros_common.wheel_joints import WheelJoints, wheel_values
-from turtlelib import EkfSlam, SlamConfig, SlamTimeline, TimelineConfig, Transform2D, Twist2D
+from turtlelib import (
+    DiffDriveMotion,
+    EkfSlam,
+    SlamConfig,
+    SlamTimeline,
+    TimelineConfig,
+    Transform2D,
+    Twist2D,
+    WheelAngles,
+)
 from turtlelib.path_trail import PathTrail, PathTrailConfig
 from turtlelib.range_bearing import observations_from_points
-from turtlelib.validation import finite_real, names, one_of, positive, store
+from turtlelib.validation import finite_real, names, non_negative, one_of, positive, store
 from turtlelib.wheel_odometry import WheelOdometry
 
 ASSOCIATIONS = ("known", "unknown")
@@ -85,7 +95,9 @@ class SlamNodeConfig:
     * ``x0``, ``y0``, ``theta0`` (m, m, rad, finite): the start pose ``T_map_body``;
     * ``map_id``, ``odom_id``, ``body_id``, ``sensor_id``: frame ids, non-empty and distinct;
     * ``fake_sensor_std`` (m, > 0): per-axis standard deviation of the fake sensor's positions;
-    * ``landmark_radius`` (m, > 0): drawn radius of the mapped landmarks.
+    * ``landmark_radius`` (m, > 0): drawn radius of the mapped landmarks;
+    * ``wheel_noise`` (sqrt(rad), >= 0): the motion model's wheel slip, ``N(0, wheel_noise^2 |dphi|)`` per
+      wheel over an increment ``dphi`` (:class:`turtlelib.DiffDriveMotion`).
     """
 
     association: str = "unknown"
@@ -98,10 +110,12 @@ class SlamNodeConfig:
     sensor_id: str = "base_scan"
     fake_sensor_std: float = 0.01
     landmark_radius: float = 0.038
+    wheel_noise: float = 0.05
 
     def __post_init__(self) -> None:
         one_of("association", self.association, ASSOCIATIONS)
         store(self, ("x0", "y0", "theta0"), finite_real)
+        store(self, ("wheel_noise",), non_negative)
         store(self, ("fake_sensor_std", "landmark_radius"), positive)
         frames = ("map_id", "odom_id", "body_id", "sensor_id")
         names("frame id", **{name: getattr(self, name) for name in frames})
@@ -130,8 +144,9 @@ class SlamNode(Node):
         self.joints = declare_dataclass(self, WheelJoints)
         self.trail: PathTrail[PoseStamped] = PathTrail(declare_dataclass(self, PathTrailConfig))
         drive = robot.diff_drive()
-        self.slam = EkfSlam(self.config, drive, self.node_config.T_map_body0)
-        self.timeline = SlamTimeline(self.slam, timeline_config)
+        motion = DiffDriveMotion(drive, self.node_config.wheel_noise)
+        self.slam = EkfSlam(self.config, motion, self.node_config.T_map_body0)
+        self.timeline = SlamTimeline(self.slam, WheelAngles(), timeline_config)
         self.odometry = WheelOdometry(drive)
         # T_sensor_frame for the frames observations may come in
         T_body_sensor = self.config.T_body_sensor
@@ -140,10 +155,6 @@ class SlamNode(Node):
             self.node_config.body_id: T_body_sensor.inverse(),
         }
         self._fake_sensor_covariance = self.node_config.fake_sensor_std**2 * np.eye(2)
-        # the header stamps of the observations waiting in the timeline, by their time in s: the map is
-        # stamped with these, not with a stamp rebuilt from seconds (a float holds an epoch-sized time to
-        # about 0.2 us only, so the map's stamp would differ from the scan's)
-        self._waiting_stamps: dict[float, Time] = {}
         self._warnings = SourceWarnings(self.get_logger())
 
         self._odom_publisher = self.create_publisher(Odometry, "~/odom", 10)
@@ -164,17 +175,18 @@ class SlamNode(Node):
         except ValueError as error:
             self._warnings.warn("joint_states", f"joint_states skipped: {error}")
             return
-        t_s = stamp_seconds(msg.header.stamp)
-        latest_s = self.timeline.latest_time_s
-        if latest_s is not None and t_s < latest_s:
+        t_ns = stamp_nanoseconds(msg.header.stamp)
+        t_s = t_ns * 1e-9
+        latest_ns = self.timeline.latest_time_ns
+        if latest_ns is not None and t_ns < latest_ns:
             self._warnings.warn(
                 "joint_states",
-                f"time went backwards ({t_s:.9f} s < {latest_s:.9f} s): restarting the timeline there",
+                f"time went backwards ({t_ns} ns < {latest_ns} ns): restarting the timeline there",
             )
-            self._restart(t_s, phi_left_rad, phi_right_rad)
+            self._restart(t_ns, phi_left_rad, phi_right_rad)
             return
         try:
-            applied = self.timeline.add_wheels(t_s, phi_left_rad, phi_right_rad)
+            applied = self.timeline.add_motion(t_ns, (phi_left_rad, phi_right_rad))
             if self.odometry.reference_time_s is None:
                 self.odometry.set_reference(t_s, phi_left_rad, phi_right_rad)
             V_body = self.odometry.step(t_s, phi_left_rad, phi_right_rad)
@@ -186,65 +198,47 @@ class SlamNode(Node):
             self._warnings.warn(
                 "joint_states", f"joint_states skipped: {error}; taking it as the new reference"
             )
-            self._restart(t_s, phi_left_rad, phi_right_rad)
+            self._restart(t_ns, phi_left_rad, phi_right_rad)
             return
-        map_stamp = self._waiting_stamps.get(applied[-1][0]) if applied else None
-        self._forget_waiting_stamps()
         self._publish_pose(msg.header.stamp, V_body, T_map_body, P_pose)
         if applied:
-            self._publish_map(map_stamp if map_stamp is not None else stamp_from_seconds(applied[-1][0]))
+            self._publish_map(stamp_from_nanoseconds(applied[-1][0]))
 
     def _on_fake_sensor(self, msg: MarkerArray) -> None:
         try:
-            t_s, ids, p_sensor, rotation = self._observed_points(msg)
+            t_ns, ids, p_sensor, rotation = self._observed_points(msg)
             # Sigma_sensor = R_sf Sigma R_sf^T
             covariance = np.broadcast_to(
                 rotation @ self._fake_sensor_covariance @ rotation.T, (len(ids), 2, 2)
             )
             z, R = observations_from_points(p_sensor, covariance)
-            applied = self.timeline.add_observations(t_s, z, R, ids)
+            applied = self.timeline.add_observations(t_ns, z, R, ids)
         except (ValueError, np.linalg.LinAlgError) as error:
             self._warnings.warn("fake_sensor", f"fake_sensor skipped: {error}")
             return
-        self._observation_added(t_s, msg, applied)
+        if applied:
+            self._publish_map(msg.markers[0].header.stamp)
 
     def _on_landmarks(self, msg: MarkerArray) -> None:
         try:
-            t_s, ids, p_sensor, _ = self._observed_points(msg)
+            t_ns, ids, p_sensor, _ = self._observed_points(msg)
             z, _ = observations_from_points(p_sensor, np.zeros((len(ids), 2, 2)))
-            applied = self.timeline.add_observations(t_s, z)
+            applied = self.timeline.add_observations(t_ns, z)
         except (ValueError, np.linalg.LinAlgError) as error:
             self._warnings.warn("landmarks", f"landmarks skipped: {error}")
             return
-        self._observation_added(t_s, msg, applied)
-
-    def _observation_added(self, t_s: float, msg: MarkerArray, applied: list) -> None:
-        """Publish the map of an observation applied at once, or keep its stamp while it waits."""
-        stamp = msg.markers[0].header.stamp  # _observed_points checked that all markers share it
         if applied:
-            self._publish_map(stamp)
-        else:
-            self._waiting_stamps[t_s] = stamp
+            self._publish_map(msg.markers[0].header.stamp)
 
-    def _restart(self, t_s: float, phi_left_rad: float, phi_right_rad: float) -> None:
+    def _restart(self, t_ns: int, phi_left_rad: float, phi_right_rad: float) -> None:
         """Take this wheel sample as the new start of the timeline and of the odometry (estimate kept)."""
-        self.timeline.restart(t_s, phi_left_rad, phi_right_rad)
-        self._waiting_stamps.clear()
-        self.odometry.set_reference(t_s, phi_left_rad, phi_right_rad)
-
-    def _forget_waiting_stamps(self) -> None:
-        """Drop the stamps of observations no longer waiting: every one at or before the newest wheel
-        sample has been applied (or refused)."""
-        latest_s = self.timeline.latest_time_s
-        if latest_s is not None:
-            self._waiting_stamps = {
-                t_s: stamp for t_s, stamp in self._waiting_stamps.items() if t_s > latest_s
-            }
+        self.timeline.restart(t_ns, (phi_left_rad, phi_right_rad))
+        self.odometry.set_reference(t_ns * 1e-9, phi_left_rad, phi_right_rad)
 
     def _observed_points(
         self, msg: MarkerArray
-    ) -> tuple[float, NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
-        """Stamp (s), ids, centres ``p_sensor`` (K, 2) and the rotation from the markers' frame into the
+    ) -> tuple[int, NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
+        """Stamp (ns), ids, centres ``p_sensor`` (K, 2) and the rotation from the markers' frame into the
         sensor frame; ValueError for an unusable array."""
         positions = marker_positions(msg)
         T_sensor_frame = self._T_sensor_from.get(positions.frame_id)
@@ -254,7 +248,7 @@ class SlamNode(Node):
             )
         # p_sensor = T_sensor_frame @ p_frame
         p_sensor = T_sensor_frame @ positions.xy if len(positions.ids) else positions.xy
-        return stamp_seconds(positions.stamp), positions.ids, p_sensor, T_sensor_frame.rotation_matrix()
+        return stamp_nanoseconds(positions.stamp), positions.ids, p_sensor, T_sensor_frame.rotation_matrix()
 
     # --- outputs -----------------------------------------------------------------------------------------
 

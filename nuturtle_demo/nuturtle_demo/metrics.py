@@ -30,6 +30,7 @@ Metrics
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -98,6 +99,28 @@ def odom_in_world(odom: PoseSeries, T_world_start: Transform2D) -> PoseSeries:
     """Odometry poses in the world: ``T_world_body = T_world_start @ T_odom_body`` for each sample."""
     poses = np.array([(T_world_start @ Transform2D(*pose)).as_array() for pose in odom.poses])
     return PoseSeries(odom.t_s, poses.reshape(-1, 3))
+
+
+def align_se2(source_xy: NDArray[np.float64], target_xy: NDArray[np.float64]) -> Transform2D:
+    """The rigid motion ``T`` (no scale) minimising ``sum_i |T p_i - q_i|^2`` for point pairs ``source_xy``
+    (N, 2) -> ``target_xy`` (N, 2), N >= 2 (Kabsch / Umeyama in the plane).
+
+    With centroids ``p_bar``, ``q_bar`` and centred points: ``theta = atan2(sum p x q, sum p . q)``
+    (cross and dot products of the pairs), ``t = q_bar - R(theta) p_bar``.
+    """
+    p = np.asarray(source_xy, dtype=np.float64).reshape(-1, 2)
+    q = np.asarray(target_xy, dtype=np.float64).reshape(-1, 2)
+    if p.shape != q.shape or p.shape[0] < 2:
+        raise ValueError(f"need two equal (N >= 2, 2) point sets, got {p.shape} and {q.shape}")
+    p_bar, q_bar = p.mean(axis=0), q.mean(axis=0)
+    a, b = p - p_bar, q - q_bar
+    # theta = atan2(sum a x b, sum a . b)
+    theta = math.atan2(float(np.sum(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])), float(np.sum(a * b)))
+    c, s = math.cos(theta), math.sin(theta)
+    # t = q_bar - R p_bar
+    return Transform2D(
+        q_bar[0] - (c * p_bar[0] - s * p_bar[1]), q_bar[1] - (s * p_bar[0] + c * p_bar[1]), theta
+    )
 
 
 def pose_errors(estimate: PoseSeries, truth: PoseSeries) -> NDArray[np.float64]:
@@ -179,7 +202,7 @@ def landmarks_within_range(
 
 
 def pose_nees(errors: NDArray[np.float64], covariances: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``eps_k = e_k^T P_k^-1 e_k`` (K,) for errors (K, 3) and covariances (K, 3, 3).
+    """``eps_k = e_k^T P_k^-1 e_k`` (K,) for errors (K, d) and covariances (K, d, d).
 
     A sample whose covariance is not positive definite (smallest eigenvalue <= ``MIN_EIGENVALUE``, e.g.
     the exactly known start pose before the robot moves) has no NEES: NaN.

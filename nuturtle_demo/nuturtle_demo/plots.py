@@ -23,7 +23,7 @@ LANDMARK_SIGMAS = 2.0
 DPI = 130
 
 
-def _figure(width_in: float, height_in: float) -> Any:
+def new_figure(width_in: float, height_in: float) -> Any:
     from matplotlib.figure import Figure
 
     return Figure(figsize=(width_in, height_in), dpi=DPI, layout="constrained")
@@ -60,7 +60,7 @@ def plot_trajectory(
     2-sigma ellipses from ``mapped_covariances`` (n, 2, 2)."""
     from matplotlib.patches import Circle, Rectangle
 
-    figure = _figure(7.0, 7.0)
+    figure = new_figure(7.0, 7.0)
     axes = figure.add_subplot()
     hx, hy = 0.5 * arena_xy_m[0], 0.5 * arena_xy_m[1]
     axes.add_patch(Rectangle((-hx, -hy), 2 * hx, 2 * hy, fill=False, edgecolor="black", linewidth=2.0))
@@ -93,7 +93,7 @@ def plot_errors(
 ) -> None:
     """errors.png: SLAM pose error ``e = [x, y, theta]`` (K, 3) over time (K,) with its +-2 sigma bounds
     (``sigmas`` (K, 3), square roots of the covariance diagonal)."""
-    figure = _figure(8.0, 7.0)
+    figure = new_figure(8.0, 7.0)
     labels = ("x error (m)", "y error (m)", "heading error (rad)")
     axes_list = figure.subplots(3, 1, sharex=True)
     for k, (axes, label) in enumerate(zip(axes_list, labels, strict=True)):
@@ -119,7 +119,7 @@ def plot_covariance(path: str | Path, P: NDArray[np.float64]) -> None:
     d = np.sqrt(np.clip(np.diag(P), 1e-300, None))
     correlation = P / np.outer(d, d)
     magnitude = np.log10(np.abs(P) + 1e-16)
-    figure = _figure(12.0, 5.6)
+    figure = new_figure(12.0, 5.6)
     left, right = figure.subplots(1, 2)
     image = left.imshow(magnitude, cmap="viridis", interpolation="nearest", vmin=max(magnitude.min(), -12.0))
     figure.colorbar(image, ax=left, label="log10 |P_ij|")

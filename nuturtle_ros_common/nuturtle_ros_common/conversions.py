@@ -93,6 +93,17 @@ def stamp_seconds(stamp: Time) -> float:
     return stamp.sec + stamp.nanosec * 1e-9
 
 
+def stamp_nanoseconds(stamp: Time) -> int:
+    """The stamp as integer ns, exactly."""
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+
+def stamp_from_nanoseconds(t_ns: int) -> Time:
+    """The stamp of integer ns ``t_ns`` (0 <= nanosec < 1e9), exactly."""
+    sec, nanosec = divmod(int(t_ns), 1_000_000_000)
+    return Time(sec=sec, nanosec=nanosec)
+
+
 def stamp_from_seconds(seconds: float) -> Time:
     """The stamp nearest to `seconds` (rounded to the nanosecond; 0 <= nanosec < 1e9)."""
     sec = math.floor(seconds)

@@ -27,15 +27,17 @@ from visualization_msgs.msg import Marker, MarkerArray
 from nuslam.landmarks_node import LandmarksNode
 from nuslam.slam_node import SlamNode
 from nuturtle_description.robot_params import burger_params
-from nuturtle_ros_common.conversions import covariance_from_6x6, stamp_seconds, yaw_from_quaternion
+from nuturtle_ros_common.conversions import covariance_from_6x6, yaw_from_quaternion
 from rclpy_harness import matched, record_rosout, warnings_of
 from turtlelib import (
+    DiffDriveMotion,
     EkfSlam,
     LidarConfig,
     SlamConfig,
     SlamTimeline,
     TimelineConfig,
     Transform2D,
+    WheelAngles,
     simulate_scan,
 )
 from turtlelib.range_bearing import observations_from_points
@@ -52,6 +54,7 @@ EPOCH_NS = 1_700_000_000_123_456_789  # an epoch-sized stamp with every nanoseco
 LANDMARKS = {3: (1.2, 0.4), 7: (0.5, -1.0), 12: (-0.6, 0.8)}
 GREEN = (0.1, 0.8, 0.2, 1.0)
 TOL = 1e-9
+WHEEL_NOISE = 0.05  # the node's default wheel_noise (sqrt(rad))
 
 
 def wheel_speeds(vx: float, omega: float) -> tuple[float, float]:
@@ -366,8 +369,8 @@ def test_late_and_early_observations_are_applied_at_their_own_stamps(ros):
     T0 = Transform2D(0.1, -0.2, 0.3)
     rig = Rig(ros, association="known", x0=T0.x, y0=T0.y, theta0=T0.theta)
     config, timeline_config = SlamConfig(sensor_x=T_BODY_SENSOR.x), TimelineConfig()
-    slam = EkfSlam(config, DRIVE, T0)
-    timeline = SlamTimeline(slam, timeline_config)
+    slam = EkfSlam(config, DiffDriveMotion(DRIVE, WHEEL_NOISE), T0)
+    timeline = SlamTimeline(slam, WheelAngles(), timeline_config)
     arc = Arc(T0, EPOCH_NS, vx=0.22, omega=0.6)
     rng = np.random.default_rng(11)
     fake_std = 0.01
@@ -381,7 +384,7 @@ def test_late_and_early_observations_are_applied_at_their_own_stamps(ros):
         ids = np.array([i for i, _, _ in seen])
         p_sensor = T_BODY_SENSOR.inverse() @ np.array([(x, y) for _, x, y in seen])
         z, R = observations_from_points(p_sensor, np.broadcast_to(fake_std**2 * np.eye(2), (3, 2, 2)))
-        return cylinder_array("base_footprint", t_obs, seen), [stamp_seconds(stamp(t_obs)), z, R, ids]
+        return cylinder_array("base_footprint", t_obs, seen), [t_obs, z, R, ids]
 
     def check_map(array: MarkerArray, t_obs: int) -> None:
         assert_map_header(array, t_obs)
@@ -399,7 +402,7 @@ def test_late_and_early_observations_are_applied_at_their_own_stamps(ros):
     for k in range(36):
         t_ns = EPOCH_NS + k * dt_ns
         odom = rig.wheels(t_ns, arc.angles(t_ns))
-        timeline.add_wheels(stamp_seconds(stamp(t_ns)), *arc.angles(t_ns))
+        timeline.add_motion(t_ns, arc.angles(t_ns))
         T_ref, P_ref = timeline.latest_pose()
         assert close_pose(odom, T_ref), (k, pose_of(odom), T_ref)
         assert covariance_from_6x6(odom.pose.covariance) == pytest.approx(P_ref, abs=1e-12)
@@ -422,7 +425,7 @@ def test_late_and_early_observations_are_applied_at_their_own_stamps(ros):
             count = len(rig.maps)
             t_next = t_ns + dt_ns
             rig.wheels(t_next, arc.angles(t_next))
-            timeline.add_wheels(stamp_seconds(stamp(t_next)), *arc.angles(t_next))
+            timeline.add_motion(t_next, arc.angles(t_next))
             assert rig.ros.spin_until(lambda count=count: len(rig.maps) > count, 5.0)
             check_map(rig.maps[-1], t_obs)
             break
@@ -619,6 +622,11 @@ def invalid(name: str, value, message: str):
         invalid("x0", math.inf, "x0 must be a finite number"),
         invalid("matcher", "greedy", "matcher"),
         invalid("confirm_count", 0, "confirm_count"),
+        invalid("tentative_timeout", 0.0, "tentative_timeout"),
+        invalid("tentative_timeout", "2", "tentative_timeout must be of type float"),
+        invalid("gate_known", 1.5, "gate_known"),
+        invalid("linearization", "exact", "linearization must be one of"),
+        invalid("wheel_noise", -0.1, "wheel_noise"),
         invalid("max_observation_delay", -0.1, "max_observation_delay"),
         invalid("wheel_right", "wheel_left_joint", "wheel_left, wheel_right must be distinct joint names"),
         invalid("wheel_radius", -0.033, "wheel_radius"),
@@ -636,8 +644,30 @@ def test_the_default_parameters(ros):
     # the sensor mount is the robot's (lidar_x ...), not a parameter of the filter's own
     assert node.config == SlamConfig(sensor_x=T_BODY_SENSOR.x)
     assert not node.has_parameter("sensor_x")
+    assert node.get_parameter("tentative_timeout").value == 2.0  # s
+    assert node.get_parameter("gate_known").value == 0.9999
+    assert node.get_parameter("linearization").value == "standard"
+    # the motion model: the robot's wheels with the node's wheel_noise
+    assert node.get_parameter("wheel_noise").value == WHEEL_NOISE
+    assert node.slam.motion == DiffDriveMotion(DRIVE, WHEEL_NOISE)
+    assert node.timeline.signal == WheelAngles()
     assert node.timeline.config == TimelineConfig()
     assert node.get_parameter("wheel_radius").value == R_WHEEL
+
+
+def test_the_filter_parameters_reach_the_filter(ros):
+    overrides = [
+        Parameter("wheel_noise", value=0.2),
+        Parameter("tentative_timeout", value=0.5),
+        Parameter("gate_known", value=1.0),
+        Parameter("linearization", value="fej"),
+    ]
+    node = ros.add(SlamNode(context=ros.context, parameter_overrides=overrides))
+    assert node.slam.motion == DiffDriveMotion(DRIVE, 0.2)
+    assert node.node_config.wheel_noise == 0.2
+    assert node.config == SlamConfig(
+        sensor_x=T_BODY_SENSOR.x, tentative_timeout=0.5, gate_known=1.0, linearization="fej"
+    )
 
 
 def test_the_filter_s_sensor_mount_is_the_robot_s_lidar_mount(ros):

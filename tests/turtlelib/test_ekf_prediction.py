@@ -13,8 +13,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from turtlelib import DiffDrive, Transform2D
+from turtlelib.arc_noise import MAX_STEP_TURN_RAD
 from turtlelib.ekf_slam import EkfSlam, SlamConfig
-from turtlelib.wheel_noise import MAX_STEP_TURN_RAD, wheel_slip_covariance
+from turtlelib.motion_models import DiffDriveMotion
+from turtlelib.wheel_noise import wheel_slip_covariance
 
 PI = math.pi
 BURGER = DiffDrive(wheel_radius=0.033, track_width=0.16)
@@ -25,8 +27,8 @@ headings = st.floats(-PI, PI, allow_nan=False)
 
 
 def filter_at(pose: Transform2D, pose_std=(0.01, 0.02, 0.03), wheel_noise=0.05) -> EkfSlam:
-    config = SlamConfig(sensor_x=-0.032, wheel_noise=wheel_noise, confirm_count=1)
-    slam = EkfSlam(config, BURGER, pose)
+    config = SlamConfig(sensor_x=-0.032, confirm_count=1)
+    slam = EkfSlam(config, DiffDriveMotion(BURGER, wheel_noise), pose)
     # a correlated, full-rank starting covariance
     A = np.array([[1.0, 0.3, -0.2], [0.0, 1.0, 0.5], [0.0, 0.0, 1.0]]) * np.array(pose_std)
     slam.reset(pose, A @ A.T, keep_map=True)
@@ -102,9 +104,9 @@ def test_noise_is_symmetric_positive_semidefinite_for_large_turns():
 def test_prediction_does_not_depend_on_the_rate(theta, left, right, n):
     start = Transform2D(0.5, -1.0, theta)
     one, many = filter_at(start), filter_at(start)
-    one.predict(left, right)
+    one.predict((left, right))
     for _ in range(n):
-        many.predict(left / n, right / n)
+        many.predict((left / n, right / n))
     np.testing.assert_allclose(many.pose.as_matrix(), one.pose.as_matrix(), rtol=0.0, atol=1e-10)
     scale = np.abs(one.pose_covariance).max()
     np.testing.assert_allclose(many.pose_covariance, one.pose_covariance, rtol=0.0, atol=1e-10 * scale)
@@ -114,7 +116,7 @@ def test_prediction_touches_only_robot_rows_and_columns():
     slam = filter_at(Transform2D(0.2, 0.1, 0.3))
     slam.update_known([4, 9], [[1.0, 0.3], [2.0, -1.0]])
     before = slam.covariance
-    slam.predict(2.0, 3.0)
+    slam.predict((2.0, 3.0))
     after = slam.covariance
     np.testing.assert_array_equal(after[3:, 3:], before[3:, 3:])
     assert not np.allclose(after[:3, 3:], before[:3, 3:])
@@ -155,7 +157,7 @@ def test_prediction_covariance_matches_monte_carlo(left, right):
     # a landmark correlated with the pose, so the cross-covariance P_qm' = G P_qm is exercised
     slam.update_known([0], [[1.2, 0.4]])
     prior_mean, prior_cov = slam.state, slam.covariance
-    slam.predict(left, right)
+    slam.predict((left, right))
 
     n_samples = 20_000
     prior = rng.multivariate_normal(prior_mean, prior_cov, n_samples)
@@ -174,9 +176,9 @@ def test_prediction_rejects_non_finite_increments_and_keeps_the_filter():
     state, cov = slam.state, slam.covariance
     for bad in (math.nan, math.inf, -math.inf):
         with pytest.raises(ValueError):
-            slam.predict(bad, 1.0)
+            slam.predict((bad, 1.0))
         with pytest.raises(ValueError):
-            slam.predict(1.0, bad)
+            slam.predict((1.0, bad))
     np.testing.assert_array_equal(slam.state, state)
     np.testing.assert_array_equal(slam.covariance, cov)
 
@@ -186,7 +188,7 @@ def test_a_turn_beyond_the_step_limit_is_refused_and_keeps_the_filter():
     slam = filter_at(Transform2D(0.2, 0.1, 0.3))
     state, cov = slam.state, slam.covariance
     with pytest.raises(ValueError, match="not a motion"):
-        slam.predict(-1e9, 1e9)
+        slam.predict((-1e9, 1e9))
     np.testing.assert_array_equal(slam.state, state)
     np.testing.assert_array_equal(slam.covariance, cov)
     # the largest turn it takes: omega = r / d (dphi_right - dphi_left) = MAX_STEP_TURN_RAD

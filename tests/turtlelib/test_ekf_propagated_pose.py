@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 
 from turtlelib import DiffDrive, Transform2D
 from turtlelib.ekf_slam import EkfSlam, SlamConfig
+from turtlelib.motion_models import DiffDriveMotion
 from turtlelib.range_bearing import predict_observations
 
 PI = math.pi
@@ -24,16 +25,14 @@ poses = st.builds(Transform2D, st.floats(-5.0, 5.0), st.floats(-5.0, 5.0), st.fl
 
 def filter_with_map(pose: Transform2D, mode="known", wheel_noise=0.05) -> EkfSlam:
     """Landmarks mapped from an uncertain pose, then moved on: a full, correlated covariance."""
-    config = SlamConfig(
-        sensor_x=-0.032, wheel_noise=wheel_noise, initial_xy_std=0.03, initial_theta_std=0.05, confirm_count=1
-    )
-    slam = EkfSlam(config, BURGER, pose)
+    config = SlamConfig(sensor_x=-0.032, initial_xy_std=0.03, initial_theta_std=0.05, confirm_count=1)
+    slam = EkfSlam(config, DiffDriveMotion(BURGER, wheel_noise), pose)
     z, _, _ = predict_observations(pose.as_array(), pose @ LANDMARKS, config.T_body_sensor)
     if mode == "known":
         slam.update_known([0, 1, 2], z)
     else:
-        slam.update_unknown(z)
-    slam.predict(3.0, 4.0)
+        slam.update_unknown(z, stamp_ns=0)
+    slam.predict((3.0, 4.0))
     return slam
 
 
@@ -55,9 +54,9 @@ def test_propagated_pose_is_what_predict_gives(pose, left, right, wheel_noise):
     slam = filter_with_map(pose, wheel_noise=wheel_noise)
     before = snapshot(slam)
     predicted = copy.deepcopy(slam)
-    predicted.predict(left, right)
+    predicted.predict((left, right))
 
-    T, P = slam.propagated_pose(left, right)
+    T, P = slam.propagated_pose((left, right))
     assert isinstance(T, Transform2D)
     np.testing.assert_allclose(T.as_array(), predicted.pose.as_array(), rtol=0.0, atol=1e-12)
     expected = predicted.pose_covariance
@@ -72,8 +71,8 @@ def test_propagated_pose_is_what_predict_gives(pose, left, right, wheel_noise):
 
 def test_propagated_pose_hand_case():
     # from the origin with a certain pose, both wheels 10 rad: 0.33 m straight ahead, covariance = Q only
-    slam = EkfSlam(SlamConfig(sensor_x=-0.032, wheel_noise=0.1), BURGER)
-    T, P = slam.propagated_pose(10.0, 10.0)
+    slam = EkfSlam(SlamConfig(sensor_x=-0.032), DiffDriveMotion(BURGER, 0.1))
+    T, P = slam.propagated_pose((10.0, 10.0))
     assert T.x == pytest.approx(0.33, abs=1e-15)
     assert T.y == 0.0 and T.theta == 0.0
     # Q of a straight line: var_v = q r^2 / 2, var_w = 2 q r^2 / d^2, u = r dphi, q = k^2 dphi
@@ -89,7 +88,11 @@ def test_propagated_pose_hand_case():
 
 def test_propagated_pose_without_motion_is_the_current_pose():
     slam = filter_with_map(Transform2D(1.0, -2.0, 2.5))
-    T, P = slam.propagated_pose(0.0, 0.0)
+    T, P = slam.propagated_pose((0.0, 0.0))
+    assert T == slam.pose
+    np.testing.assert_array_equal(P, slam.pose_covariance)
+    # no inputs at all: the current pose too
+    T, P = slam.propagated_pose_along([])
     assert T == slam.pose
     np.testing.assert_array_equal(P, slam.pose_covariance)
 
@@ -97,8 +100,8 @@ def test_propagated_pose_without_motion_is_the_current_pose():
 def test_propagated_pose_does_not_chain():
     # it always starts from the filter's pose: twice the same call, the same answer
     slam = filter_with_map(Transform2D(0.2, 0.1, -0.4))
-    first = slam.propagated_pose(2.0, 1.0)
-    second = slam.propagated_pose(2.0, 1.0)
+    first = slam.propagated_pose((2.0, 1.0))
+    second = slam.propagated_pose((2.0, 1.0))
     assert first[0] == second[0]
     np.testing.assert_array_equal(first[1], second[1])
     assert first[0] != slam.pose
@@ -109,7 +112,7 @@ def test_propagated_pose_rejects_non_finite_increments(left, right):
     slam = filter_with_map(Transform2D())
     before = snapshot(slam)
     with pytest.raises(ValueError):
-        slam.propagated_pose(left, right)
+        slam.propagated_pose((left, right))
     assert_same(before, snapshot(slam))
 
 
@@ -138,7 +141,7 @@ def test_checked_observations_returns_validated_arrays():
     assert z.shape == (0, 2) and R.shape == (0, 2, 2) and ids.shape == (0,)
     assert_same(before, snapshot(slam))
     # a filter without an association mode yet takes either kind
-    fresh = EkfSlam(SlamConfig(sensor_x=-0.032), BURGER)
+    fresh = EkfSlam(SlamConfig(sensor_x=-0.032), DiffDriveMotion(BURGER, 0.05))
     assert fresh.checked_observations(GOOD_Z)[2] is None
     assert fresh.checked_observations(GOOD_Z, ids=[0, 1])[2] is not None
 

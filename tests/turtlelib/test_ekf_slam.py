@@ -14,10 +14,13 @@ from hypothesis import strategies as st
 
 from turtlelib import DiffDrive, Transform2D
 from turtlelib.ekf_slam import EkfSlam, ObservationStatus, SlamConfig
+from turtlelib.motion_models import DiffDriveMotion
 from turtlelib.range_bearing import predict_observations
 
 PI = math.pi
 BURGER = DiffDrive(wheel_radius=0.033, track_width=0.16)
+MOTION = DiffDriveMotion(BURGER, 0.05)
+SCAN_NS = 200_000_000  # scans at 5 Hz: scan k is stamped k * SCAN_NS
 MATCHED, NEW, REJECTED = ObservationStatus.MATCHED, ObservationStatus.NEW, ObservationStatus.REJECTED
 
 
@@ -64,8 +67,6 @@ def test_default_config_knows_no_robot():
 @pytest.mark.parametrize(
     "field, value",
     [
-        ("wheel_noise", -0.1),
-        ("wheel_noise", math.nan),
         ("range_std", 0.0),
         ("bearing_std", -1.0),
         ("bearing_std", math.inf),
@@ -75,11 +76,18 @@ def test_default_config_knows_no_robot():
         ("gate_associate", 0.0),
         ("gate_associate", 0.99999),  # not below gate_new
         ("gate_new", 1.0),
+        ("gate_known", 0.0),
+        ("gate_known", 1.5),
+        ("gate_known", math.nan),
+        ("linearization", "exact"),
         ("confirm_count", 0),
         ("confirm_count", 2.0),
         ("confirm_count", True),
         ("tentative_timeout", 0),
-        ("tentative_timeout", 3),  # cannot hold the default confirm_count = 5 sightings
+        ("tentative_timeout", 0.0),
+        ("tentative_timeout", -1.0),
+        ("tentative_timeout", math.nan),
+        ("tentative_timeout", math.inf),
         ("max_range", 0.0),
         ("initial_xy_std", -0.01),
         ("initial_theta_std", math.nan),
@@ -91,12 +99,24 @@ def test_config_rejects_invalid_values(field, value):
         SlamConfig(**{field: value})
 
 
+def test_config_takes_a_short_timeout_and_no_gate():
+    # the timeout is a time now: any positive one is valid, whatever confirm_count needs
+    assert SlamConfig(confirm_count=5, tentative_timeout=0.1).tentative_timeout == 0.1
+    assert SlamConfig(gate_known=1.0).gate_known == 1.0
+
+
+@pytest.mark.parametrize("wheel_noise", [-0.1, math.nan, math.inf])
+def test_motion_model_rejects_invalid_wheel_noise(wheel_noise):
+    with pytest.raises(ValueError):
+        DiffDriveMotion(BURGER, wheel_noise)
+
+
 # --- views -------------------------------------------------------------------------------------------------
 
 
 def test_initial_filter():
     config = SlamConfig(sensor_x=-0.032, initial_xy_std=0.1, initial_theta_std=0.2)
-    slam = EkfSlam(config, BURGER, Transform2D(1.0, 2.0, 3.0))
+    slam = EkfSlam(config, MOTION, Transform2D(1.0, 2.0, 3.0))
     assert slam.pose == Transform2D(1.0, 2.0, 3.0)
     np.testing.assert_allclose(slam.pose_covariance, np.diag([0.01, 0.01, 0.04]))
     np.testing.assert_array_equal(slam.state, [1.0, 2.0, 3.0])
@@ -104,12 +124,12 @@ def test_initial_filter():
     assert slam.landmark_ids.shape == (0,)
     assert slam.landmarks.shape == (0, 2)
     assert slam.landmark_covariances.shape == (0, 2, 2)
-    assert EkfSlam(config, BURGER).pose == Transform2D()
+    assert EkfSlam(config, MOTION).pose == Transform2D()
 
 
 def test_new_landmark_from_the_inverse_model():
     # robot at the origin facing +x with the LDS-01 at x = -0.032: 1 m at +90 deg is (-0.032, 1)
-    slam = EkfSlam(SlamConfig(sensor_x=-0.032), BURGER)
+    slam = EkfSlam(SlamConfig(sensor_x=-0.032), MOTION)
     result = slam.update_known([3], [[1.0, 0.5 * PI]])
     np.testing.assert_array_equal(result.status, [NEW])
     np.testing.assert_array_equal(result.landmark_ids, [3])
@@ -122,11 +142,11 @@ def test_new_landmark_from_the_inverse_model():
 
 
 def test_views_are_ordered_by_id_and_consistent():
-    slam = EkfSlam(SlamConfig(sensor_x=-0.032, initial_xy_std=0.05, initial_theta_std=0.05), BURGER)
+    slam = EkfSlam(SlamConfig(sensor_x=-0.032, initial_xy_std=0.05, initial_theta_std=0.05), MOTION)
     world = np.array([[1.0, 0.5], [2.0, -1.0], [-1.0, 1.5], [0.5, -2.0]])
     ids = np.array([7, 2, 11, 5])
     slam.update_known(ids, observe(slam, world))
-    slam.predict(5.0, 7.0)
+    slam.predict((5.0, 7.0))
     slam.update_known(ids[:3], observe(slam, world[:3]))
     np.testing.assert_array_equal(slam.landmark_ids, [2, 5, 7, 11])
     order = np.argsort(ids)
@@ -147,7 +167,7 @@ def test_views_are_ordered_by_id_and_consistent():
 
 
 def test_landmark_estimate_of_an_unknown_id_raises():
-    slam = EkfSlam(SlamConfig(sensor_x=-0.032), BURGER)
+    slam = EkfSlam(SlamConfig(sensor_x=-0.032), MOTION)
     slam.update_known([1], [[1.0, 0.0]])
     for bad in (0, 2, -1, 1.0, "1"):
         with pytest.raises(ValueError):
@@ -155,13 +175,13 @@ def test_landmark_estimate_of_an_unknown_id_raises():
 
 
 def test_observations_beyond_max_range_are_rejected():
-    slam = EkfSlam(SlamConfig(sensor_x=-0.032, max_range=2.0), BURGER)
+    slam = EkfSlam(SlamConfig(sensor_x=-0.032, max_range=2.0), MOTION)
     result = slam.update_known([0, 1], [[1.0, 0.0], [2.5, 1.0]])
     np.testing.assert_array_equal(result.status, [NEW, REJECTED])
     np.testing.assert_array_equal(result.landmark_ids, [0, -1])
     np.testing.assert_array_equal(slam.landmark_ids, [0])
-    result = EkfSlam(SlamConfig(sensor_x=-0.032, max_range=2.0), BURGER).update_unknown(
-        [[1.0, 0.0], [2.5, 1.0]]
+    result = EkfSlam(SlamConfig(sensor_x=-0.032, max_range=2.0), MOTION).update_unknown(
+        [[1.0, 0.0], [2.5, 1.0]], stamp_ns=0
     )
     np.testing.assert_array_equal(result.status, [NEW, REJECTED])
 
@@ -170,86 +190,111 @@ def test_observations_beyond_max_range_are_rejected():
 
 
 def test_tentative_landmark_is_confirmed_after_confirm_count_sightings():
-    config = SlamConfig(sensor_x=-0.032, confirm_count=3, tentative_timeout=5)
-    slam = EkfSlam(config, BURGER)
+    # a timeout of 5 scans at 5 Hz
+    config = SlamConfig(sensor_x=-0.032, confirm_count=3, tentative_timeout=1.0)
+    slam = EkfSlam(config, MOTION)
     landmark = [[1.0, 0.5]]
-    first = slam.update_unknown(observe(slam, landmark))
+    first = slam.update_unknown(observe(slam, landmark), stamp_ns=0)
     np.testing.assert_array_equal(first.status, [NEW])
     new_id = int(first.landmark_ids[0])
     np.testing.assert_array_equal(slam.tentative_ids, [new_id])
     assert slam.landmark_ids.shape == (0,)
     assert slam.covariance.shape == (3, 3)  # tentative landmarks are not in the public state
 
-    slam.update_unknown(np.zeros((0, 2)))  # a scan without detections
-    second = slam.update_unknown(observe(slam, landmark))
+    slam.update_unknown(np.zeros((0, 2)), stamp_ns=SCAN_NS)  # a scan without detections
+    second = slam.update_unknown(observe(slam, landmark), stamp_ns=2 * SCAN_NS)
     np.testing.assert_array_equal(second.status, [MATCHED])
     np.testing.assert_array_equal(second.landmark_ids, [new_id])
     assert second.confirmed_ids.shape == (0,)
-    third = slam.update_unknown(observe(slam, landmark))
+    third = slam.update_unknown(observe(slam, landmark), stamp_ns=3 * SCAN_NS)
     np.testing.assert_array_equal(third.confirmed_ids, [new_id])
     np.testing.assert_array_equal(slam.landmark_ids, [new_id])
     assert slam.tentative_ids.shape == (0,)
 
 
 def test_unconfirmed_landmark_is_dropped_after_the_timeout():
-    config = SlamConfig(sensor_x=-0.032, confirm_count=2, tentative_timeout=3)
-    slam = EkfSlam(config, BURGER)
+    # a timeout of 3 scans at 5 Hz
+    config = SlamConfig(sensor_x=-0.032, confirm_count=2, tentative_timeout=0.6)
+    slam = EkfSlam(config, MOTION)
     landmarks = [[1.0, 0.5], [-1.0, 2.0]]
-    first = slam.update_unknown(observe(slam, landmarks))
+    first = slam.update_unknown(observe(slam, landmarks), stamp_ns=0)
     keep, lonely = (int(i) for i in first.landmark_ids)
     # the first landmark is seen again and confirmed; the second never again
-    assert slam.update_unknown(observe(slam, landmarks[:1])).confirmed_ids.tolist() == [keep]
-    assert slam.update_unknown([]).dropped_ids.tolist() == []
-    dropped = slam.update_unknown([])  # three scans after the one that created it
+    confirming = slam.update_unknown(observe(slam, landmarks[:1]), stamp_ns=SCAN_NS)
+    assert confirming.confirmed_ids.tolist() == [keep]
+    assert slam.update_unknown([], stamp_ns=2 * SCAN_NS).dropped_ids.tolist() == []
+    dropped = slam.update_unknown([], stamp_ns=3 * SCAN_NS)  # three scans after the one that created it
     np.testing.assert_array_equal(dropped.dropped_ids, [lonely])
     np.testing.assert_array_equal(slam.landmark_ids, [keep])
     assert slam.tentative_ids.shape == (0,)
     # the rest of the filter still works on the compacted state
-    slam.predict(1.0, 1.2)
-    result = slam.update_unknown(observe(slam, landmarks[:1]))
+    slam.predict((1.0, 1.2))
+    result = slam.update_unknown(observe(slam, landmarks[:1]), stamp_ns=4 * SCAN_NS)
     np.testing.assert_array_equal(result.landmark_ids, [keep])
     assert np.linalg.eigvalsh(slam.covariance).min() > 0.0
 
 
+def test_the_timeout_is_time_not_calls():
+    # scans 1 ms apart: many more calls than a timeout of 0.6 s at 5 Hz would count (3 scans), but the
+    # tentative landmark lasts until 0.6 s have passed since its first sighting, and goes at once then
+    config = SlamConfig(sensor_x=-0.032, confirm_count=2, tentative_timeout=0.6)
+    slam = EkfSlam(config, MOTION)
+    lonely = int(slam.update_unknown(observe(slam, [[-1.0, 2.0]]), stamp_ns=0).landmark_ids[0])
+    ms = 1_000_000
+    for k in range(1, 600):
+        assert slam.update_unknown([], stamp_ns=k * ms).dropped_ids.tolist() == []
+    np.testing.assert_array_equal(slam.tentative_ids, [lonely])
+    dropped = slam.update_unknown([], stamp_ns=600 * ms)
+    np.testing.assert_array_equal(dropped.dropped_ids, [lonely])
+    assert slam.tentative_ids.shape == (0,)
+    # and without calls in between, the first call after the timeout drops it too
+    slam = EkfSlam(config, MOTION)
+    lonely = int(slam.update_unknown(observe(slam, [[-1.0, 2.0]]), stamp_ns=0).landmark_ids[0])
+    np.testing.assert_array_equal(slam.update_unknown([], stamp_ns=700 * ms).dropped_ids, [lonely])
+
+
 def test_confirm_count_one_maps_at_once():
-    slam = EkfSlam(SlamConfig(sensor_x=-0.032, confirm_count=1), BURGER)
-    result = slam.update_unknown(observe(slam, [[1.0, 0.5], [2.0, -1.0]]))
+    slam = EkfSlam(SlamConfig(sensor_x=-0.032, confirm_count=1), MOTION)
+    result = slam.update_unknown(observe(slam, [[1.0, 0.5], [2.0, -1.0]]), stamp_ns=0)
     np.testing.assert_array_equal(result.confirmed_ids, result.landmark_ids)
     np.testing.assert_array_equal(slam.landmark_ids, result.landmark_ids)
 
 
 def test_observation_between_the_gates_is_discarded():
     config = SlamConfig(sensor_x=-0.032, confirm_count=1, range_std=0.01, bearing_std=0.01)
-    slam = EkfSlam(config, BURGER)
-    slam.update_unknown([[1.0, 0.0]])
+    slam = EkfSlam(config, MOTION)
+    slam.update_unknown([[1.0, 0.0]], stamp_ns=0)
     # S = 2 R here (certain pose): a range off by 4 sigma_S gives D2 = 16, between 9.2 and 18.4
     sigma = math.sqrt(2.0) * config.range_std
-    result = slam.update_unknown([[1.0 + f * sigma, 0.0] for f in (4.0, 1.0, 6.0)])
+    result = slam.update_unknown([[1.0 + f * sigma, 0.0] for f in (4.0, 1.0, 6.0)], stamp_ns=SCAN_NS)
     # one compatible (matched), one ambiguous (discarded), one far (new) -- the first two compete for
     # the landmark and the closer wins
     np.testing.assert_array_equal(result.status, [REJECTED, MATCHED, NEW])
 
 
 def test_two_detections_in_one_scan_never_start_two_landmarks_on_one_spot():
-    slam = EkfSlam(SlamConfig(sensor_x=-0.032, confirm_count=1), BURGER)
-    result = slam.update_unknown([[1.0, 0.0], [1.005, 0.001], [2.0, 1.0]])
+    slam = EkfSlam(SlamConfig(sensor_x=-0.032, confirm_count=1), MOTION)
+    result = slam.update_unknown([[1.0, 0.0], [1.005, 0.001], [2.0, 1.0]], stamp_ns=0)
     np.testing.assert_array_equal(result.status, [NEW, REJECTED, NEW])
     assert len(slam.landmark_ids) == 2
 
 
 def test_tentative_landmarks_do_not_steal_from_confirmed_ones():
     # a tentative landmark right next to a confirmed one gets no sightings and expires
+    # a timeout of 3 scans at 5 Hz
     config = SlamConfig(
-        sensor_x=-0.032, confirm_count=2, tentative_timeout=3, range_std=0.01, bearing_std=0.01
+        sensor_x=-0.032, confirm_count=2, tentative_timeout=0.6, range_std=0.01, bearing_std=0.01
     )
-    slam = EkfSlam(config, BURGER)
-    slam.update_unknown([[1.0, 0.0]])
-    confirmed = int(slam.update_unknown([[1.0, 0.0]]).confirmed_ids[0])
-    ghost = slam.update_unknown([[1.1, 0.0]])  # far enough (in sigmas) to start a tentative landmark
+    slam = EkfSlam(config, MOTION)
+    slam.update_unknown([[1.0, 0.0]], stamp_ns=0)
+    confirmed = int(slam.update_unknown([[1.0, 0.0]], stamp_ns=SCAN_NS).confirmed_ids[0])
+    # far enough (in sigmas) to start a tentative landmark
+    ghost = slam.update_unknown([[1.1, 0.0]], stamp_ns=2 * SCAN_NS)
     np.testing.assert_array_equal(ghost.status, [NEW])
     # observations between the two are compatible with both; they go to the confirmed landmark
-    for _ in range(3):
-        np.testing.assert_array_equal(slam.update_unknown([[1.02, 0.0]]).landmark_ids, [confirmed])
+    for k in range(3, 6):
+        result = slam.update_unknown([[1.02, 0.0]], stamp_ns=k * SCAN_NS)
+        np.testing.assert_array_equal(result.landmark_ids, [confirmed])
     np.testing.assert_array_equal(slam.landmark_ids, [confirmed])
     assert slam.tentative_ids.shape == (0,)
 
@@ -257,7 +302,7 @@ def test_tentative_landmarks_do_not_steal_from_confirmed_ones():
 def test_update_keeps_the_heading_wrapped():
     # a landmark mapped from a certain pose; then the robot, believed at heading pi - 0.001 (+- 0.05),
     # sees it as if its heading were pi + 0.01: the corrected heading crosses pi and must wrap
-    slam = EkfSlam(SlamConfig(sensor_x=-0.032, range_std=0.001, bearing_std=0.001), BURGER)
+    slam = EkfSlam(SlamConfig(sensor_x=-0.032, range_std=0.001, bearing_std=0.001), MOTION)
     slam.update_known([0], [[2.0, 0.0]])
     believed = Transform2D(0.0, 0.0, PI - 0.001)
     slam.reset(believed, np.diag([1e-8, 1e-8, 0.05**2]), keep_map=True)
@@ -271,7 +316,7 @@ def test_update_keeps_the_heading_wrapped():
 
 
 def test_reset_empties_the_map_or_keeps_it():
-    slam = EkfSlam(SlamConfig(sensor_x=-0.032, initial_xy_std=0.1), BURGER)
+    slam = EkfSlam(SlamConfig(sensor_x=-0.032, initial_xy_std=0.1), MOTION)
     slam.update_known([0, 1], [[1.0, 0.0], [2.0, 1.0]])
     landmarks, blocks = slam.landmarks, slam.landmark_covariances
     pose_cov = np.diag([0.04, 0.09, 0.01])
@@ -288,14 +333,14 @@ def test_reset_empties_the_map_or_keeps_it():
 
 
 def test_one_association_mode_per_filter():
-    slam = EkfSlam(SlamConfig(sensor_x=-0.032), BURGER)
+    slam = EkfSlam(SlamConfig(sensor_x=-0.032), MOTION)
     slam.update_known([0], [[1.0, 0.0]])
     before = snapshot(slam)
     with pytest.raises(ValueError):
-        slam.update_unknown([[1.0, 0.0]])
+        slam.update_unknown([[1.0, 0.0]], stamp_ns=0)
     assert_same(before, snapshot(slam))
     slam.reset()
-    slam.update_unknown([[1.0, 0.0]])
+    slam.update_unknown([[1.0, 0.0]], stamp_ns=0)
     with pytest.raises(ValueError):
         slam.update_known([0], [[1.0, 0.0]])
 
@@ -311,7 +356,7 @@ def test_one_association_mode_per_filter():
     ],
 )
 def test_reset_rejects_bad_input(pose, covariance):
-    slam = EkfSlam(SlamConfig(sensor_x=-0.032), BURGER)
+    slam = EkfSlam(SlamConfig(sensor_x=-0.032), MOTION)
     slam.update_known([0], [[1.0, 0.0]])
     before = snapshot(slam)
     with pytest.raises(ValueError):
@@ -340,13 +385,13 @@ BAD_OBSERVATIONS = [
 
 
 def filter_with_map(mode):
-    slam = EkfSlam(SlamConfig(sensor_x=-0.032, initial_xy_std=0.01, confirm_count=2), BURGER)
+    slam = EkfSlam(SlamConfig(sensor_x=-0.032, initial_xy_std=0.01, confirm_count=2), MOTION)
     z = observe(slam, [[1.0, 0.2], [1.5, -0.8]])
     if mode == "known":
         slam.update_known([0, 1], z)
     else:
-        slam.update_unknown(z)
-    slam.predict(1.0, 1.1)
+        slam.update_unknown(z, stamp_ns=0)
+    slam.predict((1.0, 1.1))
     return slam
 
 
@@ -360,14 +405,15 @@ def test_bad_observations_raise_and_leave_the_filter_unchanged(z, R):
             if mode == "known":
                 slam.update_known(list(range(len(z))) if np.ndim(z) == 2 else [0], z, R)
             else:
-                slam.update_unknown(z, R)
+                slam.update_unknown(z, R, stamp_ns=SCAN_NS)
         assert_same(before, snapshot(slam))
         # and the next good update does exactly what it does on an untouched filter
         good = observe(slam, [[1.0, 0.2], [1.5, -0.8]])
         if mode == "known":
             a, b = slam.update_known([0, 1], good), reference.update_known([0, 1], good)
         else:
-            a, b = slam.update_unknown(good), reference.update_unknown(good)
+            a = slam.update_unknown(good, stamp_ns=SCAN_NS)
+            b = reference.update_unknown(good, stamp_ns=SCAN_NS)
         assert_same(dataclasses.astuple(a), dataclasses.astuple(b))
         assert_same(snapshot(slam), snapshot(reference))
 
@@ -402,18 +448,20 @@ motions = st.tuples(st.floats(-5.0, 10.0), st.floats(-5.0, 10.0))
 @settings(deadline=None, max_examples=40)
 @given(st.lists(st.tuples(motions, observation_batches), min_size=1, max_size=8), st.booleans())
 def test_any_valid_sequence_keeps_the_covariance_symmetric_positive_definite(steps, known):
-    # arbitrary (even mutually inconsistent) observations never break the filter's numerics
-    slam = EkfSlam(
-        SlamConfig(sensor_x=-0.032, initial_xy_std=0.01, initial_theta_std=0.01, confirm_count=1), BURGER
+    # arbitrary (even mutually inconsistent) observations never break the filter's numerics; no known
+    # gate, so that known association fuses them all
+    config = SlamConfig(
+        sensor_x=-0.032, initial_xy_std=0.01, initial_theta_std=0.01, confirm_count=1, gate_known=1.0
     )
-    for (left, right), batch in steps:
-        slam.predict(left, right)
+    slam = EkfSlam(config, MOTION)
+    for k, ((left, right), batch) in enumerate(steps):
+        slam.predict((left, right))
         unique = {landmark_id: (r, b) for landmark_id, r, b in batch}
         z = np.array(list(unique.values())).reshape(-1, 2)
         if known:
             slam.update_known(list(unique), z)
         else:
-            slam.update_unknown(z)
+            slam.update_unknown(z, stamp_ns=k * SCAN_NS)
         P = slam.covariance
         assert np.all(np.isfinite(slam.state))
         np.testing.assert_array_equal(P, P.T)

@@ -7,6 +7,7 @@ landmarks (beyond the initial storage capacity) and marginalisation.
 """
 
 import copy
+import dataclasses
 import math
 
 import numpy as np
@@ -14,14 +15,18 @@ import pytest
 
 from turtlelib import DiffDrive, Transform2D
 from turtlelib.ekf_slam import EkfSlam, ObservationStatus, SlamConfig
+from turtlelib.motion_models import DiffDriveMotion
 from turtlelib.range_bearing import landmarks_from_observations, predict_observations, residual
 from turtlelib.slam_state import SlamState
 from turtlelib.wheel_noise import wheel_slip_covariance
 
 PI = math.pi
 BURGER = DiffDrive(wheel_radius=0.033, track_width=0.16)
+WHEEL_NOISE = 0.05
+MOTION = DiffDriveMotion(BURGER, WHEEL_NOISE)
+# no innovation gate: these tests compare the fusion of every observation with the textbook filter's
 CONFIG = SlamConfig(
-    sensor_x=-0.032, wheel_noise=0.05, max_range=50.0, initial_xy_std=0.02, initial_theta_std=0.01
+    sensor_x=-0.032, max_range=50.0, initial_xy_std=0.02, initial_theta_std=0.01, gate_known=1.0
 )
 SENSOR = CONFIG.T_body_sensor
 
@@ -42,7 +47,7 @@ class DenseEkf:
         F = np.eye(N)
         F[:3, :3] = G_pose
         Q = np.zeros((N, N))
-        Q[:3, :3] = wheel_slip_covariance(BURGER, theta, left, right, CONFIG.wheel_noise)
+        Q[:3, :3] = wheel_slip_covariance(BURGER, theta, left, right, WHEEL_NOISE)
         self.x[:3] = new_pose
         self.P = F @ self.P @ F.T + Q
 
@@ -112,13 +117,13 @@ def test_fast_filter_equals_the_dense_textbook_filter():
     rng = np.random.default_rng(3)
     world = rng.uniform(-4.0, 4.0, (40, 2))
     start = Transform2D(0.1, -0.2, 0.3)
-    slam = EkfSlam(CONFIG, BURGER, start)
+    slam = EkfSlam(CONFIG, MOTION, start)
     dense = DenseEkf(start.as_array(), CONFIG.initial_pose_covariance())
     truth = start
     seen: set[int] = set()
     for _ in range(30):
         left, right = rng.uniform(-5.0, 25.0, 2)
-        slam.predict(left, right)
+        slam.predict((left, right))
         dense.predict(left, right)
         truth = BURGER.step(truth, left, right)
         assert_agrees(slam, dense)
@@ -145,14 +150,14 @@ def test_fast_filter_equals_the_dense_textbook_filter():
 
 def test_joint_nis_of_a_batch_matches_the_dense_innovation():
     rng = np.random.default_rng(11)
-    slam = EkfSlam(CONFIG, BURGER)
+    slam = EkfSlam(CONFIG, MOTION)
     dense = DenseEkf(np.zeros(3), CONFIG.initial_pose_covariance())
     z0 = np.array([[1.0, 0.2], [2.0, -0.5], [1.5, 2.0]])
     R0 = random_noise(rng, 3)
     slam.update_known([0, 1, 2], z0, R0)
     for k in range(3):
         dense.augment(k, z0[k], R0[k])
-    slam.predict(3.0, 4.0)
+    slam.predict((3.0, 4.0))
     dense.predict(3.0, 4.0)
 
     z = z0 + rng.normal(0.0, 0.02, z0.shape)
@@ -171,6 +176,74 @@ def test_joint_nis_of_a_batch_matches_the_dense_innovation():
     result = slam.update_known([0, 1, 2], z, R)
     assert result.nis == pytest.approx(nu @ np.linalg.solve(S, nu), rel=1e-10)
     assert result.nis_dof == 6
+
+
+# --- the innovation gate of known association --------------------------------------------------------------
+
+
+def test_an_observation_outside_the_known_gate_is_rejected_and_changes_nothing():
+    config = SlamConfig(sensor_x=-0.032, initial_xy_std=0.02, initial_theta_std=0.01)  # gate_known 0.9999
+    slam = EkfSlam(config, MOTION)
+    world = np.array([[1.0, 0.5], [-0.5, 1.5]])
+    slam.update_known([0, 1], predict_observations(np.zeros(3), world, SENSOR)[0])
+    slam.predict((3.0, 4.0))
+    z, _, _ = predict_observations(slam.state[:3], world, SENSOR)
+    state, P = slam.state, slam.covariance
+
+    # a range 1 m off with range_std 0.02: D2 in the thousands, far beyond chi2_2^-1(0.9999) = 18.4
+    wrong = z[:1] + [[1.0, 0.0]]
+    result = slam.update_known([0], wrong)
+    np.testing.assert_array_equal(result.status, [ObservationStatus.REJECTED])
+    np.testing.assert_array_equal(result.landmark_ids, [-1])
+    assert result.nis_dof == 0
+    np.testing.assert_array_equal(slam.state, state)
+    np.testing.assert_array_equal(slam.covariance, P)
+
+    # in one batch with a good one: the good one is fused, the wrong one is not
+    reference = copy.deepcopy(slam)
+    result = slam.update_known([0, 1], np.vstack([wrong, z[1:]]))
+    np.testing.assert_array_equal(result.status, [ObservationStatus.REJECTED, ObservationStatus.MATCHED])
+    np.testing.assert_array_equal(result.landmark_ids, [-1, 1])
+    assert result.nis_dof == 2
+    alone = reference.update_known([1], z[1:])
+    assert result.nis == alone.nis
+    np.testing.assert_array_equal(slam.state, reference.state)
+    np.testing.assert_array_equal(slam.covariance, reference.covariance)
+    assert not np.array_equal(slam.covariance, P)
+
+    # without the gate (gate_known = 1) the same wrong observation is fused
+    ungated = EkfSlam(dataclasses.replace(config, gate_known=1.0), MOTION)
+    ungated.update_known([0, 1], predict_observations(np.zeros(3), world, SENSOR)[0])
+    ungated.predict((3.0, 4.0))
+    np.testing.assert_array_equal(ungated.update_known([0], wrong).status, [ObservationStatus.MATCHED])
+    assert not np.array_equal(ungated.state, state)
+
+
+def test_a_normal_observation_is_fused_under_the_default_gate():
+    rng = np.random.default_rng(13)
+    config = SlamConfig(sensor_x=-0.032, initial_xy_std=0.02, initial_theta_std=0.01)
+    gated, ungated = EkfSlam(config, MOTION), EkfSlam(CONFIG, MOTION)
+    world = np.array([[1.0, 0.5], [-0.5, 1.5], [0.3, -1.2]])
+    z0, _, _ = predict_observations(np.zeros(3), world, SENSOR)
+    for slam in (gated, ungated):
+        slam.update_known([0, 1, 2], z0)
+        slam.predict((3.0, 4.0))
+    z, _, _ = predict_observations(gated.state[:3], world, SENSOR)
+    z = z + rng.normal(0.0, 0.02, z.shape)  # one sigma of the default noise
+    result = gated.update_known([0, 1, 2], z)
+    np.testing.assert_array_equal(result.status, [ObservationStatus.MATCHED] * 3)
+    np.testing.assert_array_equal(result.landmark_ids, [0, 1, 2])
+    # the gate only decides; a fused observation is fused exactly as without it
+    expected = ungated.update_known([0, 1, 2], z)
+    assert result.nis == expected.nis
+    np.testing.assert_array_equal(gated.state, ungated.state)
+    np.testing.assert_array_equal(gated.covariance, ungated.covariance)
+
+
+@pytest.mark.parametrize("gate_known", [0.0, 1.5, -0.5, math.nan])
+def test_invalid_known_gate_is_refused(gate_known):
+    with pytest.raises(ValueError):
+        SlamConfig(gate_known=gate_known)
 
 
 # --- SlamState: marginalisation and numerical health -------------------------------------------------------
@@ -207,14 +280,14 @@ def test_covariance_stays_symmetric_positive_definite_under_precise_observations
     # very precise observations, many times, of landmarks whose prior is wide: the regime where the
     # standard form P - K H P loses symmetry and definiteness
     rng = np.random.default_rng(9)
-    slam = EkfSlam(CONFIG, BURGER)
+    slam = EkfSlam(CONFIG, MOTION)
     world = rng.uniform(-3.0, 3.0, (12, 2))
     truth = Transform2D()
     z, _, _ = predict_observations(truth.as_array(), world, SENSOR)
     slam.update_known(np.arange(12), z, np.tile(np.diag([1.0, 0.3]), (12, 1, 1)))
     for _ in range(200):
         left, right = rng.uniform(0.0, 3.0, 2)
-        slam.predict(left, right)
+        slam.predict((left, right))
         truth = BURGER.step(truth, left, right)
         ids = rng.choice(12, 6, replace=False)
         z, _, _ = predict_observations(truth.as_array(), world[ids], SENSOR)
@@ -231,7 +304,7 @@ def test_new_landmark_covariance_matches_monte_carlo():
     rng = np.random.default_rng(21)
     pose_cov = np.array([[4e-4, 1e-4, 2e-5], [1e-4, 3e-4, -1e-5], [2e-5, -1e-5, 1e-4]])
     start = Transform2D(0.5, 0.2, 1.1)
-    slam = EkfSlam(CONFIG, BURGER, start)
+    slam = EkfSlam(CONFIG, MOTION, start)
     slam.reset(start, pose_cov)
     z = np.array([[1.0, 0.4], [2.5, -2.0]])
     R = random_noise(rng, 1)[0]
@@ -258,11 +331,11 @@ def test_update_covariance_matches_monte_carlo():
     # x ~ N(x_hat, P), z = h(x) + v: the filter's posterior mean x_hat+ = x_hat + K (z - h(x_hat)) has
     # error covariance E[(x - x_hat+)(x - x_hat+)^T] = P+ (up to linearisation)
     rng = np.random.default_rng(31)
-    slam = EkfSlam(CONFIG, BURGER, Transform2D(0.0, 0.0, 0.2))
+    slam = EkfSlam(CONFIG, MOTION, Transform2D(0.0, 0.0, 0.2))
     slam.reset(Transform2D(0.0, 0.0, 0.2), np.diag([1e-3, 1e-3, 5e-4]))
     z0 = np.array([[1.5, 0.3], [2.0, -1.2]])
     slam.update_known([0, 1], z0, np.tile(np.diag([4e-4, 4e-4]), (2, 1, 1)))
-    slam.predict(10.0, 12.0)
+    slam.predict((10.0, 12.0))
     prior_mean, prior_cov = slam.state, slam.covariance
     R = random_noise(rng, 2)
 

@@ -9,6 +9,7 @@ observations, and the spurious-detection test adds random clutter.
 
 import dataclasses
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,6 +17,7 @@ import pytest
 from turtlelib import DiffDrive, Transform2D, Twist2D
 from turtlelib.consistency import chi2_bounds, nees
 from turtlelib.ekf_slam import EkfSlam, ObservationStatus, SlamConfig
+from turtlelib.motion_models import DiffDriveMotion
 from turtlelib.range_bearing import predict_observations
 
 PI = math.pi
@@ -27,13 +29,14 @@ LANDMARKS = np.array(
 # one loop of a circle of radius 0.5 m centred at (0, 0.5): 0.2 m/s, 0.4 rad/s, 5 Hz scans
 TWIST = Twist2D(0.4, 0.2, 0.0)
 SCAN_PERIOD_S = 0.2
+SCAN_PERIOD_NS = 200_000_000
 PREDICTIONS_PER_SCAN = 4
 SLIP_SUBSTEPS = 4
 N_SCANS = int(round(2.0 * PI / TWIST.omega / SCAN_PERIOD_S))
 RANGE_STD, BEARING_STD = 0.02, 0.02
-CONFIG = SlamConfig(
-    sensor_x=-0.032, wheel_noise=0.05, range_std=RANGE_STD, bearing_std=BEARING_STD, max_range=2.5
-)
+WHEEL_NOISE = 0.05
+MOTION = DiffDriveMotion(BURGER, WHEEL_NOISE)
+CONFIG = SlamConfig(sensor_x=-0.032, range_std=RANGE_STD, bearing_std=BEARING_STD, max_range=2.5)
 
 
 class World:
@@ -49,7 +52,7 @@ class World:
 
     def drive(self) -> tuple[float, float]:
         """Move the truth by one prediction step; returns the encoder increments (what the filter gets)."""
-        k = CONFIG.wheel_noise
+        k = WHEEL_NOISE
         for _ in range(SLIP_SUBSTEPS):
             left, right = (dphi / SLIP_SUBSTEPS for dphi in self.increments)
             slip = self.rng.normal(0.0, k * np.sqrt(np.abs([left, right])))
@@ -87,17 +90,17 @@ def run(seed: int, known: bool, config: SlamConfig = CONFIG, clutter: float = 0.
 
     ``on_scan(slam)`` runs after every update."""
     world = World(seed, clutter)
-    slam = EkfSlam(config, BURGER)
+    slam = EkfSlam(config, MOTION)
     history = []
     nees_per_scan = np.empty(N_SCANS)
     for scan in range(N_SCANS):
         for _ in range(PREDICTIONS_PER_SCAN):
-            slam.predict(*world.drive())
+            slam.predict(world.drive())
         source, z = world.observe()
         if known:
             slam.update_known(source, z)
         else:
-            history.append((source, slam.update_unknown(z)))
+            history.append((source, slam.update_unknown(z, stamp_ns=scan * SCAN_PERIOD_NS)))
         nees_per_scan[scan] = pose_nees(slam, world.T_world_body)
         if on_scan is not None:
             on_scan(slam)
@@ -123,21 +126,15 @@ def test_average_pose_nees_stays_in_the_chi2_band(known):
 
 def test_an_overconfident_filter_fails_the_nees_band():
     # the same check must catch a filter that believes its odometry 5x more than it should
-    overconfident = SlamConfig(
-        sensor_x=CONFIG.sensor_x,
-        wheel_noise=CONFIG.wheel_noise / 5.0,
-        range_std=RANGE_STD,
-        bearing_std=BEARING_STD,
-        max_range=CONFIG.max_range,
-    )
+    overconfident = DiffDriveMotion(BURGER, WHEEL_NOISE / 5.0)
     runs = []
     for seed in range(10):
         world = World(seed)
-        slam = EkfSlam(overconfident, BURGER)
+        slam = EkfSlam(CONFIG, overconfident)
         nees_per_scan = []
         for _ in range(N_SCANS // 2):
             for _ in range(PREDICTIONS_PER_SCAN):
-                slam.predict(*world.drive())
+                slam.predict(world.drive())
             source, z = world.observe()
             slam.update_known(source, z)
             nees_per_scan.append(pose_nees(slam, world.T_world_body))
@@ -225,3 +222,20 @@ def test_spurious_detections_never_survive_confirmation(association, seed):
         truth_of[int(landmark_id)] = int(sources[np.argmax(counts)])
     assert sorted(truth_of.values()) == list(range(len(LANDMARKS)))
     np.testing.assert_allclose(slam.landmarks, LANDMARKS[[truth_of[i] for i in slam.landmark_ids]], atol=0.1)
+
+
+# --- regression: the diff-drive filter is today's, bit for bit ------------------------------------------
+
+GOLDEN = Path(__file__).parent / "data" / "diff_drive_golden.npz"
+
+
+@pytest.mark.parametrize(("name", "known", "clutter"), [("known", True, 0.0), ("unknown", False, 0.3)])
+def test_diff_drive_filter_is_unchanged_bit_for_bit(name, known, clutter):
+    # diff_drive_golden.npz holds the final state, covariance and landmark ids of run(7, ...) computed by the
+    # filter of commit 59b6b40 (before motion models were passed in; it had no known-association gate,
+    # hence gate_known=1, and counted the tentative timeout in scans: 10 scans of 0.2 s = the 2 s default)
+    _, slam, _ = run(7, known, config=dataclasses.replace(CONFIG, gate_known=1.0), clutter=clutter)
+    golden = np.load(GOLDEN)
+    np.testing.assert_array_equal(slam.landmark_ids, golden[f"{name}_ids"])
+    np.testing.assert_array_equal(slam.state, golden[f"{name}_state"])
+    np.testing.assert_array_equal(slam.covariance, golden[f"{name}_covariance"])

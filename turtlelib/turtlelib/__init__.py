@@ -9,6 +9,15 @@ from .detection import Clusters, Detections, DetectorConfig, LandmarkDetector, c
 from .ekf_slam import Association, EkfSlam, ObservationStatus, SlamConfig
 from .geometry import Transform2D, Twist2D, integrate_twist, normalize_angle, normalize_angles
 from .kinematics import DiffDrive
+from .motion_models import (
+    AckermannMotion,
+    DiffDriveMotion,
+    MotionModel,
+    OdometryMotion,
+    TwistNoise,
+    UnicycleMotion,
+)
+from .motion_signals import HeldInputs, MotionSignal, OdometryPoses, WheelAngles
 from .scan_model import LidarConfig, arena_walls, cast_beams, simulate_scan
 from .slam_timeline import SlamTimeline, TimelineConfig
 
@@ -28,6 +37,16 @@ __all__ = [
     "refine_for_range_sensor",
     "simulate_scan",
     "DiffDrive",
+    "AckermannMotion",
+    "DiffDriveMotion",
+    "MotionModel",
+    "OdometryMotion",
+    "TwistNoise",
+    "UnicycleMotion",
+    "HeldInputs",
+    "MotionSignal",
+    "OdometryPoses",
+    "WheelAngles",
     "Transform2D",
     "Twist2D",
     "integrate_twist",

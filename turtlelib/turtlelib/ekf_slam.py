@@ -1,4 +1,4 @@
-"""EKF SLAM for a differential-drive robot with a range-bearing landmark sensor.
+"""EKF SLAM for a planar robot with a range-bearing landmark sensor; the motion model is passed in.
 
 State
 -----
@@ -10,13 +10,43 @@ ordered by landmark id (dropping the tentative ones from ``x`` and ``P`` is thei
 
 Prediction (:meth:`EkfSlam.predict`, O(N))
 -----------------------------------------
-From the wheel increments ``dphi = [dphi_left, dphi_right]`` (rad) through ``DiffDrive``::
+From an input ``u`` through the motion model (:mod:`turtlelib.motion_models`: wheel increments, odometry,
+unicycle or car-like)::
 
-    q' = f(q, dphi) = q (+) exp([F dphi])                    (the exact arc)
-    P_qq' = G P_qq G^T + Q(dphi),  P_qm' = G P_qm,  G = df/dq
+    q' = f(q, u),   P_qq' = G P_qq G^T + Q(u),  P_qm' = G P_qm,  G = df/dq
 
-``Q`` propagates random-walk wheel slip ``N(0, wheel_noise^2 |dphi|)`` through the kinematics along the arc
-(:mod:`turtlelib.wheel_noise`), so the result does not depend on how often prediction runs.
+The models' ``Q`` is integrated along the step's arc, so the result does not depend on how often
+prediction runs.
+
+Consistency: observability-constrained Jacobians (``linearization = 'fej'`` or ``'oc'``)
+-----------------------------------------------------------------------------------------
+The standard EKF evaluates ``G`` and ``H`` at the newest estimates. Then the linearised system no longer
+has the unobservable directions of the true one (a global translation and rotation of pose and map), the
+filter gains spurious information about the global heading, and its covariance becomes overconfident
+(Huang, Mourikis & Roumeliotis, "Analysis and improvement of the consistency of extended Kalman filter
+based SLAM", ICRA 2008). The unobservable directions are, with ``J = [[0, -1], [1, 0]]``, the columns of::
+
+    N = [[I_2, J p], [0, 1], [I_2, J m_0], [I_2, J m_1], ...]     (a translation, a rotation about 0)
+
+and the remedies choose Jacobians for which ``G_k N_k = N_(k+1)`` and ``H_k N_k = 0`` (so no observation
+carries information along ``N``), with ``p`` the pose prior ``q_(k|k-1)`` (the pose of the last prediction,
+before any update at this time) and ``m_i`` each landmark's first estimate (its value when it was
+initialised):
+
+* both: ``G`` at the motion from the last prior, ``G = [[1, 0, -dy], [0, 1, dx], [0, 0, 1]]`` with
+  ``[dx, dy] = p_(k+1|k) - p_(k|k-1)``, i.e. the model's ``G`` plus ``J (p_(k|k) - p_(k|k-1))`` in its
+  heading column. Exact for models that compose the pose with a displacement (every model of
+  :mod:`turtlelib.motion_models`).
+* ``'fej'`` (first-estimates Jacobian EKF): ``H`` evaluated at ``p`` and the landmarks' first estimates.
+* ``'oc'`` (observability-constrained EKF, Huang et al., IJRR 2010): ``H`` at the newest estimates,
+  projected onto the closest (Frobenius) Jacobian with ``H N = 0``: per observation of landmark ``i``,
+  on its pose and landmark columns, ``H* = H (I_5 - N_i (N_i^T N_i)^-1 N_i^T)`` with
+  ``N_i = [[I_2, J p], [0, 1], [I_2, J m_i]]``. It stays close to the standard Jacobian when the first
+  estimates were poor (where FEJ can diverge).
+
+The innovations still use the newest estimates; only the Jacobians (so ``P``) change. Then the global
+heading variance never drops below its value when the first landmark was seen: relative observations
+cannot tell where the whole map points.
 
 Update (:meth:`EkfSlam.update_known`, :meth:`EkfSlam.update_unknown`, O(N^2) per observation)
 ----------------------------------------------------------------------------------------------
@@ -24,6 +54,10 @@ Observation ``z = [range_m, bearing_rad]`` of a landmark from the sensor at ``T_
 (:mod:`turtlelib.range_bearing`); one scan's observations are stacked into one update whose ``H`` touches
 only the pose and the observed landmarks (:meth:`SlamState.correct`). Landmarks seen for the first time are
 initialised from the inverse observation model with their full cross-covariance (:meth:`SlamState.append`).
+
+Known association gates every observation of a mapped landmark too: one with
+``D2 = nu^T S^-1 nu >= chi2_2^-1(gate_known)`` (a wrong id, a reflection) is rejected rather than fused,
+so a single bad observation cannot corrupt the map (``gate_known = 1`` fuses everything).
 
 Unknown association (:meth:`EkfSlam.update_unknown`)
 ----------------------------------------------------
@@ -34,8 +68,8 @@ only takes observations that no confirmed landmark is compatible with, so a tent
 a confirmed landmark starves and expires. An unpaired observation starts a new tentative
 landmark only if ``D2 > chi2_2^-1(gate_new)`` for every landmark, and is discarded otherwise. A tentative
 landmark is confirmed once seen ``confirm_count`` times (its first sighting included) and is dropped
-(marginalised out) if still unconfirmed ``tentative_timeout`` scans after the scan that created it, so a
-single spurious detection never enters the map.
+(marginalised out) if still unconfirmed ``tentative_timeout`` seconds after the scan that created it (scan
+stamps in integer ns), so a single spurious detection never enters the map.
 
 Bad input (non-finite values, non-positive range, an invalid noise covariance, invalid or duplicate
 landmark ids) raises ValueError and leaves the filter unchanged.
@@ -43,6 +77,7 @@ landmark ids) raises ValueError and leaves the filter unchanged.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from enum import IntEnum
 from functools import partial
@@ -53,22 +88,20 @@ from numpy.typing import ArrayLike, NDArray
 
 from .association import chi2_gate, joint_compatibility, mahalanobis_2d, nearest_neighbour
 from .geometry import Transform2D
-from .kinematics import DiffDrive
 from .landmark_tracks import LandmarkTracks
+from .motion_models import NS_PER_S, MotionModel
 from .range_bearing import landmarks_from_observations, predict_observations, residual
 from .slam_state import ROBOT_DIM, SlamState
 from .validation import finite_real, in_range, integer, non_negative, one_of, positive, store
-from .wheel_noise import wheel_slip_covariance
 
 MATCHERS = ("nn", "jcbb")
+LINEARIZATIONS = ("standard", "fej", "oc")
 
 
 @dataclass(frozen=True)
 class SlamConfig:
     """Parameters of :class:`EkfSlam`; the field names are the slam node's ROS parameters.
 
-    * ``wheel_noise`` (sqrt(rad), >= 0): slip of each wheel is ``N(0, wheel_noise^2 |dphi|)`` over an
-      increment ``dphi`` (variance per rad of wheel travel), see :mod:`turtlelib.wheel_noise`.
     * ``range_std`` (m), ``bearing_std`` (rad), > 0: default observation noise ``R = diag(range_std^2,
       bearing_std^2)`` when an update is given no ``R``.
     * ``sensor_x``, ``sensor_y`` (m), ``sensor_theta`` (rad): ``T_body_sensor``, the sensor mounting in the
@@ -77,8 +110,13 @@ class SlamConfig:
       or ``'jcbb'`` (joint compatibility branch and bound).
     * ``gate_associate`` < ``gate_new``, both in (0, 1): chi2 probabilities (2 dof) of the association gate
       and of the gate beyond which an observation may start a new landmark.
-    * ``confirm_count`` (>= 1): sightings that confirm a tentative landmark; ``tentative_timeout`` (scans,
-      >= 1 and >= confirm_count - 1): how long a tentative landmark may stay unconfirmed.
+    * ``gate_known`` in (0, 1]: chi2 probability (2 dof) of the innovation gate of known association
+      (1: no gate).
+    * ``linearization``: ``'standard'`` (Jacobians at the newest estimates), ``'fej'`` (first-estimates
+      Jacobians) or ``'oc'`` (observability-constrained Jacobians): the consistency remedies of the module
+      docstring.
+    * ``confirm_count`` (>= 1): sightings that confirm a tentative landmark; ``tentative_timeout`` (s, > 0):
+      how long after its first sighting a tentative landmark may stay unconfirmed.
     * ``max_range`` (m, > 0): observations farther than this are rejected.
     * ``initial_xy_std`` (m), ``initial_theta_std`` (rad), >= 0: initial pose standard deviations.
     * ``jcbb_max_nodes`` (>= 1): bound on the pairings JCBB tries per scan.
@@ -86,7 +124,6 @@ class SlamConfig:
     Invalid values raise ValueError.
     """
 
-    wheel_noise: float = 0.05
     range_std: float = 0.02
     bearing_std: float = 0.02
     sensor_x: float = 0.0
@@ -95,8 +132,10 @@ class SlamConfig:
     matcher: str = "nn"
     gate_associate: float = 0.99
     gate_new: float = 0.9999
+    gate_known: float = 0.9999
+    linearization: str = "standard"
     confirm_count: int = 5
-    tentative_timeout: int = 10
+    tentative_timeout: float = 2.0
     max_range: float = 3.5
     initial_xy_std: float = 0.0
     initial_theta_std: float = 0.0
@@ -104,20 +143,16 @@ class SlamConfig:
 
     def __post_init__(self) -> None:
         store(self, ("sensor_x", "sensor_y", "sensor_theta"), finite_real)
-        store(self, ("wheel_noise", "initial_xy_std", "initial_theta_std"), non_negative)
-        store(self, ("range_std", "bearing_std", "max_range"), positive)
+        store(self, ("initial_xy_std", "initial_theta_std"), non_negative)
+        store(self, ("range_std", "bearing_std", "max_range", "tentative_timeout"), positive)
         one_of("matcher", self.matcher, MATCHERS)
+        one_of("linearization", self.linearization, LINEARIZATIONS)
         probability = partial(in_range, low=0.0, high=1.0, open_low=True, open_high=True)
         store(self, ("gate_associate", "gate_new"), probability)
+        store(self, ("gate_known",), partial(in_range, low=0.0, high=1.0, open_low=True))
         if not self.gate_associate < self.gate_new:
             raise ValueError(f"need gate_associate < gate_new, got {self.gate_associate}, {self.gate_new}")
-        counts = ("confirm_count", "tentative_timeout", "jcbb_max_nodes")
-        store(self, counts, partial(integer, minimum=1))
-        if self.tentative_timeout < self.confirm_count - 1:
-            raise ValueError(
-                f"tentative_timeout ({self.tentative_timeout}) must leave room for confirm_count "
-                f"({self.confirm_count}) sightings, one per scan"
-            )
+        store(self, ("confirm_count", "jcbb_max_nodes"), partial(integer, minimum=1))
 
     @property
     def T_body_sensor(self) -> Transform2D:
@@ -167,76 +202,77 @@ class Association:
 class EkfSlam:
     """EKF SLAM (see the module docstring for the maths).
 
-    ``T_map_body0`` is the initial pose, with covariance from ``config.initial_pose_covariance()``. A
-    filter runs either with known association (:meth:`update_known`) or with unknown association
-    (:meth:`update_unknown`), fixed by the first update until :meth:`reset`.
+    ``motion`` is the motion model (:class:`turtlelib.motion_models.MotionModel`: its ``step`` gives
+    ``q'``, ``G`` and ``Q`` for an input ``u``); ``T_map_body0`` the initial pose, with covariance from
+    ``config.initial_pose_covariance()``. A filter runs either with known association
+    (:meth:`update_known`) or with unknown association (:meth:`update_unknown`), fixed by the first update
+    until :meth:`reset`.
     """
 
     def __init__(
-        self, config: SlamConfig, diff_drive: DiffDrive, T_map_body0: Transform2D | None = None
+        self, config: SlamConfig, motion: MotionModel, T_map_body0: Transform2D | None = None
     ) -> None:
         self._config = config
-        self._drive = diff_drive
+        self._motion = motion
+        self._constrained = config.linearization in ("fej", "oc")
         self._T_body_sensor = config.T_body_sensor
         self._default_R = config.measurement_covariance(1)
         self._gate_associate = float(chi2_gate(config.gate_associate, 2))
         self._gate_new = float(chi2_gate(config.gate_new, 2))
+        self._gate_known = float(chi2_gate(config.gate_known, 2)) if config.gate_known < 1.0 else np.inf
+        self._timeout_ns = round(config.tentative_timeout * NS_PER_S)
         self.reset(Transform2D() if T_map_body0 is None else T_map_body0)
+
+    @property
+    def config(self) -> SlamConfig:
+        return self._config
+
+    @property
+    def motion(self) -> MotionModel:
+        return self._motion
 
     # --- the filter steps --------------------------------------------------------------------------------
 
-    def predict(self, dphi_left: float, dphi_right: float) -> None:
-        """Move the pose by wheel increments (rad); only the robot rows and columns of ``P`` change.
+    def predict(self, u: tuple) -> None:
+        """Move the pose by the motion model's input ``u``; only the robot rows and columns of ``P`` change.
 
-        ValueError (filter unchanged) for non-finite increments.
+        ValueError (filter unchanged) for an input the model refuses (non-finite values, ...).
         """
-        q_next, G, Q = self._motion(self.pose, dphi_left, dphi_right)
+        q_next, G, Q = self._motion.step(self.pose, u)
+        if self._constrained:
+            # G = G + J (p_(k|k) - p_(k|k-1)) in the heading column: G at p_(k+1|k) - p_(k|k-1)
+            G = G.copy()
+            G[0, 2] -= self._state.mean[1] - self._pose_prior[1]
+            G[1, 2] += self._state.mean[0] - self._pose_prior[0]
         # P_qq' = G P_qq G^T + Q,  P_qm' = G P_qm
         self._state.predict(q_next, G, Q)
+        self._pose_prior = q_next.copy()
 
-    def propagated_pose(self, dphi_left: float, dphi_right: float) -> tuple[Transform2D, NDArray[np.float64]]:
-        """The pose and its covariance (3, 3) :meth:`predict` would give, without changing the filter.
+    def propagated_pose(self, u: tuple) -> tuple[Transform2D, NDArray[np.float64]]:
+        """The pose and its covariance (3, 3) :meth:`predict` would give for input ``u``, without changing the
+        filter: ``q' = f(q, u)``, ``P_qq' = G P_qq G^T + Q``, O(1), for publishing the pose between filter
+        steps."""
+        return self.propagated_pose_along([u])
 
-        ``q' = f(q, dphi)``, ``P_qq' = G P_qq G^T + Q``: O(1), for publishing the pose between filter steps.
-        """
-        return self.propagated_pose_along([(dphi_left, dphi_right)])
-
-    def propagated_pose_along(self, increments: ArrayLike) -> tuple[Transform2D, NDArray[np.float64]]:
-        """As :meth:`propagated_pose` for consecutive increments ``[[dphi_left, dphi_right], ...]`` (S, 2)
-        (rad), one motion step each (the arcs of S sample intervals); S = 0 gives the current pose."""
-        steps = np.asarray(increments, dtype=np.float64).reshape(-1, 2)
+    def propagated_pose_along(self, inputs: Iterable[tuple]) -> tuple[Transform2D, NDArray[np.float64]]:
+        """As :meth:`propagated_pose` for consecutive inputs, one motion step each; none gives the current
+        pose."""
         T_map_body = self.pose
         P_qq = self._state.covariance[:ROBOT_DIM, :ROBOT_DIM].copy()
-        for dphi_left, dphi_right in steps.tolist():
-            q_next, G, Q = self._motion(T_map_body, dphi_left, dphi_right)
+        for u in inputs:
+            q_next, G, Q = self._motion.step(T_map_body, u)
             # P_qq' = G P_qq G^T + Q
             P_qq = G @ P_qq @ G.T + Q
             P_qq = 0.5 * (P_qq + P_qq.T)
             T_map_body = Transform2D(*q_next)
         return T_map_body, P_qq
 
-    def _motion(
-        self, T_map_body: Transform2D, dphi_left: float, dphi_right: float
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-        """The motion model: the new pose ``q'`` (3,), its Jacobian ``G = dq'/dq`` and the noise ``Q``
-        (3, 3)."""
-        # q' = q (+) exp([F dphi])  (DiffDrive.step raises ValueError for non-finite increments)
-        q_next = self._drive.step(T_map_body, dphi_left, dphi_right).as_array()
-        # G = dq'/dq = [[1, 0, -dy], [0, 1, dx], [0, 0, 1]] (DiffDrive.step_jacobians' G_pose) with
-        # [dx, dy] = [x', y'] - [x, y]
-        G = np.eye(3)
-        G[0, 2] = -(q_next[1] - T_map_body.y)
-        G[1, 2] = q_next[0] - T_map_body.x
-        Q = wheel_slip_covariance(
-            self._drive, T_map_body.theta, dphi_left, dphi_right, self._config.wheel_noise
-        )
-        return q_next, G, Q
-
     def update_known(self, ids: ArrayLike, z: ArrayLike, R: ArrayLike | None = None) -> Association:
         """Update with observations ``z`` (K, 2) [range_m, bearing_rad] (sensor frame) of landmarks ``ids``.
 
         ``ids`` (K,) distinct integers >= 0 are the truth: an id never seen before starts a new (confirmed)
-        landmark from its observation. ``R`` (K, 2, 2) the observation noise (default from the config).
+        landmark from its observation; an observation of a mapped landmark outside the ``gate_known``
+        innovation gate is rejected. ``R`` (K, 2, 2) the observation noise (default from the config).
         """
         z, R, landmark_ids = self.checked_observations(z, R, ids)
         self._enter_mode("known")
@@ -244,26 +280,33 @@ class EkfSlam:
         in_range = z[:, 0] <= self._config.max_range
         slot_of = [self._tracks.slot(i) for i in landmark_ids.tolist()]
         known = np.array([slot is not None for slot in slot_of], dtype=bool)
-        matched = np.flatnonzero(in_range & known)
-        slots = np.array([slot_of[k] for k in matched], dtype=np.int64)
+        seen_before = np.flatnonzero(in_range & known)
+        slots = np.array([slot_of[k] for k in seen_before], dtype=np.int64)
+        # D2 = nu^T S^-1 nu of each observation against its landmark; fuse those inside the gate
+        nu, d2, H_robot, H_landmark = self._innovations(slots, z[seen_before], R[seen_before])
+        inside = d2 < self._gate_known
+        matched = seen_before[inside]
         # one stacked update with the landmarks seen before, then the new ones from the updated pose
-        nis = self._correct(slots, z[matched], R[matched])
+        nis = self._state.correct(slots[inside], H_robot[inside], H_landmark[inside], nu[inside], R[matched])
         for k in np.flatnonzero(in_range & ~known):
-            self._add_landmark(int(landmark_ids[k]), z[k], R[k], confirmed=True)
+            self._add_landmark(int(landmark_ids[k]), z[k], R[k], confirmed=True, stamp_ns=0)
 
         status = np.full(len(z), _REJECTED, dtype=np.int8)
-        status[in_range] = np.where(known[in_range], _MATCHED, _NEW)
-        return Association(status, np.where(in_range, landmark_ids, -1), nis=nis, nis_dof=2 * len(matched))
+        status[matched] = _MATCHED
+        status[in_range & ~known] = _NEW
+        used = status != _REJECTED
+        return Association(status, np.where(used, landmark_ids, -1), nis=nis, nis_dof=2 * len(matched))
 
-    def update_unknown(self, z: ArrayLike, R: ArrayLike | None = None) -> Association:
-        """Associate and fuse one scan's observations ``z`` (K, 2) [range_m, bearing_rad] (sensor frame).
+    def update_unknown(self, z: ArrayLike, R: ArrayLike | None = None, *, stamp_ns: int) -> Association:
+        """Associate and fuse one scan's observations ``z`` (K, 2) [range_m, bearing_rad] (sensor frame),
+        taken at ``stamp_ns`` (integer ns; the tentative timeout runs on these stamps).
 
-        Call it once per scan, also with no observations (K = 0): the tentative timeout counts these calls.
+        Call it once per scan, also with no observations (K = 0), so that tentative landmarks expire.
         ``R`` (K, 2, 2) the observation noise (default from the config).
         """
+        stamp_ns = integer("stamp_ns", stamp_ns)
         z, R, _ = self.checked_observations(z, R)
         self._enter_mode("unknown")
-        self._scan += 1
         usable = (z[:, 0] <= self._config.max_range).nonzero()[0]
         z_usable, R_usable = (z, R) if len(usable) == len(z) else (z[usable], R[usable])
         landmark_ids = np.full(len(z), -1, dtype=np.int64)
@@ -291,15 +334,15 @@ class EkfSlam:
         # new (tentative) landmarks from the observations incompatible with every landmark
         started: list[int] = []
         for k in usable[(match < 0) & far_from_all]:
-            if self._start_landmark(z[k], R[k], started):
+            if self._start_landmark(z[k], R[k], started, stamp_ns):
                 landmark_ids[k] = self._next_id - 1
                 status[k] = _NEW
                 if self._config.confirm_count == 1:
                     confirmed_ids.append(landmark_ids[k : k + 1])
 
-        # tentative landmarks still unconfirmed after tentative_timeout scans are marginalised out
+        # tentative landmarks still unconfirmed tentative_timeout after their first sighting are marginalised
         dropped_ids = []
-        for slot in self._tracks.expired(self._scan, self._config.tentative_timeout):
+        for slot in self._tracks.expired(stamp_ns, self._timeout_ns):
             dropped_ids.append(int(self._tracks.ids[slot]))
             self._tracks.remove(slot)
             self._state.remove(slot)
@@ -331,13 +374,14 @@ class EkfSlam:
             covariance = self._config.initial_pose_covariance()
         else:
             covariance = _pose_covariance(pose_covariance)
+        # the pose prior q_(k|k-1) of the first-estimates Jacobians
+        self._pose_prior = T_map_body.as_array()
         if keep_map:
             self._state.reset_robot(T_map_body.as_array(), covariance, keep_map=True)
             return
         self._state = SlamState(T_map_body.as_array(), covariance)
         self._tracks = LandmarkTracks()
         self._next_id = 0
-        self._scan = 0
         self._mode: str | None = None
 
     # --- estimates ---------------------------------------------------------------------------------------
@@ -465,12 +509,8 @@ class EkfSlam:
         Returns innovations ``nu_kj`` (K, k, 2), ``D2_kj`` and ``ln det S_kj`` (K, k) with
         ``S_kj = H_j P H_j^T + R_k``, and the Jacobians ``H_robot`` (k, 2, 3), ``H_landmark`` (k, 2, 2).
         """
-        positions = self._state.landmark_positions()
-        if slots is not None:
-            positions = positions[slots]
-        z_hat, H_robot, H_landmark = predict_observations(
-            self._state.mean[:ROBOT_DIM], positions, self._T_body_sensor
-        )
+        slots = np.arange(self._state.n_landmarks) if slots is None else slots
+        z_hat, H_robot, H_landmark = self._predicted_observations(slots)
         # nu_kj = z_k - z_hat_j,  S_kj = H_j P H_j^T + R_k
         nu = residual(z[:, None, :], z_hat[None, :, :])
         S = self._predicted_covariances(H_robot, H_landmark, slots)[None] + R[:, None]
@@ -537,26 +577,50 @@ class EkfSlam:
         )
         return np.where(match >= 0, candidates[match], -1)
 
-    def _correct(self, slots: NDArray[np.int64], z: NDArray[np.float64], R: NDArray[np.float64]) -> float:
-        """One stacked update with observations ``z`` of ``slots``; returns the joint NIS."""
+    def _predicted_observations(
+        self, slots: NDArray[np.int64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """``z_hat`` (k, 2) of landmark ``slots`` from the newest estimates and the Jacobians ``H_robot``
+        (k, 2, 3), ``H_landmark`` (k, 2, 2) of the configured ``linearization`` (module docstring)."""
+        pose = self._state.mean[:ROBOT_DIM]
         z_hat, H_robot, H_landmark = predict_observations(
-            self._state.mean[:ROBOT_DIM], self._state.landmark_positions()[slots], self._T_body_sensor
+            pose, self._state.landmark_positions()[slots], self._T_body_sensor
         )
-        return self._state.correct(slots, H_robot, H_landmark, residual(z, z_hat), R)
+        if self._config.linearization == "fej":
+            _, H_robot, H_landmark = predict_observations(
+                self._pose_prior, self._tracks.first_xy[slots], self._T_body_sensor
+            )
+        elif self._config.linearization == "oc":
+            H_robot, H_landmark = _observability_constrained(
+                H_robot, H_landmark, self._pose_prior, self._tracks.first_xy[slots]
+            )
+        return z_hat, H_robot, H_landmark
+
+    def _innovations(
+        self, slots: NDArray[np.int64], z: NDArray[np.float64], R: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], ...]:
+        """Observations ``z`` (k, 2) of ``slots`` (k,): innovations ``nu`` (k, 2), ``D2 = nu^T S^-1 nu`` (k,)
+        with ``S = H P H^T + R`` of each one alone, and the Jacobians ``H_robot``, ``H_landmark``."""
+        z_hat, H_robot, H_landmark = self._predicted_observations(slots)
+        nu = residual(z, z_hat)
+        d2, _ = mahalanobis_2d(nu, self._predicted_covariances(H_robot, H_landmark, slots) + R)
+        return nu, d2, H_robot, H_landmark
 
     def _add_landmark(
-        self, landmark_id: int, z: NDArray[np.float64], R: NDArray[np.float64], confirmed: bool
+        self, landmark_id: int, z: NDArray[np.float64], R: NDArray[np.float64], confirmed: bool, stamp_ns: int
     ) -> int:
-        """Initialise a landmark from one observation by the inverse model (see :meth:`SlamState.append`);
-        returns its slot."""
+        """Initialise a landmark from one observation by the inverse model (see :meth:`SlamState.append`),
+        first seen at ``stamp_ns``; returns its slot."""
         p_map, G_robot, G_z = landmarks_from_observations(
             self._state.mean[:ROBOT_DIM], z[None, :], self._T_body_sensor
         )
         slot = self._state.append(p_map[0], G_robot[0], G_z[0], R)
-        self._tracks.append(landmark_id, self._scan, confirmed)
+        self._tracks.append(landmark_id, stamp_ns, confirmed, p_map[0])
         return slot
 
-    def _start_landmark(self, z: NDArray[np.float64], R: NDArray[np.float64], started: list[int]) -> bool:
+    def _start_landmark(
+        self, z: NDArray[np.float64], R: NDArray[np.float64], started: list[int], stamp_ns: int
+    ) -> bool:
         """Start a landmark (id ``_next_id``) from an observation ``z`` (2,) that no landmark explains, unless
         it lies within gate_new of one this scan has ``started`` (slots) already: one object gives one
         detection per scan. Returns whether it did (and appends the new slot to ``started``)."""
@@ -565,7 +629,7 @@ class EkfSlam:
             if np.any(d2 <= self._gate_new):
                 return False
         confirmed = self._config.confirm_count == 1
-        started.append(self._add_landmark(self._next_id, z, R, confirmed=confirmed))
+        started.append(self._add_landmark(self._next_id, z, R, confirmed=confirmed, stamp_ns=stamp_ns))
         self._next_id += 1
         return True
 
@@ -573,6 +637,29 @@ class EkfSlam:
         """State indices of the pose and the confirmed landmarks (in id order)."""
         first = ROBOT_DIM + 2 * self._tracks.slots_by_id(confirmed=True)
         return np.concatenate([np.arange(ROBOT_DIM), (first[:, None] + np.arange(2)).ravel()])
+
+
+def _observability_constrained(
+    H_robot: NDArray[np.float64],
+    H_landmark: NDArray[np.float64],
+    pose: NDArray[np.float64],
+    landmarks_xy: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The OC-EKF Jacobians (k, 2, 3), (k, 2, 2): ``H* = H (I - N (N^T N)^-1 N^T)`` per observation with
+    ``N = [[I_2, J p], [0, 1], [I_2, J m]]`` (5, 3), ``p`` the pose's position and ``m`` (k, 2) the
+    landmarks' (module docstring)."""
+    k = len(landmarks_xy)
+    N = np.zeros((k, 5, 3))
+    N[:, 0, 0] = N[:, 1, 1] = N[:, 3, 0] = N[:, 4, 1] = N[:, 2, 2] = 1.0
+    # J p = [-p_y, p_x],  J m = [-m_y, m_x]
+    N[:, 0, 2], N[:, 1, 2] = -pose[1], pose[0]
+    N[:, 3, 2], N[:, 4, 2] = -landmarks_xy[:, 1], landmarks_xy[:, 0]
+    H = np.concatenate([H_robot, H_landmark], axis=2)
+    # H* = H - (H N) (N^T N)^-1 N^T
+    HN = H @ N
+    gram = N.transpose(0, 2, 1) @ N
+    H = H - np.linalg.solve(gram, HN.transpose(0, 2, 1)).transpose(0, 2, 1) @ N.transpose(0, 2, 1)
+    return H[:, :, :ROBOT_DIM], H[:, :, ROBOT_DIM:]
 
 
 def _landmark_ids(ids: ArrayLike) -> NDArray[np.int64]:

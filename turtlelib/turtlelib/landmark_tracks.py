@@ -1,4 +1,5 @@
-"""Bookkeeping of EKF SLAM landmark slots: id, sightings, scan of creation, confirmed or tentative.
+"""Bookkeeping of EKF SLAM landmark slots: id, sightings, time of creation, first estimate, confirmed or
+tentative.
 
 The slots mirror :class:`turtlelib.slam_state.SlamState`'s: :meth:`LandmarkTracks.append` adds the last
 slot, :meth:`LandmarkTracks.remove` swap-removes exactly as ``SlamState.remove`` does. Arrays grow with
@@ -12,12 +13,16 @@ from numpy.typing import NDArray
 
 
 class LandmarkTracks:
-    """Per-slot ``ids``, ``seen`` (sightings), ``born`` (scan of creation) and ``confirmed`` flags."""
+    """Per-slot ``ids``, ``seen`` (sightings), ``born`` (stamp of the first sighting, ns), ``first_xy`` (the
+    position the landmark was initialised at, m) and ``confirmed`` flags."""
+
+    _ARRAYS = ("_ids", "_seen", "_born", "_first_xy", "_confirmed")
 
     def __init__(self, capacity: int = 16) -> None:
         self._ids = np.zeros(capacity, dtype=np.int64)
         self._seen = np.zeros(capacity, dtype=np.int64)
         self._born = np.zeros(capacity, dtype=np.int64)
+        self._first_xy = np.zeros((capacity, 2))
         self._confirmed = np.zeros(capacity, dtype=bool)
         self._n = 0
         self._slot_of: dict[int, int] = {}
@@ -28,6 +33,11 @@ class LandmarkTracks:
         return self._ids[: self._n]
 
     @property
+    def first_xy(self) -> NDArray[np.float64]:
+        """First estimate (n, 2) of every slot, a view."""
+        return self._first_xy[: self._n]
+
+    @property
     def confirmed(self) -> NDArray[np.bool_]:
         """Confirmed flag of every slot (n,), a view."""
         return self._confirmed[: self._n]
@@ -36,16 +46,18 @@ class LandmarkTracks:
         """The slot of ``landmark_id``, or None."""
         return self._slot_of.get(landmark_id)
 
-    def append(self, landmark_id: int, scan: int, confirmed: bool) -> int:
-        """A new last slot for ``landmark_id`` first seen in ``scan``; returns the slot."""
+    def append(self, landmark_id: int, stamp_ns: int, confirmed: bool, first_xy: NDArray[np.float64]) -> int:
+        """A new last slot for ``landmark_id`` first seen at ``stamp_ns`` at ``first_xy`` (2,); returns the
+        slot."""
         if self._n == len(self._ids):
-            for name in ("_ids", "_seen", "_born", "_confirmed"):
+            for name in self._ARRAYS:
                 old = getattr(self, name)
-                grown = np.zeros(2 * len(old), dtype=old.dtype)
+                grown = np.zeros((2 * len(old), *old.shape[1:]), dtype=old.dtype)
                 grown[: self._n] = old
                 setattr(self, name, grown)
         slot = self._n
-        self._ids[slot], self._seen[slot], self._born[slot] = landmark_id, 1, scan
+        self._ids[slot], self._seen[slot], self._born[slot] = landmark_id, 1, stamp_ns
+        self._first_xy[slot] = first_xy
         self._confirmed[slot] = confirmed
         self._slot_of[landmark_id] = slot
         self._n += 1
@@ -56,7 +68,8 @@ class LandmarkTracks:
         del self._slot_of[int(self._ids[slot])]
         last = self._n - 1
         if slot != last:
-            for array in (self._ids, self._seen, self._born, self._confirmed):
+            for name in self._ARRAYS:
+                array = getattr(self, name)
                 array[slot] = array[last]
             self._slot_of[int(self._ids[slot])] = slot
         self._n = last
@@ -69,10 +82,11 @@ class LandmarkTracks:
         self._confirmed[newly] = True
         return np.sort(self._ids[newly])
 
-    def expired(self, scan: int, timeout: int) -> NDArray[np.int64]:
-        """Slots of tentative landmarks created ``timeout`` or more scans before ``scan``, highest first."""
+    def expired(self, stamp_ns: int, timeout_ns: int) -> NDArray[np.int64]:
+        """Slots of tentative landmarks first seen ``timeout_ns`` or more before ``stamp_ns``, highest
+        first."""
         n = self._n
-        old = ~self._confirmed[:n] & (scan - self._born[:n] >= timeout)
+        old = ~self._confirmed[:n] & (stamp_ns - self._born[:n] >= timeout_ns)
         return old.nonzero()[0][::-1]
 
     def slots_by_id(self, confirmed: bool) -> NDArray[np.int64]:

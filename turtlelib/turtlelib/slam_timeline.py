@@ -1,28 +1,27 @@
-"""Time alignment of wheel odometry and stamped observations for :class:`turtlelib.ekf_slam.EkfSlam`.
+"""Time alignment of motion samples and stamped observations for :class:`turtlelib.ekf_slam.EkfSlam`.
 
-Wheel angles arrive as samples ``(t_k, phi_left_k, phi_right_k)`` (20 Hz on a Burger); an observation
-carries the stamp ``t_o`` of the scan it came from and reaches the filter later (detection, transport),
-possibly after the next wheel samples. An observation must be applied with the filter at ``t_o``, not at
-whatever pose is current, so the filter runs a little behind the newest wheel sample ``t_w``:
+Motion arrives as samples ``(t_k, s_k)`` of a signal (wheel angles at 20 Hz on a Burger, odometry poses,
+velocity commands; :mod:`turtlelib.motion_signals` says how a signal becomes motion-model inputs); an
+observation carries the stamp ``t_o`` of the scan it came from and reaches the filter later (detection,
+transport), possibly after the next motion samples. An observation must be applied with the filter at
+``t_o``, not at whatever pose is current, so the filter runs a little behind the newest sample ``t_w``.
+Times are integer nanoseconds.
 
-* Between samples the wheels turn at constant speed, so the angles at any ``t`` in ``[t_(k-1), t_k]``
-  are interpolated linearly::
-
-      phi(t) = phi_(k-1) + (t - t_(k-1)) / (t_k - t_(k-1)) (phi_k - phi_(k-1))
-
-* The filter is at time ``t_f`` with wheel angles ``phi_f``; bringing it to ``t >= t_f`` is one
-  prediction per sample interval crossed (to each wheel sample in ``(t_f, t]``, then to ``phi(t)``): within
-  an interval the wheel speeds are constant, so each prediction follows one arc, and the process noise of
-  an arc does not depend on how it is split (:mod:`turtlelib.wheel_noise`). So where the motion is split
-  into predictions (observation stamps, ``max_observation_delay``) does not matter.
-* When a wheel sample arrives, every waiting observation with ``t_o <= t_w`` is applied in stamp order,
+* Between samples the signal's value at any ``t`` in ``[t_(k-1), t_k]`` is the signal's
+  ``at(s_(k-1), s_k, (t - t_(k-1)) / (t_k - t_(k-1)))`` (linear for wheel angles, held for rates).
+* The filter is at time ``t_f`` with signal value ``s_f``; bringing it to ``t >= t_f`` is one prediction
+  per sample interval crossed (to each sample in ``(t_f, t]``, then to the value at ``t``): within an
+  interval the motion is one constant-twist arc, and the process noise of an arc does not depend on how it
+  is split (:mod:`turtlelib.arc_noise`). So where the motion is split into predictions (observation
+  stamps, ``max_observation_delay``) does not matter.
+* When a motion sample arrives, every waiting observation with ``t_o <= t_w`` is applied in stamp order,
   each after bringing the filter to ``t_o``; then the filter is brought to ``t_w - max_observation_delay``
   (observations may arrive up to that late).
 * An observation with ``t_o <= t_w`` is applied at once (filter brought to ``t_o``); one newer than every
-  wheel sample waits for the wheel samples that reach it; one older than ``t_f`` came too late and is
-  refused (ValueError): applying it at a later pose would be wrong.
-* The pose at ``t_w`` (what a node publishes) is the filter's pose moved on by the wheel increments from
-  ``t_f`` to ``t_w``, interval by interval, with its covariance propagated alongside
+  motion sample waits for the samples that reach it; one older than ``t_f`` came too late and is refused
+  (ValueError): applying it at a later pose would be wrong.
+* The pose at ``t_w`` (what a node publishes) is the filter's pose moved on by the motion from ``t_f`` to
+  ``t_w``, interval by interval, with its covariance propagated alongside
   (:meth:`EkfSlam.propagated_pose_along`), without changing the filter.
 """
 
@@ -37,13 +36,15 @@ from numpy.typing import ArrayLike, NDArray
 
 from .ekf_slam import Association, EkfSlam
 from .geometry import Transform2D
+from .motion_models import NS_PER_S
+from .motion_signals import MotionSignal, Sample
 from .validation import finite_real, integer, non_negative, store
 
 
 @dataclass(frozen=True)
 class TimelineConfig:
-    """``max_observation_delay`` (s, finite, >= 0): how late an observation may arrive after the wheel
-    samples of its time; ``max_pending_observations`` (int >= 1): observations that may wait for wheel
+    """``max_observation_delay`` (s, finite, >= 0): how late an observation may arrive after the motion
+    samples of its time; ``max_pending_observations`` (int >= 1): observations that may wait for motion
     samples. Invalid values raise ValueError."""
 
     max_observation_delay: float = 0.25
@@ -58,174 +59,176 @@ class TimelineConfig:
 class _Observation:
     """One scan's observations: validated ``z`` (K, 2), ``R`` (K, 2, 2), ``ids`` (K,) or None (unknown)."""
 
-    t_s: float
+    t_ns: int
     z: NDArray[np.float64]
     R: NDArray[np.float64]
     ids: NDArray[np.int64] | None
 
 
 class SlamTimeline:
-    """Feeds an :class:`EkfSlam` wheel samples and stamped observations in time order (module docstring).
+    """Feeds an :class:`EkfSlam` motion samples of ``signal`` and stamped observations in time order
+    (module docstring); ``signal`` must give the inputs of the filter's motion model.
 
-    ``add_wheels`` and ``add_observations`` return the observations applied by the call as ``(t_o,
+    ``add_motion`` and ``add_observations`` return the observations applied by the call as ``(t_o_ns,
     Association)`` pairs, oldest first.
     """
 
-    def __init__(self, slam: EkfSlam, config: TimelineConfig | None = None) -> None:
+    def __init__(self, slam: EkfSlam, signal: MotionSignal, config: TimelineConfig | None = None) -> None:
         self.slam = slam
+        self.signal = signal
         self.config = TimelineConfig() if config is None else config
-        # wheel samples (t, phi_left, phi_right) from the last one at or before t_f, times ascending
-        self._times: list[float] = []
-        self._angles: list[tuple[float, float]] = []
-        self._t_f: float | None = None
-        self._phi_f = (0.0, 0.0)
+        self._delay_ns = round(self.config.max_observation_delay * NS_PER_S)
+        # motion samples (t_ns, s) from the last one at or before t_f, times ascending
+        self._times: list[int] = []
+        self._samples: list[Sample] = []
+        self._t_f: int | None = None
+        self._s_f: Sample = ()
         self._pending: list[_Observation] = []
 
     @property
-    def filter_time_s(self) -> float | None:
-        """``t_f``, the time the filter is at (None before the first wheel sample)."""
+    def filter_time_ns(self) -> int | None:
+        """``t_f``, the time the filter is at (None before the first motion sample)."""
         return self._t_f
 
     @property
-    def latest_time_s(self) -> float | None:
-        """``t_w``, the time of the newest wheel sample (None before the first)."""
+    def latest_time_ns(self) -> int | None:
+        """``t_w``, the time of the newest motion sample (None before the first)."""
         return self._times[-1] if self._times else None
 
     @property
     def pending_count(self) -> int:
-        """Observations waiting for wheel samples that reach their time."""
+        """Observations waiting for motion samples that reach their time."""
         return len(self._pending)
 
-    def add_wheels(
-        self, t_s: float, phi_left_rad: float, phi_right_rad: float
-    ) -> list[tuple[float, Association]]:
-        """A wheel sample: angles (rad) at time ``t_s`` (s). The first only starts the timeline.
+    def add_motion(self, t_ns: int, sample: ArrayLike) -> list[tuple[int, Association]]:
+        """A motion sample: the signal's value ``sample`` at ``t_ns``. The first only starts the timeline.
 
-        ValueError (nothing changed) for non-finite values or a time earlier than the newest sample.
+        ValueError (nothing changed) for non-finite values, a sample of another length than the first, or a
+        time earlier than the newest sample.
         """
-        t_s, phi_left_rad, phi_right_rad = _finite_sample(t_s, phi_left_rad, phi_right_rad)
-        t_w = self.latest_time_s
-        if t_w is not None and t_s < t_w:
-            raise ValueError(f"time went backwards: wheel sample at {t_s!r} s after one at {t_w!r} s")
-        self._times.append(t_s)
-        self._angles.append((phi_left_rad, phi_right_rad))
+        t_ns, sample = self._checked_sample(t_ns, sample)
+        t_w = self.latest_time_ns
+        if t_w is not None and t_ns < t_w:
+            raise ValueError(f"time went backwards: motion sample at {t_ns} ns after one at {t_w} ns")
+        self._times.append(t_ns)
+        self._samples.append(sample)
         if self._t_f is None:
-            self._t_f, self._phi_f = t_s, (phi_left_rad, phi_right_rad)
+            self._t_f, self._s_f = t_ns, sample
             return []
         applied = []
-        while self._pending and self._pending[0].t_s <= t_s:
+        while self._pending and self._pending[0].t_ns <= t_ns:
             applied.append(self._apply(self._pending.pop(0)))
-        self._advance_to(max(self._t_f, t_s - self.config.max_observation_delay))
+        self._advance_to(max(self._t_f, t_ns - self._delay_ns))
         return applied
 
     def add_observations(
-        self, t_s: float, z: ArrayLike, R: ArrayLike | None = None, ids: ArrayLike | None = None
-    ) -> list[tuple[float, Association]]:
-        """One scan's observations ``z`` (K, 2) [range_m, bearing_rad] stamped ``t_s`` (s), with noise ``R``
+        self, t_ns: int, z: ArrayLike, R: ArrayLike | None = None, ids: ArrayLike | None = None
+    ) -> list[tuple[int, Association]]:
+        """One scan's observations ``z`` (K, 2) [range_m, bearing_rad] stamped ``t_ns``, with noise ``R``
         (K, 2, 2) (default from the filter's config) and, for known association, landmark ``ids`` (K,).
 
-        Applied now if wheel samples reach ``t_s``, else queued. ValueError (nothing changed) for invalid
+        Applied now if motion samples reach ``t_ns``, else queued. ValueError (nothing changed) for invalid
         observations (also: with ids when the filter or the waiting observations run without, or the
-        reverse), before the first wheel sample, for a stale stamp (``t_s < t_f``), or when
+        reverse), before the first motion sample, for a stale stamp (``t_ns < t_f``), or when
         ``max_pending_observations`` are already waiting.
         """
-        t_s = finite_real("observation stamp", t_s)
+        t_ns = integer("observation stamp (ns)", t_ns)
         z, R, landmark_ids = self.slam.checked_observations(z, R, ids)
         if self._t_f is None:
-            raise ValueError("no wheel sample yet: an observation cannot be placed in time")
+            raise ValueError("no motion sample yet: an observation cannot be placed in time")
         if self._pending and (self._pending[0].ids is None) != (landmark_ids is None):
             # the first update fixes the filter's association mode: the waiting ones would be refused
             raise ValueError("observations with and without ids cannot wait together (one association mode)")
-        if t_s < self._t_f:
+        if t_ns < self._t_f:
             raise ValueError(
-                f"stale observation: stamped {t_s:.9f} s, the filter is already at {self._t_f:.9f} s "
+                f"stale observation: stamped {t_ns} ns, the filter is already at {self._t_f} ns "
                 f"(more than max_observation_delay = {self.config.max_observation_delay} s late)"
             )
-        observation = _Observation(t_s, z, R, landmark_ids)
-        if t_s <= self._times[-1]:
+        observation = _Observation(t_ns, z, R, landmark_ids)
+        if t_ns <= self._times[-1]:
             return [self._apply(observation)]
         if len(self._pending) >= self.config.max_pending_observations:
             raise ValueError(
-                f"{len(self._pending)} observations already wait for wheel samples past "
-                f"{self._times[-1]:.9f} s"
+                f"{len(self._pending)} observations already wait for motion samples past {self._times[-1]} ns"
             )
-        bisect.insort(self._pending, observation, key=lambda o: o.t_s)
+        bisect.insort(self._pending, observation, key=lambda o: o.t_ns)
         return []
 
-    def restart(self, t_s: float, phi_left_rad: float, phi_right_rad: float) -> None:
-        """Take this wheel sample as the new start of time, keeping the filter's estimate (for a clock that
+    def restart(self, t_ns: int, sample: ArrayLike) -> None:
+        """Take this motion sample as the new start of time, keeping the filter's estimate (for a clock that
         jumped back: a restarted simulator or a looped recording). The filter is first brought to the newest
-        wheel sample, so no motion is lost (as far as it can be: the estimate stops before a sample whose
-        increment the motion model refuses, e.g. a corrupt reading); observations still waiting are dropped.
+        sample, so no motion is lost (as far as it can be: the estimate stops before a sample whose input
+        the motion model refuses, e.g. a corrupt reading); observations still waiting are dropped.
         """
-        t_s, phi_left_rad, phi_right_rad = _finite_sample(t_s, phi_left_rad, phi_right_rad)
+        t_ns, sample = self._checked_sample(t_ns, sample)
         if self._t_f is not None:
             try:
                 self._advance_to(self._times[-1])
             except ValueError:
-                pass  # that motion is lost; the estimate is kept where the last valid increment left it
-        self._times, self._angles = [t_s], [(phi_left_rad, phi_right_rad)]
-        self._t_f, self._phi_f = t_s, (phi_left_rad, phi_right_rad)
+                pass  # that motion is lost; the estimate is kept where the last valid input left it
+        self._times, self._samples = [t_ns], [sample]
+        self._t_f, self._s_f = t_ns, sample
         self._pending.clear()
 
     def latest_pose(self) -> tuple[Transform2D, NDArray[np.float64]]:
-        """``T_map_body`` at ``t_w`` and its covariance (3, 3): the filter moved on by the wheel increments
-        since ``t_f``, one arc per sample interval as :meth:`_advance_to` would (the filter is unchanged).
-        ValueError before the first wheel sample."""
+        """``T_map_body`` at ``t_w`` and its covariance (3, 3): the filter moved on by the motion since
+        ``t_f``, one step per sample interval as :meth:`_advance_to` would (the filter is unchanged).
+        ValueError before the first motion sample."""
         if self._t_f is None:
-            raise ValueError("no wheel sample yet")
-        later = self._angles[bisect.bisect_right(self._times, self._t_f) :]
-        angles = np.array([self._phi_f, *later])
-        return self.slam.propagated_pose_along(np.diff(angles, axis=0))
+            raise ValueError("no motion sample yet")
+        inputs = []
+        t_from, s_from = self._t_f, self._s_f
+        for k in range(bisect.bisect_right(self._times, self._t_f), len(self._times)):
+            u = self.signal.input(s_from, self._samples[k], self._times[k] - t_from)
+            if u is not None:
+                inputs.append(u)
+            t_from, s_from = self._times[k], self._samples[k]
+        return self.slam.propagated_pose_along(inputs)
 
     # --- helpers -----------------------------------------------------------------------------------------
 
-    def _apply(self, observation: _Observation) -> tuple[float, Association]:
-        self._advance_to(observation.t_s)
+    def _checked_sample(self, t_ns: object, sample: ArrayLike) -> tuple[int, Sample]:
+        """``(t_ns, sample)`` as an int and a tuple of floats; ValueError unless the time is an integer and
+        the values finite, as many as the first sample's."""
+        t_ns = integer("motion sample time (ns)", t_ns)
+        values = tuple(finite_real("motion sample value", value) for value in sample)
+        if self._samples and len(values) != len(self._samples[0]):
+            raise ValueError(f"motion samples have {len(self._samples[0])} values, got {len(values)}")
+        return t_ns, values
+
+    def _apply(self, observation: _Observation) -> tuple[int, Association]:
+        self._advance_to(observation.t_ns)
         if observation.ids is None:
-            association = self.slam.update_unknown(observation.z, observation.R)
+            association = self.slam.update_unknown(observation.z, observation.R, stamp_ns=observation.t_ns)
         else:
             association = self.slam.update_known(observation.ids, observation.z, observation.R)
-        return observation.t_s, association
+        return observation.t_ns, association
 
-    def _advance_to(self, t_s: float) -> None:
-        """Predict the filter from ``t_f`` to ``t_s`` (``t_f <= t_s <= t_w``) and drop older samples.
+    def _advance_to(self, t_ns: int) -> None:
+        """Predict the filter from ``t_f`` to ``t_ns`` (``t_f <= t_ns <= t_w``) and drop older samples.
 
-        One prediction per sample interval: the wheel speeds (so the arc's curvature) change only at the
-        samples, and one prediction over two intervals would follow a different arc than the robot did.
+        One prediction per sample interval: the motion (the arc's twist) changes only at the samples, and
+        one prediction over two intervals would follow a different arc than the robot did.
         """
-        for k in range(bisect.bisect_right(self._times, self._t_f), bisect.bisect_right(self._times, t_s)):
-            self._predict_to(self._angles[k])
-        self._predict_to(self._angles_at(t_s))
-        self._t_f = t_s
+        for k in range(bisect.bisect_right(self._times, self._t_f), bisect.bisect_right(self._times, t_ns)):
+            self._predict_to(self._times[k], self._samples[k])
+        self._predict_to(t_ns, self._sample_at(t_ns))
         # keep the last sample at or before t_f: interpolation from t_f needs it
-        first_kept = bisect.bisect_right(self._times, t_s) - 1
+        first_kept = bisect.bisect_right(self._times, t_ns) - 1
         if first_kept > 0:
-            del self._times[:first_kept], self._angles[:first_kept]
+            del self._times[:first_kept], self._samples[:first_kept]
 
-    def _predict_to(self, angles: tuple[float, float]) -> None:
-        """One prediction with the increments from ``phi_f`` to ``angles`` (none if they are equal)."""
-        dphi_left, dphi_right = angles[0] - self._phi_f[0], angles[1] - self._phi_f[1]
-        if dphi_left != 0.0 or dphi_right != 0.0:
-            self.slam.predict(dphi_left, dphi_right)
-        self._phi_f = angles
+    def _predict_to(self, t_ns: int, sample: Sample) -> None:
+        """One prediction with the input from ``(t_f, s_f)`` to ``(t_ns, sample)`` (none if no motion)."""
+        u = self.signal.input(self._s_f, sample, t_ns - self._t_f)
+        if u is not None:
+            self.slam.predict(u)
+        self._t_f, self._s_f = t_ns, sample
 
-    def _angles_at(self, t_s: float) -> tuple[float, float]:
-        """``phi(t)``, linear between the samples around ``t_s`` (the newest sample of equal time)."""
-        k = bisect.bisect_right(self._times, t_s) - 1
-        if k == len(self._times) - 1 or self._times[k] == t_s:
-            return self._angles[k]
+    def _sample_at(self, t_ns: int) -> Sample:
+        """The signal's value at ``t_ns`` between the samples around it (the newest sample of equal time)."""
+        k = bisect.bisect_right(self._times, t_ns) - 1
+        if k == len(self._times) - 1 or self._times[k] == t_ns:
+            return self._samples[k]
         t0, t1 = self._times[k], self._times[k + 1]
-        (l0, r0), (l1, r1) = self._angles[k], self._angles[k + 1]
-        # phi(t) = phi_(k-1) + (t - t_(k-1)) / (t_k - t_(k-1)) (phi_k - phi_(k-1))
-        s = (t_s - t0) / (t1 - t0)
-        return l0 + s * (l1 - l0), r0 + s * (r1 - r0)
-
-
-def _finite_sample(t_s: object, phi_left_rad: object, phi_right_rad: object) -> tuple[float, float, float]:
-    """A wheel sample as floats; ValueError unless every value is a finite number."""
-    return (
-        finite_real("wheel sample time", t_s),
-        finite_real("wheel sample angle (left)", phi_left_rad),
-        finite_real("wheel sample angle (right)", phi_right_rad),
-    )
+        return self.signal.at(self._samples[k], self._samples[k + 1], (t_ns - t0) / (t1 - t0))

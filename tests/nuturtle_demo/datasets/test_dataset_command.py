@@ -1,0 +1,183 @@
+"""The dataset command end to end on the excerpts (60 s of MRCLAM Dataset 7 robot 1, 30 s of Victoria
+Park), its building blocks (scan grouping, parameter files, SE(2) alignment) and the noise calibration on
+synthetic data with known noise."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from nuturtle_demo.datasets.__main__ import main
+from nuturtle_demo.datasets.calibration import fit_motion_noise, measurement_residuals, motion_windows
+from nuturtle_demo.datasets.experiment import Scans
+from nuturtle_demo.datasets.mrclam import MrclamRecording
+from nuturtle_demo.datasets.setups import MRCLAM_PARAMS, load_params
+from nuturtle_demo.metrics import align_se2
+from turtlelib import Transform2D, TwistNoise, UnicycleMotion
+
+DATA = Path(__file__).parent / "data"
+REQUIRED_KEYS = {
+    "ate_rmse_m",
+    "ate_rmse_aligned_m",
+    "landmark_rmse_m",
+    "landmark_rmse_aligned_m",
+    "landmarks_true",
+    "landmarks_mapped",
+    "landmarks_spurious",
+    "landmarks_merged",
+    "nees_pose_mean",
+    "nees_pose_within_95_fraction",
+    "cpu_seconds",
+    "update_ms_median",
+    "update_ms_p99",
+}
+FIGURES = ("trajectory.png", "errors.png", "nees.png")
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+def _outputs(out: Path) -> dict:
+    for name in FIGURES:
+        assert (out / name).read_bytes()[:8] == PNG_MAGIC, name
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert REQUIRED_KEYS <= set(metrics)
+    return metrics
+
+
+@pytest.mark.parametrize("association", ["known", "unknown"])
+def test_mrclam_excerpt_end_to_end(tmp_path, association, capsys):
+    out = tmp_path / "run"
+    argv = ["mrclam", "--data", str(DATA / "mrclam7_robot1_60s"), "--robot", "1"]
+    assert main([*argv, "--association", association, "--out", str(out), "--no-progress"]) == 0
+    metrics = _outputs(out)
+    assert "ate_rmse_m" in capsys.readouterr().out
+    # 60 s from the Vicon start: within a metre of the truth; known ids map only real landmarks
+    assert metrics["landmarks_true"] == 15
+    assert 1 <= metrics["landmarks_mapped"] <= 15
+    if association == "known":
+        assert (
+            metrics["landmarks_spurious"] == 0
+            and metrics["landmarks_mapped_once"] == metrics["landmarks_mapped"]
+        )
+    assert 0.0 < metrics["ate_rmse_aligned_m"] <= metrics["ate_rmse_m"] + 1e-12 < 1.0
+    assert metrics["cpu_seconds"] > 0.0 and metrics["update_ms_p99"] >= metrics["update_ms_median"] > 0.0
+    assert 0.0 <= metrics["nees_pose_within_95_fraction"] <= 1.0
+    assert metrics["scans_applied"] > 0
+
+
+def test_victoria_excerpt_end_to_end(tmp_path):
+    out = tmp_path / "run"
+    assert main(["victoria", "--data", str(DATA / "victoria_30s"), "--out", str(out), "--no-progress"]) == 0
+    metrics = _outputs(out)
+    assert metrics["landmarks_true"] is None and metrics["landmark_rmse_m"] is None
+    assert metrics["landmarks_mapped"] > 0
+    # started from the GPS: within a few metres of it over the first 30 s
+    assert metrics["ate_rmse_m"] < 5.0
+    assert metrics["nees_dof"] == 2
+
+
+def test_a_missing_directory_is_a_clear_error(tmp_path, capsys):
+    assert main(["mrclam", "--data", str(tmp_path / "nowhere"), "--robot", "1", "--no-progress"]) == 2
+    assert "error:" in capsys.readouterr().err
+
+
+def test_params_file_replaces_defaults(tmp_path):
+    path = tmp_path / "params.yaml"
+    path.write_text("noise:\n  forward_m2_per_m: 0.5\nslam:\n  range_std: 0.3\n")
+    params = load_params(MRCLAM_PARAMS, path)
+    assert params.noise.forward_m2_per_m == 0.5 and params.slam.range_std == 0.3
+    assert params.noise.heading_rad2_per_rad == MRCLAM_PARAMS.noise.heading_rad2_per_rad
+    path.write_text("slam:\n  range_sd: 0.3\n")
+    with pytest.raises(ValueError, match="range_sd"):
+        load_params(MRCLAM_PARAMS, path)
+    path.write_text("slam:\n  range_std: -1\n")
+    with pytest.raises(ValueError, match="range_std"):
+        load_params(MRCLAM_PARAMS, path)
+
+
+def test_scans_group_rows_of_one_stamp():
+    scans = Scans.from_rows(np.array([5, 5, 7, 9, 9, 9]), np.arange(12.0).reshape(6, 2), np.arange(6))
+    np.testing.assert_array_equal(scans.t_ns, [5, 7, 9])
+    z, ids = scans.scan(2)
+    np.testing.assert_array_equal(ids, [3, 4, 5])
+    np.testing.assert_array_equal(z[:, 0], [6.0, 8.0, 10.0])
+    with pytest.raises(ValueError, match="non-decreasing"):
+        Scans.from_rows(np.array([2, 1]), np.zeros((2, 2)))
+
+
+def test_align_se2_hand_case():
+    # the square rotated by 90 deg about the origin and shifted by (1, 2)
+    square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    moved = np.column_stack([1.0 - square[:, 1], 2.0 + square[:, 0]])
+    T = align_se2(square, moved)
+    np.testing.assert_allclose(T.as_array(), [1.0, 2.0, math.pi / 2], atol=1e-12)
+    with pytest.raises(ValueError):
+        align_se2(square[:1], moved[:1])
+
+
+@settings(max_examples=30, deadline=None)
+@given(x=st.floats(-50, 50), y=st.floats(-50, 50), theta=st.floats(-3.1, 3.1), seed=st.integers(0, 2**16))
+def test_align_se2_recovers_any_rigid_motion(x, y, theta, seed):
+    points = np.random.default_rng(seed).uniform(-10.0, 10.0, (12, 2))
+    T_true = Transform2D(x, y, theta)
+    np.testing.assert_allclose(align_se2(points, T_true @ points).as_array(), T_true.as_array(), atol=1e-8)
+
+
+def _synthetic_recording(noise: TwistNoise, seed: int, duration_s: float = 600.0) -> MrclamRecording:
+    """A unicycle on varying commands at 50 Hz whose true motion has exactly ``noise`` (simulated on 10
+    sub-steps per sample), and one landmark observed with known noise every second."""
+    rng = np.random.default_rng(seed)
+    dt_ns = 20_000_000
+    n = int(duration_s * 50)
+    t = np.arange(n, dtype=np.int64) * dt_ns + 1_000_000_000_000
+    v = 0.2 + 0.15 * np.sin(np.arange(n) / 300.0)
+    omega = 0.5 * np.sin(np.arange(n) / 170.0)
+    truth = np.zeros((n, 3))
+    model = UnicycleMotion(noise)
+    T = Transform2D()
+    substeps = 10
+    for k in range(n - 1):
+        for _ in range(substeps):
+            q, _, Q = model.step(T, (v[k], omega[k], dt_ns // substeps))
+            T = Transform2D(*(q + np.linalg.cholesky(Q + 1e-18 * np.eye(3)) @ rng.normal(size=3)))
+        truth[k + 1] = T.as_array()
+    landmark = np.array([[1.0, 2.0]])
+    rows = np.arange(0, n, 50)
+    d = landmark - truth[rows, :2]
+    z_range = np.hypot(d[:, 0], d[:, 1]) + rng.normal(0.0, 0.05, len(rows))
+    z_bearing = np.arctan2(d[:, 1], d[:, 0]) - truth[rows, 2] + rng.normal(0.0, 0.02, len(rows))
+    return MrclamRecording(
+        robot=1,
+        odometry_t_ns=t,
+        odometry_v_mps=v,
+        odometry_omega_rad_s=omega,
+        measurement_t_ns=t[rows],
+        measurement_subject=np.full(len(rows), 6, dtype=np.int64),
+        measurement_range_m=z_range,
+        measurement_bearing_rad=np.remainder(z_bearing + np.pi, 2 * np.pi) - np.pi,
+        truth_t_ns=t,
+        truth_poses=truth,
+        landmark_subjects=np.array([6], dtype=np.int64),
+        landmark_xy=landmark,
+        dropped_measurements=0,
+    )
+
+
+def test_calibration_recovers_the_noise_of_synthetic_data():
+    true_noise = TwistNoise(forward_m2_per_m=4e-3, lateral_m2_per_m=5e-4, heading_rad2_per_rad=2e-2)
+    recording = _synthetic_recording(true_noise, seed=3)
+    errors, bases = motion_windows(recording, window_s=2.0)
+    fitted, _ = fit_motion_noise(errors, bases)
+    # 300 windows: the dominant terms within 25 %, the absent ones small against them
+    assert fitted.forward_m2_per_m == pytest.approx(4e-3, rel=0.25)
+    assert fitted.heading_rad2_per_rad == pytest.approx(2e-2, rel=0.25)
+    assert fitted.lateral_m2_per_m == pytest.approx(5e-4, rel=0.4)
+    assert fitted.heading_rad2_per_s < 2e-3 and fitted.forward_m2_per_s < 4e-4
+    nu = measurement_residuals(recording)
+    assert np.sqrt(np.mean(nu[:, 0] ** 2)) == pytest.approx(0.05, rel=0.15)
+    assert np.sqrt(np.mean(nu[:, 1] ** 2)) == pytest.approx(0.02, rel=0.15)

@@ -1,0 +1,223 @@
+"""Motion models for :class:`turtlelib.ekf_slam.EkfSlam`: one protocol, any planar robot.
+
+Protocol
+--------
+A motion model takes the pose ``q = [x, y, theta]`` (``T_map_body``; m, m, rad) and the input ``u`` of one
+step and returns::
+
+    q' = f(q, u),   G = df/dq (3, 3),   Q (3, 3) the covariance the step adds (map frame)
+
+as ``step(T_map_body, u) -> (q', G, Q)``. The filter knows nothing else about the robot.
+
+Every model here moves the body along the exact arc of a constant body displacement twist
+``xi = [omega, vx, vy]`` (rad, m, m) over the step, ``T' = T exp([xi])``, so with ``[dx, dy] = p' - p``::
+
+    G = [[1, 0, -dy],
+         [0, 1,  dx],
+         [0, 0,  1 ]]
+
+and ``Q`` is the twist noise integrated along the arc (:func:`turtlelib.arc_noise.arc_covariance`): one
+step of a constant-twist motion has exactly the mean and covariance of any number of shorter steps along
+it. The models differ in how ``u`` gives ``xi`` and in the twist noise:
+
+* :class:`DiffDriveMotion`: wheel increments ``u = (dphi_left, dphi_right)`` (rad), random-walk wheel slip
+  (:mod:`turtlelib.wheel_noise`).
+* :class:`OdometryMotion`: a relative pose ``u = (dx_m, dy_m, dtheta_rad, dt_ns)`` from any odometry source
+  (``T_prev_next`` in the previous body frame), ``xi = log(T_prev_next)``; :class:`TwistNoise`.
+* :class:`UnicycleMotion`: ``u = (v_mps, omega_rad_s, dt_ns)`` held over the step,
+  ``xi = [omega dt, v dt, 0]``; :class:`TwistNoise`.
+* :class:`AckermannMotion`: a car-like vehicle with the body at the rear-axle centre,
+  ``u = (speed_mps, steering_rad, dt_ns)`` with the speed measured by a wheel encoder ``encoder_y_m`` to the
+  left of the centreline; :class:`TwistNoise`. A sensor elsewhere on the car is the filter's sensor mount.
+
+Time is in integer nanoseconds. Non-finite inputs, a negative ``dt_ns`` or an input of the wrong length
+raise ValueError.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .arc_noise import arc_covariance
+from .geometry import Transform2D, Twist2D, integrate_twist
+from .kinematics import DiffDrive
+from .validation import finite_real, non_negative, positive, store
+from .wheel_noise import wheel_slip_covariance
+
+NS_PER_S = 1_000_000_000
+# |steering| at or beyond this (rad) is not a steering angle (the car would turn on the spot or backwards)
+MAX_STEERING_RAD = 0.5 * math.pi - 1e-3
+
+Step = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
+
+
+class MotionModel(Protocol):
+    """``step(T_map_body, u) -> (q' (3,), G (3, 3), Q (3, 3))`` (module docstring)."""
+
+    def step(self, T_map_body: Transform2D, u: tuple) -> Step: ...
+
+
+def _arc_step(T_map_body: Transform2D, T_next: Transform2D, Q: NDArray[np.float64]) -> Step:
+    """``(q', G, Q)`` for a move to ``T_next`` along an arc: ``G = [[1, 0, -dy], [0, 1, dx], [0, 0, 1]]``."""
+    q_next = T_next.as_array()
+    G = np.eye(3)
+    G[0, 2] = -(q_next[1] - T_map_body.y)
+    G[1, 2] = q_next[0] - T_map_body.x
+    return q_next, G, Q
+
+
+def _unpack(u: tuple, names: tuple[str, ...]) -> tuple:
+    """``u`` as len(names) values: finite floats, and ``dt_ns`` (if named) a non-negative integer."""
+    if len(u) != len(names):
+        raise ValueError(f"input must be ({', '.join(names)}), got {len(u)} values")
+    values = []
+    for name, value in zip(names, u, strict=True):
+        if name == "dt_ns":
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
+                raise ValueError(f"dt_ns must be an integer >= 0, got {value!r}")
+            values.append(int(value))
+        else:
+            value = float(value)
+            if not math.isfinite(value):
+                raise ValueError(f"{name} must be finite, got {value!r}")
+            values.append(value)
+    return tuple(values)
+
+
+@dataclass(frozen=True)
+class DiffDriveMotion:
+    """Wheel increments ``u = (dphi_left, dphi_right)`` (rad) of ``drive``; slip ``N(0, wheel_noise^2
+    |dphi|)`` per wheel (``wheel_noise`` in sqrt(rad), >= 0; :mod:`turtlelib.wheel_noise`)."""
+
+    drive: DiffDrive
+    wheel_noise: float
+
+    def __post_init__(self) -> None:
+        store(self, ("wheel_noise",), non_negative)
+
+    def step(self, T_map_body: Transform2D, u: tuple) -> Step:
+        dphi_left, dphi_right = u
+        # q' = q (+) exp([F dphi])  (DiffDrive.step raises ValueError for non-finite increments)
+        T_next = self.drive.step(T_map_body, dphi_left, dphi_right)
+        Q = wheel_slip_covariance(self.drive, T_map_body.theta, dphi_left, dphi_right, self.wheel_noise)
+        return _arc_step(T_map_body, T_next, Q)
+
+
+@dataclass(frozen=True)
+class TwistNoise:
+    """White noise on the body twist whose variances grow with travel, turn and time.
+
+    Over a step of twist ``xi = [omega, vx, vy]`` lasting ``dt`` (s), with travel ``d = |[vx, vy]|`` (m) and
+    turn ``|omega|`` (rad), the twist errors are independent with::
+
+        var(dvx)    = forward_m2_per_m d + forward_m2_per_s dt
+        var(dvy)    = lateral_m2_per_m d
+        var(domega) = heading_rad2_per_m d + heading_rad2_per_rad |omega| + heading_rad2_per_s dt
+
+    Each term is linear in travel, turn or time, so the variances of consecutive pieces of a motion add up
+    to those of the whole (a random walk: the rate-independent form of the four-alpha odometry model of
+    Probabilistic Robotics, whose squared terms would depend on how the motion is split). All >= 0
+    (ValueError otherwise).
+    """
+
+    forward_m2_per_m: float = 0.0
+    forward_m2_per_s: float = 0.0
+    lateral_m2_per_m: float = 0.0
+    heading_rad2_per_m: float = 0.0
+    heading_rad2_per_rad: float = 0.0
+    heading_rad2_per_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        store(self, tuple(self.__dataclass_fields__), non_negative)
+
+    def covariance(self, T_map_body: Transform2D, xi: Twist2D, dt_s: float) -> NDArray[np.float64]:
+        """``Q`` (3, 3) of a step of twist ``xi`` over ``dt_s`` from ``T_map_body``, integrated along the
+        arc."""
+        travel_m = math.hypot(xi.vx, xi.vy)
+        turn_rad = abs(xi.omega)
+        var_vx = self.forward_m2_per_m * travel_m + self.forward_m2_per_s * dt_s
+        var_vy = self.lateral_m2_per_m * travel_m
+        var_omega = (
+            self.heading_rad2_per_m * travel_m
+            + self.heading_rad2_per_rad * turn_rad
+            + self.heading_rad2_per_s * dt_s
+        )
+        return arc_covariance(T_map_body.theta, xi.omega, xi.vx, xi.vy, var_vx, 0.0, var_omega, var_vy)
+
+
+def _twist_step(
+    T_map_body: Transform2D, T_delta: Transform2D, xi: Twist2D, dt_ns: int, noise: TwistNoise
+) -> Step:
+    # q' = q (+) T_delta,  T_delta = exp([xi])
+    return _arc_step(T_map_body, T_map_body @ T_delta, noise.covariance(T_map_body, xi, dt_ns / NS_PER_S))
+
+
+@dataclass(frozen=True)
+class OdometryMotion:
+    """A relative pose ``u = (dx_m, dy_m, dtheta_rad, dt_ns)``: ``T_prev_next`` from any odometry source
+    (wheel odometry, visual odometry, a recorded ``odom`` frame), taken as the arc ``xi = log(T_prev_next)``
+    (so a reference point that moves sideways is fine); ``noise`` on that twist."""
+
+    noise: TwistNoise
+
+    def step(self, T_map_body: Transform2D, u: tuple) -> Step:
+        dx_m, dy_m, dtheta_rad, dt_ns = _unpack(u, ("dx_m", "dy_m", "dtheta_rad", "dt_ns"))
+        T_delta = Transform2D(dx_m, dy_m, dtheta_rad)
+        return _twist_step(T_map_body, T_delta, T_delta.log(), dt_ns, self.noise)
+
+
+@dataclass(frozen=True)
+class UnicycleMotion:
+    """A forward speed and turn rate ``u = (v_mps, omega_rad_s, dt_ns)`` held over the step (e.g. velocity
+    commands): ``xi = [omega dt, v dt, 0]``; ``noise`` on that twist."""
+
+    noise: TwistNoise
+
+    def step(self, T_map_body: Transform2D, u: tuple) -> Step:
+        v_mps, omega_rad_s, dt_ns = _unpack(u, ("v_mps", "omega_rad_s", "dt_ns"))
+        dt_s = dt_ns / NS_PER_S
+        xi = Twist2D(omega_rad_s * dt_s, v_mps * dt_s, 0.0)
+        return _twist_step(T_map_body, integrate_twist(xi), xi, dt_ns, self.noise)
+
+
+@dataclass(frozen=True)
+class AckermannMotion:
+    """A car-like vehicle: the body frame at the rear-axle centre (x forward), ``u = (speed_mps,
+    steering_rad, dt_ns)`` held over the step, with the speed measured by a wheel encoder on the rear axle
+    ``encoder_y_m`` to the left of the centreline (0 for the axle centre) and the front-wheel steering
+    angle ``alpha`` (+ left). With wheelbase ``L`` (``wheelbase_m`` > 0)::
+
+        omega = v_c tan(alpha) / L,   v_e = v_c - omega y_e   =>   v_c = v_e / (1 - tan(alpha) y_e / L)
+        xi = [omega dt, v_c dt, 0]
+
+    (a unicycle at the rear axle; Guivant & Nebot 2001 for Victoria Park). ``noise`` on that twist.
+    ValueError for ``|alpha| >= MAX_STEERING_RAD`` or a steering whose turn centre lies at the encoder.
+    """
+
+    wheelbase_m: float
+    encoder_y_m: float
+    noise: TwistNoise
+
+    def __post_init__(self) -> None:
+        store(self, ("wheelbase_m",), positive)
+        store(self, ("encoder_y_m",), finite_real)
+
+    def step(self, T_map_body: Transform2D, u: tuple) -> Step:
+        speed_mps, steering_rad, dt_ns = _unpack(u, ("speed_mps", "steering_rad", "dt_ns"))
+        if not abs(steering_rad) < MAX_STEERING_RAD:
+            raise ValueError(f"steering angle {steering_rad!r} rad is beyond +-{MAX_STEERING_RAD:.4f} rad")
+        curvature = math.tan(steering_rad) / self.wheelbase_m
+        # v_c = v_e / (1 - tan(alpha) y_e / L)
+        scale = 1.0 - curvature * self.encoder_y_m
+        if not scale > 0.0:
+            raise ValueError(f"steering angle {steering_rad!r} rad turns the car about its encoder wheel")
+        dt_s = dt_ns / NS_PER_S
+        travel_m = speed_mps / scale * dt_s
+        # xi = [v_c tan(alpha) / L dt, v_c dt, 0]
+        xi = Twist2D(curvature * travel_m, travel_m, 0.0)
+        return _twist_step(T_map_body, integrate_twist(xi), xi, dt_ns, self.noise)

@@ -1,0 +1,86 @@
+"""How a stream of stamped samples becomes motion-model inputs, for :class:`turtlelib.SlamTimeline`.
+
+A signal is sampled at times ``t_k`` (integer ns) with values ``s_k`` (tuples of floats). The timeline needs
+its value between samples and the motion model's input ``u`` over a sub-interval:
+
+* ``at(s0, s1, fraction)``: the value at ``t0 + fraction (t1 - t0)`` (``0 <= fraction < 1``) between
+  consecutive samples ``s0`` at ``t0`` and ``s1`` at ``t1``;
+* ``input(s_from, s_to, dt_ns)``: the input that moves the model from the value ``s_from`` to ``s_to``
+  over ``dt_ns`` (both within one sample interval), or None when there is no motion to predict.
+
+Signals:
+
+* :class:`WheelAngles` (for :class:`~turtlelib.motion_models.DiffDriveMotion`): cumulative wheel angles
+  ``(phi_left, phi_right)`` (rad), constant wheel speeds between samples: linear interpolation,
+  ``u = s_to - s_from``.
+* :class:`OdometryPoses` (for :class:`~turtlelib.motion_models.OdometryMotion`): cumulative odometry poses
+  ``(x, y, theta)`` (``T_odom_body``), a constant body twist between samples:
+  ``T(fraction) = T0 exp(fraction log(T0^-1 T1))``, ``u = (T_from^-1 T_to, dt_ns)``.
+* :class:`HeldInputs` (for :class:`~turtlelib.motion_models.UnicycleMotion`,
+  :class:`~turtlelib.motion_models.AckermannMotion`): rates such as ``(v, omega)`` or ``(speed, steering)``
+  held from their sample until the next (a zero-order hold): ``at = s0``, ``u = (*s_from, dt_ns)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+from .geometry import Transform2D, integrate_twist
+
+Sample = tuple[float, ...]
+
+
+class MotionSignal(Protocol):
+    """``at`` and ``input`` (module docstring)."""
+
+    def at(self, s0: Sample, s1: Sample, fraction: float) -> Sample: ...
+
+    def input(self, s_from: Sample, s_to: Sample, dt_ns: int) -> tuple | None: ...
+
+
+@dataclass(frozen=True)
+class WheelAngles:
+    """Cumulative wheel angles ``(phi_left, phi_right)`` (rad)."""
+
+    def at(self, s0: Sample, s1: Sample, fraction: float) -> Sample:
+        (l0, r0), (l1, r1) = s0, s1
+        # phi(t) = phi_(k-1) + fraction (phi_k - phi_(k-1))
+        return l0 + fraction * (l1 - l0), r0 + fraction * (r1 - r0)
+
+    def input(self, s_from: Sample, s_to: Sample, dt_ns: int) -> tuple | None:
+        dphi_left, dphi_right = s_to[0] - s_from[0], s_to[1] - s_from[1]
+        if dphi_left == 0.0 and dphi_right == 0.0:
+            return None
+        return dphi_left, dphi_right
+
+
+@dataclass(frozen=True)
+class OdometryPoses:
+    """Cumulative odometry poses ``(x, y, theta)`` (m, m, rad) of the body in an odometry frame."""
+
+    def at(self, s0: Sample, s1: Sample, fraction: float) -> Sample:
+        T0 = Transform2D(*s0)
+        # T(fraction) = T0 exp(fraction log(T0^-1 T1))
+        T = T0 @ integrate_twist((T0.inverse() @ Transform2D(*s1)).log() * fraction)
+        return T.x, T.y, T.theta
+
+    def input(self, s_from: Sample, s_to: Sample, dt_ns: int) -> tuple | None:
+        T_delta = Transform2D(*s_from).inverse() @ Transform2D(*s_to)
+        if dt_ns == 0 and T_delta == Transform2D():
+            return None
+        return T_delta.x, T_delta.y, T_delta.theta, dt_ns
+
+
+@dataclass(frozen=True)
+class HeldInputs:
+    """Rates held from one sample to the next, e.g. ``(v_mps, omega_rad_s)`` or ``(speed_mps,
+    steering_rad)``."""
+
+    def at(self, s0: Sample, s1: Sample, fraction: float) -> Sample:
+        return s0
+
+    def input(self, s_from: Sample, s_to: Sample, dt_ns: int) -> tuple | None:
+        if dt_ns == 0:
+            return None
+        return (*s_from, dt_ns)
