@@ -48,6 +48,13 @@ The innovations still use the newest estimates; only the Jacobians (so ``P``) ch
 heading variance never drops below its value when the first landmark was seen: relative observations
 cannot tell where the whole map points.
 
+Both are only as good as the first estimates: a landmark initialised from a pose that was far off
+(a long stretch of poor odometry) keeps a wrong linearisation point. With ``relinearize_gate < 1`` a
+landmark's first estimate is replaced by its current estimate ``m`` once
+``(m - m_first)^T P_mm^-1 (m - m_first) > chi2_2^-1(relinearize_gate)`` after an update (the first
+estimate is statistically incompatible with what the map now says). Each such reset lets a little of the
+spurious information back in, once, in exchange for Jacobians at a sound point.
+
 Update (:meth:`EkfSlam.update_known`, :meth:`EkfSlam.update_unknown`, O(N^2) per observation)
 ----------------------------------------------------------------------------------------------
 Observation ``z = [range_m, bearing_rad]`` of a landmark from the sensor at ``T_body_sensor``
@@ -114,7 +121,8 @@ class SlamConfig:
       (1: no gate).
     * ``linearization``: ``'standard'`` (Jacobians at the newest estimates), ``'fej'`` (first-estimates
       Jacobians) or ``'oc'`` (observability-constrained Jacobians): the consistency remedies of the module
-      docstring.
+      docstring; ``relinearize_gate`` in (0, 1]: chi2 probability (2 dof) beyond which a landmark's first
+      estimate is reset to its current one (1: never).
     * ``confirm_count`` (>= 1): sightings that confirm a tentative landmark; ``tentative_timeout`` (s, > 0):
       how long after its first sighting a tentative landmark may stay unconfirmed.
     * ``max_range`` (m, > 0): observations farther than this are rejected.
@@ -134,6 +142,7 @@ class SlamConfig:
     gate_new: float = 0.9999
     gate_known: float = 0.9999
     linearization: str = "standard"
+    relinearize_gate: float = 1.0
     confirm_count: int = 5
     tentative_timeout: float = 2.0
     max_range: float = 3.5
@@ -149,7 +158,7 @@ class SlamConfig:
         one_of("linearization", self.linearization, LINEARIZATIONS)
         probability = partial(in_range, low=0.0, high=1.0, open_low=True, open_high=True)
         store(self, ("gate_associate", "gate_new"), probability)
-        store(self, ("gate_known",), partial(in_range, low=0.0, high=1.0, open_low=True))
+        store(self, ("gate_known", "relinearize_gate"), partial(in_range, low=0.0, high=1.0, open_low=True))
         if not self.gate_associate < self.gate_new:
             raise ValueError(f"need gate_associate < gate_new, got {self.gate_associate}, {self.gate_new}")
         store(self, ("confirm_count", "jcbb_max_nodes"), partial(integer, minimum=1))
@@ -219,7 +228,8 @@ class EkfSlam:
         self._default_R = config.measurement_covariance(1)
         self._gate_associate = float(chi2_gate(config.gate_associate, 2))
         self._gate_new = float(chi2_gate(config.gate_new, 2))
-        self._gate_known = float(chi2_gate(config.gate_known, 2)) if config.gate_known < 1.0 else np.inf
+        self._gate_known = _gate_or_inf(config.gate_known)
+        self._relinearize = _gate_or_inf(config.relinearize_gate) if self._constrained else np.inf
         self._timeout_ns = round(config.tentative_timeout * NS_PER_S)
         self.reset(Transform2D() if T_map_body0 is None else T_map_body0)
 
@@ -288,6 +298,7 @@ class EkfSlam:
         matched = seen_before[inside]
         # one stacked update with the landmarks seen before, then the new ones from the updated pose
         nis = self._state.correct(slots[inside], H_robot[inside], H_landmark[inside], nu[inside], R[matched])
+        self._relinearize_first_estimates(slots[inside])
         for k in np.flatnonzero(in_range & ~known):
             self._add_landmark(int(landmark_ids[k]), z[k], R[k], confirmed=True, stamp_ns=0)
 
@@ -327,6 +338,7 @@ class EkfSlam:
             nis = self._state.correct(
                 slots, H_robot[slots], H_landmark[slots], nu[rows, slots], R_usable[rows]
             )
+            self._relinearize_first_estimates(slots)
             confirmed_ids = [self._tracks.sighted(slots, self._config.confirm_count)]
         else:
             slots, confirmed_ids = match[:0], []
@@ -606,6 +618,16 @@ class EkfSlam:
         d2, _ = mahalanobis_2d(nu, self._predicted_covariances(H_robot, H_landmark, slots) + R)
         return nu, d2, H_robot, H_landmark
 
+    def _relinearize_first_estimates(self, slots: NDArray[np.int64]) -> None:
+        """Reset the first estimates of ``slots`` that lie beyond ``relinearize_gate`` of the current ones."""
+        if self._relinearize == np.inf or len(slots) == 0:
+            return
+        current = self._state.landmark_positions()[slots]
+        # D2 = (m - m_first)^T P_mm^-1 (m - m_first)
+        d2, _ = mahalanobis_2d(current - self._tracks.first_xy[slots], self._state.landmark_blocks(slots))
+        far = d2 > self._relinearize
+        self._tracks.relinearize(slots[far], current[far])
+
     def _add_landmark(
         self, landmark_id: int, z: NDArray[np.float64], R: NDArray[np.float64], confirmed: bool, stamp_ns: int
     ) -> int:
@@ -637,6 +659,11 @@ class EkfSlam:
         """State indices of the pose and the confirmed landmarks (in id order)."""
         first = ROBOT_DIM + 2 * self._tracks.slots_by_id(confirmed=True)
         return np.concatenate([np.arange(ROBOT_DIM), (first[:, None] + np.arange(2)).ravel()])
+
+
+def _gate_or_inf(prob: float) -> float:
+    """``chi2_2^-1(prob)``, infinite for ``prob = 1``."""
+    return float(chi2_gate(prob, 2)) if prob < 1.0 else np.inf
 
 
 def _observability_constrained(

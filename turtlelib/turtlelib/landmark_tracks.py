@@ -37,6 +37,10 @@ class LandmarkTracks:
         """First estimate (n, 2) of every slot, a view."""
         return self._first_xy[: self._n]
 
+    def relinearize(self, slots: NDArray[np.int64], xy: NDArray[np.float64]) -> None:
+        """Replace the first estimates of ``slots`` (k,) by ``xy`` (k, 2)."""
+        self._first_xy[slots] = xy
+
     @property
     def confirmed(self) -> NDArray[np.bool_]:
         """Confirmed flag of every slot (n,), a view."""

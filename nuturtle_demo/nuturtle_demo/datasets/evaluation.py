@@ -56,7 +56,8 @@ class Evaluation:
     compared estimate ``estimate_xy`` and reference ``reference_xy`` (S, 2), ``errors`` (S, d) with the
     filter's ``sigmas`` (S, d) and ``error_labels``; ``nees`` (S,) with ``nees_dof``; the reference track
     ``reference_track`` (R, 2) and the estimate's track ``estimate_track`` (E, 2); the map (in the map frame)
-    and the true landmarks (or None); ``metrics``."""
+    and the true landmarks (or None); ``T_align`` the rigid motion that best fits the estimate to the
+    reference; ``metrics``."""
 
     t_s: NDArray[np.float64]
     estimate_xy: NDArray[np.float64]
@@ -72,6 +73,7 @@ class Evaluation:
     landmarks: NDArray[np.float64]
     landmark_covariances: NDArray[np.float64]
     true_landmarks: NDArray[np.float64] | None
+    T_align: Transform2D
     metrics: dict
 
 
@@ -189,10 +191,11 @@ def evaluate_mrclam(
         nees_dof=3,
         reference_label="Vicon ground truth",
         reference_track=recording.truth_poses[in_run, :2],
-        estimate_track=result.poses[:, :2],
+        estimate_track=result.track[:, :2],
         landmarks=result.landmarks,
         landmark_covariances=result.landmark_covariances,
         true_landmarks=recording.landmark_xy,
+        T_align=T_align,
         metrics=metrics,
     )
 
@@ -216,6 +219,7 @@ def evaluate_victoria(
     """Victoria Park's laser point against the GPS fixes (module docstring)."""
     t0 = experiment.motion_t_ns[0]
     points, point_covariances = laser_points(result.poses, result.covariances)
+    track, _ = laser_points(result.track, np.zeros((len(result.track), 3, 3)))
     good = ~gps_outliers(recording.gps_t_ns, recording.gps_xy)
     covered = good & (recording.gps_t_ns >= result.t_ns[0]) & (recording.gps_t_ns <= result.t_ns[-1])
     t_gps, gps = recording.gps_t_ns[covered], recording.gps_xy[covered]
@@ -225,7 +229,7 @@ def evaluate_victoria(
     covariance = np.column_stack([np.interp(t_rel, t_est, flat[:, i]) for i in range(4)]).reshape(-1, 2, 2)
     errors = estimate - gps
     nees = pose_nees(errors, covariance)
-    metrics, _ = _trajectory_metrics(estimate, gps, nees, 2)
+    metrics, T_align = _trajectory_metrics(estimate, gps, nees, 2)
     metrics.update(
         {
             "gps_fixes_used": int(covered.sum()),
@@ -250,9 +254,10 @@ def evaluate_victoria(
         nees_dof=2,
         reference_label="GPS (outliers removed)",
         reference_track=recording.gps_xy[good],
-        estimate_track=points,
+        estimate_track=track,
         landmarks=result.landmarks,
         landmark_covariances=result.landmark_covariances,
         true_landmarks=None,
+        T_align=T_align,
         metrics=metrics,
     )

@@ -81,14 +81,15 @@ class Experiment:
 @dataclass(frozen=True)
 class ExperimentResult:
     """The estimates after every applied scan: ``t_ns`` (S,), ``poses`` (S, 3) ``T_map_body``,
-    ``covariances`` (S, 3, 3); the final map (``landmark_ids`` (n,), ``landmarks`` (n, 2),
-    ``landmark_covariances`` (n, 2, 2)); per observation status counts; CPU seconds of the whole run and
-    the wall time (ms) of every timeline call that applied a scan (its prediction up to the stamp and its
-    update)."""
+    ``covariances`` (S, 3, 3); the filter's pose at every motion sample, ``track`` (M, 3); the final map
+    (``landmark_ids`` (n,), ``landmarks`` (n, 2), ``landmark_covariances`` (n, 2, 2)); per observation
+    status counts; CPU seconds of the whole run and the wall time (ms) of every timeline call that applied
+    a scan (its prediction up to the stamp and its update)."""
 
     t_ns: NDArray[np.int64]
     poses: NDArray[np.float64]
     covariances: NDArray[np.float64]
+    track: NDArray[np.float64]
     landmark_ids: NDArray[np.int64]
     landmarks: NDArray[np.float64]
     landmark_covariances: NDArray[np.float64]
@@ -111,6 +112,7 @@ def run_experiment(experiment: Experiment, progress: Callable[[int], None] | Non
     first_scan = int(np.searchsorted(scans.t_ns, t_motion[0], side="left"))
     scan_after = np.searchsorted(t_motion, scans.t_ns, side="right")
     t_est, poses, covariances, update_ms = [], [], [], []
+    track = np.empty((len(t_motion), 3))
     counts = {"matched": 0, "new": 0, "rejected": 0}
 
     def keep(applied: list, elapsed_ms: float) -> None:
@@ -132,6 +134,7 @@ def run_experiment(experiment: Experiment, progress: Callable[[int], None] | Non
         start = time.perf_counter()
         applied = timeline.add_motion(int(t_motion[k]), samples[k])
         keep(applied, 1e3 * (time.perf_counter() - start))
+        track[k] = slam.pose.as_array()
         # the scans whose stamp lies before the next motion sample
         while i_scan < len(scans) and scan_after[i_scan] == k + 1:
             z, ids = scans.scan(i_scan)
@@ -148,6 +151,7 @@ def run_experiment(experiment: Experiment, progress: Callable[[int], None] | Non
         t_ns=np.array(t_est, dtype=np.int64),
         poses=np.array(poses).reshape(-1, 3),
         covariances=np.array(covariances).reshape(-1, 3, 3),
+        track=track,
         landmark_ids=slam.landmark_ids,
         landmarks=slam.landmarks,
         landmark_covariances=slam.landmark_covariances,

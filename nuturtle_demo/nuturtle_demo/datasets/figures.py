@@ -9,38 +9,50 @@ from pathlib import Path
 
 import numpy as np
 
+from turtlelib import Transform2D
+
 from ..plots import LANDMARK_SIGMAS, SLAM_COLOR, TRUTH_COLOR, ellipse_points, new_figure
 from .evaluation import Evaluation
 
 
 def plot_trajectory(path: str | Path, evaluation: Evaluation, title: str) -> None:
-    """trajectory.png: the reference (Vicon or GPS), the estimate, the map with 2-sigma ellipses and the
-    true landmarks (if known), in the map frame."""
-    figure = new_figure(8.0, 7.0)
-    axes = figure.add_subplot()
-    reference = evaluation.reference_track
+    """trajectory.png: the reference (Vicon or GPS), the estimate, the map with 2-sigma ellipses and the true
+    landmarks (if known); left in the map frame, right after the rigid motion that best fits the estimate to
+    the reference (the global frame is unobservable)."""
+    figure = new_figure(14.0, 7.0)
+    for axes, T, label in zip(
+        figure.subplots(1, 2),
+        (Transform2D(), evaluation.T_align),
+        ("map frame", "after rigid alignment"),
+        strict=True,
+    ):
+        _draw_run(axes, evaluation, T)
+        axes.set_title(f"{title}: {label}")
+    figure.savefig(path)
+
+
+def _draw_run(axes, evaluation: Evaluation, T: Transform2D) -> None:
+    """The reference, the estimate and the map moved by ``T`` on ``axes``."""
     style = "-" if evaluation.true_landmarks is not None else "."
     axes.plot(
-        *reference.T,
-        style,
-        color=TRUTH_COLOR,
-        linewidth=1.0,
-        markersize=1.5,
+        *evaluation.reference_track.T, style, color=TRUTH_COLOR, linewidth=1.0, markersize=1.5,
         label=evaluation.reference_label,
-    )
-    axes.plot(*evaluation.estimate_track.T, color=SLAM_COLOR, linewidth=0.8, label="SLAM estimate")
-    for center, covariance in zip(evaluation.landmarks, evaluation.landmark_covariances, strict=True):
-        axes.plot(*ellipse_points(center, covariance, LANDMARK_SIGMAS).T, color="tab:blue", linewidth=0.6)
-    axes.plot(*evaluation.landmarks.T, "+", color="tab:blue", markersize=6, label="map (2σ ellipses)")
+    )  # fmt: skip
+    axes.plot(*(T @ evaluation.estimate_track).T, color=SLAM_COLOR, linewidth=0.8, label="SLAM estimate")
+    R = T.rotation_matrix()
+    landmarks = T @ evaluation.landmarks if len(evaluation.landmarks) else evaluation.landmarks
+    for center, covariance in zip(landmarks, evaluation.landmark_covariances, strict=True):
+        # C' = R C R^T
+        ellipse = ellipse_points(center, R @ covariance @ R.T, LANDMARK_SIGMAS)
+        axes.plot(*ellipse.T, color="tab:blue", linewidth=0.6)
+    axes.plot(*landmarks.reshape(-1, 2).T, "+", color="tab:blue", markersize=6, label="map (2σ ellipses)")
     if evaluation.true_landmarks is not None:
         axes.plot(*evaluation.true_landmarks.T, "kx", markersize=7, label="true landmarks")
     axes.set_aspect("equal")
     axes.set_xlabel("x (m)")
     axes.set_ylabel("y (m)")
-    axes.set_title(title)
     axes.grid(True, alpha=0.3)
     axes.legend(loc="best", fontsize="small")
-    figure.savefig(path)
 
 
 def plot_errors(path: str | Path, evaluation: Evaluation) -> None:
