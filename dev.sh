@@ -5,6 +5,7 @@
 #                                  turtlelib's tests in a venv without ROS (.venv-core), the whole suite
 #   ./dev.sh test [pytest options] set up if needed, then only pytest with these options
 #   ./dev.sh lint                  ruff format --check and ruff check
+#   ./dev.sh datasets ARGS         set up if needed, then EKF SLAM on a real dataset (docs/real_data.md)
 # Set-up is idempotent: an install is redone only when pyproject.toml changes.
 set -euo pipefail
 cd "$(dirname "$0")"
@@ -71,5 +72,6 @@ case "$cmd" in
     ;;
   lint) setup; lint ;;
   setup) setup ;;
-  *) echo "usage: ./dev.sh run|test|lint|setup [args]" >&2; exit 2 ;;
+  datasets) setup; exec "$py" -P -m nuturtle_demo.datasets "$@" ;;
+  *) echo "usage: ./dev.sh run|test|lint|setup|datasets [args]" >&2; exit 2 ;;
 esac

@@ -43,12 +43,20 @@ def test_nees_of_gaussian_errors_is_chi2():
         ([1.0, 2.0], [[1.0, 0.0], [0.0, math.inf]]),
         ([1.0, 2.0], [[1.0, 0.5], [0.0, 1.0]]),  # not symmetric
         ([1.0, 2.0], [[1.0, 0.0], [0.0, -1.0]]),  # a negative variance
-        ([1.0, 2.0], [[1.0, 1.0], [1.0, 1.0]]),  # singular
+        ([1.0, 2.0], [[1.0, 2.0], [2.0, 1.0]]),  # indefinite
     ],
 )
 def test_nees_rejects_bad_input(error, covariance):
     with pytest.raises(ValueError):
         nees(error, covariance)
+
+
+def test_a_singular_covariance_has_no_nees():
+    # the exactly known start (P = 0) and a rank-deficient P are skipped as NaN, the others computed
+    assert math.isnan(nees([0.0, 0.0, 0.0], np.zeros((3, 3))))
+    assert math.isnan(nees([1.0, 2.0], [[1.0, 1.0], [1.0, 1.0]]))
+    values = nees([[1.0, 0.0], [2.0, 0.0]], [np.zeros((2, 2)), np.eye(2)])
+    assert math.isnan(values[0]) and values[1] == pytest.approx(4.0)
 
 
 @pytest.mark.parametrize("dof, n_runs, prob", [(3, 50, 0.95), (2, 1, 0.95), (2, 100, 0.99), (6, 10, 0.9)])

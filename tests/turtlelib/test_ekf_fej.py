@@ -1,15 +1,18 @@
-"""First-estimates Jacobians (SlamConfig.linearization = 'fej'): the filter gains no information about the
-global heading, which relative observations cannot give (Huang, Mourikis & Roumeliotis 2008).
+"""Observability-constrained Jacobians (SlamConfig.linearization = 'fej' or 'oc'): the filter gains no
+information about the global heading, which relative observations cannot give (Huang, Mourikis &
+Roumeliotis 2008, 2010).
 
 The world: a unicycle drives two loops of a circle among six landmarks, with twist noise as its model says
 and noisy range-bearing observations. The standard EKF's heading variance falls below its value when the
-first landmark was seen (spurious information); with FEJ it never does.
+first landmark was seen (spurious information); with FEJ or OC it never does.
 """
 
 import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from turtlelib import Transform2D, TwistNoise, UnicycleMotion
 from turtlelib.ekf_slam import EkfSlam, SlamConfig
@@ -23,7 +26,7 @@ STEPS_BEFORE_FIRST_LANDMARK = 20
 RANGE_STD, BEARING_STD = 0.05, 0.02
 
 
-def run(linearization: str, seed: int) -> tuple[float, float, float, float]:
+def run(linearization: str, seed: int, relinearize_gate: float = 1.0) -> tuple[float, float, float, float]:
     """``(P_tt when the first landmark is seen, min P_tt afterwards, final heading error, final P_tt)``."""
     rng = np.random.default_rng(seed)
     config = SlamConfig(
@@ -33,6 +36,7 @@ def run(linearization: str, seed: int) -> tuple[float, float, float, float]:
         initial_xy_std=0.05,
         initial_theta_std=0.1,
         linearization=linearization,
+        relinearize_gate=relinearize_gate,
         gate_known=1.0,
     )
     motion = UnicycleMotion(NOISE)
@@ -58,10 +62,21 @@ def run(linearization: str, seed: int) -> tuple[float, float, float, float]:
     return P_tt_before, P_tt_after, error, slam.pose_covariance[2, 2]
 
 
+@pytest.mark.parametrize("linearization", ["fej", "oc"])
 @pytest.mark.parametrize("seed", range(3))
-def test_fej_never_gains_global_heading_information(seed):
-    before, smallest, _, _ = run("fej", seed)
+def test_the_remedies_never_gain_global_heading_information(linearization, seed):
+    before, smallest, _, _ = run(linearization, seed)
     assert smallest >= before * (1.0 - 1e-9)
+
+
+@pytest.mark.parametrize("linearization", ["fej", "oc"])
+def test_first_estimates_are_reset_beyond_the_relinearize_gate(linearization):
+    # a gate every estimate passes (the first estimates of this world are sound) changes nothing; a gate
+    # of probability ~0 resets every first estimate after every update: the Jacobians of the newest
+    # estimates, so the spurious heading information is back
+    assert run(linearization, 0, relinearize_gate=1.0 - 1e-12) == run(linearization, 0)
+    before, smallest, _, _ = run(linearization, 0, relinearize_gate=1e-9)
+    assert smallest < 0.9 * before
 
 
 @pytest.mark.parametrize("seed", range(3))
@@ -72,7 +87,7 @@ def test_the_standard_ekf_does(seed):
     assert smallest < 0.9 * before
 
 
-@pytest.mark.parametrize(("linearization", "consistent"), [("fej", True), ("standard", False)])
+@pytest.mark.parametrize(("linearization", "consistent"), [("fej", True), ("oc", True), ("standard", False)])
 def test_final_heading_error_against_the_filter_sigma(linearization, consistent):
     # 30 seeds: the final heading error squared over the filter's variance is chi2(1) when the filter is
     # honest; the mean of 30 lies below 1.65 with 97.5 % probability (chi2(30) / 30)
@@ -80,3 +95,41 @@ def test_final_heading_error_against_the_filter_sigma(linearization, consistent)
         error**2 / variance for _, _, error, variance in (run(linearization, 100 + s) for s in range(30))
     ]
     assert (np.mean(ratios) < 1.65) == consistent
+
+
+@settings(max_examples=50, deadline=None)
+@given(
+    pose=st.tuples(st.floats(-5, 5), st.floats(-5, 5), st.floats(-3, 3)),
+    offset=st.tuples(st.floats(-0.5, 0.5), st.floats(-0.5, 0.5)),
+    shift=st.tuples(st.floats(-1, 1), st.floats(-1, 1)),
+    seed=st.integers(0, 1000),
+)
+def test_oc_jacobians_have_the_unobservable_directions_in_their_null_space(pose, offset, shift, seed):
+    from turtlelib.ekf_slam import _observability_constrained
+
+    landmarks = np.random.default_rng(seed).uniform(-6.0, 6.0, (4, 2)) + pose[:2] + 0.5
+    T_body_sensor = Transform2D(*offset, 0.0)
+    _, H_robot, H_landmark = predict_observations(np.array(pose), landmarks, T_body_sensor)
+    # N built at other (first) estimates than the Jacobians' own point
+    first = landmarks + shift
+    H_robot_oc, H_landmark_oc = _observability_constrained(H_robot, H_landmark, np.array(pose), first)
+    for k in range(len(landmarks)):
+        N = np.zeros((5, 3))
+        N[[0, 1, 3, 4], [0, 1, 0, 1]] = 1.0
+        N[:, 2] = [-pose[1], pose[0], 1.0, -first[k, 1], first[k, 0]]
+        H_oc = np.hstack([H_robot_oc[k], H_landmark_oc[k]])
+        np.testing.assert_allclose(H_oc @ N, 0.0, atol=1e-9)
+        # the smallest change that does it: what was removed lies in the span of N^T
+        change = np.hstack([H_robot[k], H_landmark[k]]) - H_oc
+        np.testing.assert_allclose(change @ (np.eye(5) - N @ np.linalg.pinv(N)), 0.0, atol=1e-9)
+
+
+def test_oc_changes_nothing_when_the_jacobian_already_respects_the_null_space():
+    from turtlelib.ekf_slam import _observability_constrained
+
+    pose, landmarks = np.array([0.3, -0.2, 0.7]), np.array([[2.0, 1.0], [-1.0, 3.0]])
+    # sensor at the body origin, N at the Jacobians' own point: H N = 0 already
+    _, H_robot, H_landmark = predict_observations(pose, landmarks, Transform2D())
+    H_robot_oc, H_landmark_oc = _observability_constrained(H_robot, H_landmark, pose, landmarks)
+    np.testing.assert_allclose(H_robot_oc, H_robot, atol=1e-12)
+    np.testing.assert_allclose(H_landmark_oc, H_landmark, atol=1e-12)

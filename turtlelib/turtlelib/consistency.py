@@ -6,7 +6,9 @@
 * Over ``n_runs`` independent Monte Carlo runs, ``n_runs * mean(eps)`` is chi2 with ``n_runs d`` dof, so
   the average lies in ``chi2_bounds(d, n_runs, prob)`` with probability ``prob``.
 
-Angle components of ``e`` and ``nu`` must be wrapped by the caller.
+Angle components of ``e`` and ``nu`` must be wrapped by the caller. A singular covariance (positive
+semi-definite but not definite, e.g. the exactly known start pose of a filter before it moves) has no NEES:
+it is skipped as NaN, so averages over a run use ``np.nanmean``. An indefinite one is an error.
 """
 
 from __future__ import annotations
@@ -15,12 +17,16 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.special import chdtri
 
+# P with smallest / largest eigenvalue at or below this is singular (no NEES); below minus this, indefinite
+SINGULAR_EIGENVALUE_RTOL = 1e-12
+
 
 def nees(error: ArrayLike, covariance: ArrayLike) -> float | NDArray[np.float64]:
     """``e^T P^-1 e`` for ``error`` (..., d) and ``covariance`` (..., d, d) (stacks broadcast).
 
-    Solved through a Cholesky factor, never inverted: ValueError unless every ``P`` is finite,
-    symmetric positive definite and the shapes agree.
+    Solved through a Cholesky factor, never inverted. NaN where ``P`` is singular: its smallest eigenvalue
+    at most ``SINGULAR_EIGENVALUE_RTOL`` times its largest. ValueError unless every ``P`` is finite,
+    symmetric and positive semi-definite (to that tolerance), and the shapes agree.
     """
     e = np.asarray(error, dtype=np.float64)
     P = np.asarray(covariance, dtype=np.float64)
@@ -30,13 +36,19 @@ def nees(error: ArrayLike, covariance: ArrayLike) -> float | NDArray[np.float64]
         raise ValueError("error and covariance must be finite")
     if not np.allclose(P, np.swapaxes(P, -1, -2), rtol=1e-9, atol=0.0):
         raise ValueError("covariance must be symmetric")
-    try:
-        L = np.linalg.cholesky(P)
-    except np.linalg.LinAlgError as error_:
-        raise ValueError("covariance must be positive definite") from error_
-    # w = L^-1 e,  eps = |w|^2
-    w = np.linalg.solve(L, e[..., None])[..., 0]
-    result = np.einsum("...i,...i->...", w, w)
+    e, P = np.broadcast_arrays(e[..., None], P)
+    e = e[..., 0]
+    eigenvalues = np.linalg.eigvalsh(P)
+    scale = np.maximum(np.abs(eigenvalues).max(axis=-1), np.finfo(float).tiny)
+    if np.any(eigenvalues[..., 0] < -SINGULAR_EIGENVALUE_RTOL * scale):
+        raise ValueError("covariance must be positive semi-definite (no negative variance)")
+    definite = eigenvalues[..., 0] > SINGULAR_EIGENVALUE_RTOL * scale
+    result = np.full(definite.shape, np.nan)
+    if np.any(definite):
+        L = np.linalg.cholesky(P[definite])
+        # w = L^-1 e,  eps = |w|^2
+        w = np.linalg.solve(L, e[definite][..., None])[..., 0]
+        result[definite] = np.einsum("...i,...i->...", w, w)
     return float(result) if result.ndim == 0 else result
 
 
