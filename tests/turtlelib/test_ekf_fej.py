@@ -133,3 +133,21 @@ def test_oc_changes_nothing_when_the_jacobian_already_respects_the_null_space():
     H_robot_oc, H_landmark_oc = _observability_constrained(H_robot, H_landmark, pose, landmarks)
     np.testing.assert_allclose(H_robot_oc, H_robot, atol=1e-12)
     np.testing.assert_allclose(H_landmark_oc, H_landmark, atol=1e-12)
+
+
+@pytest.mark.parametrize("linearization", ["standard", "fej", "oc"])
+def test_propagated_pose_is_what_predict_gives_after_an_update(linearization):
+    # after an update the pose has left its prior: the first propagated step must use the same G as predict
+    config = SlamConfig(
+        linearization=linearization, initial_xy_std=0.1, initial_theta_std=0.1, gate_known=1.0
+    )
+    slam = EkfSlam(config, UnicycleMotion(NOISE))
+    slam.predict((0.5, 0.3, DT_NS))
+    slam.update_known([0, 1], [[2.0, 0.3], [1.5, -0.8]])
+    slam.update_known([0, 1], [[1.9, 0.35], [1.6, -0.75]])
+    inputs = [(0.5, 0.3, DT_NS), (0.4, -0.2, DT_NS)]
+    T, P = slam.propagated_pose_along(inputs)
+    for u in inputs:
+        slam.predict(u)
+    np.testing.assert_allclose(T.as_array(), slam.pose.as_array(), atol=1e-12)
+    np.testing.assert_allclose(P, slam.pose_covariance, atol=1e-12)

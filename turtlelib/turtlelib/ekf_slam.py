@@ -249,13 +249,8 @@ class EkfSlam:
         ValueError (filter unchanged) for an input the model refuses (non-finite values, ...).
         """
         q_next, G, Q = self._motion.step(self.pose, u)
-        if self._constrained:
-            # G = G + J (p_(k|k) - p_(k|k-1)) in the heading column: G at p_(k+1|k) - p_(k|k-1)
-            G = G.copy()
-            G[0, 2] -= self._state.mean[1] - self._pose_prior[1]
-            G[1, 2] += self._state.mean[0] - self._pose_prior[0]
         # P_qq' = G P_qq G^T + Q,  P_qm' = G P_qm
-        self._state.predict(q_next, G, Q)
+        self._state.predict(q_next, self._propagation_jacobian(G), Q)
         self._pose_prior = q_next.copy()
 
     def propagated_pose(self, u: tuple) -> tuple[Transform2D, NDArray[np.float64]]:
@@ -269,13 +264,25 @@ class EkfSlam:
         pose."""
         T_map_body = self.pose
         P_qq = self._state.covariance[:ROBOT_DIM, :ROBOT_DIM].copy()
-        for u in inputs:
+        for step, u in enumerate(inputs):
             q_next, G, Q = self._motion.step(T_map_body, u)
+            # the first step from the filter's pose as predict takes it; the later ones start at their prior
+            G = self._propagation_jacobian(G) if step == 0 else G
             # P_qq' = G P_qq G^T + Q
             P_qq = G @ P_qq @ G.T + Q
             P_qq = 0.5 * (P_qq + P_qq.T)
             T_map_body = Transform2D(*q_next)
         return T_map_body, P_qq
+
+    def _propagation_jacobian(self, G: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The model's ``G``, or with FEJ / OC ``G + J (p_(k|k) - p_(k|k-1))`` in its heading column: ``G`` at
+        ``p_(k+1|k) - p_(k|k-1)`` (module docstring)."""
+        if not self._constrained:
+            return G
+        G = G.copy()
+        G[0, 2] -= self._state.mean[1] - self._pose_prior[1]
+        G[1, 2] += self._state.mean[0] - self._pose_prior[0]
+        return G
 
     def update_known(self, ids: ArrayLike, z: ArrayLike, R: ArrayLike | None = None) -> Association:
         """Update with observations ``z`` (K, 2) [range_m, bearing_rad] (sensor frame) of landmarks ``ids``.
