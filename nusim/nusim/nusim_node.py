@@ -4,7 +4,8 @@ A thin ROS wrapper over `nusim.simulation.Simulation` (models in that module's d
 
 Subscribes
     `wheel_cmd` (sensor_msgs/JointState): `velocity` (rad/s) of joints `wheel_left`, `wheel_right`
-        (matched by name), quantised and clamped to motor units; held until the next command.
+        (matched by name), quantised and clamped to motor units; held until the next command, or for
+        `cmd_timeout` s of simulation time, after which the wheels stop (as the robot's firmware does).
     `~/teleport` (geometry_msgs/PoseWithCovarianceStamped, frame `nusim/world` or empty): moves the robot
         to the pose's (x, y, yaw); refused (with a warning) if its disc would overlap a cylinder or a wall.
 Publishes (all stamped with simulation time)
@@ -28,8 +29,8 @@ Parameters
     (x0, y0, theta0, arena_x_length, arena_y_length), `Obstacles` (obstacles.x, obstacles.y, obstacles.r),
     `NoiseConfig` (input_noise, slip_fraction, basic_sensor_variance, max_range, seed), `LidarConfig`
     (lidar.*), `RobotParams` (the Burger's constants by default), `WheelJoints` (wheel_left, wheel_right),
-    `PathTrailConfig` (path_*). The defaults are the default world of config/basic_world.yaml. Invalid
-    values stop the node at start-up with a message (exit code 1).
+    `CommandTimeoutConfig` (cmd_timeout), `PathTrailConfig` (path_*). The defaults are the default world
+    of config/basic_world.yaml. Invalid values stop the node at start-up with a message (exit code 1).
 
 Time: a wall-clock (steady) timer ticks at `rate * realtime_factor` Hz and each tick advances simulation
 time by `1 / rate` s, so the node needs no `use_sim_time` itself; every other node runs on its /clock.
@@ -54,9 +55,11 @@ from std_srvs.srv import Empty
 from visualization_msgs.msg import Marker, MarkerArray
 
 from nuturtle_description.robot_params import RobotParams, burger_params
+from nuturtle_ros_common.command_timeout import CommandTimeoutConfig, CommandWatchdog
 from nuturtle_ros_common.conversions import (
     odometry_message,
     stamp_from_seconds,
+    stamp_nanoseconds,
     transform_from_pose,
     transform_stamped,
 )
@@ -92,8 +95,9 @@ YELLOW = (1.0, 0.85, 0.0, 1.0)
 
 @dataclass(frozen=True)
 class NusimTiming:
-    """Physics rate and publishing rates (Hz, finite, > 0; no stream faster than `rate`), and the
-    `realtime_factor` (> 0) of simulation time over wall time."""
+    """Physics rate `rate` and the publishing rates `joint_states_rate`, `scan_rate`, `fake_sensor_rate`
+    (Hz, finite, > 0; no stream faster than `rate`), and the `realtime_factor` (> 0) of simulation time
+    over wall time."""
 
     rate: float = 100.0
     realtime_factor: float = 1.0
@@ -154,6 +158,7 @@ class NusimNode(Node):
             lidar=declare_dataclass(self, LidarConfig, prefix="lidar.", overrides=vars(default_lidar())),
         )
         self.joints = declare_dataclass(self, WheelJoints)
+        self.watchdog = CommandWatchdog(declare_dataclass(self, CommandTimeoutConfig))
         self.trail: PathTrail[PoseStamped] = PathTrail(declare_dataclass(self, PathTrailConfig))
         self.simulation = Simulation(config)
         self.step_count = 0
@@ -196,6 +201,7 @@ class NusimNode(Node):
             self.get_logger().warning(f"wheel_cmd skipped: {error}", throttle_duration_sec=WARN_THROTTLE_S)
             return
         self.simulation.command_wheels(left_rad_s, right_rad_s)
+        self.watchdog.command(stamp_nanoseconds(self.sim_stamp()))
 
     def _on_teleport(self, msg: PoseWithCovarianceStamped) -> None:
         frame_id = msg.header.frame_id
@@ -221,6 +227,9 @@ class NusimNode(Node):
     def _on_tick(self) -> None:
         self.simulation.step(1.0 / self.timing.rate)
         self.step_count += 1
+        if self.watchdog.expired(stamp_nanoseconds(self.sim_stamp())):
+            self.simulation.command_wheels(0.0, 0.0)
+            self.get_logger().info("no wheel_cmd for cmd_timeout: wheels stopped")
         stamp = self.sim_stamp()
         self._clock_publisher.publish(ClockMsg(clock=stamp))
         if self.timing.due(self.step_count, self.timing.joint_states_rate):

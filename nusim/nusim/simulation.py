@@ -65,7 +65,8 @@ DEFAULT_OBSTACLES_Y = (0.3, -0.3, -1.2, 1.2, 0.75, -0.75, 1.4, -1.4)
 
 @dataclass(frozen=True)
 class ArenaConfig:
-    """The arena's size (m, > 0) and the robot's start pose ``(x0, y0)`` (m), ``theta0`` (rad)."""
+    """The arena's size ``arena_x_length``, ``arena_y_length`` (m, > 0) and the robot's start pose
+    ``(x0, y0)`` (m), ``theta0`` (rad)."""
 
     x0: float = 0.0
     y0: float = 0.0

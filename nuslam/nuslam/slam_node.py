@@ -97,7 +97,9 @@ class SlamNodeConfig:
     * ``fake_sensor_std`` (m, > 0): per-axis standard deviation of the fake sensor's positions;
     * ``landmark_radius`` (m, > 0): drawn radius of the mapped landmarks;
     * ``wheel_noise`` (sqrt(rad), >= 0): the motion model's wheel slip, ``N(0, wheel_noise^2 |dphi|)`` per
-      wheel over an increment ``dphi`` (:class:`turtlelib.DiffDriveMotion`).
+      wheel over an increment ``dphi`` (:class:`turtlelib.DiffDriveMotion`);
+    * ``observation_timeout`` (s, > 0): the wheels turning this long (joint_states time) without an
+      observation arriving gives a (throttled) warning: slam is only dead-reckoning.
     """
 
     association: str = "unknown"
@@ -111,12 +113,13 @@ class SlamNodeConfig:
     fake_sensor_std: float = 0.01
     landmark_radius: float = 0.038
     wheel_noise: float = 0.05
+    observation_timeout: float = 3.0
 
     def __post_init__(self) -> None:
         one_of("association", self.association, ASSOCIATIONS)
         store(self, ("x0", "y0", "theta0"), finite_real)
         store(self, ("wheel_noise",), non_negative)
-        store(self, ("fake_sensor_std", "landmark_radius"), positive)
+        store(self, ("fake_sensor_std", "landmark_radius", "observation_timeout"), positive)
         frames = ("map_id", "odom_id", "body_id", "sensor_id")
         names("frame id", **{name: getattr(self, name) for name in frames})
 
@@ -155,6 +158,9 @@ class SlamNode(Node):
             self.node_config.body_id: T_body_sensor.inverse(),
         }
         self._fake_sensor_covariance = self.node_config.fake_sensor_std**2 * np.eye(2)
+        self._observation_topic = "fake_sensor" if self.node_config.association == "known" else "landmarks"
+        # the joint_states stamp and wheel angles of the first sample since the last observation
+        self._observed_at: tuple[int, tuple[float, float]] | None = None
         self._warnings = SourceWarnings(self.get_logger())
 
         self._odom_publisher = self.create_publisher(Odometry, "~/odom", 10)
@@ -200,6 +206,7 @@ class SlamNode(Node):
             )
             self._restart(t_ns, phi_left_rad, phi_right_rad)
             return
+        self._check_observations_arrive(t_ns, (phi_left_rad, phi_right_rad))
         self._publish_pose(msg.header.stamp, V_body, T_map_body, P_pose)
         if applied:
             self._publish_map(stamp_from_nanoseconds(applied[-1][0]))
@@ -216,6 +223,7 @@ class SlamNode(Node):
         except (ValueError, np.linalg.LinAlgError) as error:
             self._warnings.warn("fake_sensor", f"fake_sensor skipped: {error}")
             return
+        self._observed_at = None  # the observations arrive: the silence starts again at the next sample
         if applied:
             self._publish_map(msg.markers[0].header.stamp)
 
@@ -227,8 +235,25 @@ class SlamNode(Node):
         except (ValueError, np.linalg.LinAlgError) as error:
             self._warnings.warn("landmarks", f"landmarks skipped: {error}")
             return
+        self._observed_at = None  # the observations arrive: the silence starts again at the next sample
         if applied:
             self._publish_map(msg.markers[0].header.stamp)
+
+    def _check_observations_arrive(self, t_ns: int, angles: tuple[float, float]) -> None:
+        """Warn (throttled) when the wheels have turned for ``observation_timeout`` without observations."""
+        if self._observed_at is None or t_ns < self._observed_at[0]:
+            self._observed_at = (t_ns, angles)
+            return
+        since_ns, since_angles = self._observed_at
+        silent_s = (t_ns - since_ns) * 1e-9
+        if silent_s > self.node_config.observation_timeout and angles != since_angles:
+            topic = self._observation_topic
+            source = "nusim's fake sensor" if topic == "fake_sensor" else "the landmarks node"
+            self._warnings.warn(
+                "observations",
+                f"no {topic} for {silent_s:.1f} s while the wheels turn: slam is only dead-reckoning "
+                f"(is {source} running and publishing {topic}?)",
+            )
 
     def _restart(self, t_ns: int, phi_left_rad: float, phi_right_rad: float) -> None:
         """Take this wheel sample as the new start of the timeline and of the odometry (estimate kept)."""

@@ -64,7 +64,7 @@ class CircleNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__("circle", **kwargs)
-        self.config = declare_dataclass(self, CircleConfig)
+        self.config = declare_dataclass(self, CircleConfig, read_only=False)
         self.direction = 1.0
         self.stopped = False
         self._cmd_vel_publisher = self.create_publisher(Twist, "cmd_vel", 10)

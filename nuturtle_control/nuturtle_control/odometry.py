@@ -54,7 +54,8 @@ from turtlelib.wheel_odometry import WheelOdometry
 
 @dataclass(frozen=True)
 class OdometryFrames:
-    """Frame ids of the odometry: non-empty and distinct (ValueError otherwise)."""
+    """Frame ids of the odometry, ``odom_id`` (the parent) and ``body_id`` (the child): non-empty and
+    distinct (ValueError otherwise)."""
 
     body_id: str = "base_footprint"
     odom_id: str = "odom"

@@ -6,7 +6,8 @@ Publishes
     `wheel_cmd` (sensor_msgs/JointState): `velocity` = (left, right) wheel speeds in rad/s for joints
         `wheel_left`, `wheel_right`, stamped with the time of the command's arrival.
 Parameters
-    `RobotParams` (the Burger's constants by default), `WheelJoints` (wheel_left, wheel_right).
+    `RobotParams` (the Burger's constants by default), `WheelJoints` (wheel_left, wheel_right),
+    `CommandTimeoutConfig` (cmd_timeout).
 
 Model: inverse kinematics ``phi_dot = H(0) V_b`` (``turtlelib.DiffDrive.wheel_speeds``), then
 curvature-preserving saturation to ``max_wheel_speed = motor_cmd_max / motor_cmd_per_rad_sec``
@@ -14,7 +15,8 @@ curvature-preserving saturation to ``max_wheel_speed = motor_cmd_max / motor_cmd
 arc, only slower). A lateral velocity (linear.y) cannot be followed by a differential drive: it is
 dropped with a warning and the rest of the command is executed. The out-of-plane components (linear.z,
 angular.x, angular.y) are ignored. A command with a non-finite component is logged and skipped.
-Warnings are throttled.
+Warnings are throttled. A command holds for `cmd_timeout` s (node clock) without a newer one; then one
+zero `wheel_cmd` stops the wheels.
 """
 
 from __future__ import annotations
@@ -27,12 +29,16 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
 from nuturtle_description.robot_params import RobotParams, burger_params
+from nuturtle_ros_common.command_timeout import CommandTimeoutConfig, CommandWatchdog
 from nuturtle_ros_common.node_main import run_node
 from nuturtle_ros_common.ros_params import declare_dataclass
 from nuturtle_ros_common.throttle import WARN_THROTTLE_S
 from nuturtle_ros_common.wheel_joints import WheelJoints
 from turtlelib import Twist2D
 from turtlelib.wheel_limits import limit_wheel_speeds
+
+# How often the command timeout is checked (s, node clock)
+WATCHDOG_PERIOD_S = 0.05
 
 
 class TurtleControlNode(Node):
@@ -42,9 +48,19 @@ class TurtleControlNode(Node):
         super().__init__("turtle_control", **kwargs)
         self.robot = declare_dataclass(self, RobotParams, overrides=vars(burger_params()))
         self.joints = declare_dataclass(self, WheelJoints)
+        self.watchdog = CommandWatchdog(declare_dataclass(self, CommandTimeoutConfig))
         self.drive = self.robot.diff_drive()
         self._wheel_cmd_publisher = self.create_publisher(JointState, "wheel_cmd", 10)
         self.create_subscription(Twist, "cmd_vel", self._on_cmd_vel, 10)
+        self.create_timer(WATCHDOG_PERIOD_S, self._on_watchdog)
+
+    def _on_watchdog(self) -> None:
+        now = self.get_clock().now()
+        if self.watchdog.expired(now.nanoseconds):
+            stop = JointState(name=self.joints.names, velocity=[0.0, 0.0])
+            stop.header.stamp = now.to_msg()
+            self._wheel_cmd_publisher.publish(stop)
+            self.get_logger().info("no cmd_vel for cmd_timeout: wheels stopped")
 
     def _on_cmd_vel(self, msg: Twist) -> None:
         components = (msg.linear.x, msg.linear.y, msg.linear.z, msg.angular.x, msg.angular.y, msg.angular.z)
@@ -77,9 +93,11 @@ class TurtleControlNode(Node):
                 "the same arc",
                 throttle_duration_sec=WARN_THROTTLE_S,
             )
+        now = self.get_clock().now()
         wheel_cmd = JointState(name=self.joints.names, velocity=[left_rad_s, right_rad_s])
-        wheel_cmd.header.stamp = self.get_clock().now().to_msg()
+        wheel_cmd.header.stamp = now.to_msg()
         self._wheel_cmd_publisher.publish(wheel_cmd)
+        self.watchdog.command(now.nanoseconds)
 
 
 def main(args: list[str] | None = None) -> None:

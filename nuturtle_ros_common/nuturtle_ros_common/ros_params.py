@@ -4,12 +4,20 @@ Config dataclasses (turtlelib's and the nodes') name their fields after the ROS 
 generic function serves every node: each field becomes parameter `<prefix><field>`, its default is the
 dataclass default (or an override such as the Burger's constants from diff_params.yaml), and the
 dataclass's own validation raises `ValueError` for invalid values.
+
+Parameters are a contract: each one is described (`ros2 param describe`) by the part of its dataclass's
+docstring that names it (units, range, meaning), and is read-only unless the node applies a change at
+run time (then it passes `read_only=False` and validates changes with `replace_from_parameters` in an
+on-set callback). `ros2 param set` on a read-only parameter is refused with the reason, instead of
+answering "successful" and changing nothing.
 """
 
 from __future__ import annotations
 
 import array
 import dataclasses
+import inspect
+import re
 from collections.abc import Iterable, Mapping
 from typing import Any, TypeVar
 
@@ -51,27 +59,54 @@ def field_defaults(cls: type) -> dict[str, Any]:
     return defaults
 
 
+def field_descriptions(cls: type) -> dict[str, str]:
+    """Each field's description: the first clause of ``cls``'s docstring that names it within backticks
+    (a bullet, or a sentence or ``;``-separated part of one), else the docstring's summary line."""
+    doc = inspect.getdoc(cls) or ""
+    summary = doc.strip().splitlines()[0] if doc.strip() else cls.__name__
+    # clauses: bullets, then sentences and ;-separated parts, with their whitespace collapsed
+    clauses = []
+    for bullet in re.split(r"\n\s*\*\s+", "\n" + doc):
+        text = " ".join(bullet.split())
+        clauses += [part.strip() for part in re.split(r"(?<=[.;])\s+(?=[A-Z`*])|;\s+", text) if part.strip()]
+    descriptions = {}
+    for field in dataclasses.fields(cls):
+        # a backticked span holding the name as a word: ``name``, ``name > 0``, ``(x0, y0)``
+        pattern = re.compile(rf"`[^`]*(?<![\w.]){re.escape(field.name)}\b[^`]*`")
+        named = next((clause for clause in clauses if pattern.search(clause)), None)
+        descriptions[field.name] = f"{cls.__name__}: {named if named is not None else summary}"
+    return descriptions
+
+
 def declare_dataclass(
     node: Node,
     cls: type[C],
     prefix: str = "",
     overrides: Mapping[str, Any] | None = None,
     fixed: Mapping[str, Any] | None = None,
+    read_only: bool = True,
 ) -> C:
     """Declare every field of `cls` as parameter `prefix + name` and return `cls(**values)`.
 
     `overrides` replace field defaults; `fixed` fields are not parameters of their own but take the
     given values (e.g. the slam filter's sensor mount, which is the robot's `lidar_*` parameters).
-    Raises ValueError (from the dataclass or for a wrongly typed value) when a value is invalid.
+    Each parameter is described by :func:`field_descriptions` and is read-only unless `read_only=False`
+    (for a node that applies changes). Raises ValueError (from the dataclass or for a wrongly typed value)
+    when a value is invalid.
     """
     fixed = dict(fixed or {})
     defaults = {name: value for name, value in field_defaults(cls).items() if name not in fixed}
     defaults.update({name: value for name, value in (overrides or {}).items() if name not in fixed})
     values = dict(fixed)
+    descriptions = field_descriptions(cls)
     for name, default in defaults.items():
         if isinstance(default, tuple):
             default = list(default)
-        parameter = node.declare_parameter(prefix + name, default, ParameterDescriptor(dynamic_typing=True))
+        # dynamic typing: a YAML `0` for a float parameter is coerced below rather than refused by rclpy
+        descriptor = ParameterDescriptor(
+            description=descriptions[name], read_only=read_only, dynamic_typing=True
+        )
+        parameter = node.declare_parameter(prefix + name, default, descriptor)
         like = defaults[name]
         values[name] = _coerce(parameter.value, like, prefix + name)
     return cls(**values)

@@ -16,7 +16,8 @@ from turtlelib.validation import names
 
 @dataclass(frozen=True)
 class WheelJoints:
-    """Joint names of the left and right wheel: non-empty and distinct (ValueError otherwise)."""
+    """Joint names of the wheels, ``wheel_left`` and ``wheel_right``: non-empty and distinct (ValueError
+    otherwise)."""
 
     wheel_left: str = "wheel_left_joint"
     wheel_right: str = "wheel_right_joint"

@@ -64,7 +64,8 @@ class Rig:
 
     def __init__(self, ros, **overrides) -> None:
         self.ros = ros
-        values = {"realtime_factor": 20.0, **overrides}
+        # commands hold (no timeout) unless a test says otherwise: most tests drive on one command
+        values = {"realtime_factor": 20.0, "cmd_timeout": 0.0, **overrides}
         self.node = ros.add(NusimNode(context=ros.context, parameter_overrides=parameters(values)))
         helper = ros.node("nusim_test_helper")
         self.helper = helper
@@ -134,6 +135,21 @@ def test_commanded_wheels_move_the_true_robot_and_the_encoders_as_the_kinematics
     assert truth.twist.twist.angular.z == pytest.approx(twist.omega, rel=1e-9)
     # the path ends at the latest kept true pose, in nusim/world
     assert rig.paths[-1].header.frame_id == "nusim/world" and len(rig.paths[-1].poses) >= 2
+
+
+def test_the_wheels_stop_cmd_timeout_after_the_last_wheel_cmd(ros):
+    rig = Rig(ros, **QUIET, cmd_timeout=0.5)
+    rig.command(["wheel_left_joint", "wheel_right_joint"], [3.0, 3.0])
+    rig.spin_until(lambda: bool(rig.joint_states) and rig.joint_states[-1].velocity[0] > 0.0)
+    started = rig.node.step_count
+    rig.spin_until(lambda: list(rig.joint_states[-1].velocity) == [0.0, 0.0])
+    # stopped at the first physics step past 0.5 s of simulation time after the command
+    assert (rig.node.step_count - started) / rig.node.timing.rate == pytest.approx(0.5, abs=0.1)
+    rig.spin_sim_seconds(0.1)
+    x = pose_of(rig.ground_truth[-1]).x
+    assert x > 0.03
+    rig.spin_sim_seconds(0.5)
+    assert pose_of(rig.ground_truth[-1]).x == pytest.approx(x, abs=1e-12)
 
 
 def test_clock_steps_by_one_over_rate_and_streams_publish_on_their_grids(ros):
@@ -303,6 +319,7 @@ def test_the_default_parameters_are_the_basic_world_yaml():
         **{f"lidar.{k}": v for k, v in vars(default_lidar()).items()},
         "wheel_left": "wheel_left_joint",
         "wheel_right": "wheel_right_joint",
+        "cmd_timeout": 0.5,
         "path_min_step_m": 0.02,
         "path_min_turn_rad": 0.1,
         "path_max_poses": 3000,

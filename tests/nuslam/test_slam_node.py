@@ -183,7 +183,8 @@ def assert_covariance(odom: Odometry) -> np.ndarray:
 
 def test_straight_drive_then_arc_follow_the_kinematics_from_the_start_pose_with_a_growing_covariance(ros):
     T0 = Transform2D(0.5, -0.25, 0.7)
-    rig = Rig(ros, x0=T0.x, y0=T0.y, theta0=T0.theta)
+    # no observations in this test: no warning that slam only dead-reckons
+    rig = Rig(ros, x0=T0.x, y0=T0.y, theta0=T0.theta, observation_timeout=100.0)
     t_ns, phi = 50 * S, (2.0, -1.0)  # any start angles: only increments count
     first = rig.wheels(t_ns, phi)
     assert close_pose(first, T0)
@@ -493,7 +494,7 @@ def test_bad_joint_states_are_skipped_with_a_warning_and_the_node_keeps_going(ro
 def test_finite_angles_whose_increment_overflows_are_skipped_and_taken_as_the_new_reference(ros, dt_ns):
     """At 20 Hz the filter (0.25 s behind) has not reached the bad interval yet, at 1 Hz it has: either
     way the sample is refused, later samples drive on from it and observations are still applied."""
-    rig = Rig(ros, association="known")
+    rig = Rig(ros, association="known", observation_timeout=100.0)
     t_ns = S
     rig.wheels(t_ns, (0.0, 0.0))
     rig.wheels(t_ns + dt_ns, (0.0, 0.0))
@@ -680,3 +681,24 @@ def test_the_filter_s_sensor_mount_is_the_robot_s_lidar_mount(ros):
     ]
     node = ros.add(SlamNode(context=ros.context, parameter_overrides=overrides))
     assert node.config.T_body_sensor == Transform2D(0.1, -0.05, math.pi)
+
+
+def test_turning_wheels_without_observations_warn_that_slam_only_dead_reckons(ros):
+    rig = Rig(ros, observation_timeout=2.0)
+    dphi = 0.1 / R_WHEEL
+    for k in range(4):
+        rig.wheels((k + 1) * S, (k * dphi, k * dphi))
+    warnings = rig.warnings(at_least=1)
+    assert len(warnings) == 1 and "no landmarks for 3.0 s while the wheels turn" in warnings[0]
+
+
+def test_no_warning_while_observations_arrive_or_the_robot_stands(ros):
+    rig = Rig(ros, observation_timeout=2.0)
+    dphi = 0.1 / R_WHEEL
+    for k in range(4):
+        rig.wheels((k + 1) * S, (0.0, 0.0))  # standing: nothing to observe is no news
+    for k in range(4):
+        rig.wheels((k + 5) * S, (k * dphi, k * dphi))
+        rig.observations.publish(cylinder_array("base_scan", (k + 5) * S, []))  # a scan without cylinders
+        rig.ros.spin_for(0.05)
+    assert rig.warnings() == []

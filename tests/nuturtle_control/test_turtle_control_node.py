@@ -151,3 +151,25 @@ def test_parameters_override_the_burger_constants_and_joint_names(ros):
 def test_invalid_parameters_refuse_to_construct(ros, parameter):
     with pytest.raises(ValueError, match=parameter.name):
         TurtleControlNode(context=ros.context, parameter_overrides=[parameter])
+
+
+def test_the_wheels_stop_cmd_timeout_after_the_last_command(ros):
+    rig = Rig(ros, parameter_overrides=[Parameter("cmd_timeout", value=0.3)])
+    moving = rig.send(vx=0.1)
+    assert list(moving.velocity) != [0.0, 0.0]
+    sent = rig.node.get_clock().now().nanoseconds
+    assert ros.spin_until(lambda: list(rig.wheel_cmds[-1].velocity) == [0.0, 0.0], 5.0), "never stopped"
+    stopped = rig.node.get_clock().now().nanoseconds
+    assert (stopped - sent) * 1e-9 >= 0.3
+    # once: no stream of zero commands
+    count = len(rig.wheel_cmds)
+    ros.spin_for(0.5)
+    assert len(rig.wheel_cmds) == count
+
+
+def test_a_zero_cmd_timeout_holds_the_command(ros):
+    rig = Rig(ros, parameter_overrides=[Parameter("cmd_timeout", value=0.0)])
+    rig.send(vx=0.1)
+    count = len(rig.wheel_cmds)
+    ros.spin_for(0.8)
+    assert len(rig.wheel_cmds) == count
