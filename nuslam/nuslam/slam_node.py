@@ -6,6 +6,8 @@ arrive late (up to `max_observation_delay`) are still applied at the pose they w
 
 Subscribes
     `joint_states` (sensor_msgs/JointState): wheel angles (rad) of joints `wheel_left`, `wheel_right`.
+    `odom` (nav_msgs/Odometry, `odom_id` -> `body_id`): the odometry source's pose (the `odometry` node's,
+        or the robot's own), for `map -> odom`.
     `association` = `unknown` (default): `landmarks` (visualization_msgs/MarkerArray from the `landmarks`
         node, frame `sensor_id` or `body_id`): one scan's cylinder centres; the EKF associates them
         (Mahalanobis gates, nearest neighbour or JCBB, tentative landmarks confirmed after
@@ -21,8 +23,10 @@ Publishes
         DELETEALL, then per confirmed landmark a green CYLINDER (ns `landmarks`, id = landmark id, diameter
         2 `landmark_radius`) and its 2-sigma ellipse (ns `covariance`).
     `/tf` `map_id` -> `odom_id` where tf2_msgs is installed: ``T_map_odom = T_map_body T_odom_body^-1``
-        with ``T_odom_body`` the wheel odometry integrated from the same joint_states (the `odometry`
-        node's), so the odometry frame hangs under the map as REP 105 says.
+        at each pose's stamp, with ``T_odom_body`` the transform the odometry source broadcasts (read from
+        its `odom` topic, interpolated between its samples), so that composing the two transforms on /tf
+        gives slam's pose exactly, however late slam started (REP 105: the localizer publishes
+        `map -> odom`). Not broadcast until `odom` covers a pose's stamp.
 Parameters
     `SlamNodeConfig` (association, x0, y0, theta0, frame ids, fake_sensor_std, landmark_radius, and the
     motion model's wheel_noise), `turtlelib.SlamConfig` (range_std, bearing_std, matcher, gates,
@@ -57,6 +61,7 @@ from nuturtle_ros_common.conversions import (
     odometry_message,
     stamp_from_nanoseconds,
     stamp_nanoseconds,
+    transform_from_pose,
     transform_stamped,
 )
 from nuturtle_ros_common.markers import cylinder_marker, delete_all_marker, ellipse_marker, marker_positions
@@ -76,6 +81,7 @@ from turtlelib import (
     WheelAngles,
 )
 from turtlelib.path_trail import PathTrail, PathTrailConfig
+from turtlelib.pose_buffer import PoseBuffer
 from turtlelib.range_bearing import observations_from_points
 from turtlelib.validation import finite_real, names, non_negative, one_of, positive, store
 from turtlelib.wheel_odometry import WheelOdometry
@@ -83,6 +89,8 @@ from turtlelib.wheel_odometry import WheelOdometry
 ASSOCIATIONS = ("known", "unknown")
 GREEN = (0.1, 0.8, 0.2, 1.0)
 GREEN_TRANSLUCENT = (0.1, 0.8, 0.2, 0.35)
+# odom samples kept to pair with slam's poses (10 s at the odometry node's 20 Hz)
+ODOM_BUFFER_SAMPLES = 200
 # Drawn confidence region of a mapped landmark (standard deviations)
 ELLIPSE_SIGMA = 2.0
 
@@ -167,7 +175,11 @@ class SlamNode(Node):
         self._path_publisher = self.create_publisher(Path, "~/path", 10)
         self._map_publisher = self.create_publisher(MarkerArray, "~/map", 10)
         self._tf = OptionalTfBroadcaster(self)
+        self._odom_poses = PoseBuffer(ODOM_BUFFER_SAMPLES)
+        # the newest pose not yet paired with odom for map -> odom: (t_ns, T_map_body, stamp)
+        self._map_to_odom_pending: tuple[int, Transform2D, Time] | None = None
         self.create_subscription(JointState, "joint_states", self._on_joint_states, 10)
+        self.create_subscription(Odometry, "odom", self._on_odom, 10)
         if self.node_config.association == "known":
             self.create_subscription(MarkerArray, "fake_sensor", self._on_fake_sensor, 10)
         else:
@@ -239,6 +251,39 @@ class SlamNode(Node):
         if applied:
             self._publish_map(msg.markers[0].header.stamp)
 
+    def _on_odom(self, msg: Odometry) -> None:
+        frames = self.node_config
+        try:
+            if (msg.header.frame_id, msg.child_frame_id) != (frames.odom_id, frames.body_id):
+                raise ValueError(
+                    f"frames {msg.header.frame_id!r} -> {msg.child_frame_id!r}, expected "
+                    f"{frames.odom_id!r} -> {frames.body_id!r}"
+                )
+            T_odom_body = transform_from_pose(msg.pose.pose)
+            t_ns = stamp_nanoseconds(msg.header.stamp)
+            latest_ns = self._odom_poses.latest_time_ns
+            if latest_ns is not None and t_ns <= latest_ns:
+                self._odom_poses.clear()  # the odometry source restarted (or a recording looped)
+            self._odom_poses.add(t_ns, T_odom_body)
+        except ValueError as error:
+            self._warnings.warn("odom", f"odom skipped: {error}")
+            return
+        self._send_map_to_odom()
+
+    def _send_map_to_odom(self) -> None:
+        """``T_map_odom = T_map_body T_odom_body^-1`` for the pending pose, once odom covers its stamp."""
+        if self._map_to_odom_pending is None:
+            return
+        t_ns, T_map_body, stamp = self._map_to_odom_pending
+        T_odom_body = self._odom_poses.at(t_ns)
+        if T_odom_body is None:
+            return
+        frames = self.node_config
+        self._tf.send(
+            transform_stamped(T_map_body @ T_odom_body.inverse(), frames.map_id, frames.odom_id, stamp)
+        )
+        self._map_to_odom_pending = None
+
     def _check_observations_arrive(self, t_ns: int, angles: tuple[float, float]) -> None:
         """Warn (throttled) when the wheels have turned for ``observation_timeout`` without observations."""
         if self._observed_at is None or t_ns < self._observed_at[0]:
@@ -284,8 +329,8 @@ class SlamNode(Node):
         odom = odometry_message(T_map_body, V_body, frames.map_id, frames.body_id, stamp, P_pose)
         self._odom_publisher.publish(odom)
         if self._tf.available:
-            T_map_odom = T_map_body @ self.odometry.T_odom_body.inverse()
-            self._tf.send(transform_stamped(T_map_odom, frames.map_id, frames.odom_id, stamp))
+            self._map_to_odom_pending = (stamp_nanoseconds(stamp), T_map_body, stamp)
+            self._send_map_to_odom()
         if self.trail.offer(T_map_body, PoseStamped(header=odom.header, pose=odom.pose.pose)):
             self._path_publisher.publish(Path(header=odom.header, poses=list(self.trail.items)))
 

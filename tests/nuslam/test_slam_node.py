@@ -27,7 +27,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from nuslam.landmarks_node import LandmarksNode
 from nuslam.slam_node import SlamNode
 from nuturtle_description.robot_params import burger_params
-from nuturtle_ros_common.conversions import covariance_from_6x6, yaw_from_quaternion
+from nuturtle_ros_common.conversions import covariance_from_6x6, odometry_message, yaw_from_quaternion
 from rclpy_harness import matched, record_rosout, warnings_of
 from turtlelib import (
     DiffDriveMotion,
@@ -37,6 +37,7 @@ from turtlelib import (
     SlamTimeline,
     TimelineConfig,
     Transform2D,
+    Twist2D,
     WheelAngles,
     simulate_scan,
 )
@@ -129,9 +130,12 @@ class Rig:
         self.joint_states = helper.create_publisher(JointState, "joint_states", 10)
         topic = "fake_sensor" if parameters.get("association") == "known" else "landmarks"
         self.observations = helper.create_publisher(MarkerArray, topic, 10)
+        # the odometry source's odom (odom -> base_footprint), for map -> odom
+        self.odom = helper.create_publisher(Odometry, "odom", 10)
         endpoints = [
             self.joint_states,
             self.observations,
+            self.odom,
             helper.create_subscription(Odometry, "slam/odom", self.odoms.append, 100),
             helper.create_subscription(MarkerArray, "slam/map", self.maps.append, 100),
             helper.create_subscription(Path, "slam/path", self.paths.append, 100),
@@ -702,3 +706,61 @@ def test_no_warning_while_observations_arrive_or_the_robot_stands(ros):
         rig.observations.publish(cylinder_array("base_scan", (k + 5) * S, []))  # a scan without cylinders
         rig.ros.spin_for(0.05)
     assert rig.warnings() == []
+
+
+class TfRecorder:
+    """Stands in for /tf, which needs tf2_msgs (not on any registry): records the transforms slam sends."""
+
+    available = True
+
+    def __init__(self) -> None:
+        self.sent = []
+
+    def send(self, *transforms) -> None:
+        self.sent.extend(transforms)
+
+
+@pytest.mark.parametrize("odom_first", [True, False], ids=["odom before joint_states", "odom after"])
+def test_map_to_odom_composed_with_the_broadcast_odom_gives_slam_s_pose_when_slam_starts_late(
+    ros, odom_first
+):
+    rig = Rig(ros, observation_timeout=100.0)
+    recorder = rig.node._tf = TfRecorder()
+    odom_publisher = rig.odom
+    # the odometry node has run for a while: its odom frame is far from slam's map (which starts at 0)
+    T_odom_start = Transform2D(-0.13, 0.98, -2.89)
+    slam_poses = {}
+    dphi = 0.05 / R_WHEEL
+    for k in range(6):
+        t_ns, phi = (k + 1) * S, (k * dphi, k * 1.2 * dphi)
+        T_odom_body = T_odom_start @ DRIVE.step(Transform2D(), *phi)
+        odom = odometry_message(T_odom_body, Twist2D(), "odom", "base_footprint", stamp(t_ns))
+        if odom_first:
+            odom_publisher.publish(odom)
+            ros.spin_for(0.05)
+        slam_poses[t_ns] = Transform2D(*pose_of(rig.wheels(t_ns, phi)))
+        if not odom_first:
+            odom_publisher.publish(odom)
+        assert ros.spin_until(lambda k=k: len(recorder.sent) >= k + 1, 5.0), "no map -> odom"
+        sent = recorder.sent[-1]
+        assert (sent.header.frame_id, sent.child_frame_id) == ("map", "odom")
+        assert stamp_ns(sent.header.stamp) == t_ns
+        T_map_odom = transform_from_pose_msg(sent.transform)
+        # /tf's chain map -> odom -> base_footprint is slam's pose at that stamp
+        np.testing.assert_allclose(
+            (T_map_odom @ T_odom_body).as_array(), slam_poses[t_ns].as_array(), atol=1e-9
+        )
+    assert len(recorder.sent) == 6, "one map -> odom per pose"
+
+
+def test_odom_in_other_frames_is_skipped_with_a_warning(ros):
+    rig = Rig(ros, observation_timeout=100.0)
+    rig.odom.publish(odometry_message(Transform2D(), Twist2D(), "world", "base_footprint", stamp(S)))
+    warnings = rig.warnings(at_least=1)
+    assert len(warnings) == 1 and "odom skipped" in warnings[0] and "'world'" in warnings[0]
+
+
+def transform_from_pose_msg(transform) -> Transform2D:
+    return Transform2D(
+        transform.translation.x, transform.translation.y, yaw_from_quaternion(transform.rotation)
+    )
