@@ -4,43 +4,38 @@ Arguments
     association:=unknown|known    unknown (default): landmarks found in the LiDAR scan by the `landmarks`
                                   node; known: nusim's fake_sensor (simulator only).
     use_sim_time:=false|true      true against the simulator (every node on nusim's /clock).
-    cmd_src:=circle|teleop|none   what drives the robot (see start_robot.launch.py).
+    cmd_src:=none|circle|teleop   what drives the robot (see start_robot.launch.py; none by default: nothing
+                                  moves until asked).
 
-    ros2 launch nuslam slam.launch.py cmd_src:=teleop        # on the robot (its bringup: joint_states, scan)
+    ros2 launch nuslam slam.launch.py cmd_src:=teleop        # our control stack (wheel_cmd firmware)
+    ros2 launch nuslam turtlebot3.launch.py                  # a stock TurtleBot3 (its own odom, TF, cmd_vel)
     ros2 launch nuturtle_demo nusim_slam.launch.py           # the same against the simulator
 
 Every node reads the Burger's constants from nuturtle_description/config/diff_params.yaml and its own
-defaults from config/landmarks.yaml and config/slam.yaml; the launch arguments come last, so they win.
+defaults from config/landmarks.yaml and config/slam.yaml; the launch arguments come last, so they win
+(`nuslam.launch_nodes`).
 RViz shows the wheel odometry `odom` (blue) and SLAM's pose, path and map in `map` (green).
 """
 
-import os
-
-from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, IncludeLaunchDescription, OpaqueFunction
 from launch.launch_description_sources import PythonLaunchDescriptionSource
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
-
-def _share(package, *parts):
-    return os.path.join(get_package_share_directory(package), *parts)
+from nuslam.launch_nodes import landmarks_parameters, slam_parameters
+from nuturtle_control.launch_nodes import CMD_SOURCES
+from nuturtle_ros_common.ros_files import share_file
 
 
 def _slam_nodes(context):
     association = LaunchConfiguration("association").perform(context)
-    clock = {"use_sim_time": LaunchConfiguration("use_sim_time").perform(context) == "true"}
-    diff_params = _share("nuturtle_description", "config", "diff_params.yaml")
+    use_sim_time = LaunchConfiguration("use_sim_time").perform(context) == "true"
     nodes = [
         Node(
             package="nuslam",
             executable="slam",
-            parameters=[
-                diff_params,
-                _share("nuslam", "config", "slam.yaml"),
-                {"association": association, **clock},
-            ],
+            parameters=slam_parameters(association, use_sim_time),
             output="screen",
         ),
     ]
@@ -49,7 +44,7 @@ def _slam_nodes(context):
             Node(
                 package="nuslam",
                 executable="landmarks",
-                parameters=[_share("nuslam", "config", "landmarks.yaml"), clock],
+                parameters=landmarks_parameters(use_sim_time),
                 output="screen",
             )
         )
@@ -61,9 +56,11 @@ def generate_launch_description() -> LaunchDescription:
         [
             DeclareLaunchArgument("association", default_value="unknown", choices=["unknown", "known"]),
             DeclareLaunchArgument("use_sim_time", default_value="false", choices=["true", "false"]),
-            DeclareLaunchArgument("cmd_src", default_value="circle", choices=["circle", "teleop", "none"]),
+            DeclareLaunchArgument("cmd_src", default_value="none", choices=list(CMD_SOURCES)),
             IncludeLaunchDescription(
-                PythonLaunchDescriptionSource(_share("nuturtle_control", "launch", "start_robot.launch.py")),
+                PythonLaunchDescriptionSource(
+                    str(share_file("nuturtle_control", "launch", "start_robot.launch.py"))
+                ),
                 launch_arguments={
                     "use_sim_time": LaunchConfiguration("use_sim_time"),
                     "cmd_src": LaunchConfiguration("cmd_src"),

@@ -2,43 +2,45 @@
 
 Arguments
     use_sim_time:=false|true      true when the robot is simulated (every node on nusim's /clock).
-    cmd_src:=circle|teleop|none   circle (default): the `circle` node publishes cmd_vel (config/circle.yaml);
-                                  teleop: teleop_twist_keyboard in its own terminal (xterm); none: nothing
-                                  (another node or `ros2 topic pub` drives).
+    cmd_src:=none|circle|teleop   none (default): nothing drives until asked (another node, `ros2 topic
+                                  pub`, or `ros2 run nuturtle_control circle`); circle: the `circle` node
+                                  publishes cmd_vel (config/circle.yaml); teleop: teleop_twist_keyboard in
+                                  its own terminal (xterm).
 
 The simulator is not started here (this package installs on the robot without it): the simulated system
 is `ros2 launch nuturtle_demo nusim_slam.launch.py`. Every node gets the Burger's constants from
-nuturtle_description/config/diff_params.yaml and its own defaults from this package's config/<node>.yaml.
+nuturtle_description/config/diff_params.yaml and its own defaults from this package's config/<node>.yaml,
+then the launch arguments (last, so they win: `nuturtle_control.launch_nodes`). turtle_control stops the
+wheels `cmd_timeout` (0.5 s) after the last cmd_vel.
 """
 
-import os
-
-from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
-
-def _share(package, *parts):
-    return os.path.join(get_package_share_directory(package), *parts)
+from nuturtle_control.launch_nodes import (
+    CMD_SOURCES,
+    circle_parameters,
+    odometry_parameters,
+    turtle_control_parameters,
+)
 
 
 def _nodes(context):
     cmd_src = LaunchConfiguration("cmd_src").perform(context)
-    clock = {"use_sim_time": LaunchConfiguration("use_sim_time").perform(context) == "true"}
-    diff_params = _share("nuturtle_description", "config", "diff_params.yaml")
+    use_sim_time = LaunchConfiguration("use_sim_time").perform(context) == "true"
     nodes = [
         Node(
             package="nuturtle_control",
             executable="turtle_control",
-            parameters=[diff_params, _share("nuturtle_control", "config", "turtle_control.yaml"), clock],
+            parameters=turtle_control_parameters(use_sim_time),
             output="screen",
         ),
         Node(
             package="nuturtle_control",
             executable="odometry",
-            parameters=[diff_params, _share("nuturtle_control", "config", "odometry.yaml"), clock],
+            parameters=odometry_parameters(use_sim_time),
             output="screen",
         ),
     ]
@@ -47,7 +49,7 @@ def _nodes(context):
             Node(
                 package="nuturtle_control",
                 executable="circle",
-                parameters=[_share("nuturtle_control", "config", "circle.yaml"), clock],
+                parameters=circle_parameters(use_sim_time),
                 output="screen",
             )
         )
@@ -57,7 +59,7 @@ def _nodes(context):
                 package="teleop_twist_keyboard",
                 executable="teleop_twist_keyboard",
                 prefix="xterm -e",
-                parameters=[clock],
+                parameters=[{"use_sim_time": use_sim_time}],
                 output="screen",
             )
         )
@@ -75,9 +77,9 @@ def generate_launch_description() -> LaunchDescription:
             ),
             DeclareLaunchArgument(
                 "cmd_src",
-                default_value="circle",
-                choices=["circle", "teleop", "none"],
-                description="what publishes cmd_vel",
+                default_value="none",
+                choices=list(CMD_SOURCES),
+                description="what publishes cmd_vel (none: nothing moves the robot until asked)",
             ),
             OpaqueFunction(function=_nodes),
         ]

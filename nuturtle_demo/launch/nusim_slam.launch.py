@@ -3,7 +3,9 @@ its /clock (nuslam's slam.launch.py with use_sim_time:=true).
 
 Arguments
     association:=unknown|known    unknown (default): LiDAR landmarks; known: nusim's fake_sensor.
-    cmd_src:=circle|teleop|none   what drives the robot (see nuturtle_control's start_robot.launch.py).
+    cmd_src:=none|circle|teleop   what drives the robot (see nuturtle_control's start_robot.launch.py); none
+                                  (default): nothing until asked, e.g. `ros2 run nuturtle_control circle
+                                  --ros-args -p use_sim_time:=true` once everything is up.
     world:=<path>                 nusim's world (default: nusim/config/basic_world.yaml).
 
     ros2 launch nuturtle_demo nusim_slam.launch.py association:=known
@@ -29,7 +31,8 @@ def generate_launch_description() -> LaunchDescription:
     return LaunchDescription(
         [
             DeclareLaunchArgument("association", default_value="unknown", choices=["unknown", "known"]),
-            DeclareLaunchArgument("cmd_src", default_value="circle", choices=["circle", "teleop", "none"]),
+            # none: the robot stays still until asked, so every node is up (and slam at the true start) first
+            DeclareLaunchArgument("cmd_src", default_value="none", choices=["none", "circle", "teleop"]),
             DeclareLaunchArgument("world", default_value=_share("nusim", "config", "basic_world.yaml")),
             IncludeLaunchDescription(
                 PythonLaunchDescriptionSource(_share("nusim", "launch", "nusim.launch.py")),

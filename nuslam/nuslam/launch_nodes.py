@@ -1,0 +1,27 @@
+"""The parameter lists of nuslam's launch files (plain functions: tests call them, launch cannot run in CI).
+
+Every list is the robot's constants (nuturtle_description/config/diff_params.yaml), the node's own
+defaults (config/<node>.yaml), then the launch arguments, which win (`launch_parameters.with_arguments`).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from nuturtle_ros_common.launch_parameters import with_arguments
+from nuturtle_ros_common.ros_files import share_file
+
+
+def slam_parameters(association: str, use_sim_time: bool, **arguments: Any) -> list[str | dict[str, Any]]:
+    """The `slam` node's list: ``association`` (known or unknown), ``use_sim_time`` and any other
+    parameter ``arguments`` given at launch."""
+    files = [
+        share_file("nuturtle_description", "config", "diff_params.yaml"),
+        share_file("nuslam", "config", "slam.yaml"),
+    ]
+    return with_arguments(files, {"association": association, "use_sim_time": use_sim_time, **arguments})
+
+
+def landmarks_parameters(use_sim_time: bool) -> list[str | dict[str, Any]]:
+    """The `landmarks` node's list."""
+    return with_arguments([share_file("nuslam", "config", "landmarks.yaml")], {"use_sim_time": use_sim_time})

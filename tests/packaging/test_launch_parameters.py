@@ -1,0 +1,76 @@
+"""What the launch files give their nodes, without `ros2 launch` (not installable here): the parameter
+lists come from plain functions, and `launch_parameters.resolve` applies a list as rcl does (later entries
+win), so a launch argument must beat the node's YAML file."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+
+from nuslam.launch_nodes import landmarks_parameters, slam_parameters
+from nuturtle_control.launch_nodes import circle_parameters, odometry_parameters, turtle_control_parameters
+from nuturtle_ros_common.launch_parameters import resolve, with_arguments
+from nuturtle_ros_common.ros_files import share_file
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.mark.parametrize("association", ["known", "unknown"])
+def test_the_association_argument_reaches_slam_over_its_yaml(association):
+    values = resolve(slam_parameters(association, use_sim_time=True), "slam")
+    assert values["association"] == association
+    assert values["use_sim_time"] is True
+    # the rest from the files: the robot's constants and slam.yaml
+    assert values["wheel_radius"] == 0.033 and values["wheel_noise"] == 0.05
+
+
+def test_a_dict_before_the_yaml_loses_to_it():
+    # what went wrong: slam.yaml (association: unknown) after the argument wins
+    slam_yaml = share_file("nuslam", "config", "slam.yaml")
+    assert resolve([{"association": "known"}, slam_yaml], "slam")["association"] == "unknown"
+    assert resolve(with_arguments([slam_yaml], {"association": "known"}), "slam")["association"] == "known"
+
+
+@pytest.mark.parametrize(
+    ("parameters", "node", "expected"),
+    [
+        (landmarks_parameters(True), "landmarks", {"use_sim_time": True}),
+        (turtle_control_parameters(False), "turtle_control", {"use_sim_time": False, "cmd_timeout": 0.5}),
+        (odometry_parameters(True), "odometry", {"use_sim_time": True, "odom_id": "odom"}),
+        (circle_parameters(True), "circle", {"use_sim_time": True, "radius": 0.5}),
+    ],
+)
+def test_every_node_list_is_files_then_arguments(parameters, node, expected):
+    assert isinstance(parameters[-1], dict), "the launch arguments come last"
+    assert all(Path(entry).is_file() for entry in parameters[:-1])
+    values = resolve(parameters, node)
+    assert {name: values[name] for name in expected} == expected
+
+
+@pytest.mark.parametrize(
+    ("launch_file", "functions"),
+    [
+        ("nuslam/launch/slam.launch.py", ["slam_parameters(", "landmarks_parameters("]),
+        ("nuslam/launch/turtlebot3.launch.py", ["slam_parameters(", "landmarks_parameters("]),
+        (
+            "nuturtle_control/launch/start_robot.launch.py",
+            ["turtle_control_parameters(", "odometry_parameters(", "circle_parameters("],
+        ),
+    ],
+)
+def test_the_launch_files_build_their_lists_with_these_functions(launch_file, functions):
+    text = (ROOT / launch_file).read_text()
+    for function in functions:
+        assert f"parameters={function}" in text, function
+
+
+def test_the_stock_turtlebot3_launch_drives_nothing_and_duplicates_no_odometry():
+    # the robot's turtlebot3_node owns cmd_vel, odom and odom -> base_footprint
+    text = (ROOT / "nuslam/launch/turtlebot3.launch.py").read_text()
+    for executable in ("turtle_control", "odometry", "circle", "teleop"):
+        assert f'executable="{executable}"' not in text
+    # and no launch starts the robot moving unless asked
+    for launch_file in ("nuslam/launch/slam.launch.py", "nuturtle_control/launch/start_robot.launch.py"):
+        assert re.search(r'"cmd_src",\s*default_value="none"', (ROOT / launch_file).read_text()), launch_file
