@@ -8,6 +8,9 @@ Publishes (stamped with the scan's stamp, in the scan's frame)
         One array per scan, also when nothing is found (SLAM counts scans).
     `~/clusters` (visualization_msgs/MarkerArray): a DELETEALL, then one POINTS marker per cluster of the
         scan, cylinders green and rejected clusters grey (for tuning the thresholds).
+    `/diagnostics` (diagnostic_msgs/DiagnosticArray, 1 Hz): `landmarks: scan` (rate; ERROR after
+        `STALE_S` without a scan) and `landmarks: detector` (time per scan, cylinders in the last scan,
+        scans refused; WARN when scans were refused since the last report).
 Parameters
     Every field of `turtlelib.DetectorConfig` (cluster_threshold, min_points, min_radius, max_radius, ...),
     under the same names. Invalid values stop the node at start-up with a message.
@@ -19,6 +22,7 @@ throttled warning; the node keeps running.
 from __future__ import annotations
 
 import sys
+import time
 
 import numpy as np
 from geometry_msgs.msg import Point
@@ -27,6 +31,14 @@ from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import LaserScan
 from visualization_msgs.msg import Marker, MarkerArray
 
+from nuturtle_ros_common.diagnostics import (
+    OK,
+    WARN,
+    DiagnosticsPublisher,
+    DurationMonitor,
+    InputMonitor,
+    status,
+)
 from nuturtle_ros_common.markers import cylinder_marker, delete_all_marker, set_color
 from nuturtle_ros_common.node_main import run_node
 from nuturtle_ros_common.ros_params import declare_dataclass
@@ -37,6 +49,8 @@ GREEN = (0.1, 0.8, 0.2, 1.0)
 GREY = (0.6, 0.6, 0.6, 0.8)
 # Size of a drawn cluster point (m)
 CLUSTER_POINT_M = 0.02
+# An input silent this long (s, node clock) is an ERROR in /diagnostics
+STALE_S = 2.0
 
 
 def landmark_markers(detections: Detections, msg: LaserScan) -> MarkerArray:
@@ -78,8 +92,26 @@ class LandmarksNode(Node):
         self._landmarks_publisher = self.create_publisher(MarkerArray, "landmarks", 10)
         self._clusters_publisher = self.create_publisher(MarkerArray, "~/clusters", 10)
         self.create_subscription(LaserScan, "scan", self._on_scan, qos_profile_sensor_data)
+        self._scans = InputMonitor("scan", self.get_clock().now().nanoseconds, STALE_S)
+        self._detect_time = DurationMonitor()
+        self._refused = self._refused_reported = 0
+        self._cylinders = 0
+        DiagnosticsPublisher(self, self._statuses)
+
+    def _statuses(self, now_ns: int) -> list:
+        """The scan input, and the detector: WARN when scans were refused since the last report."""
+        refused_now, self._refused_reported = self._refused - self._refused_reported, self._refused
+        values = {"cylinders_last_scan": self._cylinders, "scans_refused": self._refused}
+        values.update(self._detect_time.values("detection"))
+        message = f"{self._cylinders} cylinders in the last scan"
+        if refused_now:
+            message += f"; {refused_now} scans refused in the last {DiagnosticsPublisher.PERIOD_S:g} s"
+        detector = status("landmarks: detector", "landmarks", WARN if refused_now else OK, message, values)
+        return [self._scans.status("landmarks", now_ns), detector]
 
     def _on_scan(self, msg: LaserScan) -> None:
+        self._scans.arrived(self.get_clock().now().nanoseconds)
+        start = time.perf_counter()
         ranges = np.asarray(msg.ranges, dtype=np.float64)  # array.array('f'): through the buffer protocol
         try:
             detections, clusters = self.detector.detect_with_clusters(
@@ -87,7 +119,10 @@ class LandmarksNode(Node):
             )
         except ValueError as error:
             self.get_logger().warning(f"scan skipped: {error}", throttle_duration_sec=WARN_THROTTLE_S)
+            self._refused += 1
             return
+        self._detect_time.add(1e3 * (time.perf_counter() - start))
+        self._cylinders = len(detections.radius)
         self._landmarks_publisher.publish(landmark_markers(detections, msg))
         if self._clusters_publisher.get_subscription_count():
             self._clusters_publisher.publish(cluster_markers(clusters, detections, msg))

@@ -22,6 +22,10 @@ Publishes
     `~/map` (visualization_msgs/MarkerArray, frame `map_id`, after each applied scan, stamped with it):
         DELETEALL, then per confirmed landmark a green CYLINDER (ns `landmarks`, id = landmark id, diameter
         2 `landmark_radius`) and its 2-sigma ellipse (ns `covariance`).
+    `/diagnostics` (diagnostic_msgs/DiagnosticArray, 1 Hz): `slam: joint_states` and `slam: <observation
+        topic>` (rates; ERROR after `STALE_S` of the node's clock without a message), `slam: filter`
+        (landmarks mapped and tentative, observations fused and rejected, time per applied scan; WARN when
+        observations were rejected or skipped since the last report).
     `/tf` `map_id` -> `odom_id` where tf2_msgs is installed: ``T_map_odom = T_map_body T_odom_body^-1``
         at each pose's stamp, with ``T_odom_body`` the transform the odometry source broadcasts (read from
         its `odom` topic, interpolated between its samples), so that composing the two transforms on /tf
@@ -45,6 +49,7 @@ earlier than the last restarts the timeline there (a restarted simulator or a lo
 from __future__ import annotations
 
 import sys
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -64,6 +69,14 @@ from nuturtle_ros_common.conversions import (
     transform_from_pose,
     transform_stamped,
 )
+from nuturtle_ros_common.diagnostics import (
+    OK,
+    WARN,
+    DiagnosticsPublisher,
+    DurationMonitor,
+    InputMonitor,
+    status,
+)
 from nuturtle_ros_common.markers import cylinder_marker, delete_all_marker, ellipse_marker, marker_positions
 from nuturtle_ros_common.node_main import run_node
 from nuturtle_ros_common.ros_params import declare_dataclass
@@ -73,6 +86,7 @@ from nuturtle_ros_common.wheel_joints import WheelJoints, wheel_values
 from turtlelib import (
     DiffDriveMotion,
     EkfSlam,
+    ObservationStatus,
     SlamConfig,
     SlamTimeline,
     TimelineConfig,
@@ -91,6 +105,8 @@ GREEN = (0.1, 0.8, 0.2, 1.0)
 GREEN_TRANSLUCENT = (0.1, 0.8, 0.2, 0.35)
 # odom samples kept to pair with slam's poses (10 s at the odometry node's 20 Hz)
 ODOM_BUFFER_SAMPLES = 200
+# An input silent this long (s, node clock) is an ERROR in /diagnostics
+STALE_S = 2.0
 # Drawn confidence region of a mapped landmark (standard deviations)
 ELLIPSE_SIGMA = 2.0
 
@@ -180,6 +196,13 @@ class SlamNode(Node):
         self._map_to_odom_pending: tuple[int, Transform2D, Time] | None = None
         self.create_subscription(JointState, "joint_states", self._on_joint_states, 10)
         self.create_subscription(Odometry, "odom", self._on_odom, 10)
+        started_ns = self.get_clock().now().nanoseconds
+        self._joint_states_input = InputMonitor("joint_states", started_ns, STALE_S)
+        self._observation_input = InputMonitor(self._observation_topic, started_ns, STALE_S)
+        self._update_time = DurationMonitor()
+        self._counts = {"fused": 0, "rejected": 0, "skipped": 0}
+        self._skipped_reported = self._rejected_reported = 0
+        DiagnosticsPublisher(self, self._statuses)
         if self.node_config.association == "known":
             self.create_subscription(MarkerArray, "fake_sensor", self._on_fake_sensor, 10)
         else:
@@ -188,6 +211,7 @@ class SlamNode(Node):
     # --- inputs ------------------------------------------------------------------------------------------
 
     def _on_joint_states(self, msg: JointState) -> None:
+        self._joint_states_input.arrived(self.get_clock().now().nanoseconds)
         try:
             phi_left_rad, phi_right_rad = wheel_values(self.joints, msg.name, msg.position)
         except ValueError as error:
@@ -204,7 +228,9 @@ class SlamNode(Node):
             self._restart(t_ns, phi_left_rad, phi_right_rad)
             return
         try:
+            start = time.perf_counter()
             applied = self.timeline.add_motion(t_ns, (phi_left_rad, phi_right_rad))
+            self._count_applied(applied, start)
             if self.odometry.reference_time_s is None:
                 self.odometry.set_reference(t_s, phi_left_rad, phi_right_rad)
             V_body = self.odometry.step(t_s, phi_left_rad, phi_right_rad)
@@ -224,6 +250,7 @@ class SlamNode(Node):
             self._publish_map(stamp_from_nanoseconds(applied[-1][0]))
 
     def _on_fake_sensor(self, msg: MarkerArray) -> None:
+        self._observation_input.arrived(self.get_clock().now().nanoseconds)
         try:
             t_ns, ids, p_sensor, rotation = self._observed_points(msg)
             # Sigma_sensor = R_sf Sigma R_sf^T
@@ -231,21 +258,28 @@ class SlamNode(Node):
                 rotation @ self._fake_sensor_covariance @ rotation.T, (len(ids), 2, 2)
             )
             z, R = observations_from_points(p_sensor, covariance)
+            start = time.perf_counter()
             applied = self.timeline.add_observations(t_ns, z, R, ids)
+            self._count_applied(applied, start)
         except (ValueError, np.linalg.LinAlgError) as error:
             self._warnings.warn("fake_sensor", f"fake_sensor skipped: {error}")
+            self._counts["skipped"] += 1
             return
         self._observed_at = None  # the observations arrive: the silence starts again at the next sample
         if applied:
             self._publish_map(msg.markers[0].header.stamp)
 
     def _on_landmarks(self, msg: MarkerArray) -> None:
+        self._observation_input.arrived(self.get_clock().now().nanoseconds)
         try:
             t_ns, ids, p_sensor, _ = self._observed_points(msg)
             z, _ = observations_from_points(p_sensor, np.zeros((len(ids), 2, 2)))
+            start = time.perf_counter()
             applied = self.timeline.add_observations(t_ns, z)
+            self._count_applied(applied, start)
         except (ValueError, np.linalg.LinAlgError) as error:
             self._warnings.warn("landmarks", f"landmarks skipped: {error}")
+            self._counts["skipped"] += 1
             return
         self._observed_at = None  # the observations arrive: the silence starts again at the next sample
         if applied:
@@ -283,6 +317,41 @@ class SlamNode(Node):
             transform_stamped(T_map_body @ T_odom_body.inverse(), frames.map_id, frames.odom_id, stamp)
         )
         self._map_to_odom_pending = None
+
+    def _count_applied(self, applied: list, start: float) -> None:
+        """Count the observations of ``applied`` scans and time the call that applied them."""
+        if not applied:
+            return
+        self._update_time.add(1e3 * (time.perf_counter() - start))
+        for _, association in applied:
+            rejected = int(np.count_nonzero(association.status == ObservationStatus.REJECTED))
+            self._counts["rejected"] += rejected
+            self._counts["fused"] += len(association.status) - rejected
+
+    def _statuses(self, now_ns: int) -> list:
+        """The inputs, and the filter: WARN when observations were rejected or skipped since the last
+        report."""
+        skipped = self._counts["skipped"] - self._skipped_reported
+        rejected = self._counts["rejected"] - self._rejected_reported
+        self._skipped_reported, self._rejected_reported = self._counts["skipped"], self._counts["rejected"]
+        mapped, tentative = len(self.slam.landmark_ids), len(self.slam.tentative_ids)
+        message = f"{mapped} landmarks mapped, {tentative} tentative"
+        if skipped or rejected:
+            period = f"{DiagnosticsPublisher.PERIOD_S:g} s"
+            message += f"; in the last {period} {skipped} arrays skipped, {rejected} observations rejected"
+        values = {
+            "landmarks_mapped": mapped,
+            "landmarks_tentative": tentative,
+            "observations_fused": self._counts["fused"],
+            "observations_rejected": self._counts["rejected"],
+            "observation_arrays_skipped": self._counts["skipped"],
+            **self._update_time.values("scan_update"),
+        }
+        return [
+            self._joint_states_input.status("slam", now_ns),
+            self._observation_input.status("slam", now_ns),
+            status("slam: filter", "slam", WARN if skipped or rejected else OK, message, values),
+        ]
 
     def _check_observations_arrive(self, t_ns: int, angles: tuple[float, float]) -> None:
         """Warn (throttled) when the wheels have turned for ``observation_timeout`` without observations."""

@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 import pytest
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from nuslam_test_tools import node_inputs_matched, stamp, stamp_ns
 from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data
@@ -261,3 +262,18 @@ def invalid(name: str, value, message: str):
 def test_an_invalid_parameter_raises_value_error_at_construction(ros, parameter, message):
     with pytest.raises(ValueError, match=message):
         LandmarksNode(context=ros.context, parameter_overrides=[parameter])
+
+
+def test_diagnostics_are_an_error_when_no_scan_arrives(ros):
+    ros.add(LandmarksNode(context=ros.context))
+    helper = ros.node("landmarks_diagnostics_helper")
+    arrays: list[DiagnosticArray] = []
+    subscription = helper.create_subscription(DiagnosticArray, "/diagnostics", arrays.append, 10)
+    assert ros.spin_until(lambda: matched(subscription), 5.0)
+    assert ros.spin_until(
+        lambda: bool(arrays) and any(s.level == DiagnosticStatus.ERROR for s in arrays[-1].status), 6.0
+    )
+    statuses = {s.name: s for s in arrays[-1].status}
+    assert set(statuses) == {"landmarks: scan", "landmarks: detector"}
+    assert "nothing yet on scan" in statuses["landmarks: scan"].message
+    assert statuses["landmarks: detector"].level == DiagnosticStatus.OK

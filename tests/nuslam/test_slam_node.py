@@ -17,6 +17,7 @@ from itertools import pairwise
 
 import numpy as np
 import pytest
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from nav_msgs.msg import Odometry, Path
 from nuslam_test_tools import cylinder_array, node_inputs_matched, stamp, stamp_ns
 from rclpy.parameter import Parameter
@@ -764,3 +765,37 @@ def transform_from_pose_msg(transform) -> Transform2D:
     return Transform2D(
         transform.translation.x, transform.translation.y, yaw_from_quaternion(transform.rotation)
     )
+
+
+def test_diagnostics_report_the_inputs_and_an_error_when_observations_stop(ros):
+    rig = Rig(ros, observation_timeout=100.0)
+    arrays: list[DiagnosticArray] = []
+    subscription = rig.helper.create_subscription(DiagnosticArray, "/diagnostics", arrays.append, 10)
+    assert ros.spin_until(lambda: matched(subscription), 5.0)
+    t_ns = S
+    dphi = 0.01 / R_WHEEL
+
+    def drive(seconds: float, observe: bool) -> None:
+        nonlocal t_ns
+        for _ in range(round(seconds * 10)):
+            t_ns += S // 10
+            rig.joint_states.publish(joint_state(t_ns, (t_ns / S * dphi, t_ns / S * dphi)))
+            if observe:
+                rig.observations.publish(cylinder_array("base_scan", t_ns, relative(T_BODY_SENSOR)))
+            ros.spin_for(0.1)
+
+    def latest() -> dict[str, DiagnosticStatus]:
+        return {s.name: s for s in arrays[-1].status}
+
+    drive(1.5, observe=True)
+    statuses = latest()
+    assert set(statuses) == {"slam: joint_states", "slam: landmarks", "slam: filter"}
+    assert statuses["slam: joint_states"].level == DiagnosticStatus.OK
+    assert statuses["slam: landmarks"].level == DiagnosticStatus.OK
+    values = {pair.key: pair.value for pair in statuses["slam: filter"].values}
+    assert int(values["observations_fused"]) > 0 and "landmarks_mapped" in values
+    drive(3.0, observe=False)
+    statuses = latest()
+    assert statuses["slam: joint_states"].level == DiagnosticStatus.OK
+    assert statuses["slam: landmarks"].level == DiagnosticStatus.ERROR
+    assert "nothing on landmarks for" in statuses["slam: landmarks"].message
