@@ -41,7 +41,8 @@ Parameters
     (`SlamConfig.sensor_x/y/theta`) is the robot's `lidar_x`, `lidar_y`, `lidar_yaw`. Invalid values stop
     the node at start-up with a message.
 
-Bad input never stops the node: invalid joint_states, observations that are stale, non-finite, in an
+Observations that arrive before the first joint_states are dropped quietly (start-up order). Bad input
+never stops the node: invalid joint_states, observations that are stale, non-finite, in an
 unknown frame or beyond the filter's checks are skipped with a throttled warning; a joint_states stamp
 earlier than the last restarts the timeline there (a restarted simulator or a looped recording).
 """
@@ -251,6 +252,8 @@ class SlamNode(Node):
 
     def _on_fake_sensor(self, msg: MarkerArray) -> None:
         self._observation_input.arrived(self.get_clock().now().nanoseconds)
+        if self._before_first_motion():
+            return
         try:
             t_ns, ids, p_sensor, rotation = self._observed_points(msg)
             # Sigma_sensor = R_sf Sigma R_sf^T
@@ -271,6 +274,8 @@ class SlamNode(Node):
 
     def _on_landmarks(self, msg: MarkerArray) -> None:
         self._observation_input.arrived(self.get_clock().now().nanoseconds)
+        if self._before_first_motion():
+            return
         try:
             t_ns, ids, p_sensor, _ = self._observed_points(msg)
             z, _ = observations_from_points(p_sensor, np.zeros((len(ids), 2, 2)))
@@ -317,6 +322,14 @@ class SlamNode(Node):
             transform_stamped(T_map_body @ T_odom_body.inverse(), frames.map_id, frames.odom_id, stamp)
         )
         self._map_to_odom_pending = None
+
+    def _before_first_motion(self) -> bool:
+        """At start-up observations may come before the first joint_states: there is no pose to place them
+        on, so they are dropped (a debug message, not a warning: nothing is wrong)."""
+        if self.timeline.latest_time_ns is not None:
+            return False
+        self.get_logger().debug("observation before the first joint_states: dropped")
+        return True
 
     def _count_applied(self, applied: list, start: float) -> None:
         """Count the observations of ``applied`` scans and time the call that applied them."""

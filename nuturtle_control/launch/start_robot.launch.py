@@ -10,7 +10,9 @@ Arguments
 The simulator is not started here (this package installs on the robot without it): the simulated system
 is `ros2 launch nuturtle_demo nusim_slam.launch.py`. Every node gets the Burger's constants from
 nuturtle_description/config/diff_params.yaml and its own defaults from this package's config/<node>.yaml,
-then the launch arguments (last, so they win: `nuturtle_control.launch_nodes`). turtle_control stops the
+then the launch arguments (last, so they win: `nuturtle_control.launch_nodes`). robot_state_publisher
+publishes the URDF generated from diff_params.yaml: `base_footprint -> base_scan` on /tf_static (the
+LiDAR mount slam uses) and the wheels' TF from joint_states. turtle_control stops the
 wheels `cmd_timeout` (0.5 s) after the last cmd_vel.
 """
 
@@ -23,6 +25,7 @@ from nuturtle_control.launch_nodes import (
     CMD_SOURCES,
     circle_parameters,
     odometry_parameters,
+    robot_state_publisher_parameters,
     turtle_control_parameters,
 )
 
@@ -41,6 +44,13 @@ def _nodes(context):
             package="nuturtle_control",
             executable="odometry",
             parameters=odometry_parameters(use_sim_time),
+            output="screen",
+        ),
+        # the one owner of base_footprint -> base_scan (and the wheel joints' TF)
+        Node(
+            package="robot_state_publisher",
+            executable="robot_state_publisher",
+            parameters=robot_state_publisher_parameters(use_sim_time),
             output="screen",
         ),
     ]

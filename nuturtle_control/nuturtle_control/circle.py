@@ -36,7 +36,7 @@ from turtlelib.validation import finite_real, positive, store
 class CircleConfig:
     """Circle driving: `frequency` (Hz) and `radius` (m) finite and > 0, `velocity` (m/s) finite."""
 
-    frequency: float = 100.0
+    frequency: float = 20.0
     radius: float = 0.5
     velocity: float = 0.1
 

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from nuturtle_description.robot_params import burger_params
+from nuturtle_description.urdf import burger_urdf
 from nuturtle_ros_common.launch_parameters import with_arguments
 from nuturtle_ros_common.ros_files import share_file
 
@@ -25,6 +27,12 @@ def turtle_control_parameters(use_sim_time: bool) -> list[str | dict[str, Any]]:
 
 def odometry_parameters(use_sim_time: bool) -> list[str | dict[str, Any]]:
     return _robot_node("odometry", use_sim_time)
+
+
+def robot_state_publisher_parameters(use_sim_time: bool) -> list[dict[str, Any]]:
+    """robot_state_publisher's: the Burger's URDF generated from diff_params.yaml (so `base_footprint ->
+    base_scan` on /tf_static is the LiDAR mount slam uses) and ``use_sim_time``."""
+    return [{"robot_description": burger_urdf(burger_params()), "use_sim_time": use_sim_time}]
 
 
 def circle_parameters(use_sim_time: bool) -> list[str | dict[str, Any]]:

@@ -11,20 +11,36 @@ Arguments
     ros2 launch nuturtle_demo nusim_slam.launch.py association:=known
 
 RViz shows nusim's ground truth in `nusim/world` (red), the wheel odometry `odom` (blue) and SLAM's pose,
-path and map in `map` (green).
+path and map in `map` (green); a static `nusim/world -> map` (the world file's start pose, where slam's map
+starts) joins the two trees.
 """
 
 import os
 
 from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, IncludeLaunchDescription
+from launch.actions import DeclareLaunchArgument, IncludeLaunchDescription, OpaqueFunction
 from launch.launch_description_sources import PythonLaunchDescriptionSource
 from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import Node
+
+from nuturtle_demo.launch_nodes import world_to_map_arguments
 
 
 def _share(package, *parts):
     return os.path.join(get_package_share_directory(package), *parts)
+
+
+def _world_to_map(context):
+    world = LaunchConfiguration("world").perform(context)
+    return [
+        Node(
+            package="tf2_ros",
+            executable="static_transform_publisher",
+            arguments=world_to_map_arguments(world),
+            output="screen",
+        )
+    ]
 
 
 def generate_launch_description() -> LaunchDescription:
@@ -38,6 +54,7 @@ def generate_launch_description() -> LaunchDescription:
                 PythonLaunchDescriptionSource(_share("nusim", "launch", "nusim.launch.py")),
                 launch_arguments={"config_file": LaunchConfiguration("world")}.items(),
             ),
+            OpaqueFunction(function=_world_to_map),
             IncludeLaunchDescription(
                 PythonLaunchDescriptionSource(_share("nuslam", "launch", "slam.launch.py")),
                 launch_arguments={

@@ -56,12 +56,15 @@ _ParamsDumper.add_representer(
 )
 
 
-def params_file(nodes: Iterable[Node]) -> str:
-    """A ROS params file (YAML) holding every parameter of every node, usable with ``--params-file``."""
-    document = {
-        node.get_fully_qualified_name().lstrip("/"): {"ros__parameters": nest(node_parameters(node))}
-        for node in nodes
-    }
+def params_file(nodes: Iterable[Node], replace: Mapping[str, Mapping[str, Any]] | None = None) -> str:
+    """A ROS params file (YAML) holding every parameter of every node, usable with ``--params-file``;
+    ``replace`` maps a node's name to values written instead of its own (e.g. how fast a run went)."""
+    replace = replace or {}
+    document = {}
+    for node in nodes:
+        name = node.get_fully_qualified_name().lstrip("/")
+        values = {**node_parameters(node), **replace.get(name, {})}
+        document[name] = {"ros__parameters": nest(values)}
     return yaml.dump(document, Dumper=_ParamsDumper, sort_keys=False, width=110)
 
 

@@ -220,7 +220,9 @@ def run_demo(options: DemoOptions) -> DemoResult:
         system.driver.stop()
         _spin_until(executor, lambda: False, DRAIN_S)
         writer.close()
-        (out_dir / "config.yaml").write_text(params_file(system.nodes), encoding="utf-8")
+        # the pace of this run is not part of the world: reusing the file runs nusim at real time
+        config = params_file(system.nodes, replace={"nusim": {"realtime_factor": 1.0}})
+        (out_dir / "config.yaml").write_text(config, encoding="utf-8")
         metrics = _evaluate_and_plot(system, options, out_dir, sim_seconds, wall_seconds)
         return DemoResult(
             metrics, out_dir, sorted(system.recorder.recorded_topics), writer.message_count, interrupted

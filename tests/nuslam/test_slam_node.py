@@ -799,3 +799,13 @@ def test_diagnostics_report_the_inputs_and_an_error_when_observations_stop(ros):
     assert statuses["slam: joint_states"].level == DiagnosticStatus.OK
     assert statuses["slam: landmarks"].level == DiagnosticStatus.ERROR
     assert "nothing on landmarks for" in statuses["slam: landmarks"].message
+
+
+def test_observations_before_the_first_joint_states_are_dropped_without_a_warning(ros):
+    rig = Rig(ros)
+    rig.observations.publish(cylinder_array("base_scan", S, relative(T_BODY_SENSOR)))
+    ros.spin_for(0.3)
+    assert rig.maps == [] and rig.warnings() == []
+    # and the node goes on normally once joint_states arrive
+    rig.wheels(2 * S, (0.0, 0.0))
+    assert rig.observe(cylinder_array("base_scan", 2 * S, relative(T_BODY_SENSOR))).markers

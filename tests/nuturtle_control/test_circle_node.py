@@ -126,7 +126,7 @@ def test_parameter_changes_apply_at_run_time_and_resume_after_stop(ros):
     count = len(rig.twists)
     results = rig.set(radius=2, velocity=0.3)  # an int where a float is expected
     assert all(result.successful for result in results)
-    assert rig.node.config == CircleConfig(frequency=100.0, radius=2.0, velocity=0.3)
+    assert rig.node.config == CircleConfig(frequency=20.0, radius=2.0, velocity=0.3)
     twists = rig.next_twists()
     assert len(rig.twists) > count
     assert components(twists[-1]) == pytest.approx((0.3, 0, 0, 0, 0, 0.15), abs=TOL)

@@ -74,3 +74,47 @@ def test_the_stock_turtlebot3_launch_drives_nothing_and_duplicates_no_odometry()
     # and no launch starts the robot moving unless asked
     for launch_file in ("nuslam/launch/slam.launch.py", "nuturtle_control/launch/start_robot.launch.py"):
         assert re.search(r'"cmd_src",\s*default_value="none"', (ROOT / launch_file).read_text()), launch_file
+
+
+def test_world_to_map_is_the_world_file_s_start_pose(tmp_path):
+    from nuturtle_demo.launch_nodes import world_to_map_arguments
+
+    basic = world_to_map_arguments(ROOT / "nusim" / "config" / "basic_world.yaml")
+    assert basic == [
+        "--x",
+        "0.0",
+        "--y",
+        "0.0",
+        "--yaw",
+        "0.0",
+        "--frame-id",
+        "nusim/world",
+        "--child-frame-id",
+        "map",
+    ]
+    world = tmp_path / "world.yaml"
+    world.write_text("nusim:\n  ros__parameters:\n    x0: 1.5\n    y0: -2.0\n    theta0: 0.5\n")
+    assert world_to_map_arguments(world)[:6] == ["--x", "1.5", "--y", "-2.0", "--yaw", "0.5"]
+    assert (
+        "arguments=world_to_map_arguments("
+        in (ROOT / "nuturtle_demo/launch/nusim_slam.launch.py").read_text()
+    )
+
+
+def test_robot_state_publisher_gets_the_urdf_with_the_lidar_mount_slam_uses():
+    from nuturtle_control.launch_nodes import robot_state_publisher_parameters
+    from nuturtle_description.robot_params import burger_params
+
+    (parameters,) = robot_state_publisher_parameters(use_sim_time=True)
+    assert parameters["use_sim_time"] is True
+    urdf = parameters["robot_description"]
+    robot = burger_params()
+    # the fixed scan joint base_link -> base_scan at the mount's x, y and yaw (base_link is planar with
+    # base_footprint), so /tf_static's base_footprint -> base_scan is slam's T_body_scan
+    scan_joint = urdf[urdf.index('<joint name="scan_joint"') :]
+    scan_joint = scan_joint[: scan_joint.index("</joint>")]
+    assert '<child link="base_scan"/>' in scan_joint
+    assert f'xyz="{robot.lidar_x:.12g} {robot.lidar_y:.12g} ' in scan_joint
+    assert f'rpy="0 0 {robot.lidar_yaw:.12g}"' in scan_joint
+    text = (ROOT / "nuturtle_control/launch/start_robot.launch.py").read_text()
+    assert "parameters=robot_state_publisher_parameters(" in text
