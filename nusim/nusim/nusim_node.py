@@ -59,7 +59,6 @@ from nuturtle_ros_common.command_timeout import CommandTimeoutConfig, CommandWat
 from nuturtle_ros_common.conversions import (
     odometry_message,
     stamp_from_seconds,
-    stamp_nanoseconds,
     transform_from_pose,
     transform_stamped,
 )
@@ -72,6 +71,7 @@ from nuturtle_ros_common.wheel_joints import WheelJoints, wheel_values
 from turtlelib import Twist2D
 from turtlelib.path_trail import PathTrail, PathTrailConfig
 from turtlelib.scan_model import LidarConfig
+from turtlelib.timebase import NS_PER_S
 from turtlelib.validation import positive, store
 
 from .simulation import (
@@ -188,6 +188,10 @@ class NusimNode(Node):
             clock=Clock(clock_type=ClockType.STEADY_TIME),
         )
 
+    def _sim_time_ns(self) -> int:
+        """Simulation time ``step_count / rate`` in integer ns."""
+        return round(self.step_count * NS_PER_S / self.timing.rate)
+
     def sim_stamp(self) -> Time:
         """Simulation time ``step_count / rate`` (s) as a stamp."""
         return stamp_from_seconds(self.step_count / self.timing.rate)
@@ -201,7 +205,7 @@ class NusimNode(Node):
             self.get_logger().warning(f"wheel_cmd skipped: {error}", throttle_duration_sec=WARN_THROTTLE_S)
             return
         self.simulation.command_wheels(left_rad_s, right_rad_s)
-        self.watchdog.command(stamp_nanoseconds(self.sim_stamp()))
+        self.watchdog.command(self._sim_time_ns())
 
     def _on_teleport(self, msg: PoseWithCovarianceStamped) -> None:
         frame_id = msg.header.frame_id
@@ -227,7 +231,7 @@ class NusimNode(Node):
     def _on_tick(self) -> None:
         self.simulation.step(1.0 / self.timing.rate)
         self.step_count += 1
-        if self.watchdog.expired(stamp_nanoseconds(self.sim_stamp())):
+        if self.watchdog.expired(self._sim_time_ns()):
             self.simulation.command_wheels(0.0, 0.0)
             self.get_logger().info("no wheel_cmd for cmd_timeout: wheels stopped")
         stamp = self.sim_stamp()

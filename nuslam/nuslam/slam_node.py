@@ -301,7 +301,9 @@ class SlamNode(Node):
             T_odom_body = transform_from_pose(msg.pose.pose)
             t_ns = stamp_nanoseconds(msg.header.stamp)
             latest_ns = self._odom_poses.latest_time_ns
-            if latest_ns is not None and t_ns <= latest_ns:
+            if latest_ns is not None and t_ns == latest_ns:
+                return  # a copy of the newest sample
+            if latest_ns is not None and t_ns < latest_ns:
                 self._odom_poses.clear()  # the odometry source restarted (or a recording looped)
             self._odom_poses.add(t_ns, T_odom_body)
         except ValueError as error:

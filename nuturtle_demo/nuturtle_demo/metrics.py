@@ -207,13 +207,9 @@ def pose_nees(errors: NDArray[np.float64], covariances: NDArray[np.float64]) -> 
     A sample whose covariance is not positive definite (smallest eigenvalue <= ``MIN_EIGENVALUE``, e.g.
     the exactly known start pose before the robot moves) has no NEES: NaN.
     """
-    eps = np.full(errors.shape[0], np.nan)
     if errors.shape[0] == 0:
-        return eps
-    valid = np.linalg.eigvalsh(covariances)[:, 0] > MIN_EIGENVALUE
-    if np.any(valid):
-        eps[valid] = nees(errors[valid], covariances[valid])
-    return eps
+        return np.zeros(0)
+    return nees(errors, covariances, atol=MIN_EIGENVALUE)
 
 
 def nees_band(prob: float = NEES_BAND_PROB) -> tuple[float, float]:

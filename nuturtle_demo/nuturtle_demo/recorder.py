@@ -53,6 +53,8 @@ from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, W
 from rosbags.typesys import Stores, TypesysError, get_typestore
 from rosbags.typesys.store import Typestore
 
+from turtlelib.timebase import NS_PER_S
+
 BAG_VERSION = 9
 METADATA_FILE = "metadata.yaml"
 MESSAGE_ENCODING = "cdr"
@@ -60,7 +62,6 @@ MESSAGE_ENCODING = "cdr"
 CUSTOM_DATA = {"recorded_by": __name__}
 # Queue of each recording subscription: room for bursts when the executor falls behind
 RECORD_DEPTH = 200
-NS_PER_S = 1_000_000_000
 
 
 def _bag_time(duration: Duration) -> QosTime:

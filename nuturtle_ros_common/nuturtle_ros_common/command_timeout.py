@@ -11,9 +11,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from turtlelib.timebase import NS_PER_S
 from turtlelib.validation import non_negative, store
-
-NS_PER_S = 1_000_000_000
 
 
 @dataclass(frozen=True)

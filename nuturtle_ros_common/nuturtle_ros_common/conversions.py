@@ -11,6 +11,7 @@ from nav_msgs.msg import Odometry
 from numpy.typing import NDArray
 
 from turtlelib import Transform2D, Twist2D
+from turtlelib.timebase import NS_PER_S
 
 
 def quaternion_from_yaw(yaw_rad: float) -> Quaternion:
@@ -95,12 +96,12 @@ def stamp_seconds(stamp: Time) -> float:
 
 def stamp_nanoseconds(stamp: Time) -> int:
     """The stamp as integer ns, exactly."""
-    return stamp.sec * 1_000_000_000 + stamp.nanosec
+    return stamp.sec * NS_PER_S + stamp.nanosec
 
 
 def stamp_from_nanoseconds(t_ns: int) -> Time:
     """The stamp of integer ns ``t_ns`` (0 <= nanosec < 1e9), exactly."""
-    sec, nanosec = divmod(int(t_ns), 1_000_000_000)
+    sec, nanosec = divmod(int(t_ns), NS_PER_S)
     return Time(sec=sec, nanosec=nanosec)
 
 

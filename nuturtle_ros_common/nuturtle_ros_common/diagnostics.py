@@ -21,10 +21,11 @@ from collections.abc import Callable, Mapping
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
 
+from turtlelib.timebase import NS_PER_S
+
 OK = DiagnosticStatus.OK
 WARN = DiagnosticStatus.WARN
 ERROR = DiagnosticStatus.ERROR
-NS_PER_S = 1_000_000_000
 WINDOW = 50
 
 

@@ -96,7 +96,7 @@ def launch_references(path: Path) -> LaunchReferences:
     nodes = set()
     for call in calls:
         name = getattr(call.func, "id", None)
-        if name == "_share" and all(isinstance(arg, ast.Constant) for arg in call.args):
+        if name in ("_share", "share_file") and all(isinstance(arg, ast.Constant) for arg in call.args):
             shared.add(tuple(arg.value for arg in call.args))
         if name == "Node":
             keywords = {kw.arg: kw.value for kw in call.keywords}

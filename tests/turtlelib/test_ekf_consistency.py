@@ -82,3 +82,9 @@ def test_chi2_bounds_for_the_pose_over_50_runs():
 def test_chi2_bounds_reject_bad_arguments(dof, n_runs, prob):
     with pytest.raises(ValueError):
         chi2_bounds(dof, n_runs, prob)
+
+
+def test_an_absolute_floor_makes_tiny_variances_singular():
+    P = np.diag([1e-11, 1.0])  # above the relative floor (1e-12 of the largest)
+    assert nees([1e-6, 1.0], P) == pytest.approx(1.1)  # (1e-6)^2 / 1e-11 + 1
+    assert math.isnan(nees([1e-6, 1.0], P, atol=1e-10))

@@ -21,12 +21,13 @@ from scipy.special import chdtri
 SINGULAR_EIGENVALUE_RTOL = 1e-12
 
 
-def nees(error: ArrayLike, covariance: ArrayLike) -> float | NDArray[np.float64]:
+def nees(error: ArrayLike, covariance: ArrayLike, atol: float = 0.0) -> float | NDArray[np.float64]:
     """``e^T P^-1 e`` for ``error`` (..., d) and ``covariance`` (..., d, d) (stacks broadcast).
 
     Solved through a Cholesky factor, never inverted. NaN where ``P`` is singular: its smallest eigenvalue
-    at most ``SINGULAR_EIGENVALUE_RTOL`` times its largest. ValueError unless every ``P`` is finite,
-    symmetric and positive semi-definite (to that tolerance), and the shapes agree.
+    at most ``SINGULAR_EIGENVALUE_RTOL`` times its largest, or at most ``atol`` (in the units of ``P``: a
+    floor below which a variance counts as zero). ValueError unless every ``P`` is finite, symmetric and
+    positive semi-definite (to the relative tolerance), and the shapes agree.
     """
     e = np.asarray(error, dtype=np.float64)
     P = np.asarray(covariance, dtype=np.float64)
@@ -42,7 +43,7 @@ def nees(error: ArrayLike, covariance: ArrayLike) -> float | NDArray[np.float64]
     scale = np.maximum(np.abs(eigenvalues).max(axis=-1), np.finfo(float).tiny)
     if np.any(eigenvalues[..., 0] < -SINGULAR_EIGENVALUE_RTOL * scale):
         raise ValueError("covariance must be positive semi-definite (no negative variance)")
-    definite = eigenvalues[..., 0] > SINGULAR_EIGENVALUE_RTOL * scale
+    definite = eigenvalues[..., 0] > np.maximum(SINGULAR_EIGENVALUE_RTOL * scale, atol)
     result = np.full(definite.shape, np.nan)
     if np.any(definite):
         L = np.linalg.cholesky(P[definite])

@@ -96,9 +96,10 @@ from numpy.typing import ArrayLike, NDArray
 from .association import chi2_gate, joint_compatibility, mahalanobis_2d, nearest_neighbour
 from .geometry import Transform2D
 from .landmark_tracks import LandmarkTracks
-from .motion_models import NS_PER_S, MotionModel
+from .motion_models import MotionModel
 from .range_bearing import landmarks_from_observations, predict_observations, residual
 from .slam_state import ROBOT_DIM, SlamState
+from .timebase import NS_PER_S
 from .validation import finite_real, in_range, integer, non_negative, one_of, positive, store
 
 MATCHERS = ("nn", "jcbb")

@@ -46,10 +46,10 @@ from numpy.typing import NDArray
 from .arc_noise import arc_covariance
 from .geometry import Transform2D, Twist2D, integrate_twist
 from .kinematics import DiffDrive
+from .timebase import NS_PER_S
 from .validation import finite_real, non_negative, positive, store
 from .wheel_noise import wheel_slip_covariance
 
-NS_PER_S = 1_000_000_000
 # |steering| at or beyond this (rad) is not a steering angle (the car would turn on the spot or backwards)
 MAX_STEERING_RAD = 0.5 * math.pi - 1e-3
 

@@ -36,8 +36,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from .ekf_slam import Association, EkfSlam
 from .geometry import Transform2D
-from .motion_models import NS_PER_S
 from .motion_signals import MotionSignal, Sample
+from .timebase import NS_PER_S
 from .validation import finite_real, integer, non_negative, store
 
 

@@ -17,10 +17,15 @@ import argparse
 import json
 import math
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from .experiment import run_experiment
+from .experiment import Experiment, ExperimentResult, run_experiment
+
+if TYPE_CHECKING:
+    from .evaluation import Evaluation
+    from .setups import DatasetParams
 
 
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
@@ -69,7 +74,13 @@ def _json_value(value):
     return value
 
 
-def _write_run(args: argparse.Namespace, experiment, evaluate, params) -> dict:
+def _write_run(
+    args: argparse.Namespace,
+    experiment: Experiment,
+    evaluate: Callable[[Experiment, ExperimentResult], Evaluation],
+    params: DatasetParams,
+) -> dict:
+    """Run ``experiment`` with a progress bar, evaluate it and write the outputs into ``args.out``."""
     import yaml
 
     from .figures import plot_errors, plot_nees, plot_trajectory

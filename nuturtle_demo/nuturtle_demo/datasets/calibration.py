@@ -63,7 +63,8 @@ class Calibration:
 
     def report(self) -> str:
         lines = [
-            f"fitted on {self.windows} windows of {self.window_s} s and {self.observations} observations:"
+            f"fitted on {self.windows} windows of {self.window_s} s and {self.observations} observations "
+            f"(motion: sum of ln det S + e^T S^-1 e = {self.negative_log_likelihood:.1f}):"
         ]
         lines += [f"  {name:22s} {getattr(self.noise, name):.4g}" for name in NOISE_FIELDS]
         lines += [

@@ -52,16 +52,14 @@ LANDMARK_GATE_M = 0.5
 
 @dataclass(frozen=True)
 class Evaluation:
-    """What the figures and metrics.json need: evaluation stamps ``t_s`` (s since the run's start), the
-    compared estimate ``estimate_xy`` and reference ``reference_xy`` (S, 2), ``errors`` (S, d) with the
-    filter's ``sigmas`` (S, d) and ``error_labels``; ``nees`` (S,) with ``nees_dof``; the reference track
+    """What the figures and metrics.json need: evaluation stamps ``t_s`` (s since the run's start),
+    ``errors`` (S, d) of the estimate against the reference with the filter's ``sigmas`` (S, d) and
+    ``error_labels``; ``nees`` (S,) with ``nees_dof``; the reference track
     ``reference_track`` (R, 2) and the estimate's track ``estimate_track`` (E, 2); the map (in the map frame)
     and the true landmarks (or None); ``T_align`` the rigid motion that best fits the estimate to the
     reference; ``metrics``."""
 
     t_s: NDArray[np.float64]
-    estimate_xy: NDArray[np.float64]
-    reference_xy: NDArray[np.float64]
     errors: NDArray[np.float64]
     sigmas: NDArray[np.float64]
     error_labels: tuple[str, ...]
@@ -77,7 +75,10 @@ class Evaluation:
     metrics: dict
 
 
-def _trajectory_metrics(estimate_xy, reference_xy, nees, dof) -> tuple[dict, Transform2D]:
+def _trajectory_metrics(
+    estimate_xy: NDArray[np.float64], reference_xy: NDArray[np.float64], nees: NDArray[np.float64], dof: int
+) -> tuple[dict, Transform2D]:
+    """ATE raw and after the best rigid alignment (returned), and the NEES statistics of one run."""
     error_m = np.linalg.norm(estimate_xy - reference_xy, axis=1)
     T_align = align_se2(estimate_xy, reference_xy)
     aligned_error_m = np.linalg.norm(T_align @ estimate_xy - reference_xy, axis=1)
@@ -137,9 +138,10 @@ def _landmark_metrics(
         unpaired_true = np.setdiff1d(np.arange(len(true_xy)), paired_true)
         merged = 0
         if len(mapped):
+            paired_mapped = set(mapped_index.tolist())
             for t in unpaired_true:
                 nearest = int(np.argmin(distance[:, t]))
-                merged += int(distance[nearest, t] <= gate_m and nearest in set(mapped_index.tolist()))
+                merged += int(distance[nearest, t] <= gate_m and nearest in paired_mapped)
         spurious, duplicates = len(association.spurious), len(association.duplicates)
     values = {
         "landmarks_true": int(len(true_xy)),
@@ -182,8 +184,6 @@ def evaluate_mrclam(
     in_run = (recording.truth_t_ns >= t0) & (recording.truth_t_ns <= experiment.motion_t_ns[-1])
     return Evaluation(
         t_s=(t_ns - t0) * 1e-9,
-        estimate_xy=poses[:, :2],
-        reference_xy=truth[:, :2],
         errors=errors,
         sigmas=np.sqrt(np.maximum(np.diagonal(P, axis1=1, axis2=2), 0.0)),
         error_labels=("x error (m)", "y error (m)", "heading error (rad)"),
@@ -245,8 +245,6 @@ def evaluate_victoria(
     metrics.update(_timing_metrics(experiment, result))
     return Evaluation(
         t_s=t_rel,
-        estimate_xy=estimate,
-        reference_xy=gps,
         errors=errors,
         sigmas=np.sqrt(np.maximum(np.diagonal(covariance, axis1=1, axis2=2), 0.0)),
         error_labels=("East error (m)", "North error (m)"),
