@@ -41,6 +41,7 @@ from rclpy.signals import SignalHandlerOptions
 from nusim.nusim_node import NusimNode
 from nuturtle_control.odometry import OdometryNode
 from nuturtle_control.turtle_control import TurtleControlNode
+from nuturtle_ros_common.node_main import spin_once_guarded
 from nuturtle_ros_common.ros_files import load_ros_parameters, share_file
 from turtlelib.validation import integer, one_of, positive, store
 
@@ -206,7 +207,7 @@ def run_demo(options: DemoOptions) -> DemoResult:
         with _progress_bar(options) as progress:
             try:
                 while system.sim_time_s < options.duration_s:
-                    executor.spin_once(timeout_sec=0.1)
+                    spin_once_guarded(executor, system.nusim.get_logger(), timeout_sec=0.1)
                     now_s = min(system.sim_time_s, options.duration_s)
                     if now_s - progress.n >= 0.5 or now_s >= options.duration_s:
                         wall_s = time.monotonic() - wall_start
