@@ -18,6 +18,7 @@ from .motion_models import (
     UnicycleMotion,
 )
 from .motion_signals import HeldInputs, MotionSignal, OdometryPoses, WheelAngles
+from .sample_gate import GateResult, SampleGate, SampleGateConfig, Verdict
 from .scan_model import LidarConfig, arena_walls, cast_beams, simulate_scan
 from .slam_timeline import SlamTimeline, TimelineConfig
 
@@ -58,6 +59,10 @@ __all__ = [
     "SlamConfig",
     "SlamTimeline",
     "TimelineConfig",
+    "GateResult",
+    "SampleGate",
+    "SampleGateConfig",
+    "Verdict",
     "chi2_bounds",
     "nees",
     "nis",
