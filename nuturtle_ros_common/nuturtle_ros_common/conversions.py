@@ -13,6 +13,10 @@ from numpy.typing import NDArray
 from turtlelib import Transform2D, Twist2D
 from turtlelib.timebase import NS_PER_S
 
+# A quaternion whose norm differs from 1 by more than this is refused: not a rotation someone meant (a
+# zero, a sum of two, a corrupt message); a typed one such as (0, 0, 0.7, 0.7) is within it
+QUATERNION_NORM_TOLERANCE = 0.05
+
 
 def quaternion_from_yaw(yaw_rad: float) -> Quaternion:
     """Rotation about +z by yaw: q = (0, 0, sin(yaw/2), cos(yaw/2))."""
@@ -20,11 +24,19 @@ def quaternion_from_yaw(yaw_rad: float) -> Quaternion:
 
 
 def yaw_from_quaternion(q: Quaternion) -> float:
-    """Yaw of a quaternion (rotation about z of its ZYX Euler decomposition), for any non-zero norm.
+    """Yaw of a unit quaternion (rotation about z of its ZYX Euler decomposition).
 
-    yaw = atan2(2 (w z + x y), w^2 + x^2 - y^2 - z^2): both arguments scale with |q|^2, so a
-    hand-written, unnormalised quaternion such as (0, 0, 1, 1) gives the yaw it means (pi/2).
+    yaw = atan2(2 (w z + x y), w^2 + x^2 - y^2 - z^2): both arguments scale with |q|^2, so a quaternion
+    a little off unit norm (rounding, one typed by hand) gives the yaw it means. ValueError for a
+    non-finite quaternion or one whose norm is off 1 by more than ``QUATERNION_NORM_TOLERANCE`` (a zero
+    quaternion has no yaw at all).
     """
+    norm = math.sqrt(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w)
+    if not abs(norm - 1.0) <= QUATERNION_NORM_TOLERANCE:  # also NaN and inf
+        raise ValueError(
+            f"quaternion ({q.x}, {q.y}, {q.z}, {q.w}) has norm {norm:.6g}, not 1 "
+            f"(within {QUATERNION_NORM_TOLERANCE}): not a rotation"
+        )
     return math.atan2(2.0 * (q.w * q.z + q.x * q.y), q.w * q.w + q.x * q.x - q.y * q.y - q.z * q.z)
 
 
@@ -37,7 +49,8 @@ def pose_from_transform(T: Transform2D) -> Pose:
 
 
 def transform_from_pose(pose: Pose) -> Transform2D:
-    """The planar part of a 3D pose (x, y, yaw); raises ValueError when non-finite."""
+    """The planar part of a 3D pose (x, y, yaw); ValueError when non-finite or its quaternion is not a
+    rotation (:func:`yaw_from_quaternion`)."""
     return Transform2D(pose.position.x, pose.position.y, yaw_from_quaternion(pose.orientation))
 
 
@@ -91,11 +104,18 @@ def odometry_message(
 
 
 def stamp_seconds(stamp: Time) -> float:
+    """The stamp in s (float); ValueError for an invalid stamp (:func:`stamp_nanoseconds`)."""
+    stamp_nanoseconds(stamp)
     return stamp.sec + stamp.nanosec * 1e-9
 
 
 def stamp_nanoseconds(stamp: Time) -> int:
-    """The stamp as integer ns, exactly."""
+    """The stamp as integer ns, exactly. ValueError for a stamp no ROS clock gives: ``sec < 0`` (before
+    the epoch, which rclpy's Time refuses too) or ``nanosec >= 1e9`` (not normalised)."""
+    if stamp.sec < 0 or stamp.nanosec >= NS_PER_S:
+        raise ValueError(
+            f"invalid stamp sec = {stamp.sec}, nanosec = {stamp.nanosec} (need sec >= 0, nanosec < 1e9)"
+        )
     return stamp.sec * NS_PER_S + stamp.nanosec
 
 

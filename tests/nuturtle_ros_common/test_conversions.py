@@ -17,6 +17,7 @@ from nuturtle_ros_common.conversions import (
     pose_from_transform,
     quaternion_from_yaw,
     stamp_from_seconds,
+    stamp_nanoseconds,
     stamp_seconds,
     transform_from_pose,
     transform_stamped,
@@ -31,12 +32,23 @@ def test_hand_computed_quaternions():
     q = quaternion_from_yaw(math.pi / 2)
     assert (q.x, q.y, q.z, q.w) == pytest.approx((0.0, 0.0, math.sqrt(0.5), math.sqrt(0.5)), abs=1e-15)
     assert yaw_from_quaternion(Quaternion(x=0.0, y=0.0, z=1.0, w=0.0)) == pytest.approx(math.pi)
-    # written by hand, not normalised: (0, 0, 1, 1) means 90 degrees
-    assert yaw_from_quaternion(Quaternion(x=0.0, y=0.0, z=1.0, w=1.0)) == pytest.approx(math.pi / 2)
+    # typed by hand, a little off unit norm: (0, 0, 0.7, 0.7) means 90 degrees
+    assert yaw_from_quaternion(Quaternion(x=0.0, y=0.0, z=0.7, w=0.7)) == pytest.approx(math.pi / 2)
 
 
-@given(angles, st.floats(1e-3, 1e3))
-def test_yaw_round_trip_at_any_quaternion_scale(yaw, scale):
+@pytest.mark.parametrize(
+    "q",
+    [(0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 1.0, 1.0), (0.0, 0.0, 0.5, 0.5), (math.nan, 0.0, 0.0, 1.0),
+     (0.0, 0.0, math.inf, -math.inf), (0.0, 0.0, 0.0, 1e300)],
+)  # fmt: skip
+def test_a_quaternion_that_is_not_a_rotation_is_refused(q):
+    x, y, z, w = q
+    with pytest.raises(ValueError, match="not a rotation"):
+        yaw_from_quaternion(Quaternion(x=x, y=y, z=z, w=w))
+
+
+@given(angles, st.floats(0.951, 1.049))
+def test_yaw_round_trip_near_unit_norm(yaw, scale):
     q = quaternion_from_yaw(yaw)
     scaled = Quaternion(x=0.0, y=0.0, z=scale * q.z, w=scale * q.w)
     assert math.remainder(yaw_from_quaternion(scaled) - yaw, math.tau) == pytest.approx(0.0, abs=1e-12)
@@ -70,6 +82,16 @@ def test_stamp_from_seconds_carries_a_fraction_that_rounds_up_to_a_second():
     assert stamp_from_seconds(1.9999999999) == Time(sec=2, nanosec=0)
     assert stamp_from_seconds(3.25) == Time(sec=3, nanosec=250_000_000)
     assert stamp_from_seconds(-0.5) == Time(sec=-1, nanosec=500_000_000)
+
+
+@pytest.mark.parametrize(
+    ("sec", "nanosec"), [(-1, 0), (0, 1_000_000_000), (5, 4_000_000_000), (0, 2**32 - 1)]
+)
+def test_an_invalid_stamp_is_refused(sec, nanosec):
+    with pytest.raises(ValueError, match="invalid stamp"):
+        stamp_nanoseconds(Time(sec=sec, nanosec=nanosec))
+    with pytest.raises(ValueError, match="invalid stamp"):
+        stamp_seconds(Time(sec=sec, nanosec=nanosec))
 
 
 @given(st.integers(0, 2**31 - 2), st.integers(0, 999_999_999))

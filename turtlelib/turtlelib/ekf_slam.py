@@ -79,7 +79,10 @@ landmark is confirmed once seen ``confirm_count`` times (its first sighting incl
 stamps in integer ns), so a single spurious detection never enters the map.
 
 Bad input (non-finite values, non-positive range, an invalid noise covariance, invalid or duplicate
-landmark ids) raises ValueError and leaves the filter unchanged.
+landmark ids, more than ``max_observations`` in one update, a motion step the model turns into non-finite
+values) raises ValueError and leaves the filter unchanged. Implausible observations (nearer than
+``min_range``, farther than ``max_range``, outside the innovation gates) are rejected one by one, and the
+map never grows past ``max_landmarks``: what matters is the memory and time of ``P``, ``O(n^2)``.
 """
 
 from __future__ import annotations
@@ -126,7 +129,12 @@ class SlamConfig:
       estimate is reset to its current one (1: never).
     * ``confirm_count`` (>= 1): sightings that confirm a tentative landmark; ``tentative_timeout`` (s, > 0):
       how long after its first sighting a tentative landmark may stay unconfirmed.
-    * ``max_range`` (m, > 0): observations farther than this are rejected.
+    * ``min_range`` (m, >= 0) < ``max_range`` (m): observations nearer or farther than these are rejected
+      (the sensor's range_min and range_max: nothing real is seen outside them).
+    * ``max_landmarks`` (>= 1): the map's size bound; observations that would start a landmark beyond it
+      are rejected (:attr:`EkfSlam.map_full`).
+    * ``max_observations`` (>= 1): the most observations one update takes; more raise ValueError (no real
+      scan holds that many landmarks: a flood, not a scan).
     * ``initial_xy_std`` (m), ``initial_theta_std`` (rad), >= 0: initial pose standard deviations.
     * ``jcbb_max_nodes`` (>= 1): bound on the pairings JCBB tries per scan.
 
@@ -146,14 +154,17 @@ class SlamConfig:
     relinearize_gate: float = 1.0
     confirm_count: int = 5
     tentative_timeout: float = 2.0
+    min_range: float = 0.12
     max_range: float = 3.5
+    max_landmarks: int = 1000
+    max_observations: int = 100
     initial_xy_std: float = 0.0
     initial_theta_std: float = 0.0
     jcbb_max_nodes: int = 10_000
 
     def __post_init__(self) -> None:
         store(self, ("sensor_x", "sensor_y", "sensor_theta"), finite_real)
-        store(self, ("initial_xy_std", "initial_theta_std"), non_negative)
+        store(self, ("initial_xy_std", "initial_theta_std", "min_range"), non_negative)
         store(self, ("range_std", "bearing_std", "max_range", "tentative_timeout"), positive)
         one_of("matcher", self.matcher, MATCHERS)
         one_of("linearization", self.linearization, LINEARIZATIONS)
@@ -162,7 +173,13 @@ class SlamConfig:
         store(self, ("gate_known", "relinearize_gate"), partial(in_range, low=0.0, high=1.0, open_low=True))
         if not self.gate_associate < self.gate_new:
             raise ValueError(f"need gate_associate < gate_new, got {self.gate_associate}, {self.gate_new}")
-        store(self, ("confirm_count", "jcbb_max_nodes"), partial(integer, minimum=1))
+        store(
+            self,
+            ("confirm_count", "jcbb_max_nodes", "max_landmarks", "max_observations"),
+            partial(integer, minimum=1),
+        )
+        if not self.min_range < self.max_range:
+            raise ValueError(f"need min_range < max_range, got {self.min_range}, {self.max_range}")
 
     @property
     def T_body_sensor(self) -> Transform2D:
@@ -182,7 +199,8 @@ class ObservationStatus(IntEnum):
 
     MATCHED = 0  # joined an existing landmark (confirmed or tentative)
     NEW = 1  # started a new landmark (tentative unless confirm_count == 1 or the association is known)
-    REJECTED = 2  # unused: beyond max_range, or between the two gates, or outbid for its landmark
+    REJECTED = 2  # unused: outside [min_range, max_range], between the two gates, outbid for its landmark,
+    # outside the known-association gate, or new while the map is full
 
 
 # the status values as plain integers, for filling int8 arrays
@@ -247,9 +265,10 @@ class EkfSlam:
     def predict(self, u: tuple) -> None:
         """Move the pose by the motion model's input ``u``; only the robot rows and columns of ``P`` change.
 
-        ValueError (filter unchanged) for an input the model refuses (non-finite values, ...).
+        ValueError (filter unchanged) for an input the model refuses (non-finite values, ...) or turns into
+        a non-finite pose, Jacobian or noise (an overflowing step).
         """
-        q_next, G, Q = self._motion.step(self.pose, u)
+        q_next, G, Q = _finite_step(self._motion.step(self.pose, u))
         # P_qq' = G P_qq G^T + Q,  P_qm' = G P_qm
         self._state.predict(q_next, self._propagation_jacobian(G), Q)
         self._pose_prior = q_next.copy()
@@ -266,7 +285,7 @@ class EkfSlam:
         T_map_body = self.pose
         P_qq = self._state.covariance[:ROBOT_DIM, :ROBOT_DIM].copy()
         for step, u in enumerate(inputs):
-            q_next, G, Q = self._motion.step(T_map_body, u)
+            q_next, G, Q = _finite_step(self._motion.step(T_map_body, u))
             # the first step from the filter's pose as predict takes it; the later ones start at their prior
             G = self._propagation_jacobian(G) if step == 0 else G
             # P_qq' = G P_qq G^T + Q
@@ -295,7 +314,7 @@ class EkfSlam:
         z, R, landmark_ids = self.checked_observations(z, R, ids)
         self._enter_mode("known")
 
-        in_range = z[:, 0] <= self._config.max_range
+        in_range = self._in_range(z)
         slot_of = [self._tracks.slot(i) for i in landmark_ids.tolist()]
         known = np.array([slot is not None for slot in slot_of], dtype=bool)
         seen_before = np.flatnonzero(in_range & known)
@@ -307,12 +326,13 @@ class EkfSlam:
         # one stacked update with the landmarks seen before, then the new ones from the updated pose
         nis = self._state.correct(slots[inside], H_robot[inside], H_landmark[inside], nu[inside], R[matched])
         self._relinearize_first_estimates(slots[inside])
-        for k in np.flatnonzero(in_range & ~known):
-            self._add_landmark(int(landmark_ids[k]), z[k], R[k], confirmed=True, stamp_ns=0)
-
         status = np.full(len(z), _REJECTED, dtype=np.int8)
         status[matched] = _MATCHED
-        status[in_range & ~known] = _NEW
+        for k in np.flatnonzero(in_range & ~known):
+            if self.map_full:
+                break
+            self._add_landmark(int(landmark_ids[k]), z[k], R[k], confirmed=True, stamp_ns=0)
+            status[k] = _NEW
         used = status != _REJECTED
         return Association(status, np.where(used, landmark_ids, -1), nis=nis, nis_dof=2 * len(matched))
 
@@ -326,7 +346,7 @@ class EkfSlam:
         stamp_ns = integer("stamp_ns", stamp_ns)
         z, R, _ = self.checked_observations(z, R)
         self._enter_mode("unknown")
-        usable = (z[:, 0] <= self._config.max_range).nonzero()[0]
+        usable = self._in_range(z).nonzero()[0]
         z_usable, R_usable = (z, R) if len(usable) == len(z) else (z[usable], R[usable])
         landmark_ids = np.full(len(z), -1, dtype=np.int64)
         status = np.full(len(z), _REJECTED, dtype=np.int8)
@@ -444,6 +464,12 @@ class EkfSlam:
         return self._state.covariance[np.ix_(indices, indices)]
 
     @property
+    def map_full(self) -> bool:
+        """Whether the map (confirmed and tentative landmarks) holds ``max_landmarks``: no landmark is added
+        until one is dropped."""
+        return self._state.n_landmarks >= self._config.max_landmarks
+
+    @property
     def tentative_ids(self) -> NDArray[np.int64]:
         """Ids of the tentative (unconfirmed) landmarks, ascending."""
         return self._tracks.ids[self._tracks.slots_by_id(confirmed=False)]
@@ -484,6 +510,11 @@ class EkfSlam:
             raise ValueError(f"this filter runs with {self._mode} association; reset() to switch")
         landmark_ids = None if ids is None else _landmark_ids(ids)
         z, R = self._observations(z, R)
+        if len(z) > self._config.max_observations:
+            raise ValueError(
+                f"{len(z)} observations in one update, more than max_observations = "
+                f"{self._config.max_observations}"
+            )
         if landmark_ids is not None and len(landmark_ids) != len(z):
             raise ValueError(f"{len(landmark_ids)} ids for {len(z)} observations")
         return z, R, landmark_ids
@@ -515,6 +546,10 @@ class EkfSlam:
         if not ((R[:, 0, 0] > 0.0).all() and (R[:, 1, 1] > 0.0).all() and (det > 0.0).all()):
             raise ValueError("R must be positive definite (positive variances)")
         return z, R
+
+    def _in_range(self, z: NDArray[np.float64]) -> NDArray[np.bool_]:
+        """``min_range <= range <= max_range`` per observation (K,)."""
+        return (z[:, 0] >= self._config.min_range) & (z[:, 0] <= self._config.max_range)
 
     def _enter_mode(self, mode: str) -> None:
         if self._mode not in (None, mode):
@@ -653,7 +688,10 @@ class EkfSlam:
     ) -> bool:
         """Start a landmark (id ``_next_id``) from an observation ``z`` (2,) that no landmark explains, unless
         it lies within gate_new of one this scan has ``started`` (slots) already: one object gives one
-        detection per scan. Returns whether it did (and appends the new slot to ``started``)."""
+        detection per scan, or the map is full. Returns whether it did (and appends the new slot to
+        ``started``)."""
+        if self.map_full:
+            return False
         if started:
             _, d2, _, _, _ = self._gate(z[None], R[None], np.array(started))
             if np.any(d2 <= self._gate_new):
@@ -667,6 +705,16 @@ class EkfSlam:
         """State indices of the pose and the confirmed landmarks (in id order)."""
         first = ROBOT_DIM + 2 * self._tracks.slots_by_id(confirmed=True)
         return np.concatenate([np.arange(ROBOT_DIM), (first[:, None] + np.arange(2)).ravel()])
+
+
+def _finite_step(
+    step: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]],
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """A motion model's ``(q', G, Q)``, checked finite: ValueError otherwise (a step so large it overflows
+    would make ``P`` NaN for good)."""
+    if not all(np.isfinite(part).all() for part in step):
+        raise ValueError("the motion step gives a non-finite pose, Jacobian or noise (an implausible input)")
+    return step
 
 
 def _gate_or_inf(prob: float) -> float:

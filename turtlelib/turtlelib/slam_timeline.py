@@ -20,6 +20,11 @@ Times are integer nanoseconds.
 * An observation with ``t_o <= t_w`` is applied at once (filter brought to ``t_o``); one newer than every
   motion sample waits for the samples that reach it; one older than ``t_f`` came too late and is refused
   (ValueError): applying it at a later pose would be wrong.
+* Only observations that can be applied wait: one stamped more than ``max_observation_lead`` after
+  ``t_w`` is refused (a scan is processed after it was taken, so the motion samples of its time are
+  normally there already), and when ``max_pending_observations`` wait, a newer observation is refused
+  while an older one takes the place of the newest waiting one (the one furthest from ever being
+  reached), so a few bad stamps can never block the queue.
 * The pose at ``t_w`` (what a node publishes) is the filter's pose moved on by the motion from ``t_f`` to
   ``t_w``, interval by interval, with its covariance propagated alongside
   (:meth:`EkfSlam.propagated_pose_along`), without changing the filter.
@@ -38,20 +43,23 @@ from .ekf_slam import Association, EkfSlam
 from .geometry import Transform2D
 from .motion_signals import MotionSignal, Sample
 from .timebase import NS_PER_S
-from .validation import finite_real, integer, non_negative, store
+from .validation import finite_real, integer, non_negative, positive, store
 
 
 @dataclass(frozen=True)
 class TimelineConfig:
     """``max_observation_delay`` (s, finite, >= 0): how late an observation may arrive after the motion
-    samples of its time; ``max_pending_observations`` (int >= 1): observations that may wait for motion
-    samples. Invalid values raise ValueError."""
+    samples of its time; ``max_observation_lead`` (s, > 0): how far past the newest motion sample an
+    observation may be stamped and still wait for motion; ``max_pending_observations`` (int >= 1):
+    observations that may wait for motion samples. Invalid values raise ValueError."""
 
     max_observation_delay: float = 0.25
+    max_observation_lead: float = 1.0
     max_pending_observations: int = 20
 
     def __post_init__(self) -> None:
         store(self, ("max_observation_delay",), non_negative)
+        store(self, ("max_observation_lead",), positive)
         store(self, ("max_pending_observations",), partial(integer, minimum=1))
 
 
@@ -78,6 +86,7 @@ class SlamTimeline:
         self.signal = signal
         self.config = TimelineConfig() if config is None else config
         self._delay_ns = round(self.config.max_observation_delay * NS_PER_S)
+        self._lead_ns = round(self.config.max_observation_lead * NS_PER_S)
         # motion samples (t_ns, s) from the last one at or before t_f, times ascending
         self._times: list[int] = []
         self._samples: list[Sample] = []
@@ -129,8 +138,9 @@ class SlamTimeline:
 
         Applied now if motion samples reach ``t_ns``, else queued. ValueError (nothing changed) for invalid
         observations (also: with ids when the filter or the waiting observations run without, or the
-        reverse), before the first motion sample, for a stale stamp (``t_ns < t_f``), or when
-        ``max_pending_observations`` are already waiting.
+        reverse), before the first motion sample, for a stale stamp (``t_ns < t_f``), one too far ahead
+        (``t_ns > t_w + max_observation_lead``), or one newer than every waiting observation when
+        ``max_pending_observations`` are already waiting (an older one displaces the newest waiting one).
         """
         t_ns = integer("observation stamp (ns)", t_ns)
         z, R, landmark_ids = self.slam.checked_observations(z, R, ids)
@@ -144,13 +154,21 @@ class SlamTimeline:
                 f"stale observation: stamped {t_ns} ns, the filter is already at {self._t_f} ns "
                 f"(more than max_observation_delay = {self.config.max_observation_delay} s late)"
             )
+        t_w = self._times[-1]
+        if t_ns > t_w + self._lead_ns:
+            raise ValueError(
+                f"observation stamped {(t_ns - t_w) * 1e-9:.3f} s after the newest motion sample (more than "
+                f"max_observation_lead = {self.config.max_observation_lead} s): no motion may ever reach it"
+            )
         observation = _Observation(t_ns, z, R, landmark_ids)
-        if t_ns <= self._times[-1]:
+        if t_ns <= t_w:
             return [self._apply(observation)]
         if len(self._pending) >= self.config.max_pending_observations:
-            raise ValueError(
-                f"{len(self._pending)} observations already wait for motion samples past {self._times[-1]} ns"
-            )
+            if t_ns >= self._pending[-1].t_ns:
+                raise ValueError(
+                    f"{len(self._pending)} observations already wait for motion samples past {t_w} ns"
+                )
+            self._pending.pop()  # the newest waits longest: the older observation is the more useful
         bisect.insort(self._pending, observation, key=lambda o: o.t_ns)
         return []
 
