@@ -12,15 +12,18 @@ Publishes
 Parameters
     `RobotParams` (the Burger's constants by default), `WheelJoints` (wheel_left, wheel_right),
     `OdometryFrames` (body_id, odom_id), `PathTrailConfig` (path_min_step_m, path_min_turn_rad,
-    path_max_poses).
+    path_max_poses), `turtlelib.SampleGateConfig` (speed_margin, max_sample_gap, restart_samples).
 
 Model (see `wheel_odometry.WheelOdometry`): wheel-angle increments ``dphi = phi_k - phi_{k-1}`` move
 the pose along the exact arc ``T_odom_body_k = T_odom_body_{k-1} @ exp([F dphi])``, and the body twist is
 ``F dphi / dt``. The first message sets the reference (odom then holds the initial pose, zero twist).
 Invalid messages (missing or repeated wheel joints, names and positions of different lengths,
-non-finite angles) are logged (throttled) and skipped. A stamp earlier than the last one is logged and
-the message becomes the new reference without moving the pose (a restarted simulator or a looped bag),
-so the node recovers instead of waiting for time to catch up.
+non-finite angles, an invalid stamp) are logged (throttled) and skipped. Implausible ones are refused
+(`nuturtle_ros_common.wheel_stream`): a stamp not after the last (an exact copy is ignored), more than
+`max_sample_gap` after it, or wheels that would have turned faster than the motors can; only when
+`restart_samples` refused messages in a row continue each other has the source restarted (a restarted
+simulator, a looped bag): the first of them becomes the new reference without moving the pose, and the
+motion along the others is integrated. An `initialpose` whose quaternion is not a rotation is refused.
 """
 
 from __future__ import annotations
@@ -37,17 +40,19 @@ from sensor_msgs.msg import JointState
 from nuturtle_description.robot_params import RobotParams, burger_params
 from nuturtle_ros_common.conversions import (
     odometry_message,
-    stamp_seconds,
+    stamp_from_nanoseconds,
     transform_from_pose,
     transform_stamped,
 )
 from nuturtle_ros_common.node_main import run_node
 from nuturtle_ros_common.ros_params import declare_dataclass
 from nuturtle_ros_common.tf_compat import OptionalTfBroadcaster
-from nuturtle_ros_common.throttle import WARN_THROTTLE_S
-from nuturtle_ros_common.wheel_joints import WheelJoints, wheel_values
+from nuturtle_ros_common.throttle import SourceWarnings
+from nuturtle_ros_common.wheel_joints import WheelJoints
+from nuturtle_ros_common.wheel_stream import WheelStream
 from turtlelib import Transform2D, Twist2D
 from turtlelib.path_trail import PathTrail, PathTrailConfig
+from turtlelib.sample_gate import SampleGateConfig, Verdict
 from turtlelib.validation import names
 from turtlelib.wheel_odometry import WheelOdometry
 
@@ -72,6 +77,14 @@ class OdometryNode(Node):
         robot = declare_dataclass(self, RobotParams, overrides=vars(burger_params()))
         self.joints = declare_dataclass(self, WheelJoints)
         self.frames = declare_dataclass(self, OdometryFrames)
+        self._warnings = SourceWarnings(self.get_logger())
+        self.wheels = WheelStream(
+            self.joints,
+            robot.max_wheel_speed,
+            robot.encoder_ticks_per_rad,
+            declare_dataclass(self, SampleGateConfig),
+            self._warnings,
+        )
         self.odometry = WheelOdometry(robot.diff_drive())
         self.trail: PathTrail[PoseStamped] = PathTrail(declare_dataclass(self, PathTrailConfig))
         self._odom_publisher = self.create_publisher(Odometry, "odom", 10)
@@ -81,33 +94,25 @@ class OdometryNode(Node):
         self.create_subscription(PoseWithCovarianceStamped, "initialpose", self._on_initial_pose, 10)
 
     def _on_joint_states(self, msg: JointState) -> None:
-        try:
-            phi_left_rad, phi_right_rad = wheel_values(self.joints, msg.name, msg.position)
-        except ValueError as error:
-            self.get_logger().warning(f"joint_states skipped: {error}", throttle_duration_sec=WARN_THROTTLE_S)
+        result = self.wheels.offer(msg)
+        if result is None:
             return
-        t_s = stamp_seconds(msg.header.stamp)
-        reference_time_s = self.odometry.reference_time_s
-        if reference_time_s is not None and t_s < reference_time_s:
-            self.get_logger().warning(
-                f"joint_states skipped: time went backwards ({t_s:.9f} s < {reference_time_s:.9f} s); "
-                "taking it as the new reference",
-                throttle_duration_sec=WARN_THROTTLE_S,
-            )
-            self.odometry.set_reference(t_s, phi_left_rad, phi_right_rad)
-            return
-        if reference_time_s is None:
-            self.odometry.set_reference(t_s, phi_left_rad, phi_right_rad)
-        try:
-            V_body = self.odometry.step(t_s, phi_left_rad, phi_right_rad)
-        except ValueError as error:  # finite angles whose increment overflows
-            self.get_logger().warning(
-                f"joint_states skipped: {error}; taking it as the new reference",
-                throttle_duration_sec=WARN_THROTTLE_S,
-            )
-            self.odometry.set_reference(t_s, phi_left_rad, phi_right_rad)
-            return
-        self._publish(self.odometry.T_odom_body, V_body, msg.header.stamp)
+        samples = list(result.samples)
+        if result.verdict is Verdict.RESTARTED or self.odometry.reference_time_s is None:
+            t_ns, (phi_left_rad, phi_right_rad) = samples.pop(0)
+            self.odometry.set_reference(t_ns * 1e-9, phi_left_rad, phi_right_rad)
+            if not samples:
+                self._publish(self.odometry.T_odom_body, Twist2D(), stamp_from_nanoseconds(t_ns))
+        for t_ns, (phi_left_rad, phi_right_rad) in samples:
+            try:
+                V_body = self.odometry.step(t_ns * 1e-9, phi_left_rad, phi_right_rad)
+            except ValueError as error:  # finite angles whose increment the kinematics cannot take
+                self._warnings.warn(
+                    "joint_states", f"joint_states skipped: {error}; taking it as the new reference"
+                )
+                self.odometry.set_reference(t_ns * 1e-9, phi_left_rad, phi_right_rad)
+                continue
+            self._publish(self.odometry.T_odom_body, V_body, stamp_from_nanoseconds(t_ns))
 
     def _publish(self, T_odom_body: Transform2D, V_body: Twist2D, stamp: Time) -> None:
         frames = self.frames
@@ -120,16 +125,16 @@ class OdometryNode(Node):
     def _on_initial_pose(self, msg: PoseWithCovarianceStamped) -> None:
         frame_id = msg.header.frame_id
         if frame_id not in ("", self.frames.odom_id):
-            self.get_logger().warning(
+            self._warnings.warn(
+                "initialpose",
                 f"initialpose skipped: it is in frame {frame_id!r}, odometry resets only from a pose in "
                 f"{self.frames.odom_id!r} (set RViz's fixed frame to {self.frames.odom_id!r})",
-                throttle_duration_sec=WARN_THROTTLE_S,
             )
             return
         try:
             T_odom_body = transform_from_pose(msg.pose.pose)
         except ValueError as error:
-            self.get_logger().warning(f"initialpose skipped: {error}", throttle_duration_sec=WARN_THROTTLE_S)
+            self._warnings.warn("initialpose", f"initialpose skipped: {error}")
             return
         self.odometry.T_odom_body = T_odom_body
         self.trail.clear()

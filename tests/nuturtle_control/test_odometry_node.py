@@ -125,7 +125,7 @@ def test_path_is_decimated_and_ends_at_the_odometry_pose(ros):
 def test_initialpose_resets_the_pose_and_following_motion_starts_from_it(ros):
     rig = Rig(ros)
     rig.send(joint_state(1.0, (0.0, 0.0)))
-    rig.send(joint_state(2.0, (1.0, 2.0)))
+    rig.send(joint_state(1.5, (1.0, 2.0)))
     reset = PoseWithCovarianceStamped()
     reset.header.frame_id = "odom"
     reset.pose.pose.position.x, reset.pose.pose.position.y = 1.0, 2.0
@@ -134,7 +134,7 @@ def test_initialpose_resets_the_pose_and_following_motion_starts_from_it(ros):
     rig.ros.spin_for(0.2)
     # 0.1 m straight ahead from (1, 2) facing 0.5 rad
     dphi = 0.1 / R_WHEEL
-    odom = rig.send(joint_state(3.0, (1.0 + dphi, 2.0 + dphi)))
+    odom = rig.send(joint_state(2.0, (1.0 + dphi, 2.0 + dphi)))
     expected = (1.0 + 0.1 * math.cos(0.5), 2.0 + 0.1 * math.sin(0.5), 0.5)
     assert pose_of(odom) == pytest.approx(expected, abs=TOL)
     # a pose in another frame cannot be used without tf: refused with a warning
@@ -142,10 +142,32 @@ def test_initialpose_resets_the_pose_and_following_motion_starts_from_it(ros):
     reset.pose.pose.position.x = 7.0
     rig.initial_pose.publish(reset)
     rig.ros.spin_for(0.2)
-    odom = rig.send(joint_state(4.0, (1.0 + dphi, 2.0 + dphi)))
+    odom = rig.send(joint_state(2.5, (1.0 + dphi, 2.0 + dphi)))
     assert pose_of(odom)[0] == pytest.approx(1.0 + 0.1 * math.cos(0.5), abs=TOL)
     warnings = rig.warnings()
     assert len(warnings) == 1 and "'map'" in warnings[0]
+
+
+@pytest.mark.parametrize(
+    "orientation",
+    [(0.0, 0.0, 0.0, 0.0), (0.0, 0.0, math.inf, -math.inf), (0.0, 0.0, math.nan, 1.0), (0.0, 0.0, 1.0, 1.0)],
+    ids=["zero", "infinite", "NaN", "norm sqrt(2)"],
+)
+def test_an_initialpose_whose_quaternion_is_not_a_rotation_is_refused(ros, orientation):
+    rig = Rig(ros)
+    rig.send(joint_state(1.0, (0.0, 0.0)))
+    reset = PoseWithCovarianceStamped()
+    reset.header.frame_id = "odom"
+    reset.pose.pose.position.x = 1.0
+    reset.pose.pose.orientation.x, reset.pose.pose.orientation.y = orientation[:2]
+    reset.pose.pose.orientation.z, reset.pose.pose.orientation.w = orientation[2:]
+    rig.initial_pose.publish(reset)
+    rig.ros.spin_for(0.2)
+    dphi = 0.1 / R_WHEEL
+    odom = rig.send(joint_state(1.5, (dphi, dphi)))
+    assert pose_of(odom) == pytest.approx((0.1, 0.0, 0.0), abs=TOL), "the pose was not reset"
+    warnings = rig.warnings()
+    assert len(warnings) == 1 and "not a rotation" in warnings[0]
 
 
 WHEELS = ["wheel_left_joint", "wheel_right_joint"]
@@ -170,41 +192,80 @@ def test_bad_joint_states_are_skipped_with_a_throttled_warning_and_the_node_keep
         rig.joint_states.publish(bad)
     # topics keep their order: the next odom answers this good message, integrated from the first one
     dphi = 0.1 / R_WHEEL
-    odom = rig.send(joint_state(3.0, (dphi, dphi)))
+    odom = rig.send(joint_state(1.5, (dphi, dphi)))
     assert pose_of(odom) == pytest.approx((0.1, 0.0, 0.0), abs=TOL)
-    assert odom.twist.twist.linear.x == pytest.approx(0.1 / 2.0, abs=TOL)
+    assert odom.twist.twist.linear.x == pytest.approx(0.1 / 0.5, abs=TOL)
     warnings = rig.warnings()
     assert len(rig.odoms) == 2
     assert len(warnings) == 1, "three bad messages, one (throttled) warning"
     assert "joint_states skipped" in warnings[0] and reason in warnings[0]
 
 
-def test_time_going_backwards_is_skipped_and_taken_as_the_new_reference(ros):
+def test_a_restarted_simulator_is_followed_after_restart_samples_messages(ros):
     rig = Rig(ros)
     rig.send(joint_state(10.0, (0.0, 0.0)))
     dphi = 0.1 / R_WHEEL
-    rig.send(joint_state(11.0, (dphi, dphi)))  # 0.1 m
-    # a restarted simulator: time and wheel angles start again; no odom for this message
+    rig.send(joint_state(10.5, (dphi, dphi)))  # 0.1 m
+    # a restarted simulator: time and wheel angles start again; the first restart_samples - 1 = 2 messages
+    # are refused, the third restarts the reference at the first and integrates the motion since
     rig.joint_states.publish(joint_state(0.5, (0.0, 0.0)))
-    odom = rig.send(joint_state(1.0, (2 * dphi, 2 * dphi)))  # 0.2 m more from the new reference
+    rig.joint_states.publish(joint_state(1.0, (dphi, dphi)))
+    rig.ros.spin_for(0.2)
+    assert len(rig.odoms) == 2
+    rig.send(joint_state(1.5, (2 * dphi, 2 * dphi)))
+    assert rig.ros.spin_until(lambda: len(rig.odoms) == 4), "one odom per message after the new reference"
+    odom = rig.odoms[3]
+    assert pose_of(rig.odoms[2]) == pytest.approx((0.2, 0.0, 0.0), abs=TOL)
     assert pose_of(odom) == pytest.approx((0.3, 0.0, 0.0), abs=TOL)
-    assert odom.twist.twist.linear.x == pytest.approx(0.2 / 0.5, abs=TOL)
-    assert len(rig.odoms) == 3
+    assert odom.twist.twist.linear.x == pytest.approx(0.1 / 0.5, abs=TOL)
     warnings = rig.warnings()
-    assert len(warnings) == 1 and "time went backwards" in warnings[0]
+    assert len(warnings) == 2 and "not after" in warnings[0] and "restarted" in warnings[1]
 
 
-def test_finite_angles_whose_increment_overflows_are_skipped_and_re_referenced(ros):
+def hostile_joint_states(t_s: float, phi: float) -> dict[str, JointState]:
+    """Single messages that must not move the odometry of a robot at ``phi`` (both wheels) at ``t_s``."""
+    replayed = joint_state(t_s - 1.0, (phi - 1.0, phi - 1.0))
+    nanosec = joint_state(t_s, (phi, phi))
+    nanosec.header.stamp.nanosec = 4_000_000_000
+    return {
+        "replayed from 1 s earlier": replayed,
+        "stamped 1 s in the future": joint_state(t_s + 1.0, (phi, phi)),
+        "nanosec 4e9": nanosec,
+        "both wheels +1e6 rad": joint_state(t_s + 0.05, (phi + 1e6, phi + 1e6)),
+        "one wheel +1e6 rad": joint_state(t_s + 0.05, (phi + 1e6, phi)),
+        "both wheels +1e200 rad": joint_state(t_s + 0.05, (1e200, 1e200)),
+        "negative sec": joint_state(-5.0, (phi, phi)),
+    }
+
+
+@pytest.mark.parametrize("kind", list(hostile_joint_states(0.0, 0.0)))
+def test_a_single_implausible_joint_states_is_refused_and_motion_is_counted_once(ros, kind):
+    """Issue: a joint_states replayed from 1 s earlier, stamped in the future or with nanosec 4e9 made
+    odometry count a second of motion twice or lose it; +1e6 rad on one wheel put odom 0.78 m off."""
+    rig = Rig(ros)
+    dphi = 0.01 / R_WHEEL  # 1 cm per 50 ms
+    for k in range(21):
+        rig.send(joint_state(1.0 + 0.05 * k, (k * dphi, k * dphi)))
+    rig.joint_states.publish(hostile_joint_states(2.0, 20 * dphi)[kind])
+    for k in range(21, 41):
+        odom = rig.send(joint_state(1.0 + 0.05 * k, (k * dphi, k * dphi)))
+    assert pose_of(odom) == pytest.approx((0.4, 0.0, 0.0), abs=TOL)
+    assert len(rig.odoms) == 41, "the hostile message published nothing"
+    warnings = rig.warnings()
+    assert len(warnings) == 1 and ("refused" in warnings[0] or "invalid stamp" in warnings[0])
+
+
+def test_absurd_finite_angles_are_refused_and_forgotten(ros):
     rig = Rig(ros)
     rig.send(joint_state(1.0, (0.0, 0.0)))
-    rig.joint_states.publish(joint_state(2.0, (1e308, -1e308)))  # the turn rate overflows to inf
-    rig.joint_states.publish(joint_state(3.0, (0.0, 0.0)))  # and back: overflows again
+    rig.joint_states.publish(joint_state(1.1, (1e308, -1e308)))  # the turn rate would overflow to inf
+    rig.send(joint_state(1.2, (0.0, 0.0)))
     dphi = 0.1 / R_WHEEL
-    odom = rig.send(joint_state(4.0, (dphi, dphi)))
+    odom = rig.send(joint_state(1.7, (dphi, dphi)))
     assert pose_of(odom) == pytest.approx((0.1, 0.0, 0.0), abs=TOL)
-    assert len(rig.odoms) == 2
+    assert len(rig.odoms) == 3
     warnings = rig.warnings()
-    assert len(warnings) == 1 and "taking it as the new reference" in warnings[0]
+    assert len(warnings) == 1 and "value 0 moved" in warnings[0]
 
 
 def test_parameters_set_joint_names_frames_and_robot_constants(ros):
@@ -218,7 +279,7 @@ def test_parameters_set_joint_names_frames_and_robot_constants(ros):
     rig = Rig(ros, parameter_overrides=overrides)
     names = ("r", "other", "l")  # any order, other joints ignored
     rig.send(joint_state(1.0, (0.0, 9.0, 0.0), names=names))
-    odom = rig.send(joint_state(2.0, (2.0, -9.0, 2.0), names=names))  # 2 rad of a 5 cm wheel
+    odom = rig.send(joint_state(1.5, (2.0, -9.0, 2.0), names=names))  # 2 rad of a 5 cm wheel
     assert pose_of(odom) == pytest.approx((0.1, 0.0, 0.0), abs=TOL)
     assert (odom.header.frame_id, odom.child_frame_id) == ("robot/odom", "robot/base_footprint")
 

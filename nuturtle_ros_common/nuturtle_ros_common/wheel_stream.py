@@ -1,0 +1,63 @@
+"""joint_states -> plausible wheel-angle samples, for every node that integrates the wheels.
+
+A JointState is read (`wheel_joints.wheel_values`: names, lengths, finite angles), its stamp checked
+(`conversions.stamp_nanoseconds`), then offered to a `turtlelib.SampleGate` whose rate bound is the
+robot's: each wheel turns at most ``(1 + speed_margin) max_wheel_speed`` (rad/s; the robot description's
+``RobotParams.max_wheel_speed``), with a slack of ``ENCODER_SLACK_TICKS`` encoder ticks. So a
+replayed, future-stamped or corrupt message is refused without moving anything, and a source that really
+restarted (a restarted simulator, a looped recording) is followed after ``restart_samples`` messages.
+"""
+
+from __future__ import annotations
+
+from sensor_msgs.msg import JointState
+
+from turtlelib.sample_gate import GateResult, SampleGate, SampleGateConfig, Verdict
+
+from .conversions import stamp_nanoseconds
+from .throttle import SourceWarnings
+from .wheel_joints import WheelJoints, wheel_values
+
+# Slack of the rate bound (encoder ticks): a reading may be off by a tick at either sample
+ENCODER_SLACK_TICKS = 2.0
+
+
+class WheelStream:
+    """The wheel samples of a node's `joint_states` (module docstring): ``max_wheel_speed`` (rad/s) and
+    ``encoder_ticks_per_rad`` set the rate bound; problems are warned (throttled) on ``warnings`` under
+    ``source``."""
+
+    def __init__(
+        self,
+        joints: WheelJoints,
+        max_wheel_speed: float,
+        encoder_ticks_per_rad: float,
+        config: SampleGateConfig,
+        warnings: SourceWarnings,
+        source: str = "joint_states",
+    ) -> None:
+        self.joints = joints
+        slack_rad = ENCODER_SLACK_TICKS / encoder_ticks_per_rad
+        self.gate = SampleGate(config, [max_wheel_speed] * 2, [slack_rad] * 2)
+        self._warnings = warnings
+        self._source = source
+
+    def offer(self, msg: JointState) -> GateResult | None:
+        """The samples to apply for ``msg`` (``ACCEPTED``: motion on from the last one; ``RESTARTED``: start
+        again at the first), or None when there is nothing to apply (invalid, refused: warned; an exact
+        duplicate: quietly)."""
+        try:
+            angles = wheel_values(self.joints, msg.name, msg.position)
+            result = self.gate.offer(stamp_nanoseconds(msg.header.stamp), angles)
+        except ValueError as error:
+            self._warnings.warn(self._source, f"{self._source} skipped: {error}")
+            return None
+        if result.verdict is Verdict.REFUSED:
+            self._warnings.warn(self._source, f"{self._source} refused: {result.reason}")
+            return None
+        if result.verdict is Verdict.RESTARTED:
+            # its own logger: the refusals before it must not throttle it away
+            self._warnings.warn(
+                f"{self._source}_restart", f"{self._source}: {result.reason} at the first of them"
+            )
+        return None if result.verdict is Verdict.DUPLICATE else result
