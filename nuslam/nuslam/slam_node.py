@@ -36,15 +36,22 @@ Parameters
     motion model's wheel_noise), `turtlelib.SlamConfig` (range_std, bearing_std, matcher, gates,
     linearization, confirm_count, tentative_timeout, max_range, initial_*_std, jcbb_max_nodes),
     `turtlelib.TimelineConfig`
-    (max_observation_delay, max_pending_observations), `RobotParams` (the Burger's by default),
-    `WheelJoints`, `PathTrailConfig`. Defaults in config/slam.yaml. The filter's sensor mount
+    (max_observation_delay, max_observation_lead, max_pending_observations), `RobotParams` (the Burger's by
+    default), `WheelJoints`, `PathTrailConfig`, `turtlelib.SampleGateConfig` (speed_margin,
+    max_sample_gap, restart_samples). Defaults in config/slam.yaml. The filter's sensor mount
     (`SlamConfig.sensor_x/y/theta`) is the robot's `lidar_x`, `lidar_y`, `lidar_yaw`. Invalid values stop
     the node at start-up with a message.
 
 Observations that arrive before the first joint_states are dropped quietly (start-up order). Bad input
-never stops the node: invalid joint_states, observations that are stale, non-finite, in an
-unknown frame or beyond the filter's checks are skipped with a throttled warning; a joint_states stamp
-earlier than the last restarts the timeline there (a restarted simulator or a looped recording).
+never stops the node and never changes the estimate: invalid or implausible joint_states
+(`nuturtle_ros_common.wheel_stream`: a stamp not after the last, more than `max_sample_gap` after it, or
+wheels faster than the motors) are refused with a throttled warning, and only `restart_samples` refused
+messages in a row that continue each other restart the timeline at the first of them (a restarted
+simulator, a looped recording), the motion along the others kept. Observation arrays that are stale,
+stamped beyond `max_observation_lead`, non-finite, in an unknown frame, larger than `max_observations` or
+otherwise refused by the filter are skipped with a throttled warning; single observations nearer than
+`min_range`, farther than `max_range`, outside the innovation gates, or new while the map holds
+`max_landmarks` are rejected (counted in /diagnostics; a full map is warned about).
 """
 
 from __future__ import annotations
@@ -83,7 +90,8 @@ from nuturtle_ros_common.node_main import run_node
 from nuturtle_ros_common.ros_params import declare_dataclass
 from nuturtle_ros_common.tf_compat import OptionalTfBroadcaster
 from nuturtle_ros_common.throttle import SourceWarnings
-from nuturtle_ros_common.wheel_joints import WheelJoints, wheel_values
+from nuturtle_ros_common.wheel_joints import WheelJoints
+from nuturtle_ros_common.wheel_stream import WheelStream
 from turtlelib import (
     DiffDriveMotion,
     EkfSlam,
@@ -98,6 +106,7 @@ from turtlelib import (
 from turtlelib.path_trail import PathTrail, PathTrailConfig
 from turtlelib.pose_buffer import PoseBuffer
 from turtlelib.range_bearing import observations_from_points
+from turtlelib.sample_gate import SampleGateConfig, Verdict
 from turtlelib.validation import finite_real, names, non_negative, one_of, positive, store
 from turtlelib.wheel_odometry import WheelOdometry
 
@@ -187,6 +196,13 @@ class SlamNode(Node):
         # the joint_states stamp and wheel angles of the first sample since the last observation
         self._observed_at: tuple[int, tuple[float, float]] | None = None
         self._warnings = SourceWarnings(self.get_logger())
+        self._wheels = WheelStream(
+            self.joints,
+            robot.max_wheel_speed,
+            robot.encoder_ticks_per_rad,
+            declare_dataclass(self, SampleGateConfig),
+            self._warnings,
+        )
 
         self._odom_publisher = self.create_publisher(Odometry, "~/odom", 10)
         self._path_publisher = self.create_publisher(Path, "~/path", 10)
@@ -213,40 +229,38 @@ class SlamNode(Node):
 
     def _on_joint_states(self, msg: JointState) -> None:
         self._joint_states_input.arrived(self.get_clock().now().nanoseconds)
-        try:
-            phi_left_rad, phi_right_rad = wheel_values(self.joints, msg.name, msg.position)
-        except ValueError as error:
-            self._warnings.warn("joint_states", f"joint_states skipped: {error}")
+        result = self._wheels.offer(msg)
+        if result is None:
             return
-        t_ns = stamp_nanoseconds(msg.header.stamp)
+        samples = list(result.samples)
+        if result.verdict is Verdict.RESTARTED:
+            t_ns, angles = samples.pop(0)
+            self._restart(t_ns, *angles)
+        for t_ns, angles in samples:
+            self._add_wheel_sample(t_ns, angles)
+
+    def _add_wheel_sample(self, t_ns: int, angles: tuple[float, float]) -> None:
+        """Move the timeline and the body-twist odometry on to a plausible wheel sample; publish the pose."""
+        phi_left_rad, phi_right_rad = angles
         t_s = t_ns * 1e-9
-        latest_ns = self.timeline.latest_time_ns
-        if latest_ns is not None and t_ns < latest_ns:
-            self._warnings.warn(
-                "joint_states",
-                f"time went backwards ({t_ns} ns < {latest_ns} ns): restarting the timeline there",
-            )
-            self._restart(t_ns, phi_left_rad, phi_right_rad)
-            return
         try:
             start = time.perf_counter()
-            applied = self.timeline.add_motion(t_ns, (phi_left_rad, phi_right_rad))
+            applied = self.timeline.add_motion(t_ns, angles)
             self._count_applied(applied, start)
             if self.odometry.reference_time_s is None:
                 self.odometry.set_reference(t_s, phi_left_rad, phi_right_rad)
             V_body = self.odometry.step(t_s, phi_left_rad, phi_right_rad)
             T_map_body, P_pose = self.timeline.latest_pose()
         except (ValueError, np.linalg.LinAlgError) as error:
-            # finite angles whose increment the kinematics cannot take (a turn rate that overflows): the
-            # timeline may hold the sample already and would fail on it again at every later sample, so
-            # start afresh from it, as the odometry node does
+            # an increment the kinematics cannot take (a turn rate that overflows): the timeline may hold
+            # the sample already and would fail on it again at every later sample, so start afresh from it
             self._warnings.warn(
                 "joint_states", f"joint_states skipped: {error}; taking it as the new reference"
             )
             self._restart(t_ns, phi_left_rad, phi_right_rad)
             return
-        self._check_observations_arrive(t_ns, (phi_left_rad, phi_right_rad))
-        self._publish_pose(msg.header.stamp, V_body, T_map_body, P_pose)
+        self._check_observations_arrive(t_ns, angles)
+        self._publish_pose(stamp_from_nanoseconds(t_ns), V_body, T_map_body, P_pose)
         if applied:
             self._publish_map(stamp_from_nanoseconds(applied[-1][0]))
 
@@ -334,7 +348,8 @@ class SlamNode(Node):
         return True
 
     def _count_applied(self, applied: list, start: float) -> None:
-        """Count the observations of ``applied`` scans and time the call that applied them."""
+        """Count the observations of ``applied`` scans and time the call that applied them; warn when
+        observations were rejected because the map is full."""
         if not applied:
             return
         self._update_time.add(1e3 * (time.perf_counter() - start))
@@ -342,6 +357,12 @@ class SlamNode(Node):
             rejected = int(np.count_nonzero(association.status == ObservationStatus.REJECTED))
             self._counts["rejected"] += rejected
             self._counts["fused"] += len(association.status) - rejected
+            if rejected and self.slam.map_full:
+                self._warnings.warn(
+                    "map",
+                    f"the map holds max_landmarks = {self.config.max_landmarks} landmarks: "
+                    "new ones are not added",
+                )
 
     def _statuses(self, now_ns: int) -> list:
         """The inputs, and the filter: WARN when observations were rejected or skipped since the last
