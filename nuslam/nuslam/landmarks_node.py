@@ -15,8 +15,10 @@ Parameters
     Every field of `turtlelib.DetectorConfig` (cluster_threshold, min_points, min_radius, max_radius, ...),
     under the same names. Invalid values stop the node at start-up with a message.
 
-A scan the detector refuses (an empty or non-finite layout, range_min >= range_max) is skipped with a
-throttled warning; the node keeps running.
+A scan whose layout contradicts itself (`turtlelib.check_scan_layout`: angle_min, angle_max,
+angle_increment and the number of ranges disagree; intensities neither empty nor one per range), or that
+the detector refuses (non-finite layout, range_min >= range_max), is skipped with a throttled warning and
+counted; the node keeps running. Beams outside [range_min, range_max] are never used.
 """
 
 from __future__ import annotations
@@ -43,7 +45,7 @@ from nuturtle_ros_common.markers import cylinder_marker, delete_all_marker, set_
 from nuturtle_ros_common.node_main import run_node
 from nuturtle_ros_common.ros_params import declare_dataclass
 from nuturtle_ros_common.throttle import WARN_THROTTLE_S
-from turtlelib import Clusters, Detections, DetectorConfig, LandmarkDetector
+from turtlelib import Clusters, Detections, DetectorConfig, LandmarkDetector, check_scan_layout
 
 GREEN = (0.1, 0.8, 0.2, 1.0)
 GREY = (0.6, 0.6, 0.6, 0.8)
@@ -114,6 +116,9 @@ class LandmarksNode(Node):
         start = time.perf_counter()
         ranges = np.asarray(msg.ranges, dtype=np.float64)  # array.array('f'): through the buffer protocol
         try:
+            check_scan_layout(len(ranges), msg.angle_min, msg.angle_max, msg.angle_increment)
+            if len(msg.intensities) not in (0, len(ranges)):
+                raise ValueError(f"{len(msg.intensities)} intensities for {len(ranges)} ranges")
             detections, clusters = self.detector.detect_with_clusters(
                 ranges, msg.angle_min, msg.angle_increment, msg.range_min, msg.range_max
             )

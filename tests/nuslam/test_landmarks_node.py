@@ -196,6 +196,12 @@ BAD_SCANS = {
     "range_min > range_max": ({"range_min": 4.0}, "range_min < range_max"),
     "NaN range_max": ({"range_max": math.nan}, "range_min < range_max"),
     "no beams": ({"ranges": []}, "non-empty"),
+    # layouts that contradict themselves (the issue: 85 of 85 detections were phantoms)
+    "angle_increment negated": ({"angle_increment": -LDS01.angle_increment}, "contradicts itself"),
+    "angle_increment doubled": ({"angle_increment": 2 * LDS01.angle_increment}, "more than one turn"),
+    "angle_min 1e10": ({"angle_min": 1e10}, "more than a turn from 0"),
+    "720 ranges for 360 beams": ({"ranges": [1.0] * 720}, "more than one turn"),
+    "intensities for half the beams": ({"intensities": [1.0] * 180}, "180 intensities for 360 ranges"),
 }
 
 

@@ -53,6 +53,8 @@ from .validation import finite_real, in_range, integer, non_negative, positive, 
 # A scan is a full turn when the angular gap from its last beam back to its first is at most this many
 # beam increments.
 _SEAM_GAP_INCREMENTS = 1.5
+# Slack of check_scan_layout (rad): LaserScan's angles are float32, ~1e-7 relative, over ~1000 beams
+LAYOUT_SLACK_RAD = 1e-4
 # Valid ranges are > 0 and finite whatever the scan's limits.
 _SMALLEST_RANGE = float(np.nextafter(0.0, 1.0))
 _LARGEST_RANGE = float(np.finfo(np.float64).max)
@@ -287,6 +289,34 @@ def _checked_ranges(ranges: ArrayLike) -> NDArray[np.float64]:
     if range_m.ndim != 1 or range_m.shape[0] == 0:
         raise ValueError(f"ranges must be a non-empty 1-D array, got shape {range_m.shape}")
     return range_m
+
+
+def check_scan_layout(samples: int, angle_min: float, angle_max: float, angle_increment: float) -> None:
+    """ValueError unless a scan's layout agrees with itself (sensor_msgs/LaserScan's fields).
+
+    Beam ``b`` is at ``angle_min + b angle_increment`` (rad); the last, ``angle_min + (samples - 1)
+    angle_increment``, must be ``angle_max`` to within one increment (drivers differ: the LDS-01's gives
+    ``angle_max = 2 pi`` for 360 beams of 1 degree, one increment past its last beam) plus
+    ``LAYOUT_SLACK_RAD`` for float32 rounding; the angles finite, the increment non-zero, both ends within
+    one turn of zero, and the beams no more than one turn (``samples |angle_increment| <= 2 pi``, plus the
+    slack). A scan that disagrees (a negated or doubled increment, twice the ranges) would put every beam in
+    the wrong direction.
+    """
+    values = (angle_min, angle_max, angle_increment)
+    if not all(math.isfinite(v) for v in values) or angle_increment == 0.0:
+        raise ValueError(f"need finite angle_min, angle_max and angle_increment != 0, got {values}")
+    if samples < 1:
+        raise ValueError("a scan needs a non-empty ranges array")
+    if max(abs(angle_min), abs(angle_max)) > 2.0 * math.pi + LAYOUT_SLACK_RAD:
+        raise ValueError(f"angle_min {angle_min} or angle_max {angle_max} is more than a turn from 0")
+    if samples * abs(angle_increment) > 2.0 * math.pi + LAYOUT_SLACK_RAD:
+        raise ValueError(f"{samples} beams of {angle_increment} rad are more than one turn")
+    last = angle_min + (samples - 1) * angle_increment
+    if abs(last - angle_max) > abs(angle_increment) + LAYOUT_SLACK_RAD:
+        raise ValueError(
+            f"{samples} ranges from angle_min {angle_min} by {angle_increment} rad end at {last:.6g} rad, "
+            f"but angle_max is {angle_max}: the layout contradicts itself"
+        )
 
 
 def _checked_limits(range_min: float, range_max: float) -> tuple[float, float]:
