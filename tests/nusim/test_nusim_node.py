@@ -291,6 +291,26 @@ def test_teleport_moves_the_robot_and_refuses_collisions_and_other_frames(ros):
 
 
 @pytest.mark.parametrize(
+    "orientation",
+    [(0.0, 0.0, 0.0, 0.0), (0.0, 0.0, math.inf, -math.inf), (0.0, 0.0, 1.0, 1.0)],
+    ids=["zero", "infinite", "norm sqrt(2)"],
+)
+def test_a_teleport_whose_quaternion_is_not_a_rotation_is_refused(ros, orientation):
+    """Issue: a zero or non-finite quaternion was accepted (a yaw from atan2(0, 0) or atan2(inf, -inf))."""
+    rig = Rig(ros, **ONE_CYLINDER)
+    msg = teleport_message(Transform2D(-1.0, 0.5, 0.0))
+    q = msg.pose.pose.orientation
+    q.x, q.y, q.z, q.w = orientation
+    rig.teleport.publish(msg)
+    rig.spin_until(lambda: len(rig.warnings()) >= 1)
+    rig.spin_sim_seconds(0.2)
+    start = (rig.node.simulation.config.arena.T_world_start).as_array()
+    assert pose_of(rig.ground_truth[-1]).as_array() == pytest.approx(start, abs=1e-12)
+    (warning,) = rig.warnings()
+    assert "teleport refused" in warning and "not a rotation" in warning
+
+
+@pytest.mark.parametrize(
     ("names", "velocities", "reason"),
     [
         (["wheel_left_joint"], [1.0], "'wheel_right_joint' is missing"),
