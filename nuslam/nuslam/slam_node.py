@@ -34,7 +34,8 @@ Publishes
 Parameters
     `SlamNodeConfig` (association, x0, y0, theta0, frame ids, fake_sensor_std, landmark_radius, and the
     motion model's wheel_noise), `turtlelib.SlamConfig` (range_std, bearing_std, matcher, gates,
-    linearization, confirm_count, tentative_timeout, max_range, initial_*_std, jcbb_max_nodes),
+    linearization, confirm_count, tentative_timeout, min_range, max_range, max_landmarks, max_observations,
+    initial_*_std, jcbb_max_nodes),
     `turtlelib.TimelineConfig`
     (max_observation_delay, max_observation_lead, max_pending_observations), `RobotParams` (the Burger's by
     default), `WheelJoints`, `PathTrailConfig`, `turtlelib.SampleGateConfig` (speed_margin,

@@ -224,3 +224,14 @@ def test_one_implausible_observation_array_changes_nothing(ros, association, kin
     if kind not in TAKEN_THEN_REJECTED:
         warnings = rig.warnings(at_least=1)
         assert len(warnings) == 1 and "skipped" in warnings[0], warnings
+
+
+def test_a_full_map_adds_no_landmark_and_says_so(ros):
+    rig = Rig(ros, association="known", max_landmarks=2, max_sample_gap=0.5)
+    drive = Drive(rig, "known")
+    drive.step(0)
+    msg, _ = drive.observation(drive.t(0))
+    array = rig.observe(msg)
+    assert len(mapped(array)) == 2 and rig.node.slam.map_full
+    warnings = rig.warnings(at_least=1)
+    assert len(warnings) == 1 and "max_landmarks = 2" in warnings[0]
