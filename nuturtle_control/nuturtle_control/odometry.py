@@ -78,7 +78,7 @@ class OdometryNode(Node):
         self.joints = declare_dataclass(self, WheelJoints)
         self.frames = declare_dataclass(self, OdometryFrames)
         self._warnings = SourceWarnings(self.get_logger())
-        self.wheels = WheelStream(
+        self._wheels = WheelStream(
             self.joints,
             robot.max_wheel_speed,
             robot.encoder_ticks_per_rad,
@@ -94,7 +94,7 @@ class OdometryNode(Node):
         self.create_subscription(PoseWithCovarianceStamped, "initialpose", self._on_initial_pose, 10)
 
     def _on_joint_states(self, msg: JointState) -> None:
-        result = self.wheels.offer(msg)
+        result = self._wheels.offer(msg)
         if result is None:
             return
         samples = list(result.samples)
