@@ -476,6 +476,31 @@ def test_nusim_lives_through_hostile_wheel_commands_and_teleports(ros, batch):
         rig.close()
 
 
+@pytest.fixture
+def nusim_rig(ros) -> Iterator[Rig]:
+    rig = Rig(ros, "nusim_refusing")
+    rig.add(NusimNode, **NUSIM_WORLD)
+    rig.publish_to("wheel_cmd", JointState)
+    rig.publish_to("nusim/teleport", PoseWithCovarianceStamped)
+    rig.record("nusim/ground_truth", Odometry)
+    rig.wait_matched()
+    yield rig
+    rig.close()
+
+
+@fuzz(max_examples=20)
+@given(refused=refused_pose_stamped("nusim/teleport", "nusim/world"))
+def test_nusim_does_not_move_the_robot_for_a_teleport_the_contract_refuses(ros, nusim_rig, refused):
+    """The robot stands at the start pose (no wheel command, no noise) through every refused teleport."""
+    truth = nusim_rig.outputs["nusim/ground_truth"]
+    nusim_rig.send(refused)
+    since = len(truth)
+    assert ros.spin_guarded_until(lambda: len(truth) > since + 1, 5.0), "no ground truth"
+    assert close(pose_of(truth[-1]), (0.0, 0.0, 0.0, 1.0)), f"moved to {pose_of(truth[-1])} by {refused!r}"
+    nusim_rig.assert_no_failures()
+    nusim_rig.assert_outputs_finite()
+
+
 # --- landmarks ----------------------------------------------------------------------------------------------
 
 
