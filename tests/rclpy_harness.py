@@ -2,7 +2,9 @@
 they share.
 
 Each test gets its own rclpy Context and a single-threaded executor; `spin_until` spins it until a
-predicate holds or a wall-clock timeout passes.
+predicate holds or a wall-clock timeout passes. `spin_guarded_until` / `spin_guarded_for` spin as the nodes'
+own `run_node` does (`nuturtle_ros_common.node_main.spin_once_guarded`): an exception a callback raises is
+logged and counted in `callback_failures` instead of ending the test, so that fuzz tests can count them.
 """
 
 from __future__ import annotations
@@ -20,6 +22,8 @@ from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.subscription import Subscription
 
+from nuturtle_ros_common.node_main import spin_once_guarded
+
 
 class RosHarness:
     """A private rclpy context + executor; nodes added with `add` are spun together."""
@@ -29,6 +33,9 @@ class RosHarness:
         rclpy.init(context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.nodes: list[Node] = []
+        # callbacks that raised while spinning with spin_guarded_until / spin_guarded_for
+        self.callback_failures = 0
+        self._logger = rclpy.logging.get_logger("rclpy_harness")
 
     def add(self, node: Node) -> Node:
         self.nodes.append(node)
@@ -51,6 +58,26 @@ class RosHarness:
         deadline = time.monotonic() + duration_s
         while time.monotonic() < deadline:
             self.executor.spin_once(timeout_sec=0.02)
+
+    def spin_guarded_until(self, predicate: Callable[[], bool], timeout_s: float = 10.0) -> bool:
+        """`spin_until`, each step through `spin_once_guarded`: a callback's exception is logged and counted
+        in `callback_failures`, and the spinning goes on."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if predicate():
+                return True
+            if not spin_once_guarded(self.executor, self._logger, timeout_sec=0.02):
+                self.callback_failures += 1
+        return predicate()
+
+    def spin_guarded_for(self, duration_s: float) -> None:
+        self.spin_guarded_until(lambda: False, duration_s)
+
+    def remove(self, node: Node) -> None:
+        """Stop spinning ``node`` and destroy it (a test that builds nodes one after the other)."""
+        self.nodes.remove(node)
+        self.executor.remove_node(node)
+        node.destroy_node()
 
     def shutdown(self) -> None:
         for node in self.nodes:
