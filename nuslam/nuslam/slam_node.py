@@ -39,9 +39,9 @@ Parameters
     `turtlelib.TimelineConfig`
     (max_observation_delay, max_observation_lead, max_pending_observations), `RobotParams` (the Burger's by
     default), `WheelJoints`, `PathTrailConfig`, `turtlelib.SampleGateConfig` (speed_margin,
-    max_sample_gap, restart_samples). Defaults in config/slam.yaml. The filter's sensor mount
-    (`SlamConfig.sensor_x/y/theta`) is the robot's `lidar_x`, `lidar_y`, `lidar_yaw`. Invalid values stop
-    the node at start-up with a message.
+    max_sample_gap, max_bridged_gap, restart_samples). Defaults in config/slam.yaml. The filter's sensor
+    mount (`SlamConfig.sensor_x/y/theta`) is the robot's `lidar_x`, `lidar_y`, `lidar_yaw`. Invalid values
+    stop the node at start-up with a message.
 
 Observations that arrive before the first joint_states are dropped quietly (start-up order). Bad input
 never stops the node and never changes the estimate: invalid or implausible joint_states

@@ -12,7 +12,8 @@ Publishes
 Parameters
     `RobotParams` (the Burger's constants by default), `WheelJoints` (wheel_left, wheel_right),
     `OdometryFrames` (body_id, odom_id), `PathTrailConfig` (path_min_step_m, path_min_turn_rad,
-    path_max_poses), `turtlelib.SampleGateConfig` (speed_margin, max_sample_gap, restart_samples).
+    path_max_poses), `turtlelib.SampleGateConfig` (speed_margin, max_sample_gap, max_bridged_gap,
+    restart_samples).
 
 Model (see `wheel_odometry.WheelOdometry`): wheel-angle increments ``dphi = phi_k - phi_{k-1}`` move
 the pose along the exact arc ``T_odom_body_k = T_odom_body_{k-1} @ exp([F dphi])``, and the body twist is

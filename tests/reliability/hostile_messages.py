@@ -45,7 +45,17 @@ from sensor_msgs.msg import JointState, LaserScan
 from visualization_msgs.msg import Marker, MarkerArray
 
 from nuturtle_description.robot_params import burger_params
-from turtlelib import LidarConfig, Transform2D, arena_walls, simulate_scan
+from nuturtle_ros_common.conversions import QUATERNION_NORM_TOLERANCE
+from nuturtle_ros_common.wheel_stream import ENCODER_SLACK_TICKS
+from turtlelib import (
+    LidarConfig,
+    SampleGateConfig,
+    SlamConfig,
+    TimelineConfig,
+    Transform2D,
+    arena_walls,
+    simulate_scan,
+)
 
 S = 1_000_000_000  # ns per s
 INT32_MIN, INT32_MAX, UINT32_MAX = -(2**31), 2**31 - 1, 2**32 - 1
@@ -60,17 +70,22 @@ LDS01 = LidarConfig()  # 360 beams of 1 deg, 0.12 - 3.5 m, exact (no noise, no q
 
 @dataclass(frozen=True)
 class Contract:
-    """What the nodes refuse (the reliability issue's input contract; the ``refused_*`` strategies draw
-    values beyond these limits with a margin, so that ``>`` or ``>=`` in a node makes no difference)."""
+    """What the nodes refuse (the reliability issue's input contract, at the nodes' default parameters; the
+    ``refused_*`` strategies draw values beyond these limits with a margin, so that ``>`` or ``>=`` in a node
+    makes no difference)."""
 
-    max_jump_ns: int = S // 2  # joint_states more than this after the last accepted one
-    max_speed_factor: float = 1.5  # wheel increments beyond factor x max_wheel_speed x dt ...
-    increment_ticks: float = 2.0  # ... + this many encoder ticks
-    restart_after: int = 3  # consecutive, mutually consistent refused samples restart the node from them
-    min_range_m: float = 0.12  # observations nearer than this to the sensor
-    max_observations: int = 100  # observation arrays with more entries
-    max_observation_lead_ns: int = S  # observations stamped this long after the newest joint_states
-    quaternion_tolerance: float = 0.01  # | |q| - 1 | beyond this (or non-finite)
+    # joint_states more than this after the last accepted one
+    max_jump_ns: int = round(SampleGateConfig().max_sample_gap * S)
+    # wheel increments beyond factor x max_wheel_speed x dt ...
+    max_speed_factor: float = 1.0 + SampleGateConfig().speed_margin
+    increment_ticks: float = ENCODER_SLACK_TICKS  # ... + this many encoder ticks
+    # consecutive, mutually consistent refused samples restart the node from them
+    restart_after: int = SampleGateConfig().restart_samples
+    min_range_m: float = SlamConfig().min_range  # observations nearer than this to the sensor
+    max_observations: int = SlamConfig().max_observations  # observation arrays with more entries
+    # observations stamped this long after the newest joint_states
+    max_observation_lead_ns: int = round(TimelineConfig().max_observation_lead * S)
+    quaternion_tolerance: float = QUATERNION_NORM_TOLERANCE  # | |q| - 1 | beyond this (or non-finite)
 
     def max_increment_rad(self, dt_ns: int) -> float:
         return self.max_speed_factor * ROBOT.max_wheel_speed * dt_ns / S + self.increment_ticks * TICK_RAD

@@ -103,9 +103,18 @@ def test_a_long_silence_continues_once_the_samples_after_it_agree():
     # the wheels could have turned that far in the gap: the gap's motion is kept (bridged)
     g = gate(max_sample_gap=0.5, restart_samples=3)
     offer_all(g, stream(5))
-    after = stream(3, t0_ms=200 + 2_000, phi0=0.2 + 0.5)
+    after = stream(3, t0_ms=200 + 1_900, phi0=0.2 + 0.5)
     results = offer_all(g, after)
     assert [r.verdict for r in results] == [Verdict.REFUSED, Verdict.REFUSED, Verdict.ACCEPTED]
+    assert results[-1].samples == tuple(after)
+
+
+def test_a_silence_longer_than_max_bridged_gap_restarts_instead_of_making_up_an_arc():
+    g = gate(max_sample_gap=0.5, max_bridged_gap=2.0, restart_samples=3)
+    offer_all(g, stream(5))
+    after = stream(3, t0_ms=200 + 2_001, phi0=0.7)  # the wheels could have turned that far, but over 2 s
+    results = offer_all(g, after)
+    assert [r.verdict for r in results] == [Verdict.REFUSED, Verdict.REFUSED, Verdict.RESTARTED]
     assert results[-1].samples == tuple(after)
 
 
@@ -139,7 +148,13 @@ def test_invalid_samples_raise_and_change_nothing(t_ns, sample):
 
 @pytest.mark.parametrize(
     "config",
-    [{"speed_margin": -0.1}, {"max_sample_gap": 0.0}, {"restart_samples": 0}, {"restart_samples": 1.5}],
+    [
+        {"speed_margin": -0.1},
+        {"max_sample_gap": 0.0},
+        {"max_sample_gap": 3.0},  # beyond max_bridged_gap
+        {"restart_samples": 0},
+        {"restart_samples": 1.5},
+    ],
 )
 def test_invalid_config_raises(config):
     with pytest.raises(ValueError):

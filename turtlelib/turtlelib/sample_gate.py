@@ -18,9 +18,10 @@ The gate holds the newest accepted sample ``a``. A new sample
   ``a`` clears it, so a lone bad message among real ones is refused and forgotten. When the candidate
   stream reaches ``restart_samples`` samples the source has restarted (a restarted simulator, a looped
   recording, encoders reset at a reboot, or a silence longer than ``max_sample_gap``): if its first sample
-  lies within the rate bound after ``a`` (only the gap was too long), the candidates are **accepted** as a
-  continuation and no motion is lost; otherwise the stream **restarted** at the first candidate, and the
-  motion along the others follows.
+  comes at most ``max_bridged_gap`` after ``a`` and within the rate bound (only the gap was too long: a
+  driver's hiccup), the candidates are **accepted** as a continuation and no motion is lost (the gap is
+  one arc); otherwise the stream **restarted** at the first candidate, and the motion along the others
+  follows (over a longer silence nobody knows how the robot moved: one arc would be made up).
 
 Values are compared as plain differences (unwrapped angles, as encoders report them).
 """
@@ -49,18 +50,25 @@ class SampleGateConfig:
     * ``speed_margin`` (>= 0): how far above the stated maximum rate a value may still move (0.5: up to
       1.5 times the robot's maximum wheel speed);
     * ``max_sample_gap`` (s, > 0): the longest plausible time between two consecutive samples;
+    * ``max_bridged_gap`` (s, >= ``max_sample_gap``): the longest silence taken as one arc of motion once
+      the samples after it agree; after a longer one the stream restarts;
     * ``restart_samples`` (int >= 1): refused samples in a row, continuing each other, after which the
       source is taken to have restarted.
     """
 
     speed_margin: float = 0.5
     max_sample_gap: float = 0.5
+    max_bridged_gap: float = 2.0
     restart_samples: int = 3
 
     def __post_init__(self) -> None:
         store(self, ("speed_margin",), non_negative)
-        store(self, ("max_sample_gap",), positive)
+        store(self, ("max_sample_gap", "max_bridged_gap"), positive)
         store(self, ("restart_samples",), partial(integer, minimum=1))
+        if self.max_bridged_gap < self.max_sample_gap:
+            raise ValueError(
+                f"need max_bridged_gap >= max_sample_gap, got {self.max_bridged_gap}, {self.max_sample_gap}"
+            )
 
 
 class Verdict(Enum):
@@ -97,6 +105,7 @@ class SampleGate:
         self._max_speed = (1.0 + config.speed_margin) * np.array(rates) / NS_PER_S  # per ns
         self._slack = np.array(slacks)
         self._gap_ns = round(config.max_sample_gap * NS_PER_S)
+        self._bridged_gap_ns = round(config.max_bridged_gap * NS_PER_S)
         self._accepted: TimedSample | None = None
         self._candidates: list[TimedSample] = []
 
@@ -136,7 +145,7 @@ class SampleGate:
         candidates, previous = tuple(self._candidates), self._accepted
         self._candidates.clear()
         self._accepted = candidates[-1]
-        if self._discontinuity(previous, candidates[0], check_gap=False) is None:
+        if self._discontinuity(previous, candidates[0], self._bridged_gap_ns) is None:
             return GateResult(Verdict.ACCEPTED, candidates)
         return GateResult(
             Verdict.RESTARTED,
@@ -144,12 +153,13 @@ class SampleGate:
             f"{len(candidates)} samples in a row do not continue the stream ({reason}): restarted",
         )
 
-    def _discontinuity(self, a: TimedSample, b: TimedSample, check_gap: bool = True) -> str | None:
-        """Why ``b`` does not continue ``a`` (None when it does)."""
+    def _discontinuity(self, a: TimedSample, b: TimedSample, gap_ns: int | None = None) -> str | None:
+        """Why ``b`` does not continue ``a`` (None when it does), allowing ``gap_ns`` between them
+        (default ``max_sample_gap``)."""
         dt_ns = b[0] - a[0]
         if dt_ns <= 0:
             return f"stamp {b[0]} ns is not after {a[0]} ns"
-        if check_gap and dt_ns > self._gap_ns:
+        if dt_ns > (self._gap_ns if gap_ns is None else gap_ns):
             gap_s = self.config.max_sample_gap
             return f"{dt_ns * 1e-9:.3f} s after the last sample (max_sample_gap = {gap_s} s)"
         step = np.abs(np.subtract(b[1], a[1]))
