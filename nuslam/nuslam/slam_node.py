@@ -92,7 +92,7 @@ from nuturtle_ros_common.ros_params import declare_dataclass
 from nuturtle_ros_common.tf_compat import OptionalTfBroadcaster
 from nuturtle_ros_common.throttle import SourceWarnings
 from nuturtle_ros_common.wheel_joints import WheelJoints
-from nuturtle_ros_common.wheel_stream import WheelStream
+from nuturtle_ros_common.wheel_stream import declare_wheel_stream
 from turtlelib import (
     DiffDriveMotion,
     EkfSlam,
@@ -107,7 +107,7 @@ from turtlelib import (
 from turtlelib.path_trail import PathTrail, PathTrailConfig
 from turtlelib.pose_buffer import PoseBuffer
 from turtlelib.range_bearing import observations_from_points
-from turtlelib.sample_gate import SampleGateConfig, Verdict
+from turtlelib.sample_gate import Verdict
 from turtlelib.validation import finite_real, names, non_negative, one_of, positive, store
 from turtlelib.wheel_odometry import WheelOdometry
 
@@ -197,13 +197,7 @@ class SlamNode(Node):
         # the joint_states stamp and wheel angles of the first sample since the last observation
         self._observed_at: tuple[int, tuple[float, float]] | None = None
         self._warnings = SourceWarnings(self.get_logger())
-        self._wheels = WheelStream(
-            self.joints,
-            robot.max_wheel_speed,
-            robot.encoder_ticks_per_rad,
-            declare_dataclass(self, SampleGateConfig),
-            self._warnings,
-        )
+        self._wheels = declare_wheel_stream(self, self.joints, robot, self._warnings)
 
         self._odom_publisher = self.create_publisher(Odometry, "~/odom", 10)
         self._path_publisher = self.create_publisher(Path, "~/path", 10)

@@ -50,10 +50,10 @@ from nuturtle_ros_common.ros_params import declare_dataclass
 from nuturtle_ros_common.tf_compat import OptionalTfBroadcaster
 from nuturtle_ros_common.throttle import SourceWarnings
 from nuturtle_ros_common.wheel_joints import WheelJoints
-from nuturtle_ros_common.wheel_stream import WheelStream
+from nuturtle_ros_common.wheel_stream import declare_wheel_stream
 from turtlelib import Transform2D, Twist2D
 from turtlelib.path_trail import PathTrail, PathTrailConfig
-from turtlelib.sample_gate import SampleGateConfig, Verdict
+from turtlelib.sample_gate import Verdict
 from turtlelib.validation import names
 from turtlelib.wheel_odometry import WheelOdometry
 
@@ -79,13 +79,7 @@ class OdometryNode(Node):
         self.joints = declare_dataclass(self, WheelJoints)
         self.frames = declare_dataclass(self, OdometryFrames)
         self._warnings = SourceWarnings(self.get_logger())
-        self._wheels = WheelStream(
-            self.joints,
-            robot.max_wheel_speed,
-            robot.encoder_ticks_per_rad,
-            declare_dataclass(self, SampleGateConfig),
-            self._warnings,
-        )
+        self._wheels = declare_wheel_stream(self, self.joints, robot, self._warnings)
         self.odometry = WheelOdometry(robot.diff_drive())
         self.trail: PathTrail[PoseStamped] = PathTrail(declare_dataclass(self, PathTrailConfig))
         self._odom_publisher = self.create_publisher(Odometry, "odom", 10)

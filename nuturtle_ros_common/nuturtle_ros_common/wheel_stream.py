@@ -10,11 +10,15 @@ restarted (a restarted simulator, a looped recording) is followed after ``restar
 
 from __future__ import annotations
 
+from typing import Protocol
+
+from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
 from turtlelib.sample_gate import GateResult, SampleGate, SampleGateConfig, Verdict
 
 from .conversions import stamp_nanoseconds
+from .ros_params import declare_dataclass
 from .throttle import SourceWarnings
 from .wheel_joints import WheelJoints, wheel_values
 
@@ -61,3 +65,22 @@ class WheelStream:
                 f"{self._source}_restart", f"{self._source}: {result.reason} at the first of them"
             )
         return None if result.verdict is Verdict.DUPLICATE else result
+
+
+class WheelLimits(Protocol):
+    """What the rate bound needs of a robot description (``RobotParams`` has it)."""
+
+    @property
+    def max_wheel_speed(self) -> float: ...
+
+    @property
+    def encoder_ticks_per_rad(self) -> float: ...
+
+
+def declare_wheel_stream(
+    node: Node, joints: WheelJoints, robot: WheelLimits, warnings: SourceWarnings
+) -> WheelStream:
+    """The `WheelStream` of ``node``'s joint_states: ``SampleGateConfig`` declared as its ROS parameters,
+    the rate bound from ``robot``."""
+    config = declare_dataclass(node, SampleGateConfig)
+    return WheelStream(joints, robot.max_wheel_speed, robot.encoder_ticks_per_rad, config, warnings)

@@ -12,9 +12,9 @@ import math
 import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from nuslam_test_tools import node_inputs_matched, stamp, stamp_ns
 from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data
+from ros_test_messages import node_inputs_matched, scan_message, stamp_ns
 from sensor_msgs.msg import LaserScan
 from visualization_msgs.msg import Marker, MarkerArray
 
@@ -37,24 +37,6 @@ T0_NS = 1_700_000_000_123_456_789  # an epoch-sized stamp with every nanosecond 
 
 def scan_ranges(circles=CYLINDERS, walls=WALLS, seed: int = 7) -> np.ndarray:
     return simulate_scan(Transform2D(), circles, walls, LDS01, np.random.default_rng(seed))
-
-
-def scan_msg(t_ns: int, ranges, frame_id: str = "base_scan", **layout) -> LaserScan:
-    """An LDS-01 LaserScan of ``ranges``; ``layout`` overrides angle_min, angle_increment, range_min, ..."""
-    msg = LaserScan()
-    msg.header.stamp = stamp(t_ns)
-    msg.header.frame_id = frame_id
-    msg.angle_min = LDS01.angle_min
-    msg.angle_max = LDS01.angle_min + (LDS01.samples - 1) * LDS01.angle_increment
-    msg.angle_increment = LDS01.angle_increment
-    msg.time_increment = 0.2 / 360
-    msg.scan_time = 0.2
-    msg.range_min = LDS01.range_min
-    msg.range_max = LDS01.range_max
-    for name, value in layout.items():
-        setattr(msg, name, value)
-    msg.ranges = [float(r) for r in ranges]
-    return msg
 
 
 def cylinders_of(array: MarkerArray) -> list[Marker]:
@@ -107,7 +89,7 @@ def assert_header(array: MarkerArray, t_ns: int, frame_id: str = "base_scan") ->
 
 def test_two_cylinders_give_a_deleteall_then_a_cylinder_each_at_its_centre_with_its_diameter(ros):
     rig = Rig(ros)
-    array = rig.send(scan_msg(T0_NS, scan_ranges()))
+    array = rig.send(scan_message(T0_NS, scan_ranges()))
     assert_header(array, T0_NS)
     assert array.markers[0].action == Marker.DELETEALL
     found = cylinders_of(array)
@@ -130,10 +112,12 @@ def test_two_cylinders_give_a_deleteall_then_a_cylinder_each_at_its_centre_with_
 
 def test_a_scan_in_another_frame_keeps_its_frame_and_each_scan_gets_its_own_array(ros):
     rig = Rig(ros)
-    first = rig.send(scan_msg(T0_NS, scan_ranges(), frame_id="robot/base_scan"))
+    first = rig.send(scan_message(T0_NS, scan_ranges(), frame_id="robot/base_scan"))
     # the second scan: only the far cylinder, moved
     moved = np.array([[-0.2, -1.5, 0.08]])
-    second = rig.send(scan_msg(T0_NS + 200_000_000, scan_ranges(moved, seed=8), frame_id="robot/base_scan"))
+    second = rig.send(
+        scan_message(T0_NS + 200_000_000, scan_ranges(moved, seed=8), frame_id="robot/base_scan")
+    )
     assert_header(first, T0_NS, "robot/base_scan")
     assert_header(second, T0_NS + 200_000_000, "robot/base_scan")
     assert len(cylinders_of(first)) == 2
@@ -151,7 +135,7 @@ def test_a_scan_in_another_frame_keeps_its_frame_and_each_scan_gets_its_own_arra
 )
 def test_a_scan_without_cylinders_gives_an_array_with_only_the_deleteall(ros, ranges):
     rig = Rig(ros)
-    array = rig.send(scan_msg(T0_NS, ranges))
+    array = rig.send(scan_message(T0_NS, ranges))
     assert_header(array, T0_NS)
     assert [marker.action for marker in array.markers] == [Marker.DELETEALL]
     assert rig.warnings() == []
@@ -159,7 +143,7 @@ def test_a_scan_without_cylinders_gives_an_array_with_only_the_deleteall(ros, ra
 
 def test_clusters_are_points_markers_green_on_the_cylinders_and_grey_elsewhere(ros):
     rig = Rig(ros)
-    rig.send(scan_msg(T0_NS, scan_ranges()))
+    rig.send(scan_message(T0_NS, scan_ranges()))
     (clusters,) = rig.clusters
     assert_header(clusters, T0_NS)
     assert clusters.markers[0].action == Marker.DELETEALL
@@ -209,13 +193,15 @@ BAD_SCANS = {
 def test_a_bad_scan_is_skipped_with_a_warning_and_the_next_good_scan_is_processed(ros, kind):
     layout, reason = BAD_SCANS[kind]
     rig = Rig(ros)
-    rig.send(scan_msg(T0_NS, scan_ranges()))
-    bad = scan_msg(T0_NS + 100_000_000, scan_ranges(), **{k: v for k, v in layout.items() if k != "ranges"})
+    rig.send(scan_message(T0_NS, scan_ranges()))
+    bad = scan_message(
+        T0_NS + 100_000_000, scan_ranges(), **{k: v for k, v in layout.items() if k != "ranges"}
+    )
     if "ranges" in layout:
         bad.ranges = layout["ranges"]
     rig.scan.publish(bad)
     # a topic keeps its order: the next array answers this good scan
-    after = rig.send(scan_msg(T0_NS + 200_000_000, scan_ranges(seed=9)))
+    after = rig.send(scan_message(T0_NS + 200_000_000, scan_ranges(seed=9)))
     assert_header(after, T0_NS + 200_000_000)
     assert len(cylinders_of(after)) == 2
     stamps = [stamp_ns(array.markers[0].header.stamp) for array in rig.landmarks]
@@ -228,7 +214,7 @@ def test_a_bad_scan_is_skipped_with_a_warning_and_the_next_good_scan_is_processe
 
 def test_a_max_radius_below_both_cylinders_detects_nothing(ros):
     rig = Rig(ros, max_radius=0.04)
-    array = rig.send(scan_msg(T0_NS, scan_ranges()))
+    array = rig.send(scan_message(T0_NS, scan_ranges()))
     assert [marker.action for marker in array.markers] == [Marker.DELETEALL]
     (clusters,) = rig.clusters
     assert all(marker.color.g < 0.7 for marker in clusters.markers[1:]), "every cluster grey"
@@ -237,7 +223,7 @@ def test_a_max_radius_below_both_cylinders_detects_nothing(ros):
 
 def test_a_max_radius_between_the_cylinders_keeps_only_the_small_one(ros):
     rig = Rig(ros, max_radius=0.065, cluster_threshold=0.08)
-    (only,) = cylinders_of(rig.send(scan_msg(T0_NS, scan_ranges())))
+    (only,) = cylinders_of(rig.send(scan_message(T0_NS, scan_ranges())))
     x, y, r = CYLINDERS[0]
     assert (only.pose.position.x, only.pose.position.y) == pytest.approx((x, y), abs=CENTRE_TOL_M)
     assert only.scale.x == pytest.approx(2 * r, abs=2 * RADIUS_TOL_M)

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from nuslam_test_tools import cylinder_array
+from ros_test_messages import cylinder_array
 from test_slam_node import (
     DRIVE,
     EPOCH_NS,
@@ -99,6 +99,16 @@ class Drive:
         assert len(mapped(self.rig.maps[-1])) == len(LANDMARKS)
 
 
+def halfway(ros, association: str) -> tuple[Rig, Drive]:
+    """A node (default joint_states limits; every landmark confirmed at once) driven to HOSTILE_AT."""
+    rig = Rig(ros, association=association, confirm_count=1, max_sample_gap=0.5)
+    drive = Drive(rig, association)
+    for k in range(HOSTILE_AT + 1):
+        drive.step(k)
+    rig.ros.spin_for(0.1)
+    return rig, drive
+
+
 def snapshot(rig: Rig):
     node = rig.node
     return (
@@ -144,11 +154,7 @@ JOINT_STATES_KINDS = [
 @pytest.mark.parametrize("association", ["known", "unknown"])
 @pytest.mark.parametrize("kind", JOINT_STATES_KINDS)
 def test_one_implausible_joint_states_is_refused_and_changes_nothing(ros, association, kind):
-    rig = Rig(ros, association=association, confirm_count=1, max_sample_gap=0.5)
-    drive = Drive(rig, association)
-    for k in range(HOSTILE_AT + 1):
-        drive.step(k)
-    rig.ros.spin_for(0.1)
+    rig, drive = halfway(ros, association)
     before = snapshot(rig)
     rig.joint_states.publish(hostile_joint_states(drive)[kind])
     rig.ros.spin_for(0.3)
@@ -204,11 +210,7 @@ TAKEN_THEN_REJECTED = {"a cylinder 1 nm from the sensor", "0.5 m off its landmar
     + [("unknown", kind) for kind in OBSERVATION_KINDS if kind != "0.5 m off its landmark"],
 )
 def test_one_implausible_observation_array_changes_nothing(ros, association, kind):
-    rig = Rig(ros, association=association, confirm_count=1, max_sample_gap=0.5)
-    drive = Drive(rig, association)
-    for k in range(HOSTILE_AT + 1):
-        drive.step(k)
-    rig.ros.spin_for(0.1)
+    rig, drive = halfway(ros, association)
     before = snapshot(rig)
     hostile = hostile_observations(drive)[kind]
     copies = 25 if kind == "stamped 1000 s ahead" else 1  # more than the waiting queue holds

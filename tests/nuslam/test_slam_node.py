@@ -19,9 +19,10 @@ import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from nav_msgs.msg import Odometry, Path
-from nuslam_test_tools import cylinder_array, node_inputs_matched, stamp, stamp_ns
 from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data
+from ros_test_messages import cylinder_array, node_inputs_matched, stamp, stamp_ns
+from ros_test_messages import relative as landmarks_in
 from sensor_msgs.msg import JointState, LaserScan
 from visualization_msgs.msg import Marker, MarkerArray
 
@@ -88,10 +89,8 @@ def joint_state(t_ns: int, positions, names=WHEELS) -> JointState:
 
 
 def relative(T_world_frame: Transform2D, landmarks=LANDMARKS) -> list[tuple[int, float, float]]:
-    """``(id, x, y)`` of the landmarks in a frame at ``T_world_frame``: ``T_frame_world @ p_world``."""
-    ids = list(landmarks)
-    xy = T_world_frame.inverse() @ np.array([landmarks[i] for i in ids])
-    return [(i, float(x), float(y)) for i, (x, y) in zip(ids, xy, strict=True)]
+    """``(id, x, y)`` of the landmarks (default: this file's) in a frame at ``T_world_frame``."""
+    return landmarks_in(T_world_frame, landmarks)
 
 
 def pose_of(odom: Odometry) -> tuple[float, float, float]:

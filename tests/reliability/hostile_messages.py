@@ -27,7 +27,6 @@ that accepted 10,000 distinct landmarks would need a 20,000 x 20,000 covariance.
 
 from __future__ import annotations
 
-import array
 import functools
 import math
 import sys
@@ -40,6 +39,17 @@ from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Point, Pose, PoseWithCovarianceStamped, Quaternion, Twist, Vector3
 from hypothesis import strategies as st
 from nav_msgs.msg import Odometry
+from ros_test_messages import (
+    INT32_MAX,
+    INT32_MIN,
+    LDS01,
+    cylinder_array,
+    cylinder_marker,
+    float32_array,
+    relative,
+    scan_message,
+    stamp,
+)
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState, LaserScan
 from visualization_msgs.msg import Marker, MarkerArray
@@ -48,7 +58,6 @@ from nuturtle_description.robot_params import burger_params
 from nuturtle_ros_common.conversions import QUATERNION_NORM_TOLERANCE
 from nuturtle_ros_common.wheel_stream import ENCODER_SLACK_TICKS
 from turtlelib import (
-    LidarConfig,
     SampleGateConfig,
     SlamConfig,
     TimelineConfig,
@@ -58,14 +67,13 @@ from turtlelib import (
 )
 
 S = 1_000_000_000  # ns per s
-INT32_MIN, INT32_MAX, UINT32_MAX = -(2**31), 2**31 - 1, 2**32 - 1
+UINT32_MAX = 2**32 - 1
 
 ROBOT = burger_params()
 DRIVE = ROBOT.diff_drive()
 WHEELS = ("wheel_left_joint", "wheel_right_joint")
 T_BODY_SENSOR = ROBOT.T_body_scan  # base_scan in base_footprint (the LDS-01 at lidar_x)
 TICK_RAD = 1.0 / ROBOT.encoder_ticks_per_rad
-LDS01 = LidarConfig()  # 360 beams of 1 deg, 0.12 - 3.5 m, exact (no noise, no quantisation)
 
 
 @dataclass(frozen=True)
@@ -194,16 +202,6 @@ def summary(msg: Any) -> str:
 # --- clean messages -----------------------------------------------------------------------------------------
 
 
-def stamp(t_ns: int) -> Time:
-    """The stamp of integer ns ``t_ns`` (exact; saturated at the ends of Time's range)."""
-    sec, nanosec = divmod(int(t_ns), S)
-    if sec > INT32_MAX:
-        return Time(sec=INT32_MAX, nanosec=S - 1)
-    if sec < INT32_MIN:
-        return Time(sec=INT32_MIN, nanosec=0)
-    return Time(sec=sec, nanosec=nanosec)
-
-
 def stamp_key(t: Time) -> tuple[int, int]:
     return t.sec, t.nanosec
 
@@ -233,66 +231,6 @@ def pose_stamped(T: Transform2D, frame_id: str, t_ns: int = 0) -> PoseWithCovari
 
 def twist(vx: float = 0.0, omega: float = 0.0) -> Twist:
     return Twist(linear=Vector3(x=float(vx)), angular=Vector3(z=float(omega)))
-
-
-def cylinder_array(
-    frame_id: str, t_ns: int, points: Sequence[tuple[int, float, float]], header_stamp: Time | None = None
-) -> MarkerArray:
-    """A landmark MarkerArray as nusim / the landmarks node send it: a DELETEALL, then one CYLINDER (ADD) per
-    ``(id, x, y)``, all in ``frame_id`` stamped ``t_ns`` (or ``header_stamp``). Built by hand."""
-    header_stamp = stamp(t_ns) if header_stamp is None else header_stamp
-    delete_all = Marker(action=Marker.DELETEALL)
-    delete_all.header.frame_id = frame_id
-    delete_all.header.stamp = header_stamp
-    markers = [delete_all]
-    for marker_id, x, y in points:
-        markers.append(_cylinder(frame_id, header_stamp, int(marker_id), float(x), float(y)))
-    return MarkerArray(markers=markers)
-
-
-def _cylinder(frame_id: str, header_stamp: Time, marker_id: int, x: float, y: float) -> Marker:
-    marker = Marker(ns="landmarks", id=marker_id, type=Marker.CYLINDER, action=Marker.ADD)
-    marker.header.frame_id = frame_id
-    marker.header.stamp = header_stamp
-    marker.pose.position.x, marker.pose.position.y, marker.pose.position.z = x, y, 0.125
-    marker.pose.orientation.w = 1.0
-    marker.scale.x = marker.scale.y = 0.076
-    marker.scale.z = 0.25
-    marker.color.g = marker.color.a = 1.0
-    return marker
-
-
-def relative(
-    T_world_frame: Transform2D, landmarks: dict[int, tuple[float, float]]
-) -> list[tuple[int, float, float]]:
-    """``(id, x, y)`` of the landmarks in a frame at ``T_world_frame``: ``T_frame_world @ p_world``."""
-    ids = list(landmarks)
-    xy = T_world_frame.inverse() @ np.array([landmarks[i] for i in ids])
-    return [(i, float(x), float(y)) for i, (x, y) in zip(ids, xy, strict=True)]
-
-
-def scan_message(t_ns: int, ranges, frame_id: str = "base_scan", **layout) -> LaserScan:
-    """An LDS-01 LaserScan of ``ranges``; ``layout`` overrides angle_min, angle_increment, range_min, ..."""
-    msg = LaserScan()
-    msg.header.stamp = stamp(t_ns)
-    msg.header.frame_id = frame_id
-    msg.angle_min = LDS01.angle_min
-    msg.angle_max = LDS01.angle_min + (LDS01.samples - 1) * LDS01.angle_increment
-    msg.angle_increment = LDS01.angle_increment
-    msg.time_increment = 0.2 / 360
-    msg.scan_time = 0.2
-    msg.range_min = LDS01.range_min
-    msg.range_max = LDS01.range_max
-    for name, value in layout.items():
-        setattr(msg, name, value)
-    msg.ranges = float32_array(ranges)
-    return msg
-
-
-def float32_array(values) -> array.array:
-    """``array('f')`` of any floats (a float beyond float32 becomes +-inf, as it would on the wire)."""
-    with np.errstate(over="ignore"):
-        return array.array("f", np.asarray(values, dtype=np.float64).astype(np.float32).tobytes())
 
 
 @functools.cache
@@ -843,7 +781,7 @@ def many_markers(count: int, layout: str, frame_id: str, stamp_sn: tuple[int, in
             x, y, marker_id = 1.0 + 1e-3 * k, 0.5, 7
         else:  # NaN
             x, y, marker_id = math.nan, 0.5, k
-        markers.append(_cylinder(frame_id, header_stamp, marker_id, x, y))
+        markers.append(cylinder_marker(frame_id, header_stamp, marker_id, x, y))
     return MarkerArray(markers=markers)
 
 
@@ -870,11 +808,11 @@ def hostile_marker_arrays(draw, frames: Sequence[str], t_ref_ns: int, topic: str
     if count > 8:  # distinct ids at distinct plausible places (bounded: 150 landmarks at most)
         rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
         for k, (x, y) in enumerate(rng.uniform(-3.0, 3.0, (count, 2))):
-            markers.append(_cylinder(frame_id, header_stamp, k, float(x), float(y)))
+            markers.append(cylinder_marker(frame_id, header_stamp, k, float(x), float(y)))
     else:
         for _ in range(count):
             x, y = draw(marker_positions(frame_id))
-            marker = _cylinder(frame_id, header_stamp, draw(ids), x, y)
+            marker = cylinder_marker(frame_id, header_stamp, draw(ids), x, y)
             marker.action = draw(
                 st.sampled_from([Marker.ADD, Marker.ADD, Marker.DELETE, Marker.DELETEALL, 1, 99, -1])
             )
