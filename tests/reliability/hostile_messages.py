@@ -316,6 +316,13 @@ def frame_ids() -> st.SearchStrategy[str]:
     return st.one_of(st.sampled_from(FRAME_IDS), _texts())
 
 
+def other_frame_ids(*excluded: str) -> st.SearchStrategy[str]:
+    """Frame ids other than ``excluded`` (and never empty): built, not filtered."""
+    return st.one_of(
+        st.sampled_from([f for f in FRAME_IDS if f not in excluded and f]), _texts().map(lambda t: "~" + t)
+    )
+
+
 def _texts() -> st.SearchStrategy[str]:
     # no NUL: a C string ends there, and no surrogates: they cannot be encoded
     return st.text(st.characters(codec="utf-8", exclude_characters="\x00"), max_size=12)
@@ -370,10 +377,14 @@ def quaternions() -> st.SearchStrategy[Quaternion]:
 
 
 def bad_quaternions() -> st.SearchStrategy[Quaternion]:
-    """Quaternions the contract refuses: non-finite, or a norm more than 0.01 (with a margin) from 1."""
-    non_finite = st.tuples(float64s(), float64s(), float64s(), float64s()).filter(
-        lambda q: not all(math.isfinite(v) for v in q)
-    )
+    """Quaternions the contract refuses: non-finite, or a norm further from 1 than the tolerance (with a
+    margin)."""
+    # four doubles, one of them (at least) replaced by a non-finite value: built, not filtered
+    non_finite = st.tuples(
+        st.tuples(float64s(), float64s(), float64s(), float64s()),
+        st.integers(0, 3),
+        st.sampled_from([math.nan, math.inf, -math.inf]),
+    ).map(lambda drawn: tuple(drawn[2] if i == drawn[1] else v for i, v in enumerate(drawn[0])))
     margin = CONTRACT.quaternion_tolerance + 0.005
     off_norm = st.tuples(
         st.floats(-10.0, 10.0),
@@ -586,7 +597,7 @@ def refused_pose_stamped(
         )
         msg.pose.pose.orientation = quaternion_from_yaw(draw(st.floats(-3.0, 3.0)))
     else:
-        msg.header.frame_id = draw(frame_ids().filter(lambda f: f not in ("", frame)))
+        msg.header.frame_id = draw(other_frame_ids(frame))
         msg.pose.pose.position = draw(plausible_position)
         msg.pose.pose.orientation = quaternion_from_yaw(draw(st.floats(-3.0, 3.0)))
     return Sent(topic, f"{topic}: {family}", msg)
@@ -617,7 +628,7 @@ def refused_odometry(draw, t_ref_ns: int, topic: str = "odom", families: Sequenc
     if msg.header.frame_id != "odom" and draw(st.booleans()):
         msg.header.frame_id, msg.child_frame_id = (
             "odom",
-            draw(frame_ids().filter(lambda f: f != "base_footprint")),
+            draw(other_frame_ids("base_footprint")),
         )
     return Sent(topic, "odom: refused", msg)
 

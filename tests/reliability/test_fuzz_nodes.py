@@ -948,7 +948,7 @@ def assert_unharmed(rig: Rig, clean_run: CleanRun, answers: Iterator[tuple[Answe
 
 @pytest.mark.parametrize("refused_input", list(REFUSED_INPUTS))
 @pytest.mark.parametrize("association", ["unknown", "known"])
-@fuzz(max_examples=3)
+@fuzz(max_examples=6)
 @given(data=st.data())
 def test_refused_messages_leave_the_slam_and_odometry_estimates_unharmed(
     ros, association, refused_input, clean_run, data
