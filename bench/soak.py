@@ -30,6 +30,9 @@ Outputs in --out: ``soak.json`` (every sample, the summary, the targets and the 
 ``soak.png`` (RSS, smallest eigenvalue of P, landmarks, SLAM error over robot time) and the demo's own
 outputs (metrics.json, the figures, the bag run/, config.yaml).
 
+The run uses a private DDS domain on loopback (ROS_DOMAIN_ID = pid % 100 + 1 unless set), so no other ROS
+process on the machine joins it.
+
 Usage: python -P bench/soak.py [--duration 3600] [--out out/soak] [--association unknown|known] [--seed 0]
        [--sample-period 10] [--no-progress]
 """
@@ -39,6 +42,11 @@ from __future__ import annotations
 import os
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy loads OpenBLAS
+# A private DDS domain on loopback unless ROS_DOMAIN_ID says otherwise (before rclpy starts): another ROS
+# process on this machine, e.g. a demo on the default domain 0, would otherwise publish its own /clock and
+# joint_states into this run (and hear this one)
+os.environ.setdefault("ROS_DOMAIN_ID", str(os.getpid() % 100 + 1))
+os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
 import argparse
 import gc
@@ -301,7 +309,8 @@ def judge(summary: dict[str, Any], samples: Sequence[SoakSample]) -> list[Target
 
 def plot_soak(path: str | Path, samples: Sequence[SoakSample], landmarks_true: int) -> None:
     """soak.png: over robot time (min), VmRSS (MiB), the smallest eigenvalue of P (log), the landmarks
-    mapped and tentative, and the SLAM position error (mm) with the 2 cm target."""
+    mapped and tentative, and the SLAM position error (mm) with the 2 cm target and the time the map was
+    complete."""
     from nuturtle_demo.plots import new_figure
 
     t_min = np.array([s.sim_time_s for s in samples]) / 60.0
@@ -324,6 +333,9 @@ def plot_soak(path: str | Path, samples: Sequence[SoakSample], landmarks_true: i
     landmarks.legend(loc="lower right")
     error.plot(t_min, [s.slam_error_m * 1e3 for s in samples], color="tab:green")
     error.axhline(MAX_SLAM_ERROR_M * 1e3, color="tab:red", linestyle="--", label="2 cm target")
+    complete_s = next((s.sim_time_s for s in samples if s.landmarks_mapped >= landmarks_true), None)
+    if complete_s is not None:
+        error.axvline(complete_s / 60.0, color="0.6", linestyle=":", label="map complete")
     error.set_ylabel("SLAM position error (mm)")
     error.set_xlabel("robot time (min)")
     error.set_ylim(bottom=0.0)
@@ -379,6 +391,7 @@ def run_soak(
         "machine": {
             "cores": os.cpu_count(), "machine": platform.machine(), "python": platform.python_version(),
             "openblas_num_threads": os.environ.get("OPENBLAS_NUM_THREADS"),
+            "ros_domain_id": os.environ.get("ROS_DOMAIN_ID"),
         },
         "interrupted": result.interrupted,
         "summary": summary,
@@ -403,7 +416,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     print(
         f"soak: {args.duration:g} s of robot time, association {args.association}, seed {args.seed} "
-        f"(OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS')}; {platform.machine()}, "
+        f"(ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID')}, "
+        f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS')}; {platform.machine()}, "
         f"{os.cpu_count()} cores, Python {platform.python_version()})",
         flush=True,
     )
