@@ -25,6 +25,7 @@ from __future__ import annotations
 import json
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
@@ -109,8 +110,10 @@ class DemoResult:
     interrupted: bool
 
 
-class _System:
-    """The nodes of one run, built in one context (see the module docstring)."""
+class DemoSystem:
+    """The nodes of one run, built in one context (see the module docstring): ``nusim``, ``turtle_control``,
+    ``odometry``, ``landmarks``, ``slam``, ``driver``, ``recorder``, ``monitor``; ``sim_time_s`` the
+    simulation time (s) nusim has reached."""
 
     def __init__(self, options: DemoOptions, context: Context, writer: BagWriter) -> None:
         sim_time = [Parameter("use_sim_time", value=True)]
@@ -136,7 +139,7 @@ class _System:
         return self.nusim.step_count / self.nusim.timing.rate
 
 
-def _slam_nodes(system: _System, options: DemoOptions, context: Context, sim_time: list[Parameter]):
+def _slam_nodes(system: DemoSystem, options: DemoOptions, context: Context, sim_time: list[Parameter]):
     """The landmarks and slam nodes, SLAM started at nusim's start pose with matched process noise."""
     from nuslam.landmarks_node import LandmarksNode
     from nuslam.slam_node import SlamNode
@@ -179,19 +182,29 @@ def _progress_bar(options: DemoOptions):
     )  # fmt: skip
 
 
-def run_demo(options: DemoOptions) -> DemoResult:
+# on_progress(system, sim_time_s) of run_demo
+ProgressCallback = Callable[[DemoSystem, float], None]
+
+
+def run_demo(options: DemoOptions, on_progress: ProgressCallback | None = None) -> DemoResult:
     """Run the system for ``options.duration_s`` of simulation time and write every output (module
-    docstring, docs/demo.md). Ctrl-C ends the run early; the outputs then cover the time simulated."""
+    docstring, docs/demo.md). Ctrl-C ends the run early; the outputs then cover the time simulated.
+
+    ``on_progress(system, sim_time_s)``, if given, is called in the executor's thread after each executor
+    step that followed a new physics step, with the running :class:`DemoSystem` and the simulation time
+    it has reached (s): a hook to watch the nodes during the run (``bench/soak.py``). It must only read
+    them. nusim steps on the same thread, so a slow hook costs wall time, never simulation time.
+    """
     out_dir = Path(options.out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     writer = BagWriter(out_dir / BAG_NAME, overwrite=True)
     context = Context()
     rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
     executor = SingleThreadedExecutor(context=context)
-    system: _System | None = None
+    system: DemoSystem | None = None
     interrupted = False
     try:
-        system = _System(options, context, writer)
+        system = DemoSystem(options, context, writer)
         for node in system.nodes:
             if node is not system.nusim:
                 executor.add_node(node)
@@ -204,10 +217,14 @@ def run_demo(options: DemoOptions) -> DemoResult:
             raise RuntimeError(f"the recorder did not discover {missing} within {DISCOVERY_TIMEOUT_S} s")
         executor.add_node(system.nusim)
         wall_start = time.monotonic()
+        reported_step = system.nusim.step_count
         with _progress_bar(options) as progress:
             try:
                 while system.sim_time_s < options.duration_s:
                     spin_once_guarded(executor, system.nusim.get_logger(), timeout_sec=0.1)
+                    if on_progress is not None and system.nusim.step_count != reported_step:
+                        reported_step = system.nusim.step_count
+                        on_progress(system, system.sim_time_s)
                     now_s = min(system.sim_time_s, options.duration_s)
                     if now_s - progress.n >= 0.5 or now_s >= options.duration_s:
                         wall_s = time.monotonic() - wall_start
@@ -237,7 +254,7 @@ def run_demo(options: DemoOptions) -> DemoResult:
 
 
 def _evaluate_and_plot(
-    system: _System, options: DemoOptions, out_dir: Path, sim_seconds: float, wall_seconds: float
+    system: DemoSystem, options: DemoOptions, out_dir: Path, sim_seconds: float, wall_seconds: float
 ) -> RunMetrics:
     simulation = system.nusim.simulation
     T_world_start = simulation.config.arena.T_world_start
@@ -290,7 +307,7 @@ def slam_snapshot(slam_node: Any) -> SlamSnapshot:
     )
 
 
-def _sensor_range_m(system: _System, options: DemoOptions) -> float | np.ndarray:
+def _sensor_range_m(system: DemoSystem, options: DemoOptions) -> float | np.ndarray:
     """How close each cylinder must come to count as seen (m): the fake sensor's range (known association),
     or (unknown) the farthest distance at which the LiDAR puts ``min_points`` beams on it, within SLAM's
     and the LiDAR's range. A cylinder of radius r at distance d spans about 2 r / d rad, so it is hit by
