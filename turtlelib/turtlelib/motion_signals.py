@@ -23,12 +23,25 @@ Signals:
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
 from .geometry import Transform2D, integrate_twist
+from .validation import finite_real, integer
 
 Sample = tuple[float, ...]
+TimedSample = tuple[int, Sample]
+
+
+def timed_sample(t_ns: object, sample: Sequence[float], length: int | None = None) -> TimedSample:
+    """``(t_ns, sample)`` as an int and a tuple of floats; ValueError unless the time is an integer (ns)
+    and the values finite, ``length`` of them when given."""
+    t_ns = integer("motion sample time (ns)", t_ns)
+    values = tuple(finite_real("motion sample value", value) for value in sample)
+    if length is not None and len(values) != length:
+        raise ValueError(f"motion samples have {length} values, got {len(values)}")
+    return t_ns, values
 
 
 class MotionSignal(Protocol):

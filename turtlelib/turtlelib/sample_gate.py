@@ -35,11 +35,9 @@ from functools import partial
 
 import numpy as np
 
+from .motion_signals import TimedSample, timed_sample
 from .timebase import NS_PER_S
-from .validation import finite_real, integer, non_negative, positive, store
-
-Sample = tuple[float, ...]
-TimedSample = tuple[int, Sample]
+from .validation import integer, non_negative, positive, store
 
 
 @dataclass(frozen=True)
@@ -122,11 +120,7 @@ class SampleGate:
     def offer(self, t_ns: int, sample: Sequence[float]) -> GateResult:
         """Decide on the sample ``sample`` at ``t_ns`` (module docstring). ValueError (nothing changed) for
         a non-integer time, non-finite values or a sample of the wrong length."""
-        t_ns = integer("sample time (ns)", t_ns)
-        values = tuple(finite_real("sample value", value) for value in sample)
-        if len(values) != len(self._slack):
-            raise ValueError(f"samples have {len(self._slack)} values, got {len(values)}")
-        new = (t_ns, values)
+        new = timed_sample(t_ns, sample, len(self._slack))
         if self._accepted is None:
             self._accepted = new
             return GateResult(Verdict.ACCEPTED, (new,))

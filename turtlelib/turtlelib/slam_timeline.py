@@ -41,9 +41,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from .ekf_slam import Association, EkfSlam
 from .geometry import Transform2D
-from .motion_signals import MotionSignal, Sample
+from .motion_signals import MotionSignal, Sample, timed_sample
 from .timebase import NS_PER_S
-from .validation import finite_real, integer, non_negative, positive, store
+from .validation import integer, non_negative, positive, store
 
 
 @dataclass(frozen=True)
@@ -206,13 +206,9 @@ class SlamTimeline:
     # --- helpers -----------------------------------------------------------------------------------------
 
     def _checked_sample(self, t_ns: object, sample: ArrayLike) -> tuple[int, Sample]:
-        """``(t_ns, sample)`` as an int and a tuple of floats; ValueError unless the time is an integer and
-        the values finite, as many as the first sample's."""
-        t_ns = integer("motion sample time (ns)", t_ns)
-        values = tuple(finite_real("motion sample value", value) for value in sample)
-        if self._samples and len(values) != len(self._samples[0]):
-            raise ValueError(f"motion samples have {len(self._samples[0])} values, got {len(values)}")
-        return t_ns, values
+        """``(t_ns, sample)`` validated (:func:`~turtlelib.motion_signals.timed_sample`), as many values as
+        the first sample's."""
+        return timed_sample(t_ns, sample, len(self._samples[0]) if self._samples else None)
 
     def _apply(self, observation: _Observation) -> tuple[int, Association]:
         self._advance_to(observation.t_ns)
