@@ -67,6 +67,7 @@ from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Odometry, Path
 from numpy.typing import NDArray
 from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
 
@@ -75,7 +76,6 @@ from nuturtle_ros_common.conversions import (
     odometry_message,
     stamp_from_nanoseconds,
     stamp_nanoseconds,
-    transform_from_pose,
     transform_stamped,
 )
 from nuturtle_ros_common.diagnostics import (
@@ -88,6 +88,7 @@ from nuturtle_ros_common.diagnostics import (
 )
 from nuturtle_ros_common.markers import cylinder_marker, delete_all_marker, ellipse_marker, marker_positions
 from nuturtle_ros_common.node_main import run_node
+from nuturtle_ros_common.odom_stream import OdomStream
 from nuturtle_ros_common.ros_params import declare_dataclass
 from nuturtle_ros_common.tf_compat import OptionalTfBroadcaster
 from nuturtle_ros_common.throttle import SourceWarnings
@@ -97,21 +98,26 @@ from turtlelib import (
     DiffDriveMotion,
     EkfSlam,
     ObservationStatus,
+    OdometryMotion,
+    OdometryPoses,
     SlamConfig,
     SlamTimeline,
     TimelineConfig,
     Transform2D,
     Twist2D,
+    TwistNoise,
     WheelAngles,
 )
 from turtlelib.path_trail import PathTrail, PathTrailConfig
 from turtlelib.pose_buffer import PoseBuffer
+from turtlelib.pose_twist import PoseTwist
 from turtlelib.range_bearing import observations_from_points
-from turtlelib.sample_gate import Verdict
+from turtlelib.sample_gate import GateResult, Verdict
 from turtlelib.validation import finite_real, names, non_negative, one_of, positive, store
 from turtlelib.wheel_odometry import WheelOdometry
 
 ASSOCIATIONS = ("known", "unknown")
+MOTION_SOURCES = ("joint_states", "odom")
 GREEN = (0.1, 0.8, 0.2, 1.0)
 GREEN_TRANSLUCENT = (0.1, 0.8, 0.2, 0.35)
 # odom samples kept to pair with slam's poses (10 s at the odometry node's 20 Hz)
@@ -120,6 +126,12 @@ ODOM_BUFFER_SAMPLES = 200
 STALE_S = 2.0
 # Drawn confidence region of a mapped landmark (standard deviations)
 ELLIPSE_SIGMA = 2.0
+# The default wheel slip (sqrt(rad)); the default odom_* twist noise is this slip on the Burger's twist
+WHEEL_NOISE = 0.05
+# REP 2003 map QoS: reliable, transient local (the last map reaches late subscribers), keep last 1
+MAP_QOS = QoSProfile(
+    depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
+)
 
 
 @dataclass(frozen=True)
@@ -127,6 +139,9 @@ class SlamNodeConfig:
     """The node's own parameters (ValueError for invalid values):
 
     * ``association``: ``unknown`` (LiDAR landmarks) or ``known`` (nusim's fake sensor, ids given);
+    * ``motion_source``: ``joint_states`` (the wheel angles, :class:`turtlelib.DiffDriveMotion` with
+      ``wheel_noise``) or ``odom`` (the relative pose between consecutive `odom` messages,
+      :class:`turtlelib.OdometryMotion` with the ``odom_*`` twist noise: any base that publishes odom);
     * ``x0``, ``y0``, ``theta0`` (m, m, rad, finite): the start pose ``T_map_body``;
     * ``map_id``, ``odom_id``, ``body_id``, ``sensor_id``: frame ids, non-empty and distinct;
     * ``fake_sensor_std`` (m, > 0): per-axis standard deviation of the fake sensor's positions;
@@ -138,6 +153,7 @@ class SlamNodeConfig:
     """
 
     association: str = "unknown"
+    motion_source: str = "joint_states"
     x0: float = 0.0
     y0: float = 0.0
     theta0: float = 0.0
@@ -147,11 +163,12 @@ class SlamNodeConfig:
     sensor_id: str = "base_scan"
     fake_sensor_std: float = 0.01
     landmark_radius: float = 0.038
-    wheel_noise: float = 0.05
+    wheel_noise: float = WHEEL_NOISE
     observation_timeout: float = 3.0
 
     def __post_init__(self) -> None:
         one_of("association", self.association, ASSOCIATIONS)
+        one_of("motion_source", self.motion_source, MOTION_SOURCES)
         store(self, ("x0", "y0", "theta0"), finite_real)
         store(self, ("wheel_noise",), non_negative)
         store(self, ("fake_sensor_std", "landmark_radius", "observation_timeout"), positive)
@@ -182,10 +199,18 @@ class SlamNode(Node):
         self.joints = declare_dataclass(self, WheelJoints)
         self.trail: PathTrail[PoseStamped] = PathTrail(declare_dataclass(self, PathTrailConfig))
         drive = robot.diff_drive()
-        motion = DiffDriveMotion(drive, self.node_config.wheel_noise)
+        odom_noise = declare_dataclass(
+            self, TwistNoise, prefix="odom_", overrides=vars(TwistNoise.from_wheel_slip(drive, WHEEL_NOISE))
+        )
+        self._from_odom = self.node_config.motion_source == "odom"
+        if self._from_odom:
+            motion, signal = OdometryMotion(odom_noise), OdometryPoses()
+            self.odometry: WheelOdometry | PoseTwist = PoseTwist()
+        else:
+            motion, signal = DiffDriveMotion(drive, self.node_config.wheel_noise), WheelAngles()
+            self.odometry = WheelOdometry(drive)
         self.slam = EkfSlam(self.config, motion, self.node_config.T_map_body0)
-        self.timeline = SlamTimeline(self.slam, WheelAngles(), timeline_config)
-        self.odometry = WheelOdometry(drive)
+        self.timeline = SlamTimeline(self.slam, signal, timeline_config)
         # T_sensor_frame for the frames observations may come in
         T_body_sensor = self.config.T_body_sensor
         self._T_sensor_from = {
@@ -194,22 +219,28 @@ class SlamNode(Node):
         }
         self._fake_sensor_covariance = self.node_config.fake_sensor_std**2 * np.eye(2)
         self._observation_topic = "fake_sensor" if self.node_config.association == "known" else "landmarks"
-        # the joint_states stamp and wheel angles of the first sample since the last observation
-        self._observed_at: tuple[int, tuple[float, float]] | None = None
+        # the stamp and value of the first motion sample since the last observation
+        self._observed_at: tuple[int, tuple[float, ...]] | None = None
         self._warnings = SourceWarnings(self.get_logger())
         self._wheels = declare_wheel_stream(self, self.joints, robot, self._warnings)
+        frames = self.node_config
+        self._odom = OdomStream(
+            frames.odom_id, frames.body_id, robot, self._wheels.gate.config, self._warnings
+        )
 
         self._odom_publisher = self.create_publisher(Odometry, "~/odom", 10)
         self._path_publisher = self.create_publisher(Path, "~/path", 10)
-        self._map_publisher = self.create_publisher(MarkerArray, "~/map", 10)
+        # REP 2003: maps are reliable and transient local, so a late subscriber (RViz, Foxglove) gets one
+        self._map_publisher = self.create_publisher(MarkerArray, "~/map", MAP_QOS)
         self._tf = OptionalTfBroadcaster(self)
         self._odom_poses = PoseBuffer(ODOM_BUFFER_SAMPLES)
         # the newest pose not yet paired with odom for map -> odom: (t_ns, T_map_body, stamp)
         self._map_to_odom_pending: tuple[int, Transform2D, Time] | None = None
-        self.create_subscription(JointState, "joint_states", self._on_joint_states, 10)
+        if not self._from_odom:
+            self.create_subscription(JointState, "joint_states", self._on_joint_states, 10)
         self.create_subscription(Odometry, "odom", self._on_odom, 10)
         started_ns = self.get_clock().now().nanoseconds
-        self._joint_states_input = InputMonitor("joint_states", started_ns, STALE_S)
+        self._motion_input = InputMonitor(self.node_config.motion_source, started_ns, STALE_S)
         self._observation_input = InputMonitor(self._observation_topic, started_ns, STALE_S)
         self._update_time = DurationMonitor()
         self._counts = {"fused": 0, "rejected": 0, "skipped": 0}
@@ -223,38 +254,39 @@ class SlamNode(Node):
     # --- inputs ------------------------------------------------------------------------------------------
 
     def _on_joint_states(self, msg: JointState) -> None:
-        self._joint_states_input.arrived(self.get_clock().now().nanoseconds)
-        result = self._wheels.offer(msg)
+        self._motion_input.arrived(self.get_clock().now().nanoseconds)
+        self._follow(self._wheels.offer(msg))
+
+    def _follow(self, result: GateResult | None) -> None:
+        """Apply the plausible motion samples of a joint_states or (``motion_source: odom``) odom message."""
         if result is None:
             return
         samples = list(result.samples)
         if result.verdict is Verdict.RESTARTED:
-            t_ns, angles = samples.pop(0)
-            self._restart(t_ns, *angles)
-        for t_ns, angles in samples:
-            self._add_wheel_sample(t_ns, angles)
+            self._restart(*samples.pop(0))
+        for t_ns, sample in samples:
+            self._add_motion_sample(t_ns, sample)
 
-    def _add_wheel_sample(self, t_ns: int, angles: tuple[float, float]) -> None:
-        """Move the timeline and the body-twist odometry on to a plausible wheel sample; publish the pose."""
-        phi_left_rad, phi_right_rad = angles
+    def _add_motion_sample(self, t_ns: int, sample: tuple[float, ...]) -> None:
+        """Move the timeline and the body-twist odometry on to a plausible motion sample (wheel angles or
+        an odometry pose); publish the pose."""
         t_s = t_ns * 1e-9
+        source = self.node_config.motion_source
         try:
             start = time.perf_counter()
-            applied = self.timeline.add_motion(t_ns, angles)
+            applied = self.timeline.add_motion(t_ns, sample)
             self._count_applied(applied, start)
             if self.odometry.reference_time_s is None:
-                self.odometry.set_reference(t_s, phi_left_rad, phi_right_rad)
-            V_body = self.odometry.step(t_s, phi_left_rad, phi_right_rad)
+                self.odometry.set_reference(t_s, *sample)
+            V_body = self.odometry.step(t_s, *sample)
             T_map_body, P_pose = self.timeline.latest_pose()
         except (ValueError, np.linalg.LinAlgError) as error:
             # an increment the kinematics cannot take (a turn rate that overflows): the timeline may hold
             # the sample already and would fail on it again at every later sample, so start afresh from it
-            self._warnings.warn(
-                "joint_states", f"joint_states skipped: {error}; taking it as the new reference"
-            )
-            self._restart(t_ns, phi_left_rad, phi_right_rad)
+            self._warnings.warn(source, f"{source} skipped: {error}; taking it as the new reference")
+            self._restart(t_ns, sample)
             return
-        self._check_observations_arrive(t_ns, angles)
+        self._check_observations_arrive(t_ns, sample)
         self._publish_pose(stamp_from_nanoseconds(t_ns), V_body, T_map_body, P_pose)
         if applied:
             self._publish_map(stamp_from_nanoseconds(applied[-1][0]))
@@ -300,24 +332,20 @@ class SlamNode(Node):
             self._publish_map(msg.markers[0].header.stamp)
 
     def _on_odom(self, msg: Odometry) -> None:
-        frames = self.node_config
-        try:
-            if (msg.header.frame_id, msg.child_frame_id) != (frames.odom_id, frames.body_id):
-                raise ValueError(
-                    f"frames {msg.header.frame_id!r} -> {msg.child_frame_id!r}, expected "
-                    f"{frames.odom_id!r} -> {frames.body_id!r}"
-                )
-            T_odom_body = transform_from_pose(msg.pose.pose)
-            t_ns = stamp_nanoseconds(msg.header.stamp)
-            latest_ns = self._odom_poses.latest_time_ns
-            if latest_ns is not None and t_ns == latest_ns:
-                return  # a copy of the newest sample
-            if latest_ns is not None and t_ns < latest_ns:
-                self._odom_poses.clear()  # the odometry source restarted (or a recording looped)
-            self._odom_poses.add(t_ns, T_odom_body)
-        except ValueError as error:
-            self._warnings.warn("odom", f"odom skipped: {error}")
+        """A plausible odom sample is kept for ``map -> odom`` and, with ``motion_source: odom``, moves the
+        filter; after a restart of the source (`OdomStream`) the odom frame is another, so the kept samples
+        go."""
+        if self._from_odom:
+            self._motion_input.arrived(self.get_clock().now().nanoseconds)
+        result = self._odom.offer(msg)
+        if result is None:
             return
+        if result.verdict is Verdict.RESTARTED:
+            self._odom_poses.clear()
+        for t_ns, (x, y, theta) in result.samples:
+            self._odom_poses.add(t_ns, Transform2D(x, y, theta))
+        if self._from_odom:
+            self._follow(result)
         self._send_map_to_odom()
 
     def _send_map_to_odom(self) -> None:
@@ -379,31 +407,31 @@ class SlamNode(Node):
             **self._update_time.values("scan_update"),
         }
         return [
-            self._joint_states_input.status("slam", now_ns),
+            self._motion_input.status("slam", now_ns),
             self._observation_input.status("slam", now_ns),
             status("slam: filter", "slam", WARN if skipped or rejected else OK, message, values),
         ]
 
-    def _check_observations_arrive(self, t_ns: int, angles: tuple[float, float]) -> None:
-        """Warn (throttled) when the wheels have turned for ``observation_timeout`` without observations."""
+    def _check_observations_arrive(self, t_ns: int, sample: tuple[float, ...]) -> None:
+        """Warn (throttled) when the robot has moved for ``observation_timeout`` without observations."""
         if self._observed_at is None or t_ns < self._observed_at[0]:
-            self._observed_at = (t_ns, angles)
+            self._observed_at = (t_ns, sample)
             return
-        since_ns, since_angles = self._observed_at
+        since_ns, since_sample = self._observed_at
         silent_s = (t_ns - since_ns) * 1e-9
-        if silent_s > self.node_config.observation_timeout and angles != since_angles:
+        if silent_s > self.node_config.observation_timeout and sample != since_sample:
             topic = self._observation_topic
             source = "nusim's fake sensor" if topic == "fake_sensor" else "the landmarks node"
             self._warnings.warn(
                 "observations",
-                f"no {topic} for {silent_s:.1f} s while the wheels turn: slam is only dead-reckoning "
+                f"no {topic} for {silent_s:.1f} s while the robot moves: slam is only dead-reckoning "
                 f"(is {source} running and publishing {topic}?)",
             )
 
-    def _restart(self, t_ns: int, phi_left_rad: float, phi_right_rad: float) -> None:
-        """Take this wheel sample as the new start of the timeline and of the odometry (estimate kept)."""
-        self.timeline.restart(t_ns, (phi_left_rad, phi_right_rad))
-        self.odometry.set_reference(t_ns * 1e-9, phi_left_rad, phi_right_rad)
+    def _restart(self, t_ns: int, sample: tuple[float, ...]) -> None:
+        """Take this motion sample as the new start of the timeline and of the odometry (estimate kept)."""
+        self.timeline.restart(t_ns, sample)
+        self.odometry.set_reference(t_ns * 1e-9, *sample)
 
     def _observed_points(
         self, msg: MarkerArray

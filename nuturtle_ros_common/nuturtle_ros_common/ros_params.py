@@ -103,9 +103,8 @@ def declare_dataclass(
         if isinstance(default, tuple):
             default = list(default)
         # dynamic typing: a YAML `0` for a float parameter is coerced below rather than refused by rclpy
-        descriptor = ParameterDescriptor(
-            description=descriptions[name], read_only=read_only, dynamic_typing=True
-        )
+        description = f"{prefix}{name}: {descriptions[name]}" if prefix else descriptions[name]
+        descriptor = ParameterDescriptor(description=description, read_only=read_only, dynamic_typing=True)
         parameter = node.declare_parameter(prefix + name, default, descriptor)
         like = defaults[name]
         values[name] = _coerce(parameter.value, like, prefix + name)

@@ -224,18 +224,22 @@ def test_spurious_detections_never_survive_confirmation(association, seed):
     np.testing.assert_allclose(slam.landmarks, LANDMARKS[[truth_of[i] for i in slam.landmark_ids]], atol=0.1)
 
 
-# --- regression: the diff-drive filter is today's, bit for bit ------------------------------------------
+# --- regression: the diff-drive filter is today's, to rounding -------------------------------------------
 
 GOLDEN = Path(__file__).parent / "data" / "diff_drive_golden.npz"
 
 
 @pytest.mark.parametrize(("name", "known", "clutter"), [("known", True, 0.0), ("unknown", False, 0.3)])
-def test_diff_drive_filter_is_unchanged_bit_for_bit(name, known, clutter):
+def test_diff_drive_filter_is_unchanged_to_rounding(name, known, clutter):
     # diff_drive_golden.npz holds the final state, covariance and landmark ids of run(7, ...) computed by the
     # filter of commit 59b6b40 (before motion models were passed in; it had no known-association gate,
     # hence gate_known=1, and counted the tentative timeout in scans: 10 scans of 0.2 s = the 2 s default)
     _, slam, _ = run(7, known, config=dataclasses.replace(CONFIG, gate_known=1.0), clutter=clutter)
+    # Bit for bit on the numpy/BLAS build that wrote it; other builds round the matrix products differently
+    # (about 1e-16 relative after 300 scans), so the comparison allows 1e-12 of each value's scale: far
+    # below any change of the model, far above rounding.
     golden = np.load(GOLDEN)
     np.testing.assert_array_equal(slam.landmark_ids, golden[f"{name}_ids"])
-    np.testing.assert_array_equal(slam.state, golden[f"{name}_state"])
-    np.testing.assert_array_equal(slam.covariance, golden[f"{name}_covariance"])
+    state, covariance = golden[f"{name}_state"], golden[f"{name}_covariance"]
+    np.testing.assert_allclose(slam.state, state, rtol=0.0, atol=1e-12 * np.abs(state).max())
+    np.testing.assert_allclose(slam.covariance, covariance, rtol=0.0, atol=1e-12 * np.abs(covariance).max())

@@ -228,6 +228,58 @@ def test_diff_drive_motion_is_the_wheel_slip_model():
     np.testing.assert_allclose(G, G_pose, atol=1e-15)
 
 
+def _odometry_input(T_delta: Transform2D) -> tuple:
+    return (T_delta.x, T_delta.y, T_delta.theta, S)
+
+
+def _both_steps(dphi_left: float, dphi_right: float) -> tuple[np.ndarray, np.ndarray]:
+    """Q of the wheel model and of the odometry model with the matched twist noise, for one wheel step."""
+    T = Transform2D(0.4, -0.2, 0.7)
+    q, _, Q_wheels = DiffDriveMotion(BURGER, 0.05).step(T, (dphi_left, dphi_right))
+    odometry = OdometryMotion(TwistNoise.from_wheel_slip(BURGER, 0.05))
+    _, _, Q_odometry = odometry.step(T, _odometry_input(T.inverse() @ Transform2D(*q)))
+    return Q_wheels, Q_odometry
+
+
+@pytest.mark.parametrize(("dphi_left", "dphi_right"), [(3.0, 3.0), (-4.0, -4.0)])
+def test_twist_noise_from_wheel_slip_matches_the_wheels_on_straight_lines(dphi_left, dphi_right):
+    Q_wheels, Q_odometry = _both_steps(dphi_left, dphi_right)
+    np.testing.assert_allclose(Q_odometry, Q_wheels, rtol=1e-9, atol=1e-18)
+
+
+@pytest.mark.parametrize(("dphi_left", "dphi_right"), [(-2.0, 2.0), (1.5, -1.5)])
+def test_twist_noise_from_wheel_slip_matches_the_wheels_heading_on_turns_on_the_spot(dphi_left, dphi_right):
+    Q_wheels, Q_odometry = _both_steps(dphi_left, dphi_right)
+    assert Q_odometry[2, 2] == pytest.approx(Q_wheels[2, 2], rel=1e-9)
+
+
+@given(
+    st.floats(0.5, 5.0),
+    st.floats(0.0, 0.95),
+)
+@settings(max_examples=50, deadline=None)
+def test_twist_noise_from_wheel_slip_is_cautious_on_arcs(dphi_outer, ratio):
+    # both wheels forward: the heading variance is over-stated by at most 1 + b kappa / 2
+    T = Transform2D()
+    wheels = DiffDriveMotion(BURGER, 0.05)
+    odometry = OdometryMotion(TwistNoise.from_wheel_slip(BURGER, 0.05))
+    q, _, Q_wheels = wheels.step(T, (ratio * dphi_outer, dphi_outer))
+    _, _, Q_odometry = odometry.step(T, _odometry_input(Transform2D(*q)))
+    xi = BURGER.body_twist(ratio * dphi_outer, dphi_outer)
+    kappa = abs(xi.omega) / xi.vx
+    # var(theta) is the heading noise alone, so it compares exactly
+    assert (
+        Q_wheels[2, 2]
+        <= Q_odometry[2, 2]
+        <= (1 + 0.5 * BURGER.track_width * kappa) * Q_wheels[2, 2] * (1 + 1e-9)
+    )
+
+
+def test_twist_noise_from_wheel_slip_refuses_a_negative_noise():
+    with pytest.raises(ValueError, match="wheel_noise"):
+        TwistNoise.from_wheel_slip(BURGER, -0.01)
+
+
 @pytest.mark.parametrize(
     ("model", "u"),
     [

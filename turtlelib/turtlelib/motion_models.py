@@ -122,7 +122,14 @@ class TwistNoise:
     Each term is linear in travel, turn or time, so the variances of consecutive pieces of a motion add up
     to those of the whole (a random walk: the rate-independent form of the four-alpha odometry model of
     Probabilistic Robotics, whose squared terms would depend on how the motion is split). All >= 0
-    (ValueError otherwise).
+    (ValueError otherwise):
+
+    * ``forward_m2_per_m`` (m^2/m): forward variance per metre travelled;
+    * ``forward_m2_per_s`` (m^2/s): forward variance per second;
+    * ``lateral_m2_per_m`` (m^2/m): sideways variance per metre travelled;
+    * ``heading_rad2_per_m`` (rad^2/m): heading variance per metre travelled;
+    * ``heading_rad2_per_rad`` (rad^2/rad): heading variance per radian turned;
+    * ``heading_rad2_per_s`` (rad^2/s): heading variance per second.
     """
 
     forward_m2_per_m: float = 0.0
@@ -134,6 +141,31 @@ class TwistNoise:
 
     def __post_init__(self) -> None:
         store(self, tuple(self.__dataclass_fields__), non_negative)
+
+    @classmethod
+    def from_wheel_slip(cls, drive: DiffDrive, wheel_noise: float) -> TwistNoise:
+        """The twist noise of a differential drive whose wheels slip ``N(0, wheel_noise^2 |dphi|)`` each
+        (:class:`DiffDriveMotion`), for odometry computed from those wheels.
+
+        With ``r`` the wheel radius and ``b`` the track, ``d xi = [r (dphi_r - dphi_l) / b, r (dphi_l +
+        dphi_r) / 2, 0]`` and ``|dphi_l| + |dphi_r| = 2 d / r`` when both wheels roll forward (travel
+        ``d``), ``b |domega| / r`` when turning on the spot::
+
+            forward_m2_per_m = r sigma^2 / 2,   heading_rad2_per_m = 2 r sigma^2 / b^2
+            heading_rad2_per_rad = r sigma^2 / b
+
+        Exact for straight lines, and for the heading of turns on the spot; on an arc both heading terms
+        count, so the heading variance is over-stated by the factor ``1 + b kappa / 2`` (curvature
+        ``kappa``). Left out: the wheels' correlation of speed and turn errors, and the small forward error
+        of a turn on the spot (``r sigma^2 b |domega| / 4``: the twist noise has no such term).
+        """
+        r, b = drive.wheel_radius, drive.track_width
+        variance = non_negative("wheel_noise", wheel_noise) ** 2
+        return cls(
+            forward_m2_per_m=0.5 * r * variance,
+            heading_rad2_per_m=2.0 * r * variance / b**2,
+            heading_rad2_per_rad=r * variance / b,
+        )
 
     def covariance(self, T_map_body: Transform2D, xi: Twist2D, dt_s: float) -> NDArray[np.float64]:
         """``Q`` (3, 3) of a step of twist ``xi`` over ``dt_s`` from ``T_map_body``, integrated along the

@@ -1,0 +1,101 @@
+"""nav_msgs/Odometry -> plausible odometry-pose samples, for a node that follows an odometry source.
+
+An Odometry message is read (frames ``odom_id -> body_id``, `conversions.transform_from_pose`: a finite
+position and a unit quaternion; `conversions.stamp_nanoseconds`) into the sample ``(x, y, theta)`` of
+``T_odom_body`` (m, m, rad), then offered to a `turtlelib.SampleGate` whose rate bound is the robot's:
+with wheel radius ``r``, track ``b`` and maximum wheel speed ``w`` (rad/s, the robot description's)::
+
+    |dx|, |dy| <= (1 + speed_margin) r w dt + POSITION_SLACK_M
+    |dtheta|   <= (1 + speed_margin) 2 r w / b dt + HEADING_SLACK_RAD
+
+The heading is unwrapped against the last accepted sample (``theta_acc + wrap(theta - theta_acc)``), so
+crossing +-pi is motion, not a jump. A replayed or corrupt message, a time jump or a pose jump (an
+odometry source reset to the origin) is refused without moving anything; a source that really restarted
+is followed after ``restart_samples`` messages (`turtlelib.sample_gate`).
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+from nav_msgs.msg import Odometry
+
+from turtlelib import Transform2D, normalize_angle
+from turtlelib.sample_gate import GateResult, SampleGate, SampleGateConfig, Verdict
+
+from .conversions import stamp_nanoseconds, transform_from_pose
+from .throttle import SourceWarnings
+
+# Slack of the rate bound: a pose may be off by this much at either sample (m, rad)
+POSITION_SLACK_M = 1e-3
+HEADING_SLACK_RAD = 1e-3
+
+
+class DriveLimits(Protocol):
+    """What the rate bound needs of a robot description (``RobotParams`` has it)."""
+
+    @property
+    def max_wheel_speed(self) -> float: ...
+
+    @property
+    def wheel_radius(self) -> float: ...
+
+    @property
+    def track_width(self) -> float: ...
+
+
+class OdomStream:
+    """The odometry-pose samples of a node's `odom` topic (module docstring), expected in frames
+    ``odom_id -> body_id``; problems are warned (throttled) on ``warnings`` under ``source``."""
+
+    def __init__(
+        self,
+        odom_id: str,
+        body_id: str,
+        robot: DriveLimits,
+        config: SampleGateConfig,
+        warnings: SourceWarnings,
+        source: str = "odom",
+    ) -> None:
+        self.frames = (odom_id, body_id)
+        max_speed_mps = robot.wheel_radius * robot.max_wheel_speed
+        max_turn_rate = 2.0 * max_speed_mps / robot.track_width
+        self.gate = SampleGate(
+            config,
+            [max_speed_mps, max_speed_mps, max_turn_rate],
+            [POSITION_SLACK_M, POSITION_SLACK_M, HEADING_SLACK_RAD],
+        )
+        self._warnings = warnings
+        self._source = source
+
+    def offer(self, msg: Odometry) -> GateResult | None:
+        """The samples ``(t_ns, (x, y, theta))`` to apply for ``msg`` (``ACCEPTED``: motion on from the last
+        one; ``RESTARTED``: start again at the first), or None when there is nothing to apply (invalid,
+        refused: warned; an exact duplicate: quietly)."""
+        try:
+            frames = (msg.header.frame_id, msg.child_frame_id)
+            if frames != self.frames:
+                raise ValueError(f"frames {frames[0]!r} -> {frames[1]!r}, expected {self.frames[0]!r} -> "
+                                 f"{self.frames[1]!r}")  # fmt: skip
+            T_odom_body = transform_from_pose(msg.pose.pose)
+            result = self.gate.offer(stamp_nanoseconds(msg.header.stamp), self._unwrapped(T_odom_body))
+        except ValueError as error:
+            self._warnings.warn(self._source, f"{self._source} skipped: {error}")
+            return None
+        if result.verdict is Verdict.REFUSED:
+            self._warnings.warn(self._source, f"{self._source} refused: {result.reason}")
+            return None
+        if result.verdict is Verdict.RESTARTED:
+            self._warnings.warn(
+                f"{self._source}_restart", f"{self._source}: {result.reason} at the first of them"
+            )
+        return None if result.verdict is Verdict.DUPLICATE else result
+
+    def _unwrapped(self, T_odom_body: Transform2D) -> tuple[float, float, float]:
+        """``(x, y, theta)`` with theta within pi of the last accepted sample's."""
+        accepted = self.gate.accepted
+        theta = T_odom_body.theta
+        if accepted is not None:
+            theta_accepted = accepted[1][2]
+            theta = theta_accepted + normalize_angle(theta - theta_accepted)
+        return T_odom_body.x, T_odom_body.y, theta
