@@ -20,6 +20,7 @@ from .motion_models import (
 from .motion_signals import HeldInputs, MotionSignal, OdometryPoses, WheelAngles
 from .sample_gate import GateResult, SampleGate, SampleGateConfig, Verdict
 from .scan_model import LidarConfig, arena_walls, cast_beams, simulate_scan
+from .slam_map import LandmarkMap, load_map, save_map
 from .slam_timeline import SlamTimeline, TimelineConfig
 
 __all__ = [
@@ -58,6 +59,9 @@ __all__ = [
     "EkfSlam",
     "ObservationStatus",
     "SlamConfig",
+    "LandmarkMap",
+    "load_map",
+    "save_map",
     "SlamTimeline",
     "TimelineConfig",
     "GateResult",
