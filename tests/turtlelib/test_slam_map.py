@@ -60,6 +60,21 @@ def test_landmark_map_symmetrises_within_the_tolerance_and_keeps_exact_entries()
     assert landmark_map.covariance[0, 0] == 2.0 and landmark_map.covariance[1, 1] == 1.0
 
 
+@pytest.mark.parametrize(
+    ("smallest", "valid"), [(0.0, True), (-1e-12, True), (-0.5e-9, True), (-1e-8, False)]
+)
+def test_positive_semi_definiteness_is_judged_to_1e_9_of_the_scale(smallest, valid):
+    # eigenvalues 2 and 2 smallest; the largest entry (the scale) is 2 * 0.64 = 1.28
+    rotation = np.array([[0.6, -0.8], [0.8, 0.6]])
+    P = rotation @ np.diag([2.0, 2.0 * smallest]) @ rotation.T
+    P = 0.5 * (P + P.T)
+    if valid:
+        assert LandmarkMap("map", 0, [0], [[0.0, 0.0]], P).covariance[0, 0] == P[0, 0]
+    else:
+        with pytest.raises(ValueError, match="smallest eigenvalue -2e-08"):
+            LandmarkMap("map", 0, [0], [[0.0, 0.0]], P)
+
+
 def test_equals_is_bit_for_bit():
     a, b = small_map(), small_map()
     assert a.equals(b) and a == b
