@@ -409,3 +409,24 @@ def test_localization_pose_nees_is_consistent_when_the_map_error_is_drawn_from_i
     low, high = chi2_bounds(3, n_runs, 0.99)
     for scan in checked:
         assert low < np.mean(values[scan]) < high, (scan, np.mean(values[scan]), (low, high))
+
+
+def test_a_large_loaded_map_outgrows_the_initial_storage_and_survives_a_dropped_tentative_landmark():
+    rng = np.random.default_rng(9)
+    n = 40
+    A = rng.normal(0.0, 0.01, (2 * n, 2 * n))
+    landmark_map = LandmarkMap(
+        "map", 0, np.sort(rng.choice(1000, n, replace=False)), rng.uniform(5.0, 9.0, (n, 2)), A @ A.T / n
+    )
+    slam = EkfSlam(CONFIG, MOTION)
+    slam.load_map(landmark_map, pose_covariance=START_COVARIANCE)
+    assert_map_unchanged(slam, landmark_map)
+    # a detection far from every landmark (all beyond max_range) starts a tentative landmark, which expires
+    result = slam.update_unknown([[1.0, 0.3]], stamp_ns=0)
+    assert result.status.tolist() == [ObservationStatus.NEW]
+    assert result.landmark_ids.tolist() == [int(landmark_map.ids.max()) + 1]
+    assert slam.tentative_ids.tolist() == result.landmark_ids.tolist()
+    assert slam.update_unknown([], stamp_ns=3000 * MS).dropped_ids.tolist() == result.landmark_ids.tolist()
+    assert_map_unchanged(slam, landmark_map)
+    for landmark_id, xy in zip(landmark_map.ids, landmark_map.xy, strict=True):
+        np.testing.assert_array_equal(slam.landmark_estimate(int(landmark_id))[0], xy)

@@ -476,6 +476,8 @@ class EkfSlam:
         map; the map's joint covariance as it is). Every landmark is confirmed with its id, its first
         estimate (for ``fej`` / ``oc``) its position; the next new landmark gets ``max(ids) + 1`` (0 for an
         empty map); the association mode is free (known association then observes the map's ids). O(n^2).
+        :meth:`landmark_map` then gives the same map bit for bit (reordered by id if its ids were not
+        ascending).
 
         ValueError (filter unchanged) for more than ``max_landmarks`` landmarks, or an invalid pose.
         """
