@@ -6,7 +6,7 @@ No ROS import, ever: the ROS nodes in nusim, nuturtle_control and nuslam are thi
 from .circle_fit import Circle, CircleFits, fit_circle, fit_circles, refine_for_range_sensor
 from .consistency import chi2_bounds, nees, nis
 from .detection import Clusters, Detections, DetectorConfig, LandmarkDetector, check_scan_layout, cluster_scan
-from .ekf_slam import Association, EkfSlam, ObservationStatus, SlamConfig
+from .ekf_slam import MODES, Association, EkfSlam, ObservationStatus, SlamConfig
 from .geometry import Transform2D, Twist2D, integrate_twist, normalize_angle, normalize_angles
 from .kinematics import DiffDrive
 from .motion_models import (
@@ -20,6 +20,7 @@ from .motion_models import (
 from .motion_signals import HeldInputs, MotionSignal, OdometryPoses, WheelAngles
 from .sample_gate import GateResult, SampleGate, SampleGateConfig, Verdict
 from .scan_model import LidarConfig, arena_walls, cast_beams, simulate_scan
+from .slam_map import LandmarkMap, load_map, save_map
 from .slam_timeline import SlamTimeline, TimelineConfig
 
 __all__ = [
@@ -54,10 +55,14 @@ __all__ = [
     "integrate_twist",
     "normalize_angle",
     "normalize_angles",
+    "MODES",
     "Association",
     "EkfSlam",
     "ObservationStatus",
     "SlamConfig",
+    "LandmarkMap",
+    "load_map",
+    "save_map",
     "SlamTimeline",
     "TimelineConfig",
     "GateResult",

@@ -78,6 +78,24 @@ landmark is confirmed once seen ``confirm_count`` times (its first sighting incl
 (marginalised out) if still unconfirmed ``tentative_timeout`` seconds after the scan that created it (scan
 stamps in integer ns), so a single spurious detection never enters the map.
 
+Localization (``mode = 'localization'``): a fixed map
+-----------------------------------------------------
+With a map loaded (:meth:`EkfSlam.load_map`, e.g. from :func:`turtlelib.slam_map.load_map`) the filter
+can localise against it without changing it. Matched observations update the pose only, by the
+Schmidt-Kalman (consider-state) update (Schmidt 1966; the consider Kalman filter): the landmarks'
+uncertainty and their correlation with the pose still enter the innovation covariance ``S`` and the pose's
+gain, but the landmarks are never estimated. With ``K = P H^T S^-1`` the optimal gain of the stacked update
+and ``K_r`` its robot rows, the gain is ``K_s = [K_r; 0]`` in the Joseph form
+``P' = (I - K_s H) P (I - K_s H)^T + K_s R K_s^T``::
+
+    x_r' = x_r + K_r nu,              x_m' = x_m
+    P_rr' = P_rr - K_r S K_r^T,       P_rm' = P_rm - K_r (H P)_m,       P_mm' = P_mm
+
+so the map's means and covariance stay exactly (bit for bit) as loaded, and ``P`` stays positive
+semi-definite (the Joseph form is, for any gain). Observations that would start a landmark (known
+association: an id not in the map; unknown association: unpaired and beyond ``gate_new`` of every
+landmark) get :attr:`ObservationStatus.UNMAPPED` and change nothing; tentative landmarks never appear.
+
 Bad input (non-finite values, non-positive range, an invalid noise covariance, invalid or duplicate
 landmark ids, more than ``max_observations`` in one update, a motion step the model turns into non-finite
 values) raises ValueError and leaves the filter unchanged. Implausible observations (nearer than
@@ -101,11 +119,13 @@ from .geometry import Transform2D
 from .landmark_tracks import LandmarkTracks
 from .motion_models import MotionModel
 from .range_bearing import landmarks_from_observations, predict_observations, residual
+from .slam_map import LandmarkMap
 from .slam_state import ROBOT_DIM, SlamState
 from .timebase import NS_PER_S
 from .validation import finite_real, in_range, integer, non_negative, one_of, positive, store
 
 MATCHERS = ("nn", "jcbb")
+MODES = ("mapping", "localization")
 LINEARIZATIONS = ("standard", "fej", "oc")
 
 
@@ -137,6 +157,10 @@ class SlamConfig:
       scan holds that many landmarks: a flood, not a scan).
     * ``initial_xy_std`` (m), ``initial_theta_std`` (rad), >= 0: initial pose standard deviations.
     * ``jcbb_max_nodes`` (>= 1): bound on the pairings JCBB tries per scan.
+    * ``mode``: ``'mapping'`` (SLAM: the map grows and every update refines it) or ``'localization'``
+      (the map is fixed, e.g. loaded by :meth:`EkfSlam.load_map`: updates move the pose only, by the
+      Schmidt-Kalman update of the module docstring, and no landmark is ever added; observations that
+      would start one are :attr:`ObservationStatus.UNMAPPED`).
 
     Invalid values raise ValueError.
     """
@@ -161,6 +185,7 @@ class SlamConfig:
     initial_xy_std: float = 0.0
     initial_theta_std: float = 0.0
     jcbb_max_nodes: int = 10_000
+    mode: str = "mapping"
 
     def __post_init__(self) -> None:
         store(self, ("sensor_x", "sensor_y", "sensor_theta"), finite_real)
@@ -168,6 +193,7 @@ class SlamConfig:
         store(self, ("range_std", "bearing_std", "max_range", "tentative_timeout"), positive)
         one_of("matcher", self.matcher, MATCHERS)
         one_of("linearization", self.linearization, LINEARIZATIONS)
+        one_of("mode", self.mode, MODES)
         probability = partial(in_range, low=0.0, high=1.0, open_low=True, open_high=True)
         store(self, ("gate_associate", "gate_new"), probability)
         store(self, ("gate_known", "relinearize_gate"), partial(in_range, low=0.0, high=1.0, open_low=True))
@@ -201,12 +227,14 @@ class ObservationStatus(IntEnum):
     NEW = 1  # started a new landmark (tentative unless confirm_count == 1 or the association is known)
     REJECTED = 2  # unused: outside [min_range, max_range], between the two gates, outbid for its landmark,
     # outside the known-association gate, or new while the map is full
+    UNMAPPED = 3  # would start a landmark, but the map is fixed (localization)
 
 
 # the status values as plain integers, for filling int8 arrays
 _MATCHED = int(ObservationStatus.MATCHED)
 _NEW = int(ObservationStatus.NEW)
 _REJECTED = int(ObservationStatus.REJECTED)
+_UNMAPPED = int(ObservationStatus.UNMAPPED)
 
 
 @dataclass(frozen=True)
@@ -214,9 +242,10 @@ class Association:
     """The outcome of one update, per observation and for the map.
 
     ``status`` (K,) ``ObservationStatus`` values, ``landmark_ids`` (K,) the landmark each observation
-    joined or started (-1 when rejected), ``confirmed_ids`` / ``dropped_ids`` the tentative landmarks this
-    update confirmed / dropped, ``nis`` the joint NIS of the matched observations with ``nis_dof`` dof
-    (0 and 0 without matches; gated observations make it biased low under unknown association).
+    joined or started (-1 when rejected or unmapped), ``confirmed_ids`` / ``dropped_ids`` the tentative
+    landmarks this update confirmed / dropped, ``nis`` the joint NIS of the matched observations with
+    ``nis_dof`` dof (0 and 0 without matches; gated observations make it biased low under unknown
+    association).
     """
 
     status: NDArray[np.int8]
@@ -250,6 +279,7 @@ class EkfSlam:
         self._gate_known = _gate_or_inf(config.gate_known)
         self._relinearize = _gate_or_inf(config.relinearize_gate) if self._constrained else np.inf
         self._timeout_ns = round(config.tentative_timeout * NS_PER_S)
+        self._localization = config.mode == "localization"
         self.reset(Transform2D() if T_map_body0 is None else T_map_body0)
 
     @property
@@ -308,8 +338,9 @@ class EkfSlam:
         """Update with observations ``z`` (K, 2) [range_m, bearing_rad] (sensor frame) of landmarks ``ids``.
 
         ``ids`` (K,) distinct integers >= 0 are the truth: an id never seen before starts a new (confirmed)
-        landmark from its observation; an observation of a mapped landmark outside the ``gate_known``
-        innovation gate is rejected. ``R`` (K, 2, 2) the observation noise (default from the config).
+        landmark from its observation (in localization: is UNMAPPED); an observation of a mapped landmark
+        outside the ``gate_known`` innovation gate is rejected. ``R`` (K, 2, 2) the observation noise
+        (default from the config).
         """
         z, R, landmark_ids = self.checked_observations(z, R, ids)
         self._enter_mode("known")
@@ -324,10 +355,17 @@ class EkfSlam:
         inside = d2 < self._gate_known
         matched = seen_before[inside]
         # one stacked update with the landmarks seen before, then the new ones from the updated pose
-        nis = self._state.correct(slots[inside], H_robot[inside], H_landmark[inside], nu[inside], R[matched])
+        nis = self._state.correct(
+            slots[inside], H_robot[inside], H_landmark[inside], nu[inside], R[matched], self._localization
+        )
         self._relinearize_first_estimates(slots[inside])
         status = np.full(len(z), _REJECTED, dtype=np.int8)
         status[matched] = _MATCHED
+        if self._localization:
+            status[in_range & ~known] = _UNMAPPED
+            return Association(
+                status, np.where(status == _MATCHED, landmark_ids, -1), nis=nis, nis_dof=2 * len(matched)
+            )
         for k in np.flatnonzero(in_range & ~known):
             if self.map_full:
                 break
@@ -341,7 +379,8 @@ class EkfSlam:
         taken at ``stamp_ns`` (integer ns; the tentative timeout runs on these stamps).
 
         Call it once per scan, also with no observations (K = 0), so that tentative landmarks expire.
-        ``R`` (K, 2, 2) the observation noise (default from the config).
+        ``R`` (K, 2, 2) the observation noise (default from the config). In localization an observation
+        that would start a landmark is UNMAPPED instead.
         """
         stamp_ns = integer("stamp_ns", stamp_ns)
         z, R, _ = self.checked_observations(z, R)
@@ -364,7 +403,7 @@ class EkfSlam:
             landmark_ids[usable[rows]] = self._tracks.ids[slots]
             status[usable[rows]] = _MATCHED
             nis = self._state.correct(
-                slots, H_robot[slots], H_landmark[slots], nu[rows, slots], R_usable[rows]
+                slots, H_robot[slots], H_landmark[slots], nu[rows, slots], R_usable[rows], self._localization
             )
             self._relinearize_first_estimates(slots)
             confirmed_ids = [self._tracks.sighted(slots, self._config.confirm_count)]
@@ -373,7 +412,11 @@ class EkfSlam:
 
         # new (tentative) landmarks from the observations incompatible with every landmark
         started: list[int] = []
-        for k in usable[(match < 0) & far_from_all]:
+        unexplained = usable[(match < 0) & far_from_all]
+        if self._localization:
+            status[unexplained] = _UNMAPPED
+            unexplained = unexplained[:0]
+        for k in unexplained:
             if self._start_landmark(z[k], R[k], started, stamp_ns):
                 landmark_ids[k] = self._next_id - 1
                 status[k] = _NEW
@@ -405,24 +448,85 @@ class EkfSlam:
         from the config).
 
         ``keep_map=False`` empties the map and forgets the association mode; ``keep_map=True`` keeps the
-        landmarks with their covariance and makes the new pose independent of them (zero cross-covariance).
+        landmarks with their covariance and makes the new pose independent of them (zero cross-covariance):
+        a relocalization, also after :meth:`load_map` and in localization.
         """
+        pose, covariance = self._initial_pose(T_map_body, pose_covariance)
+        # the pose prior q_(k|k-1) of the first-estimates Jacobians
+        self._pose_prior = pose.copy()
+        if keep_map:
+            self._state.reset_robot(pose, covariance, keep_map=True)
+            return
+        self._state = SlamState(pose, covariance)
+        self._tracks = LandmarkTracks()
+        self._next_id = 0
+        self._association: str | None = None
+
+    def load_map(
+        self,
+        landmark_map: LandmarkMap,
+        T_map_body: Transform2D | None = None,
+        pose_covariance: ArrayLike | None = None,
+    ) -> None:
+        """Restart with the map ``landmark_map`` (:class:`turtlelib.slam_map.LandmarkMap`), from pose
+        ``T_map_body`` (default identity) with ``pose_covariance`` (3, 3) (default from the config), as
+        :meth:`reset` does.
+
+        ``x = [pose, m_i in the map's order]``, ``P = blockdiag(P_qq, P_mm)`` (the pose independent of the
+        map; the map's joint covariance as it is). Every landmark is confirmed with its id, its first
+        estimate (for ``fej`` / ``oc``) its position; the next new landmark gets ``max(ids) + 1`` (0 for an
+        empty map); the association mode is free (known association then observes the map's ids). O(n^2).
+        :meth:`landmark_map` then gives the same map bit for bit (reordered by id if its ids were not
+        ascending).
+
+        ValueError (filter unchanged) for more than ``max_landmarks`` landmarks, or an invalid pose.
+        """
+        if not isinstance(landmark_map, LandmarkMap):
+            raise ValueError(f"landmark_map must be a LandmarkMap, got {type(landmark_map).__name__}")
+        n = landmark_map.n_landmarks
+        if n > self._config.max_landmarks:
+            raise ValueError(
+                f"the map holds {n} landmarks, more than max_landmarks = {self._config.max_landmarks}"
+            )
+        pose, covariance = self._initial_pose(T_map_body, pose_covariance)
+        state = SlamState(pose, covariance, capacity_landmarks=max(16, n))
+        state.append_independent(landmark_map.xy, landmark_map.covariance)
+        tracks = LandmarkTracks(max(16, n))
+        tracks.append_many(landmark_map.ids, 0, True, landmark_map.xy)
+        self._state, self._tracks = state, tracks
+        self._pose_prior = pose.copy()
+        self._next_id = int(landmark_map.ids.max()) + 1 if n else 0
+        self._association = None
+
+    def landmark_map(
+        self, frame_id: str, stamp_ns: int, parameters: dict[str, bool | int | float | str] | None = None
+    ) -> LandmarkMap:
+        """The confirmed landmarks as a :class:`turtlelib.slam_map.LandmarkMap` in ``frame_id`` at
+        ``stamp_ns``: ids ascending (:attr:`landmark_ids`), positions (:attr:`landmarks`) and their joint
+        covariance (2n, 2n) from ``P``, cross-covariances included; ``parameters`` (default none) for the
+        record. ValueError for an invalid frame, stamp or parameters.
+        """
+        slots = self._tracks.slots_by_id(confirmed=True)
+        indices = (ROBOT_DIM + 2 * slots[:, None] + np.arange(2)).ravel()
+        return LandmarkMap(
+            frame_id=frame_id,
+            stamp_ns=stamp_ns,
+            ids=self._tracks.ids[slots],
+            xy=self._state.landmark_positions()[slots],
+            covariance=self._state.covariance[np.ix_(indices, indices)],
+            parameters={} if parameters is None else parameters,
+        )
+
+    def _initial_pose(
+        self, T_map_body: Transform2D | None, pose_covariance: ArrayLike | None
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The validated pose (3,) (default identity) and its covariance (3, 3) (default from the config)."""
         T_map_body = Transform2D() if T_map_body is None else T_map_body
         if not isinstance(T_map_body, Transform2D):
             raise ValueError(f"T_map_body must be a Transform2D, got {type(T_map_body).__name__}")
         if pose_covariance is None:
-            covariance = self._config.initial_pose_covariance()
-        else:
-            covariance = _pose_covariance(pose_covariance)
-        # the pose prior q_(k|k-1) of the first-estimates Jacobians
-        self._pose_prior = T_map_body.as_array()
-        if keep_map:
-            self._state.reset_robot(T_map_body.as_array(), covariance, keep_map=True)
-            return
-        self._state = SlamState(T_map_body.as_array(), covariance)
-        self._tracks = LandmarkTracks()
-        self._next_id = 0
-        self._mode: str | None = None
+            return T_map_body.as_array(), self._config.initial_pose_covariance()
+        return T_map_body.as_array(), _pose_covariance(pose_covariance)
 
     # --- estimates ---------------------------------------------------------------------------------------
 
@@ -506,8 +610,8 @@ class EkfSlam:
         ValueError otherwise. For callers that queue observations and must refuse bad ones at once.
         """
         mode = "unknown" if ids is None else "known"
-        if self._mode not in (None, mode):
-            raise ValueError(f"this filter runs with {self._mode} association; reset() to switch")
+        if self._association not in (None, mode):
+            raise ValueError(f"this filter runs with {self._association} association; reset() to switch")
         landmark_ids = None if ids is None else _landmark_ids(ids)
         z, R = self._observations(z, R)
         if len(z) > self._config.max_observations:
@@ -552,9 +656,9 @@ class EkfSlam:
         return (z[:, 0] >= self._config.min_range) & (z[:, 0] <= self._config.max_range)
 
     def _enter_mode(self, mode: str) -> None:
-        if self._mode not in (None, mode):
-            raise ValueError(f"this filter runs with {self._mode} association; reset() to switch")
-        self._mode = mode
+        if self._association not in (None, mode):
+            raise ValueError(f"this filter runs with {self._association} association; reset() to switch")
+        self._association = mode
 
     def _gate(
         self, z: NDArray[np.float64], R: NDArray[np.float64], slots: NDArray[np.int64] | None = None

@@ -53,12 +53,7 @@ class LandmarkTracks:
     def append(self, landmark_id: int, stamp_ns: int, confirmed: bool, first_xy: NDArray[np.float64]) -> int:
         """A new last slot for ``landmark_id`` first seen at ``stamp_ns`` at ``first_xy`` (2,); returns the
         slot."""
-        if self._n == len(self._ids):
-            for name in self._ARRAYS:
-                old = getattr(self, name)
-                grown = np.zeros((2 * len(old), *old.shape[1:]), dtype=old.dtype)
-                grown[: self._n] = old
-                setattr(self, name, grown)
+        self._reserve(self._n + 1)
         slot = self._n
         self._ids[slot], self._seen[slot], self._born[slot] = landmark_id, 1, stamp_ns
         self._first_xy[slot] = first_xy
@@ -66,6 +61,32 @@ class LandmarkTracks:
         self._slot_of[landmark_id] = slot
         self._n += 1
         return slot
+
+    def append_many(
+        self, landmark_ids: NDArray[np.int64], stamp_ns: int, confirmed: bool, first_xy: NDArray[np.float64]
+    ) -> NDArray[np.int64]:
+        """New last slots for the distinct ``landmark_ids`` (k,) (none held already), first seen at
+        ``stamp_ns`` at ``first_xy`` (k, 2); returns the slots (k,). O(k), one reallocation at most."""
+        k = len(landmark_ids)
+        self._reserve(self._n + k)
+        new = slice(self._n, self._n + k)
+        self._ids[new], self._seen[new], self._born[new] = landmark_ids, 1, stamp_ns
+        self._first_xy[new] = first_xy
+        self._confirmed[new] = confirmed
+        self._slot_of.update(zip(np.asarray(landmark_ids).tolist(), range(self._n, self._n + k), strict=True))
+        self._n += k
+        return np.arange(new.start, new.stop)
+
+    def _reserve(self, n: int) -> None:
+        """Grow the arrays (at least doubling) so that ``n`` slots fit."""
+        if n <= len(self._ids):
+            return
+        capacity = max(n, 2 * len(self._ids))
+        for name in self._ARRAYS:
+            old = getattr(self, name)
+            grown = np.zeros((capacity, *old.shape[1:]), dtype=old.dtype)
+            grown[: self._n] = old[: self._n]
+            setattr(self, name, grown)
 
     def remove(self, slot: int) -> None:
         """Forget ``slot``; the last slot moves into it (as in ``SlamState.remove``)."""

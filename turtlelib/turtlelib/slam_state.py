@@ -18,7 +18,10 @@ Cost per operation (``m = 2k`` stacked observation rows)
   columns: it gathers those ``3 + m`` rows of ``P`` (O(N m)), forms ``S`` (m x m), and applies one
   symmetric rank-m downdate of ``P`` in place: BLAS ``dsyrk`` on one triangle (O(N^2 m)), then a copy
   of that triangle into the other (O(N^2)); never an N x N temporary, product or inverse.
-* :meth:`append` / :meth:`remove` of a landmark: O(N) (swap-remove; the last slot moves).
+* :meth:`correct` with ``consider_landmarks`` (the Schmidt update of a fixed map) changes only the robot
+  rows and columns: O(N m).
+* :meth:`append` / :meth:`remove` of a landmark: O(N) (swap-remove; the last slot moves);
+  :meth:`append_independent` of ``k`` landmarks at once: O(N k) (one reallocation at most).
 
 Every step writes ``P`` exactly (bitwise) symmetric: each off-diagonal pair ``P_ij``, ``P_ji`` is either
 computed once and copied, or computed by the same floating-point operations on equal operands.
@@ -120,6 +123,7 @@ class SlamState:
         H_landmark: NDArray[np.float64],
         nu: NDArray[np.float64],
         R: NDArray[np.float64],
+        consider_landmarks: bool = False,
     ) -> float:
         """EKF update with ``k`` observations of distinct ``slots``; returns the joint NIS ``nu^T S^-1 nu``.
 
@@ -144,17 +148,34 @@ class SlamState:
            column below the diagonal block is the transposed block row right of it,
            ``P[i1:N, i0:i1] = P[i0:i1, i1:N]^T``, and the diagonal block takes its own upper triangle
            through a strictly-lower mask. O(N^2) copies, no arithmetic.
+
+        ``consider_landmarks=True``: the Schmidt-Kalman (consider-state) update, for a fixed map: the
+        landmarks are "considered" (their uncertainty enters ``S`` and the robot's gain) but never
+        estimated (Schmidt, "Application of state-space methods to navigation problems", 1966; the
+        consider Kalman filter, e.g. Woodbury & Junkins, 2010). The gain is the optimal ``K`` with its
+        landmark rows set to zero, ``K_s = [K_r; 0]``, ``K_r = (P H^T)_r S^-1 = W_r^T L^-1`` (``W_r``,
+        ``W_m``: the robot and landmark columns of ``W``), applied in the Joseph form
+        ``P <- (I - K_s H) P (I - K_s H)^T + K_s R K_s^T`` (valid for any gain), which is, block by block::
+
+            x_r <- x_r + K_r nu = x_r + W_r^T (L^-1 nu),        x_m unchanged
+            P_rr <- P_rr - K_r S K_r^T = P_rr - W_r^T W_r
+            P_rm <- P_rm - K_r (H P)_m = P_rm - W_r^T W_m,      P_mr = P_rm^T
+            P_mm unchanged (bit for bit)
+
+        Only the robot rows and columns change, O(N m) (no ``dsyrk``); ``P_rr`` takes its upper triangle
+        into its lower one and ``P_mr`` is copied from ``P_rm``, so ``P`` stays bitwise symmetric.
         """
         dim, k = self.dim, len(slots)
         if k == 0:
             return 0.0
         m = LANDMARK_DIM * k
-        capacity = self._cov.shape[0]
+        # the full update's dsyrk spans the storage's capacity (step 1); the consider update only dim
+        width = dim if consider_landmarks else self._cov.shape[0]
         cols, H = self._compressed_jacobian(slots, H_robot, H_landmark)
-        # right-hand sides [H P, 0, nu] (m, capacity + 1); H P = (P H^T)^T needs only the rows `cols` of P
-        rhs = np.zeros((m, capacity + 1), order="F")
+        # right-hand sides [H P, 0, nu] (m, width + 1); H P = (P H^T)^T needs only the rows `cols` of P
+        rhs = np.zeros((m, width + 1), order="F")
         np.matmul(H, self._cov[cols, :dim], out=rhs[:, :dim])
-        rhs[:, capacity] = nu.reshape(m)
+        rhs[:, width] = nu.reshape(m)
         # S = H P H^T + R
         S = rhs[:, cols] @ H.T
         diagonal = np.arange(k)
@@ -163,10 +184,13 @@ class SlamState:
         L, info = dpotrf(S, lower=1, clean=1, overwrite_a=1)
         if info != 0:
             raise np.linalg.LinAlgError("the innovation covariance S is not positive definite")
-        # [W, 0, w] = L^-1 [H P, 0, nu]: W (m, N) padded with zeros to the storage width, w (m,)
+        # [W, 0, w] = L^-1 [H P, 0, nu]: W (m, N) padded with zeros to the width, w (m,)
         solved, info = dtrtrs(L, rhs, lower=1, overwrite_b=1)
-        W_pad, w = solved[:, :capacity], solved[:, capacity]
+        W_pad, w = solved[:, :width], solved[:, width]
         W = W_pad[:, :dim]
+        if consider_landmarks:
+            self._consider_update(W, w)
+            return float(w @ w)
         # x <- x + W^T w, with the heading kept in (-pi, pi]
         self._mean[:dim] += W.T @ w
         self._mean[HEADING] = normalize_angle(self._mean[HEADING])
@@ -179,6 +203,21 @@ class SlamState:
         # tril(P, -1) <- triu(P, 1)^T
         _mirror_upper_triangle(self._cov, dim)
         return float(w @ w)
+
+    def _consider_update(self, W: NDArray[np.float64], w: NDArray[np.float64]) -> None:
+        """The Schmidt update of :meth:`correct` from ``W = L^-1 H P`` (m, N) and ``w = L^-1 nu`` (m,)."""
+        dim = self.dim
+        W_r = W[:, :ROBOT_DIM]
+        # x_r <- x_r + W_r^T w
+        self._mean[:ROBOT_DIM] += W_r.T @ w
+        self._mean[HEADING] = normalize_angle(self._mean[HEADING])
+        # [P_rr, P_rm] <- [P_rr, P_rm] - W_r^T [W_r, W_m]
+        P = self._cov
+        P[:ROBOT_DIM, :dim] -= W_r.T @ W
+        # P_rr: upper triangle into the lower one; P_mr = P_rm^T
+        upper = np.triu_indices(ROBOT_DIM, 1)
+        P[upper[1], upper[0]] = P[upper]
+        P[ROBOT_DIM:dim, :ROBOT_DIM] = P[:ROBOT_DIM, ROBOT_DIM:dim].T
 
     def append(
         self,
@@ -207,6 +246,24 @@ class SlamState:
         self._mean[new] = p_map
         self._n += 1
         return self._n - 1
+
+    def append_independent(
+        self, xy: NDArray[np.float64], covariance: NDArray[np.float64]
+    ) -> NDArray[np.int64]:
+        """Add ``k`` landmarks at ``xy`` (k, 2) with joint covariance ``covariance`` (2k, 2k) (symmetric),
+        independent of the pose and the landmarks already held (zero cross-covariance); returns their
+        slots (k,). ``P <- blockdiag(P, covariance)``, one reallocation at most."""
+        k = len(xy)
+        self._reserve(self._n + k)
+        dim = self.dim
+        new = slice(dim, dim + LANDMARK_DIM * k)
+        P = self._cov
+        P[new, :dim] = 0.0
+        P[:dim, new] = 0.0
+        P[new, new] = covariance
+        self._mean[new] = np.reshape(xy, LANDMARK_DIM * k)
+        self._n += k
+        return np.arange(self._n - k, self._n)
 
     def remove(self, slot: int) -> int | None:
         """Marginalise landmark ``slot`` out (delete its rows and columns); O(N).
