@@ -57,25 +57,30 @@ otherwise refused by the filter are skipped with a throttled warning; single obs
 
 from __future__ import annotations
 
+import math
+import os
 import sys
 import time
 from dataclasses import dataclass
 
 import numpy as np
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import PoseStamped
+from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry, Path
 from numpy.typing import NDArray
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
 from nuturtle_description.robot_params import RobotParams, burger_params
 from nuturtle_ros_common.conversions import (
     odometry_message,
+    positive_definite_pose_covariance,
     stamp_from_nanoseconds,
     stamp_nanoseconds,
+    transform_from_pose,
     transform_stamped,
 )
 from nuturtle_ros_common.diagnostics import (
@@ -113,6 +118,7 @@ from turtlelib.pose_buffer import PoseBuffer
 from turtlelib.pose_twist import PoseTwist
 from turtlelib.range_bearing import observations_from_points
 from turtlelib.sample_gate import GateResult, Verdict
+from turtlelib.slam_map import LandmarkMap, load_map, save_map
 from turtlelib.validation import finite_real, names, non_negative, one_of, positive, store
 from turtlelib.wheel_odometry import WheelOdometry
 
@@ -148,6 +154,8 @@ class SlamNodeConfig:
     * ``landmark_radius`` (m, > 0): drawn radius of the mapped landmarks;
     * ``wheel_noise`` (sqrt(rad), >= 0): the motion model's wheel slip, ``N(0, wheel_noise^2 |dphi|)`` per
       wheel over an increment ``dphi`` (:class:`turtlelib.DiffDriveMotion`);
+    * ``map_file``: path of the map file (:mod:`turtlelib.slam_map`, JSON): loaded at start-up when it
+      exists (it must, with ``mode: localization``), written by ``~/save_map``; empty for none;
     * ``observation_timeout`` (s, > 0): the wheels turning this long (joint_states time) without an
       observation arriving gives a (throttled) warning: slam is only dead-reckoning.
     """
@@ -164,6 +172,7 @@ class SlamNodeConfig:
     fake_sensor_std: float = 0.01
     landmark_radius: float = 0.038
     wheel_noise: float = WHEEL_NOISE
+    map_file: str = ""
     observation_timeout: float = 3.0
 
     def __post_init__(self) -> None:
@@ -210,6 +219,10 @@ class SlamNode(Node):
             motion, signal = DiffDriveMotion(drive, self.node_config.wheel_noise), WheelAngles()
             self.odometry = WheelOdometry(drive)
         self.slam = EkfSlam(self.config, motion, self.node_config.T_map_body0)
+        # the map loaded at start-up (None: none), which ~/reset goes back to
+        self._start_map = self._load_start_map()
+        if self._start_map is not None:
+            self.slam.load_map(self._start_map, self.node_config.T_map_body0)
         self.timeline = SlamTimeline(self.slam, signal, timeline_config)
         # T_sensor_frame for the frames observations may come in
         T_body_sensor = self.config.T_body_sensor
@@ -239,11 +252,14 @@ class SlamNode(Node):
         if not self._from_odom:
             self.create_subscription(JointState, "joint_states", self._on_joint_states, 10)
         self.create_subscription(Odometry, "odom", self._on_odom, 10)
+        self.create_subscription(PoseWithCovarianceStamped, "initialpose", self._on_initial_pose, 10)
+        self.create_service(Trigger, "~/save_map", self._on_save_map)
+        self.create_service(Trigger, "~/reset", self._on_reset)
         started_ns = self.get_clock().now().nanoseconds
         self._motion_input = InputMonitor(self.node_config.motion_source, started_ns, STALE_S)
         self._observation_input = InputMonitor(self._observation_topic, started_ns, STALE_S)
         self._update_time = DurationMonitor()
-        self._counts = {"fused": 0, "rejected": 0, "skipped": 0}
+        self._counts = {"fused": 0, "rejected": 0, "unmapped": 0, "skipped": 0}
         self._skipped_reported = self._rejected_reported = 0
         DiagnosticsPublisher(self, self._statuses)
         if self.node_config.association == "known":
@@ -362,6 +378,75 @@ class SlamNode(Node):
         )
         self._map_to_odom_pending = None
 
+    def _on_initial_pose(self, msg: PoseWithCovarianceStamped) -> None:
+        """Relocalize: the pose and its (x, y, yaw) covariance, positive definite, in ``map_id``, become
+        the filter's (at the filter's time), independent of the map, which is kept."""
+        try:
+            if msg.header.frame_id != self.node_config.map_id:
+                raise ValueError(
+                    f"it is in frame {msg.header.frame_id!r}, not the map frame {self.node_config.map_id!r}"
+                )
+            T_map_body = transform_from_pose(msg.pose.pose)
+            self.slam.reset(T_map_body, positive_definite_pose_covariance(msg.pose.covariance), keep_map=True)
+        except ValueError as error:
+            self._warnings.warn("initialpose", f"initialpose skipped: {error}")
+            return
+        self.get_logger().info(f"relocalized at {T_map_body} from initialpose")
+
+    def _on_save_map(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        """Write the map (confirmed landmarks, joint covariance, the parameters) to ``map_file``."""
+        path = self.node_config.map_file
+        if not path:
+            response.success, response.message = False, "map_file is not set: nowhere to save the map"
+            return response
+        stamp_ns = self.timeline.filter_time_ns or 0
+        try:
+            save_map(path, self.slam.landmark_map(self.node_config.map_id, stamp_ns, self._map_parameters()))
+        except (OSError, ValueError) as error:
+            response.success, response.message = False, f"could not save the map to {path}: {error}"
+            self.get_logger().error(response.message)
+            return response
+        response.success = True
+        response.message = f"saved {len(self.slam.landmark_ids)} landmarks to {path}"
+        self.get_logger().info(response.message)
+        return response
+
+    def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        """Start again as at start-up: the start pose, and the map loaded then (or none)."""
+        T_map_body0 = self.node_config.T_map_body0
+        if self._start_map is None:
+            self.slam.reset(T_map_body0)
+        else:
+            self.slam.load_map(self._start_map, T_map_body0)
+        count = 0 if self._start_map is None else self._start_map.n_landmarks
+        response.success, response.message = True, f"reset to the start pose with {count} landmarks"
+        self.get_logger().info(response.message)
+        return response
+
+    def _load_start_map(self) -> LandmarkMap | None:
+        """The map in ``map_file``, if set and there; ValueError for a file that is not a map in ``map_id``
+        or one that is missing in localization."""
+        path = self.node_config.map_file
+        if not path or (not os.path.exists(path) and self.config.mode == "mapping"):
+            return None
+        landmark_map = load_map(path)
+        if landmark_map.frame_id != self.node_config.map_id:
+            raise ValueError(
+                f"{path}: the map is in frame {landmark_map.frame_id!r}, this node's map_id is "
+                f"{self.node_config.map_id!r}"
+            )
+        self.get_logger().info(f"loaded {landmark_map.n_landmarks} landmarks from {path}")
+        return landmark_map
+
+    def _map_parameters(self) -> dict[str, bool | int | float | str]:
+        """This node's scalar parameters, for the map file's record."""
+        values = {name: p.value for name, p in sorted(self.get_parameters_by_prefix("").items())}
+        return {
+            name: value
+            for name, value in values.items()
+            if isinstance(value, (bool, int, str)) or (isinstance(value, float) and math.isfinite(value))
+        }
+
     def _before_first_motion(self) -> bool:
         """At start-up observations may come before the first joint_states: there is no pose to place them
         on, so they are dropped (a debug message, not a warning: nothing is wrong)."""
@@ -378,8 +463,10 @@ class SlamNode(Node):
         self._update_time.add(1e3 * (time.perf_counter() - start))
         for _, association in applied:
             rejected = int(np.count_nonzero(association.status == ObservationStatus.REJECTED))
+            unmapped = int(np.count_nonzero(association.status == ObservationStatus.UNMAPPED))
             self._counts["rejected"] += rejected
-            self._counts["fused"] += len(association.status) - rejected
+            self._counts["unmapped"] += unmapped
+            self._counts["fused"] += len(association.status) - rejected - unmapped
             if rejected and self.slam.map_full:
                 self._warnings.warn(
                     "map",
@@ -394,7 +481,7 @@ class SlamNode(Node):
         rejected = self._counts["rejected"] - self._rejected_reported
         self._skipped_reported, self._rejected_reported = self._counts["skipped"], self._counts["rejected"]
         mapped, tentative = len(self.slam.landmark_ids), len(self.slam.tentative_ids)
-        message = f"{mapped} landmarks mapped, {tentative} tentative"
+        message = f"{self.config.mode}: {mapped} landmarks mapped, {tentative} tentative"
         if skipped or rejected:
             period = f"{DiagnosticsPublisher.PERIOD_S:g} s"
             message += f"; in the last {period} {skipped} arrays skipped, {rejected} observations rejected"
@@ -403,6 +490,7 @@ class SlamNode(Node):
             "landmarks_tentative": tentative,
             "observations_fused": self._counts["fused"],
             "observations_rejected": self._counts["rejected"],
+            "observations_unmapped": self._counts["unmapped"],
             "observation_arrays_skipped": self._counts["skipped"],
             **self._update_time.values("scan_update"),
         }

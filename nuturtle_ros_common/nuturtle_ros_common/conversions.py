@@ -80,6 +80,21 @@ def covariance_from_6x6(values) -> NDArray[np.float64]:
     return P6[np.ix_(index, index)]
 
 
+def positive_definite_pose_covariance(values) -> NDArray[np.float64]:
+    """The (x, y, yaw) block of a ROS 6x6 covariance, checked finite, symmetric and positive definite
+    (ValueError otherwise: a pose estimate must say how uncertain it is, and a zero variance would claim
+    certainty)."""
+    P = covariance_from_6x6(values)
+    if not np.all(np.isfinite(P)):
+        raise ValueError("its covariance is not finite")
+    scale = float(np.abs(P).max())
+    if not np.allclose(P, P.T, rtol=0.0, atol=1e-9 * scale):
+        raise ValueError("its (x, y, yaw) covariance is not symmetric")
+    if not scale > 0.0 or np.linalg.eigvalsh(0.5 * (P + P.T)).min() <= 1e-12 * scale:
+        raise ValueError(f"its (x, y, yaw) covariance is not positive definite: {P.round(9).tolist()}")
+    return 0.5 * (P + P.T)
+
+
 def odometry_message(
     T_parent_child: Transform2D,
     V_child: Twist2D,

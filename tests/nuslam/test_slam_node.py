@@ -18,6 +18,7 @@ from itertools import pairwise
 import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from geometry_msgs.msg import PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry, Path
 from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data
@@ -136,11 +137,13 @@ class Rig:
         self.observations = helper.create_publisher(MarkerArray, topic, 10)
         # the odometry source's odom (odom -> base_footprint), for map -> odom
         self.odom = helper.create_publisher(Odometry, "odom", 10)
+        self.initial = helper.create_publisher(PoseWithCovarianceStamped, "initialpose", 10)
         # with motion_source odom nobody listens to joint_states
         endpoints = [
             *([self.joint_states] if parameters.get("motion_source") != "odom" else []),
             self.observations,
             self.odom,
+            self.initial,
             helper.create_subscription(Odometry, "slam/odom", self.odoms.append, 100),
             helper.create_subscription(MarkerArray, "slam/map", self.maps.append, 100),
             helper.create_subscription(Path, "slam/path", self.paths.append, 100),

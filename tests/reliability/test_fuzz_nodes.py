@@ -594,8 +594,7 @@ def slam_rig(ros: RosHarness, association: str, name: str, with_odometry: bool =
     rig.publish_to("joint_states", JointState)
     rig.publish_to("odom", Odometry)
     rig.publish_to(topic, MarkerArray)
-    if with_odometry:
-        rig.publish_to("initialpose", PoseWithCovarianceStamped)
+    rig.publish_to("initialpose", PoseWithCovarianceStamped)  # slam's (and odometry's) relocalization
     rig.record("slam/odom", Odometry)
     rig.record("slam/map", MarkerArray, valid_stamps=False)  # stamped with an observation's stamp
     rig.record("slam/path", Path)
@@ -607,6 +606,7 @@ SLAM_BATCHES = batches(
     hostile_joint_states(T_REF_NS, PHI_REF),
     consistent_bursts(T_REF_NS, PHI_REF),
     hostile_odometry(T_REF_NS),
+    hostile_pose_stamped("initialpose", ("map", ""), T_REF_NS),
     # "observations": the association's topic (landmarks or fake_sensor)
     hostile_marker_arrays(("base_scan", "base_footprint"), T_REF_NS, "observations"),
     hostile_marker_arrays(("base_scan", "base_footprint"), T_REF_NS, "observations"),
