@@ -8,9 +8,13 @@ The system::
         recorder (every topic but the played ones -> slam/ bag), demo_monitor (truth, odom, slam/odom)
 
 Every node but the player runs on simulation time from the played /clock (each message's log time, sent
-just before the message). After each publication the executor runs until no callback is ready
-(``player.run_until_idle``), so a scan's landmarks reach slam before the next message goes out: as fast as
-the nodes go (default) or paced at ``rate`` x real time, and no message is dropped either way.
+just before the message). The messages are played a log-time step at a time: /clock, then the messages of
+that log time (at most one per topic; a second one of a topic starts a new step), then the executor runs
+until no callback is ready (``player.run_until_idle``), so a scan's landmarks reach slam before the next
+step goes out: as fast as the nodes go (default) or paced at ``rate`` x real time, and no message is
+dropped either way (no queue ever holds more than one played message). Within a step each node hears /clock
+first (its time source subscribed first), and slam hears the step's joint_states before the landmarks the
+step's scan gives, as in the live run.
 
 Ground truth (``truth_topic``, nav_msgs/Odometry, default ``/nusim/ground_truth``) is played on
 ``nusim/ground_truth``, which only the monitor hears. When the bag has it, SLAM starts at the truth's pose
@@ -395,14 +399,18 @@ class Replay:
         wall_start = time.monotonic()
         with _progress_bar(total_s, self.options.progress) as progress:
             try:
+                # the topics published since the executor last ran until idle, all of one log time
+                step: set[str] = set()
                 for message in self.source.messages(self.player.topics):
+                    if step and (message.log_time_ns != self.player.clock_ns or message.topic in step):
+                        run_until_idle(executor, self.logger)
+                        step.clear()
                     if pacer is not None:
                         wait_until(executor, self.logger, pacer.deadline_s(message.log_time_ns))
-                    if self.player.publish_clock(message.log_time_ns) and in_process:
-                        run_until_idle(executor, self.logger)
+                    self.player.publish_clock(message.log_time_ns)
                     self.player.publish_message(message)
                     if in_process:
-                        run_until_idle(executor, self.logger)
+                        step.add(message.topic)
                     elif pacer is None:
                         publisher = self.player.publishers_by_topic[message.topic]
                         if id(publisher) in reliable:
@@ -412,6 +420,8 @@ class Replay:
                         wall_s = time.monotonic() - wall_start
                         progress.set_postfix_str(f"{now_s / max(wall_s, 1e-9):.1f}x real time", refresh=False)
                         progress.update(round(now_s - progress.n, 1))
+                if in_process:
+                    run_until_idle(executor, self.logger)
                 progress.update(max(round(total_s - progress.n, 1), 0.0))
             except KeyboardInterrupt:
                 return True
