@@ -47,6 +47,7 @@ from rclpy.signals import SignalHandlerOptions
 from nuturtle_ros_common.conversions import stamp_nanoseconds, transform_from_pose
 from nuturtle_ros_common.ros_files import flatten
 from turtlelib import Transform2D
+from turtlelib.timebase import NS_PER_S
 
 from . import plots
 from .bag_source import BagError, BagSource, BagTopic
@@ -440,7 +441,7 @@ class Replay:
             "association": self.association,
             "messages_played": played,
             "scans_played": played.get(scan.name, 0) if scan is not None else 0,
-            "bag_seconds": (self.source.end_ns - self.source.start_ns) * 1e-9,
+            "bag_seconds": (self.source.end_ns - self.source.start_ns) / NS_PER_S,
         }
         if not self.options.play_only:
             observations = self.slam.observation_counts
@@ -528,7 +529,7 @@ class Replay:
             gate_m=LANDMARK_GATE_M,
         )
         try:
-            metrics = evaluate_run(data, sim_seconds=(self.source.end_ns - self.source.start_ns) * 1e-9,
+            metrics = evaluate_run(data, sim_seconds=(self.source.end_ns - self.source.start_ns) / NS_PER_S,
                                    wall_seconds=wall_seconds)  # fmt: skip
         except ValueError as error:
             self.logger.warning(f"no accuracy metrics: {error}")
