@@ -61,6 +61,9 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--play-only", action="store_true",
                         help="only the player and /clock, for your own nodes "
                         "(no landmarks or slam in this process)")  # fmt: skip
+    parser.add_argument("--wait-for-subscribers", type=float, default=5.0, metavar="S",
+                        help="with --play-only: wait up to S wall seconds for a subscriber on every played "
+                        "topic before playing")  # fmt: skip
     parser.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     return parser.parse_args(argv)
 
@@ -114,6 +117,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             topics={role: getattr(args, f"{role}_topic") for role in DEFAULT_TOPICS},
             rate=args.rate,
             play_only=args.play_only,
+            wait_for_subscribers_s=args.wait_for_subscribers,
             progress=not args.no_progress,
         )
         result = run_replay(options)

@@ -97,7 +97,8 @@ class ReplayOptions:
     those nodes; ``association`` / ``motion_source`` override it (None: the file's, or the node's default);
     ``topics`` the bag topic of each role (``scan``, ``joint_states``, ``odom``, ``truth``,
     ``fake_sensor``); ``rate`` > 0 paces at that many times real time, 0 plays as fast as the nodes go
-    (None: 0, or 1.0 with ``play_only``); ``play_only`` runs only the player; ``progress`` a bar on
+    (None: 0, or 1.0 with ``play_only``); ``play_only`` runs only the player, which first waits up to
+    ``wait_for_subscribers_s`` (wall) for a subscriber on every played topic; ``progress`` a bar on
     stderr."""
 
     bag: Path
@@ -116,6 +117,7 @@ class ReplayOptions:
     )
     rate: float | None = None
     play_only: bool = False
+    wait_for_subscribers_s: float = 5.0
     progress: bool = True
 
     def __post_init__(self) -> None:
@@ -337,7 +339,9 @@ class Replay:
             for node in nodes:
                 executor.add_node(node)
             self.logger = self.player.get_logger()
-            if not self.options.play_only:
+            if self.options.play_only:
+                self._wait_for_subscribers(executor)
+            else:
                 self._wait_for_matching(executor)
             wall_start = time.monotonic()
             interrupted = self._play(executor)
@@ -388,6 +392,19 @@ class Replay:
                 f"the replay's nodes did not match within {DISCOVERY_TIMEOUT_S} s: player "
                 f"{self.player.subscription_counts()}, recorder {sorted(self.recorder.recorded_topics)}"
             )
+
+    def _wait_for_subscribers(self, executor: SingleThreadedExecutor) -> None:
+        """--play-only: until every played topic has a subscriber or ``wait_for_subscribers_s`` passed
+        (messages published before a subscriber matches are lost to it)."""
+
+        def matched() -> bool:
+            return all(
+                count > 0 for name, count in self.player.subscription_counts().items() if name != "/clock"
+            )
+
+        if not spin_until(executor, self.logger, matched, self.options.wait_for_subscribers_s):
+            unmatched = sorted(n for n, c in self.player.subscription_counts().items() if c == 0)
+            self.logger.info(f"playing although nothing subscribes to {unmatched} yet")
 
     def _play(self, executor: SingleThreadedExecutor) -> bool:
         """Every played message in log-time order; True when Ctrl-C ended it early."""

@@ -166,3 +166,46 @@ def test_an_unreadable_path_is_a_clear_error(tmp_path, capsys, kind):
     assert code == 2
     assert error.startswith("error: ") and str(path) in error
     assert not (tmp_path / "out").exists()
+
+
+def test_play_only_feeds_nodes_in_another_process(live, tmp_path, ros):
+    """--play-only: just the player, here in a child process, heard over DDS by a node of this one: every
+    reliable joint_states message arrives (acknowledged before the next), with /clock."""
+    import subprocess
+    import sys
+
+    from nav_msgs.msg import Odometry
+    from rclpy.qos import qos_profile_sensor_data
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import JointState, LaserScan
+
+    live_out, _ = live
+    bag = copy_bag(live_out / BAG_NAME, tmp_path / "short", StoragePlugin.MCAP, until_ns=int(4e9))
+    listener = ros.node("listener")
+    received = {"joint_states": 0, "clock": 0}
+    listener.create_subscription(JointState, "joint_states", lambda _: received.__setitem__(
+        "joint_states", received["joint_states"] + 1), 1000)  # fmt: skip
+    listener.create_subscription(Clock, "/clock", lambda _: received.__setitem__(
+        "clock", received["clock"] + 1), 1000)  # fmt: skip
+    # a subscriber on every played topic: the player starts once they all match
+    listener.create_subscription(LaserScan, "scan", lambda _: None, qos_profile_sensor_data)
+    for topic in ("odom", "nusim/ground_truth"):
+        listener.create_subscription(Odometry, topic, lambda _: None, 1000)
+    player = subprocess.Popen(
+        [sys.executable, "-P", "-m", "nuturtle_demo.replay", str(bag), "--play-only", "--rate", "4",
+         "--out", str(tmp_path / "out"), "--no-progress"],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+    )  # fmt: skip
+    try:
+        ros.spin_until(lambda: player.poll() is not None, timeout_s=60.0)
+        ros.spin_for(0.3)
+    finally:
+        player.kill() if player.poll() is None else None
+    output = player.stdout.read()
+    assert player.returncode == 0, output
+    metrics = json.loads((tmp_path / "out" / "metrics.json").read_text())
+    played = metrics["messages_played"]["/joint_states"]
+    assert played == bag_count(bag, "/joint_states") >= 70
+    assert received["joint_states"] == played
+    assert received["clock"] >= played
+    assert "observation_arrays_applied" not in metrics
