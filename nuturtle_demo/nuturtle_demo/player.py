@@ -16,10 +16,11 @@ reliable from a reliable recording, both match), and is best effort when the rec
 Back-pressure
 -------------
 All nodes of a replay run in one process on one SingleThreadedExecutor, and a publication to a subscription
-of the same context is delivered during ``publish`` (Fast DDS's intra-process delivery), so running the
-executor until no callback is ready (:func:`run_until_idle`) after each publication lets every node, and
-every node that hears their outputs in turn (scan -> landmarks -> slam), finish with a message before the
-next one goes out: nothing is dropped whatever the speed, and nothing sleeps. :func:`wait_until` waits
+of the same context is delivered during ``publish`` (Fast DDS's intra-process delivery; the replay tests
+count every scan through to slam), so running the executor until no callback is ready
+(:func:`run_until_idle`) after each log-time step of publications (replay_run.py) lets every node, and every
+node that hears their outputs in turn (scan -> landmarks -> slam), finish with them before the next step
+goes out: nothing is dropped whatever the speed, and nothing sleeps. :func:`wait_until` waits
 on the executor (running callbacks meanwhile) for a wall-clock deadline: the pace of ``--rate``.
 """
 
