@@ -6,6 +6,7 @@
 #   ./dev.sh test [pytest options] set up if needed, then only pytest with these options
 #   ./dev.sh lint                  ruff format --check and ruff check
 #   ./dev.sh datasets ARGS         set up if needed, then EKF SLAM on a real dataset (docs/real_data.md)
+#   ./dev.sh replay BAG ARGS       set up if needed, then replay a rosbag2 recording into slam (docs/replay.md)
 # Set-up is idempotent: an install is redone only when pyproject.toml changes.
 set -euo pipefail
 cd "$(dirname "$0")"
@@ -73,5 +74,6 @@ case "$cmd" in
   lint) setup; lint ;;
   setup) setup ;;
   datasets) setup; exec "$py" -P -m nuturtle_demo.datasets "$@" ;;
-  *) echo "usage: ./dev.sh run|test|lint|setup|datasets [args]" >&2; exit 2 ;;
+  replay) setup; exec "$py" -P -m nuturtle_demo.replay "$@" ;;
+  *) echo "usage: ./dev.sh run|test|lint|setup|datasets|replay [args]" >&2; exit 2 ;;
 esac

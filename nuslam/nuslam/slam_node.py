@@ -259,13 +259,24 @@ class SlamNode(Node):
         self._motion_input = InputMonitor(self.node_config.motion_source, started_ns, STALE_S)
         self._observation_input = InputMonitor(self._observation_topic, started_ns, STALE_S)
         self._update_time = DurationMonitor()
-        self._counts = {"fused": 0, "rejected": 0, "unmapped": 0, "skipped": 0}
+        self._counts = {"fused": 0, "rejected": 0, "unmapped": 0, "skipped": 0, "arrays_applied": 0}
         self._skipped_reported = self._rejected_reported = 0
         DiagnosticsPublisher(self, self._statuses)
         if self.node_config.association == "known":
             self.create_subscription(MarkerArray, "fake_sensor", self._on_fake_sensor, 10)
         else:
             self.create_subscription(MarkerArray, "landmarks", self._on_landmarks, 10)
+
+    @property
+    def observation_counts(self) -> dict[str, int]:
+        """Observation arrays so far (read-only): ``received`` on the observation topic, ``applied`` by the
+        filter, ``skipped`` (refused), ``pending`` (waiting for motion samples past their stamp)."""
+        return {
+            "received": self._observation_input.count,
+            "applied": self._counts["arrays_applied"],
+            "skipped": self._counts["skipped"],
+            "pending": self.timeline.pending_count,
+        }
 
     # --- inputs ------------------------------------------------------------------------------------------
 
@@ -461,6 +472,7 @@ class SlamNode(Node):
         if not applied:
             return
         self._update_time.add(1e3 * (time.perf_counter() - start))
+        self._counts["arrays_applied"] += len(applied)
         for _, association in applied:
             rejected = int(np.count_nonzero(association.status == ObservationStatus.REJECTED))
             unmapped = int(np.count_nonzero(association.status == ObservationStatus.UNMAPPED))

@@ -47,40 +47,55 @@ def ellipse_points(
 
 def plot_trajectory(
     path: str | Path,
-    truth: PoseSeries,
+    truth: PoseSeries | None,
     odom: PoseSeries,
     slam: PoseSeries,
     true_circles: NDArray[np.float64],
     mapped_xy: NDArray[np.float64],
     mapped_covariances: NDArray[np.float64],
-    arena_xy_m: tuple[float, float],
+    arena_xy_m: tuple[float, float] | None,
 ) -> None:
     """trajectory.png: the arena walls, the true cylinders (rows ``[x, y, r]``), the ground truth (red),
     odometry (blue) and SLAM (green) paths in the world frame, and the mapped landmarks (n, 2) with their
-    2-sigma ellipses from ``mapped_covariances`` (n, 2, 2)."""
+    2-sigma ellipses from ``mapped_covariances`` (n, 2, 2). Without ``truth`` (None) or true cylinders (no
+    rows) those are left out; without ``arena_xy_m`` (None) so are the walls, and the axes fit the data."""
     from matplotlib.patches import Circle, Rectangle
 
     figure = new_figure(7.0, 7.0)
     axes = figure.add_subplot()
-    hx, hy = 0.5 * arena_xy_m[0], 0.5 * arena_xy_m[1]
-    axes.add_patch(Rectangle((-hx, -hy), 2 * hx, 2 * hy, fill=False, edgecolor="black", linewidth=2.0))
-    for x, y, r in np.asarray(true_circles).reshape(-1, 3):
+    true_circles = np.asarray(true_circles, dtype=np.float64).reshape(-1, 3)
+    mapped_xy = np.asarray(mapped_xy).reshape(-1, 2)
+    if arena_xy_m is not None:
+        hx, hy = 0.5 * arena_xy_m[0], 0.5 * arena_xy_m[1]
+        axes.add_patch(Rectangle((-hx, -hy), 2 * hx, 2 * hy, fill=False, edgecolor="black", linewidth=2.0))
+    for x, y, r in true_circles:
         axes.add_patch(Circle((x, y), r, color="0.35", alpha=0.8))
-    axes.plot([], [], "o", color="0.35", label="true cylinders")
-    axes.plot(*truth.xy.T, color=TRUTH_COLOR, linewidth=1.6, label="ground truth")
+    if true_circles.shape[0]:
+        axes.plot([], [], "o", color="0.35", label="true cylinders")
+    if truth is not None:
+        axes.plot(*truth.xy.T, color=TRUTH_COLOR, linewidth=1.6, label="ground truth")
     axes.plot(*odom.xy.T, color=ODOM_COLOR, linewidth=1.0, label="odometry")
     axes.plot(*slam.xy.T, color=SLAM_COLOR, linewidth=1.0, linestyle="--", label="SLAM")
-    axes.plot(*truth.xy[0], "k^", markersize=8, label="start")
-    mapped_xy = np.asarray(mapped_xy).reshape(-1, 2)
+    start = truth if truth is not None else slam
+    if len(start):
+        axes.plot(*start.xy[0], "k^", markersize=8, label="start")
     covariances = np.asarray(mapped_covariances).reshape(-1, 2, 2)
     for center, covariance in zip(mapped_xy, covariances, strict=True):
         axes.plot(*ellipse_points(center, covariance, LANDMARK_SIGMAS).T, color=SLAM_COLOR, linewidth=1.0)
     axes.plot(*mapped_xy.T, "+", color=SLAM_COLOR, markersize=9, label="mapped landmarks (2σ)")
     axes.set_aspect("equal")
     margin = 0.15
-    axes.set_xlim(-hx - margin, hx + margin)
-    axes.set_ylim(-hy - margin, hy + margin)
-    axes.set_xlabel("x (m), nusim/world = map")
+    if arena_xy_m is not None:
+        axes.set_xlim(-hx - margin, hx + margin)
+        axes.set_ylim(-hy - margin, hy + margin)
+    else:
+        series = [s.xy for s in (truth, odom, slam) if s is not None]
+        xy = np.vstack([*series, mapped_xy, true_circles[:, :2]])
+        if xy.shape[0]:
+            low, high = xy.min(axis=0) - margin, xy.max(axis=0) + margin
+            axes.set_xlim(low[0], high[0])
+            axes.set_ylim(low[1], high[1])
+    axes.set_xlabel("x (m), nusim/world = map" if truth is not None else "x (m), map")
     axes.set_ylabel("y (m)")
     axes.set_title("Trajectories and map")
     axes.grid(True, alpha=0.3)

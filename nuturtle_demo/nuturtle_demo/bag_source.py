@@ -1,0 +1,160 @@
+"""Read a rosbag2 recording for replay: its topics and its messages as raw CDR, in log-time order. No ROS.
+
+What opens
+----------
+One code path, ``rosbags.highlevel.AnyReader``, for
+
+* a rosbag2 bag directory with ``metadata.yaml``, MCAP or sqlite3 storage (``rosbags`` reads both, and
+  zstd-compressed files or messages), e.g. the demo's ``out/latest/run/``;
+* a single ``.mcap`` file without ``metadata.yaml`` (the demo's ``run/run.mcap``, a Foxglove export):
+  rosbags reads the topics, types and the channels' ``offered_qos_profiles`` from the MCAP summary;
+* a single ``.db3`` file (sqlite3 storage without its metadata.yaml).
+
+Anything else (a missing path, a folder without metadata.yaml, a file of another kind, a corrupt bag) is a
+:class:`BagError` with a message that names the path.
+
+Pieces: :class:`BagTopic` (one topic: name, type, message count, the QoS its publishers offered, as recorded),
+:class:`BagSource` (open, ``topics``, ``messages(topics)`` yielding :class:`BagMessage` tuples ``(topic,
+type_name, data, log_time_ns)``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import TracebackType
+from typing import Any, NamedTuple
+
+METADATA_FILE = "metadata.yaml"
+SINGLE_FILE_SUFFIXES = (".mcap", ".db3")
+
+
+class BagError(Exception):
+    """The path is no readable rosbag2 recording (the message says why)."""
+
+
+@dataclass(frozen=True)
+class BagTopic:
+    """One recorded topic: ``name`` (``/scan``), ``type_name`` (``sensor_msgs/msg/LaserScan``),
+    ``message_count``, and ``offered_qos`` the QoS profiles its publishers offered as rosbags gives them
+    (``rosbags.interfaces.Qos``; empty when the recording did not say)."""
+
+    name: str
+    type_name: str
+    message_count: int
+    offered_qos: tuple[Any, ...] = field(default=())
+
+
+class BagMessage(NamedTuple):
+    """One message: its ``topic``, ``type_name``, CDR bytes ``data`` and ``log_time_ns`` (the recorder's
+    clock at reception: simulation time for a ``--use-sim-time`` recording such as the demo's)."""
+
+    topic: str
+    type_name: str
+    data: bytes
+    log_time_ns: int
+
+
+def storage_of(path: Path) -> str:
+    """``mcap`` or ``sqlite3``: the storage of a bag directory (its metadata.yaml) or a single file."""
+    if path.is_dir():
+        import yaml
+
+        try:
+            metadata = yaml.safe_load((path / METADATA_FILE).read_text(encoding="utf-8"))
+            return str(metadata["rosbag2_bagfile_information"]["storage_identifier"])
+        except (OSError, KeyError, TypeError, yaml.YAMLError) as error:
+            raise BagError(f"{path}: unreadable {METADATA_FILE}: {error}") from error
+    return "mcap" if path.suffix == ".mcap" else "sqlite3"
+
+
+def _check_path(path: Path) -> None:
+    if not path.exists():
+        raise BagError(f"{path} does not exist")
+    if path.is_dir() and not (path / METADATA_FILE).is_file():
+        raise BagError(f"{path} is a folder without {METADATA_FILE}: not a rosbag2 bag directory")
+    if path.is_file() and path.suffix not in SINGLE_FILE_SUFFIXES:
+        raise BagError(
+            f"{path} is neither a rosbag2 bag directory nor a single {' or '.join(SINGLE_FILE_SUFFIXES)} file"
+        )
+
+
+class BagSource:
+    """A rosbag2 recording at ``path`` (module docstring), read through rosbags; a context manager.
+
+    ``topics`` by name once open; ``messages(names)`` the messages of those topics (all topics if None)
+    merged in log-time order, as raw CDR; ``start_ns`` / ``end_ns`` the first and last log time.
+    BagError when the path cannot be read as a bag.
+    """
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        _check_path(self.path)
+        self.storage = storage_of(self.path)
+        self._reader: Any = None
+        self.topics: dict[str, BagTopic] = {}
+
+    def open(self) -> BagSource:
+        from rosbags.highlevel import AnyReader, AnyReaderError
+        from rosbags.rosbag2 import ReaderError
+        from rosbags.typesys import Stores, get_typestore
+
+        reader = AnyReader([self.path], default_typestore=get_typestore(Stores.ROS2_JAZZY))
+        try:
+            reader.open()
+        except (AnyReaderError, ReaderError, OSError, ValueError, KeyError) as error:
+            raise BagError(f"{self.path}: not a readable rosbag2 recording: {error}") from error
+        except Exception as error:  # rosbags' storage readers raise what their file format gives them
+            raise BagError(f"{self.path}: not a readable rosbag2 recording: {error!r}") from error
+        self._reader = reader
+        topics: dict[str, BagTopic] = {}
+        for connection in reader.connections:
+            qos = tuple(getattr(connection.ext, "offered_qos_profiles", ()) or ())
+            known = topics.get(connection.topic)
+            if known is not None and known.type_name != connection.msgtype:
+                raise BagError(f"{self.path}: topic {connection.topic} has several types")
+            count = connection.msgcount + (known.message_count if known else 0)
+            topics[connection.topic] = BagTopic(
+                connection.topic, connection.msgtype, count, qos or (known.offered_qos if known else ())
+            )
+        self.topics = topics
+        return self
+
+    @property
+    def start_ns(self) -> int:
+        return int(self._open().start_time)
+
+    @property
+    def end_ns(self) -> int:
+        """The last message's log time (rosbags' end_time is one past it)."""
+        return int(self._open().end_time) - 1
+
+    def _open(self) -> Any:
+        if self._reader is None:
+            raise BagError(f"{self.path} is not open")
+        return self._reader
+
+    def messages(self, names: Iterable[str] | None = None) -> Iterator[BagMessage]:
+        """The messages of the topics ``names`` (every topic if None; unknown names are ignored) in
+        log-time order."""
+        reader = self._open()
+        wanted = None if names is None else set(names)
+        connections = [c for c in reader.connections if wanted is None or c.topic in wanted]
+        if not connections:
+            return
+        for connection, log_time_ns, data in reader.messages(connections=connections):
+            yield BagMessage(connection.topic, connection.msgtype, bytes(data), int(log_time_ns))
+
+    def close(self) -> None:
+        if self._reader is not None:
+            reader, self._reader = self._reader, None
+            reader.close()
+
+    def __enter__(self) -> BagSource:
+        return self.open()
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()

@@ -1,0 +1,211 @@
+"""The bag replay (nuturtle_demo.replay) with real rclpy nodes, no mocks: a short demo run recorded by the
+demo's own recorder (an MCAP bag with ground truth), the same recording written again by rosbags' Writer
+into a sqlite3 bag, and a bag without ground truth whose scan is on another topic, each replayed into the
+real landmarks and slam nodes.
+
+Every scan of the bag must be played and its landmarks applied by slam (counted against the bag's own
+message count), and the replay's SLAM accuracy must be the live run's within 20 % (a replay is the same
+input in the same order, so in practice it is the same).
+"""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from rosbags.rosbag2 import Reader, StoragePlugin, Writer
+from rosbags.typesys import Stores, get_typestore
+
+from nuturtle_demo.bag_source import BagError, BagSource
+from nuturtle_demo.replay import main
+from nuturtle_demo.replay_run import ReplayOptions, run_replay
+from nuturtle_demo.run import BAG_NAME, DemoOptions, run_demo
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+DURATION_S = 12.0
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+ACCURACY_KEYS = (
+    "final_position_error_slam_m", "final_heading_error_slam_rad", "ate_rmse_slam_m", "ate_rmse_odom_m",
+    "final_position_error_odom_m", "landmark_rmse_m", "nees_pose_within_95_fraction", "landmarks_mapped",
+)  # fmt: skip
+# compared with the live run: within 20 % (or 1 mm / 1 mrad, whichever is larger: the errors are mm)
+COMPARED = ("final_position_error_slam_m", "ate_rmse_slam_m", "landmark_rmse_m")
+
+
+def copy_bag(src, dst, storage, rename=None, drop=(), until_ns=None):
+    """Write the bag ``src`` again with rosbags' Writer into ``dst`` (``storage``), topics renamed by
+    ``rename``, those in ``drop`` left out, messages logged before ``until_ns`` only."""
+    rename = rename or {}
+    typestore = get_typestore(Stores.ROS2_JAZZY)
+    with Reader(src) as reader, Writer(dst, version=9, storage_plugin=storage) as writer:
+        out = {}
+        for connection in reader.connections:
+            if connection.topic in drop:
+                continue
+            out[connection.id] = writer.add_connection(
+                rename.get(connection.topic, connection.topic),
+                connection.msgtype,
+                typestore=typestore,
+                offered_qos_profiles=connection.ext.offered_qos_profiles,
+            )
+        for connection, t_ns, data in reader.messages():
+            if connection.id in out and (until_ns is None or t_ns < until_ns):
+                writer.write(out[connection.id], t_ns, data)
+    return dst
+
+
+def bag_count(path, topic):
+    with BagSource(path) as source:
+        return source.topics[topic].message_count
+
+
+@pytest.fixture(scope="module")
+def live(tmp_path_factory):
+    """A short demo run: its output folder (run/ bag, config.yaml) and metrics."""
+    out = tmp_path_factory.mktemp("live")
+    result = run_demo(DemoOptions(duration_s=DURATION_S, out_dir=out, progress=False))
+    return out, result.metrics.as_dict()
+
+
+@pytest.mark.parametrize("form", ["mcap directory", "sqlite3 directory", "single .mcap file"])
+def test_replay_applies_every_scan_and_matches_the_live_accuracy(live, tmp_path, form):
+    live_out, live_metrics = live
+    bag = {
+        "mcap directory": lambda: live_out / BAG_NAME,
+        "sqlite3 directory": lambda: copy_bag(
+            live_out / BAG_NAME, tmp_path / "sqlite", StoragePlugin.SQLITE3
+        ),
+        "single .mcap file": lambda: live_out / BAG_NAME / f"{BAG_NAME}.mcap",
+    }[form]()
+    out = tmp_path / "replay"
+    result = run_replay(ReplayOptions(bag=bag, out_dir=out, params=live_out / "config.yaml", progress=False))
+
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics == json.loads(json.dumps(result.metrics))
+    assert metrics["storage"] == ("sqlite3" if form.startswith("sqlite3") else "mcap")
+    scans = bag_count(bag, "/scan")
+    assert scans >= 0.95 * 5 * DURATION_S
+    assert metrics["scans_played"] == metrics["messages_played"]["/scan"] == scans
+    assert metrics["observation_arrays_received"] == metrics["observation_arrays_applied"] == scans
+    assert metrics["observation_arrays_skipped"] == metrics["observation_arrays_pending"] == 0
+    for topic in ("/joint_states", "/odom", "/nusim/ground_truth"):
+        assert metrics["messages_played"][topic] == bag_count(bag, topic), topic
+    # the recorded SLAM outputs of the input were not played: the new ones are slam's own, one per scan
+    assert "/landmarks" not in metrics["messages_played"]
+    assert metrics["slam_outputs_recorded"]["/landmarks"] == scans
+    assert metrics["slam_outputs_recorded"]["/slam/odom"] == bag_count(bag, "/joint_states")
+
+    assert result.accuracy
+    for key in ACCURACY_KEYS:
+        assert key in metrics, key
+    for key in COMPARED:
+        assert metrics[key] == pytest.approx(live_metrics[key], rel=0.2, abs=1e-3), key
+    assert metrics["final_heading_error_slam_rad"] == pytest.approx(
+        live_metrics["final_heading_error_slam_rad"], rel=0.2, abs=1e-3
+    )
+    assert metrics["landmarks_mapped"] == live_metrics["landmarks_mapped"]
+    assert metrics["landmarks_duplicate"] == metrics["landmarks_spurious"] == 0
+
+    for name in ("trajectory.png", "errors.png", "covariance.png"):
+        assert (out / name).read_bytes().startswith(PNG_MAGIC), name
+    assert len(json.loads((out / "map.json").read_text())["xy"]) == metrics["landmarks_mapped"]
+    with BagSource(out / "slam") as outputs:
+        assert outputs.storage == "mcap"
+        assert {"/landmarks", "/slam/odom", "/slam/path", "/slam/map"} <= set(outputs.topics)
+        assert not {"/scan", "/joint_states", "/odom", "/clock"} & set(outputs.topics)
+        assert outputs.topics["/landmarks"].message_count == scans
+
+
+def test_remapped_scan_without_ground_truth_gives_counts_but_no_accuracy(live, tmp_path, capsys):
+    """The CLI as a user runs it: the scan recorded as /lidar/scan (played as scan), no ground truth."""
+    live_out, _ = live
+    bag = copy_bag(
+        live_out / BAG_NAME, tmp_path / "renamed", StoragePlugin.MCAP, rename={"/scan": "/lidar/scan"},
+        drop=("/nusim/ground_truth", "/landmarks", "/slam/odom"), until_ns=int(6e9),
+    )  # fmt: skip
+    out = tmp_path / "replay"
+    code = main([str(bag), "--out", str(out), "--scan-topic", "/lidar/scan", "--no-progress"])
+    stdout = capsys.readouterr().out
+    assert code == 0, stdout
+    metrics = json.loads((out / "metrics.json").read_text())
+    scans = bag_count(bag, "/lidar/scan")
+    assert scans >= 25
+    assert metrics["messages_played"]["/lidar/scan"] == metrics["scans_played"] == scans
+    assert metrics["observation_arrays_applied"] == scans
+    assert "/nusim/ground_truth" not in metrics["messages_played"]
+    for key in ACCURACY_KEYS:
+        assert key not in metrics, key
+    assert (out / "trajectory.png").read_bytes().startswith(PNG_MAGIC)
+    assert not (out / "errors.png").exists()
+    assert f"| messages played, /lidar/scan | {scans} |" in stdout
+
+    # without --scan-topic the bag has no /scan: a clear error, exit code 2
+    code = main([str(bag), "--out", str(tmp_path / "again"), "--no-progress"])
+    error = capsys.readouterr().err
+    assert code == 2
+    assert "no topic /scan" in error and "--scan-topic" in error
+
+
+@pytest.mark.parametrize("kind", ["missing", "folder without metadata.yaml", "not a bag", "corrupt .mcap"])
+def test_an_unreadable_path_is_a_clear_error(tmp_path, capsys, kind):
+    path = {
+        "missing": tmp_path / "nowhere",
+        "folder without metadata.yaml": tmp_path,
+        "not a bag": tmp_path / "notes.txt",
+        "corrupt .mcap": tmp_path / "broken.mcap",
+    }[kind]
+    if kind == "not a bag":
+        path.write_text("hello")
+    if kind == "corrupt .mcap":
+        path.write_bytes(b"\x89MCAP0\r\n" + b"\x00" * 64)
+    with pytest.raises(BagError):
+        BagSource(path).open()
+    code = main([str(path), "--out", str(tmp_path / "out"), "--no-progress"])
+    error = capsys.readouterr().err
+    assert code == 2
+    assert error.startswith("error: ") and str(path) in error
+    assert not (tmp_path / "out").exists()
+
+
+def test_play_only_feeds_nodes_in_another_process(live, tmp_path, ros):
+    """--play-only: just the player, here in a child process, heard over DDS by a node of this one: every
+    reliable joint_states message arrives (acknowledged before the next), with /clock."""
+    import subprocess
+    import sys
+
+    from nav_msgs.msg import Odometry
+    from rclpy.qos import qos_profile_sensor_data
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import JointState, LaserScan
+
+    live_out, _ = live
+    bag = copy_bag(live_out / BAG_NAME, tmp_path / "short", StoragePlugin.MCAP, until_ns=int(4e9))
+    listener = ros.node("listener")
+    received = {"joint_states": 0, "clock": 0}
+    listener.create_subscription(JointState, "joint_states", lambda _: received.__setitem__(
+        "joint_states", received["joint_states"] + 1), 1000)  # fmt: skip
+    listener.create_subscription(Clock, "/clock", lambda _: received.__setitem__(
+        "clock", received["clock"] + 1), 1000)  # fmt: skip
+    # a subscriber on every played topic: the player starts once they all match
+    listener.create_subscription(LaserScan, "scan", lambda _: None, qos_profile_sensor_data)
+    for topic in ("odom", "nusim/ground_truth"):
+        listener.create_subscription(Odometry, topic, lambda _: None, 1000)
+    player = subprocess.Popen(
+        [sys.executable, "-P", "-m", "nuturtle_demo.replay", str(bag), "--play-only", "--rate", "4",
+         "--out", str(tmp_path / "out"), "--no-progress"],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+    )  # fmt: skip
+    try:
+        ros.spin_until(lambda: player.poll() is not None, timeout_s=60.0)
+        ros.spin_for(0.3)
+    finally:
+        player.kill() if player.poll() is None else None
+    output = player.stdout.read()
+    assert player.returncode == 0, output
+    metrics = json.loads((tmp_path / "out" / "metrics.json").read_text())
+    played = metrics["messages_played"]["/joint_states"]
+    assert played == bag_count(bag, "/joint_states") >= 70
+    assert received["joint_states"] == played
+    assert received["clock"] >= played
+    assert "observation_arrays_applied" not in metrics
