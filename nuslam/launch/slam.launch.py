@@ -6,6 +6,8 @@ Arguments
     use_sim_time:=false|true      true against the simulator (every node on nusim's /clock).
     cmd_src:=none|circle|teleop   what drives the robot (see start_robot.launch.py; none by default: nothing
                                   moves until asked).
+    motion_source:=joint_states|odom, mode:=mapping|localization, map_file:=PATH
+                                  slam's motion input, localization in a saved map (see turtlebot3.launch.py).
 
     ros2 launch nuslam slam.launch.py cmd_src:=teleop        # our control stack (wheel_cmd firmware)
     ros2 launch nuslam turtlebot3.launch.py                  # a stock TurtleBot3 (its own odom, TF, cmd_vel)
@@ -23,7 +25,7 @@ from launch.launch_description_sources import PythonLaunchDescriptionSource
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
-from nuslam.launch_nodes import landmarks_parameters, slam_parameters
+from nuslam.launch_nodes import SLAM_ARGUMENTS, landmarks_parameters, slam_parameters
 from nuturtle_control.launch_nodes import CMD_SOURCES
 from nuturtle_ros_common.ros_files import share_file
 
@@ -31,11 +33,12 @@ from nuturtle_ros_common.ros_files import share_file
 def _slam_nodes(context):
     association = LaunchConfiguration("association").perform(context)
     use_sim_time = LaunchConfiguration("use_sim_time").perform(context) == "true"
+    arguments = {name: LaunchConfiguration(name).perform(context) for name in SLAM_ARGUMENTS}
     nodes = [
         Node(
             package="nuslam",
             executable="slam",
-            parameters=slam_parameters(association, use_sim_time),
+            parameters=slam_parameters(association, use_sim_time, **arguments),
             output="screen",
         ),
     ]
@@ -57,6 +60,12 @@ def generate_launch_description() -> LaunchDescription:
             DeclareLaunchArgument("association", default_value="unknown", choices=["unknown", "known"]),
             DeclareLaunchArgument("use_sim_time", default_value="false", choices=["true", "false"]),
             DeclareLaunchArgument("cmd_src", default_value="none", choices=list(CMD_SOURCES)),
+            *[
+                DeclareLaunchArgument(
+                    name, default_value=default, **({"choices": list(choices)} if choices else {})
+                )
+                for name, (default, choices) in SLAM_ARGUMENTS.items()
+            ],
             IncludeLaunchDescription(
                 PythonLaunchDescriptionSource(
                     str(share_file("nuturtle_control", "launch", "start_robot.launch.py"))

@@ -7,34 +7,54 @@ So nothing here drives the robot or duplicates its odometry: slam reads `joint_s
 landmarks and broadcasts `map -> odom` against the robot's own `odom` (see docs/robot.md).
 
 Arguments
-    association:=unknown          the LiDAR landmarks (the only choice on a real robot: no fake sensor)
+    motion_source:=joint_states|odom   the wheel angles (default) or the robot's odom as slam's motion
+    mode:=mapping|localization         SLAM (default), or localization in the map of map_file
+    map_file:=PATH                     the map loaded at start-up (if there) and written by slam/save_map
 
     ros2 launch nuslam turtlebot3.launch.py      # on the laptop, same ROS_DOMAIN_ID as the robot
+    ros2 launch nuslam turtlebot3.launch.py mode:=localization map_file:=$HOME/maps/lab.json
+
+slam uses the LiDAR landmarks (association unknown: a real robot has no fake sensor).
 
 Every node reads the Burger's constants from nuturtle_description/config/diff_params.yaml and its own
 defaults from config/landmarks.yaml and config/slam.yaml (`nuslam.launch_nodes`).
 """
 
 from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument, OpaqueFunction
+from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
-from nuslam.launch_nodes import landmarks_parameters, slam_parameters
+from nuslam.launch_nodes import SLAM_ARGUMENTS, landmarks_parameters, slam_parameters
+
+
+def _slam(context):
+    arguments = {name: LaunchConfiguration(name).perform(context) for name in SLAM_ARGUMENTS}
+    return [
+        Node(
+            package="nuslam",
+            executable="slam",
+            parameters=slam_parameters("unknown", use_sim_time=False, **arguments),
+            output="screen",
+        )
+    ]
 
 
 def generate_launch_description() -> LaunchDescription:
     return LaunchDescription(
         [
+            *[
+                DeclareLaunchArgument(
+                    name, default_value=default, **({"choices": list(choices)} if choices else {})
+                )
+                for name, (default, choices) in SLAM_ARGUMENTS.items()
+            ],
             Node(
                 package="nuslam",
                 executable="landmarks",
                 parameters=landmarks_parameters(use_sim_time=False),
                 output="screen",
             ),
-            Node(
-                package="nuslam",
-                executable="slam",
-                parameters=slam_parameters("unknown", use_sim_time=False),
-                output="screen",
-            ),
+            OpaqueFunction(function=_slam),
         ]
     )

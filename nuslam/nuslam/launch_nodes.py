@@ -11,6 +11,13 @@ from typing import Any
 from nuturtle_ros_common.launch_parameters import with_arguments
 from nuturtle_ros_common.ros_files import share_file
 
+# slam's launch arguments besides association and use_sim_time: name -> (default, choices or None for any)
+SLAM_ARGUMENTS: dict[str, tuple[str, tuple[str, ...] | None]] = {
+    "motion_source": ("joint_states", ("joint_states", "odom")),
+    "mode": ("mapping", ("mapping", "localization")),
+    "map_file": ("", None),
+}
+
 
 def slam_parameters(association: str, use_sim_time: bool, **arguments: Any) -> list[str | dict[str, Any]]:
     """The `slam` node's list: ``association`` (known or unknown), ``use_sim_time`` and any other

@@ -1,13 +1,29 @@
-"""`slam`: EKF SLAM from wheel encoders and landmark observations (a thin wrapper over turtlelib).
+"""`slam`: EKF SLAM (or localization in a saved map) from wheel encoders or any odometry source and
+landmark observations (a thin wrapper over turtlelib).
 
 The filter is `turtlelib.EkfSlam`; `turtlelib.SlamTimeline` brings it to each observation's stamp before
-the observation is applied (wheel angles interpolated between joint_states samples), so observations that
-arrive late (up to `max_observation_delay`) are still applied at the pose they were taken from.
+the observation is applied (the motion interpolated between motion samples), so observations that arrive
+late (up to `max_observation_delay`) are still applied at the pose they were taken from.
+
+Motion (`motion_source`)
+    `joint_states` (default): the wheel angles through `turtlelib.DiffDriveMotion` (`wheel_noise`);
+    `odom`: the relative pose between consecutive `odom` messages through `turtlelib.OdometryMotion`
+    (twist noise `odom_*`), for any base that publishes odometry (a Gazebo TurtleBot3, a Create, ...).
+Maps (`map_file`, `mode`)
+    `map_file` (a `turtlelib.slam_map` JSON file) is loaded at start-up when it exists; in `mode:
+    localization` it must, and its landmarks stay fixed (a Schmidt update: only the pose is estimated,
+    detections of unmapped landmarks are counted, not added); in `mapping` SLAM goes on from it. A
+    corrupt, wrong-version, non-finite or other-frame file stops the node at start-up with the reason.
 
 Subscribes
-    `joint_states` (sensor_msgs/JointState): wheel angles (rad) of joints `wheel_left`, `wheel_right`.
+    `joint_states` (sensor_msgs/JointState, with `motion_source: joint_states`): wheel angles (rad) of
+        joints `wheel_left`, `wheel_right`.
     `odom` (nav_msgs/Odometry, `odom_id` -> `body_id`): the odometry source's pose (the `odometry` node's,
-        or the robot's own), for `map -> odom`.
+        or the robot's own), for `map -> odom` and (`motion_source: odom`) as the motion; gated like
+        joint_states (`nuturtle_ros_common.odom_stream`: time and speed bounds, a reset source restarts).
+    `initialpose` (geometry_msgs/PoseWithCovarianceStamped in `map_id`, RViz's "2D Pose Estimate"):
+        relocalization: pose and (x, y, yaw) covariance (finite, symmetric, positive definite, else refused
+        with a warning) replace the filter's at its time; the map is kept, independent of the new pose.
     `association` = `unknown` (default): `landmarks` (visualization_msgs/MarkerArray from the `landmarks`
         node, frame `sensor_id` or `body_id`): one scan's cylinder centres; the EKF associates them
         (Mahalanobis gates, nearest neighbour or JCBB, tentative landmarks confirmed after
@@ -19,21 +35,28 @@ Publishes
     `~/odom` (nav_msgs/Odometry, `map_id` -> `body_id`, stamped with the joint_states stamp): the pose at
         that stamp with its (x, y, yaw) covariance in the 6x6, and the wheels' body twist.
     `~/path` (nav_msgs/Path, frame `map_id`), decimated by `PathTrailConfig`.
-    `~/map` (visualization_msgs/MarkerArray, frame `map_id`, after each applied scan, stamped with it):
+    `~/map` (visualization_msgs/MarkerArray, frame `map_id`, after each applied scan, stamped with it;
+        reliable + transient local, REP 2003, so a late RViz or Foxglove gets the last one):
         DELETEALL, then per confirmed landmark a green CYLINDER (ns `landmarks`, id = landmark id, diameter
         2 `landmark_radius`) and its 2-sigma ellipse (ns `covariance`).
-    `/diagnostics` (diagnostic_msgs/DiagnosticArray, 1 Hz): `slam: joint_states` and `slam: <observation
+    `/diagnostics` (diagnostic_msgs/DiagnosticArray, 1 Hz): `slam: <motion_source>` and `slam: <observation
         topic>` (rates; ERROR after `STALE_S` of the node's clock without a message), `slam: filter`
-        (landmarks mapped and tentative, observations fused and rejected, time per applied scan; WARN when
+        (mode, landmarks mapped and tentative, observations fused, rejected and (localization) unmapped,
+        time per applied scan; WARN when
         observations were rejected or skipped since the last report).
     `/tf` `map_id` -> `odom_id` where tf2_msgs is installed: ``T_map_odom = T_map_body T_odom_body^-1``
         at each pose's stamp, with ``T_odom_body`` the transform the odometry source broadcasts (read from
         its `odom` topic, interpolated between its samples), so that composing the two transforms on /tf
         gives slam's pose exactly, however late slam started (REP 105: the localizer publishes
         `map -> odom`). Not broadcast until `odom` covers a pose's stamp.
+Services (std_srvs/Trigger)
+    `~/save_map`: writes the confirmed landmarks, their joint covariance, the frame, the filter's time and
+        this node's parameters to `map_file` (atomically: a temporary file renamed over it).
+    `~/reset`: back to the start pose (x0, y0, theta0) and the map loaded at start-up (or none).
 Parameters
-    `SlamNodeConfig` (association, x0, y0, theta0, frame ids, fake_sensor_std, landmark_radius, and the
-    motion model's wheel_noise), `turtlelib.SlamConfig` (range_std, bearing_std, matcher, gates,
+    `SlamNodeConfig` (association, motion_source, x0, y0, theta0, frame ids, fake_sensor_std,
+    landmark_radius, wheel_noise, map_file, observation_timeout), `turtlelib.TwistNoise` as `odom_*`,
+    `turtlelib.SlamConfig` (mode, range_std, bearing_std, matcher, gates,
     linearization, confirm_count, tentative_timeout, min_range, max_range, max_landmarks, max_observations,
     initial_*_std, jcbb_max_nodes),
     `turtlelib.TimelineConfig`
@@ -43,7 +66,7 @@ Parameters
     mount (`SlamConfig.sensor_x/y/theta`) is the robot's `lidar_x`, `lidar_y`, `lidar_yaw`. Invalid values
     stop the node at start-up with a message.
 
-Observations that arrive before the first joint_states are dropped quietly (start-up order). Bad input
+Observations that arrive before the first motion sample are dropped quietly (start-up order). Bad input
 never stops the node and never changes the estimate: invalid or implausible joint_states
 (`nuturtle_ros_common.wheel_stream`: a stamp not after the last, more than `max_sample_gap` after it, or
 wheels faster than the motors) are refused with a throttled warning, and only `restart_samples` refused

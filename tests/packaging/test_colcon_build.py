@@ -30,7 +30,7 @@ PACKAGES = sorted(packages())
 # How long a node must keep running after start-up to count as started (s)
 NODE_ALIVE_S = 4.0
 # Executables that are command-line tools, not nodes: run with these arguments, must exit 0
-TOOLS = {("nuturtle_demo", "demo"): ["--help"]}
+TOOLS = {("nuturtle_demo", "demo"): ["--help"], ("nuturtle_demo", "replay"): ["--help"]}
 
 PROBE = """
 import json, os

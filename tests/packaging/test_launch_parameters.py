@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from nuslam.launch_nodes import landmarks_parameters, slam_parameters
+from nuslam.launch_nodes import SLAM_ARGUMENTS, landmarks_parameters, slam_parameters
 from nuturtle_control.launch_nodes import circle_parameters, odometry_parameters, turtle_control_parameters
 from nuturtle_ros_common.launch_parameters import resolve, with_arguments
 from nuturtle_ros_common.ros_files import share_file
@@ -24,6 +24,17 @@ def test_the_association_argument_reaches_slam_over_its_yaml(association):
     assert values["use_sim_time"] is True
     # the rest from the files: the robot's constants and slam.yaml
     assert values["wheel_radius"] == 0.033 and values["wheel_noise"] == 0.05
+
+
+def test_the_map_and_motion_arguments_reach_slam_over_its_yaml(tmp_path):
+    map_file = str(tmp_path / "lab.json")
+    parameters = slam_parameters(
+        "unknown", False, motion_source="odom", mode="localization", map_file=map_file
+    )
+    values = resolve(parameters, "slam")
+    assert (values["motion_source"], values["mode"], values["map_file"]) == ("odom", "localization", map_file)
+    defaults = resolve(slam_parameters("unknown", False), "slam")
+    assert [defaults[name] for name in SLAM_ARGUMENTS] == [default for default, _ in SLAM_ARGUMENTS.values()]
 
 
 def test_a_dict_before_the_yaml_loses_to_it():
