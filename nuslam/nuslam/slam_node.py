@@ -435,7 +435,7 @@ class SlamNode(Node):
             return response
         stamp_ns = self.timeline.filter_time_ns or 0
         try:
-            save_map(path, self.slam.landmark_map(self.node_config.map_id, stamp_ns, self._map_parameters()))
+            save_map(path, self.slam.landmark_map(self.node_config.map_id, stamp_ns, self.map_parameters()))
         except (OSError, ValueError) as error:
             response.success, response.message = False, f"could not save the map to {path}: {error}"
             self.get_logger().error(response.message)
@@ -472,7 +472,7 @@ class SlamNode(Node):
         self.get_logger().info(f"loaded {landmark_map.n_landmarks} landmarks from {path}")
         return landmark_map
 
-    def _map_parameters(self) -> dict[str, bool | int | float | str]:
+    def map_parameters(self) -> dict[str, bool | int | float | str]:
         """This node's scalar parameters, for the map file's record."""
         values = {name: p.value for name, p in sorted(self.get_parameters_by_prefix("").items())}
         return {

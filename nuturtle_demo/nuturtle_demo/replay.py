@@ -40,8 +40,8 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--out", type=Path, default=Path("out/replay"),
                         help="output folder (its files and its bag slam/ are replaced)")  # fmt: skip
     parser.add_argument("--params", type=Path, default=None,
-                        help="ROS params YAML; its slam and landmarks sections (and /**) go to those nodes, "
-                        "e.g. the demo's config.yaml")  # fmt: skip
+                        help="ROS params YAML; its slam and landmarks sections (and /**) go to those nodes "
+                        "(default: the demo's config.yaml next to a demo recording, if there)")  # fmt: skip
     parser.add_argument("--association", choices=("known", "unknown"), default=None,
                         help="SLAM data association (default: the params file's, else unknown): LiDAR "
                         "landmarks from the scan, or landmark ids from the fake sensor topic")  # fmt: skip
@@ -100,6 +100,14 @@ def summary(result: Any) -> str:
     return "\n".join(lines)
 
 
+def recording_params(bag: Path) -> Path | None:
+    """The demo's config.yaml beside its recording (``OUT/config.yaml`` for the bag ``OUT/run/`` or its file
+    ``OUT/run/run.mcap``): the parameters the live run used, so a replay repeats it. None elsewhere."""
+    bag_dir = bag if bag.is_dir() else bag.parent
+    candidate = bag_dir.parent / "config.yaml"
+    return candidate if candidate.is_file() else None
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = parse_args(argv)
     from .bag_source import BagError, BagSource
@@ -108,10 +116,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         BagSource(args.bag)  # checks the path before anything heavy is imported
         from .replay_run import ReplayOptions, run_replay
 
+        params = args.params if args.params is not None else recording_params(args.bag)
+        if params is not None and args.params is None:
+            print(f"parameters of the recorded run: {params} (--params to choose others)", file=sys.stderr)
         options = ReplayOptions(
             bag=args.bag,
             out_dir=args.out,
-            params=args.params,
+            params=params,
             association=args.association,
             motion_source=args.motion_source,
             topics={role: getattr(args, f"{role}_topic") for role in DEFAULT_TOPICS},

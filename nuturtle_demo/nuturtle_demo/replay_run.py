@@ -47,6 +47,7 @@ from rclpy.signals import SignalHandlerOptions
 from nuturtle_ros_common.conversions import stamp_nanoseconds, transform_from_pose
 from nuturtle_ros_common.ros_files import flatten
 from turtlelib import Transform2D
+from turtlelib.slam_map import save_map
 from turtlelib.timebase import NS_PER_S
 
 from . import plots
@@ -520,7 +521,7 @@ class Replay:
         if truth is not None and len(odom_raw):
             T_world_body0 = truth_pose_at(truth, round(odom_raw.t_s[0] * 1e9))
         odom = odom_in_frame(odom_raw, T_world_body0)
-        self._write_map(out_dir, snapshot)
+        self._write_map(out_dir)
         circles = self._true_circles() if truth is not None else np.zeros((0, 3))
         if len(slam) and len(odom):
             plots.plot_trajectory(
@@ -556,15 +557,15 @@ class Replay:
         plots.plot_errors(out_dir / "errors.png", slam.t_s[covered], pose_errors(slam, truth), sigmas)
         return metrics.as_dict()
 
-    def _write_map(self, out_dir: Path, snapshot: Any) -> None:
-        """map.json: the final map, landmark ids, centres (m) and 2x2 covariances in the map frame."""
-        document = {
-            "frame": self.slam.node_config.map_id,
-            "landmark_ids": [int(i) for i in self.slam.slam.landmark_ids.tolist()],
-            "xy": snapshot.landmarks_xy.tolist(),
-            "covariances": snapshot.landmark_covariances.tolist(),
-        }
-        (out_dir / "map.json").write_text(json.dumps(document, indent=1) + "\n", encoding="utf-8")
+    def _write_map(self, out_dir: Path) -> None:
+        """map.json: the final map in the slam node's own map file format (:mod:`turtlelib.slam_map`: ids,
+        centres, joint covariance, the node's parameters), so slam can load it (``map_file``)."""
+        slam = self.slam
+        stamp_ns = slam.timeline.filter_time_ns or 0
+        save_map(
+            out_dir / "map.json",
+            slam.slam.landmark_map(slam.node_config.map_id, stamp_ns, slam.map_parameters()),
+        )
 
 
 def run_replay(options: ReplayOptions) -> ReplayResult:

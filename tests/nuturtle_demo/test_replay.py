@@ -20,6 +20,7 @@ from nuturtle_demo.bag_source import BagError, BagSource
 from nuturtle_demo.replay import main
 from nuturtle_demo.replay_run import ReplayOptions, run_replay
 from nuturtle_demo.run import BAG_NAME, DemoOptions, run_demo
+from turtlelib.slam_map import load_map
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -109,7 +110,7 @@ def test_replay_applies_every_scan_and_matches_the_live_accuracy(live, tmp_path,
 
     for name in ("trajectory.png", "errors.png", "covariance.png"):
         assert (out / name).read_bytes().startswith(PNG_MAGIC), name
-    assert len(json.loads((out / "map.json").read_text())["xy"]) == metrics["landmarks_mapped"]
+    assert load_map(out / "map.json").n_landmarks == metrics["landmarks_mapped"], "a map slam can load"
     with BagSource(out / "slam") as outputs:
         assert outputs.storage == "mcap"
         assert {"/landmarks", "/slam/odom", "/slam/path", "/slam/map"} <= set(outputs.topics)
@@ -209,3 +210,15 @@ def test_play_only_feeds_nodes_in_another_process(live, tmp_path, ros):
     assert received["joint_states"] == played
     assert received["clock"] >= played
     assert "observation_arrays_applied" not in metrics
+
+
+def test_a_demo_recording_is_replayed_with_the_parameters_of_its_run(tmp_path):
+    from nuturtle_demo.replay import recording_params
+
+    bag = tmp_path / "out" / "run"
+    bag.mkdir(parents=True)
+    (bag / "run.mcap").write_bytes(b"")
+    assert recording_params(bag) is None and recording_params(bag / "run.mcap") is None
+    (tmp_path / "out" / "config.yaml").write_text("slam:\n  ros__parameters: {}\n")
+    assert recording_params(bag) == tmp_path / "out" / "config.yaml"
+    assert recording_params(bag / "run.mcap") == tmp_path / "out" / "config.yaml"
