@@ -27,7 +27,6 @@ on the executor (running callbacks meanwhile) for a wall-clock deadline: the pac
 from __future__ import annotations
 
 import time
-import traceback
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -35,7 +34,6 @@ from typing import Any
 from rclpy.executors import (
     ConditionReachedException,
     Executor,
-    ExternalShutdownException,
     ShutdownException,
     TimeoutException,
 )
@@ -44,7 +42,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rosgraph_msgs.msg import Clock
 
 from nuturtle_ros_common.conversions import stamp_from_nanoseconds
-from nuturtle_ros_common.throttle import WARN_THROTTLE_S
+from nuturtle_ros_common.node_main import run_guarded
 
 from .bag_source import BagMessage, BagTopic
 from .recorder import message_class
@@ -141,17 +139,12 @@ def _run_ready(executor: Executor, logger: Any, timeout_sec: float) -> bool | No
         return None
     except (ShutdownException, ConditionReachedException):
         return False
-    try:
+
+    def run() -> None:
         handler()
         handler.result()  # raises what the callback raised
-    except (KeyboardInterrupt, ExternalShutdownException):
-        raise
-    except Exception as error:  # the point: no single message may stop the replay
-        logger.error(
-            f"a callback raised {type(error).__name__}: {error}; the message is dropped and the replay goes "
-            f"on\n{traceback.format_exc()}",
-            throttle_duration_sec=WARN_THROTTLE_S,
-        )
+
+    run_guarded(run, logger)
     return True
 
 

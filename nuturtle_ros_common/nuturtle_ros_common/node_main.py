@@ -21,24 +21,29 @@ def effective_parameters(node: Node) -> str:
     return ", ".join(f"{name}={parameters[name].value}" for name in sorted(parameters))
 
 
-def spin_once_guarded(executor: Executor, logger: RcutilsLogger, timeout_sec: float | None = None) -> bool:
-    """``executor.spin_once(timeout_sec)``, surviving the callback it runs: an exception that callback
-    raises (one of ours, or rclpy's own, e.g. its time source refusing a /clock with a negative ``sec``) is
-    logged as an error with its traceback (throttled) instead of ending the spin. Returns False when a
-    callback raised. Shutdown and Ctrl-C still propagate.
-    """
+def run_guarded(step: Callable[[], object], logger: RcutilsLogger) -> bool:
+    """Run ``step()`` (a callback, or a spin step that runs one), surviving what it raises: an exception is
+    logged as an error with its traceback (throttled) and False returned; True otherwise. Shutdown and
+    Ctrl-C still propagate."""
     try:
-        executor.spin_once(timeout_sec=timeout_sec)
+        step()
     except (KeyboardInterrupt, ExternalShutdownException):
         raise
     except Exception as error:  # the point: no single message may stop the node
         logger.error(
-            f"a callback raised {type(error).__name__}: {error}; the message is dropped and the node keeps "
-            f"running\n{traceback.format_exc()}",
+            f"a callback raised {type(error).__name__}: {error}; the message is dropped and the node goes "
+            f"on\n{traceback.format_exc()}",
             throttle_duration_sec=WARN_THROTTLE_S,
         )
         return False
     return True
+
+
+def spin_once_guarded(executor: Executor, logger: RcutilsLogger, timeout_sec: float | None = None) -> bool:
+    """``executor.spin_once(timeout_sec)``, surviving the callback it runs (:func:`run_guarded`: one of
+    ours, or rclpy's own, e.g. its time source refusing a /clock with a negative ``sec``). Returns False
+    when a callback raised."""
+    return run_guarded(lambda: executor.spin_once(timeout_sec=timeout_sec), logger)
 
 
 def spin_guarded(node: Node) -> None:

@@ -21,10 +21,11 @@ from typing import Protocol
 from nav_msgs.msg import Odometry
 
 from turtlelib import Transform2D, normalize_angle
-from turtlelib.sample_gate import GateResult, SampleGate, SampleGateConfig, Verdict
+from turtlelib.sample_gate import GateResult, SampleGate, SampleGateConfig
 
 from .conversions import stamp_nanoseconds, transform_from_pose
 from .throttle import SourceWarnings
+from .wheel_stream import to_apply
 
 # Slack of the rate bound: a pose may be off by this much at either sample (m, rad)
 POSITION_SLACK_M = 1e-3
@@ -82,14 +83,7 @@ class OdomStream:
         except ValueError as error:
             self._warnings.warn(self._source, f"{self._source} skipped: {error}")
             return None
-        if result.verdict is Verdict.REFUSED:
-            self._warnings.warn(self._source, f"{self._source} refused: {result.reason}")
-            return None
-        if result.verdict is Verdict.RESTARTED:
-            self._warnings.warn(
-                f"{self._source}_restart", f"{self._source}: {result.reason} at the first of them"
-            )
-        return None if result.verdict is Verdict.DUPLICATE else result
+        return to_apply(result, self._warnings, self._source)
 
     def _unwrapped(self, T_odom_body: Transform2D) -> tuple[float, float, float]:
         """``(x, y, theta)`` with theta within pi of the last accepted sample's."""

@@ -56,15 +56,19 @@ class WheelStream:
         except ValueError as error:
             self._warnings.warn(self._source, f"{self._source} skipped: {error}")
             return None
-        if result.verdict is Verdict.REFUSED:
-            self._warnings.warn(self._source, f"{self._source} refused: {result.reason}")
-            return None
-        if result.verdict is Verdict.RESTARTED:
-            # its own logger: the refusals before it must not throttle it away
-            self._warnings.warn(
-                f"{self._source}_restart", f"{self._source}: {result.reason} at the first of them"
-            )
-        return None if result.verdict is Verdict.DUPLICATE else result
+        return to_apply(result, self._warnings, self._source)
+
+
+def to_apply(result: GateResult, warnings: SourceWarnings, source: str) -> GateResult | None:
+    """``result`` when it has samples to apply (accepted, restarted: warned), None otherwise (refused:
+    warned; an exact duplicate: quietly). Warnings go to ``warnings`` under ``source``."""
+    if result.verdict is Verdict.REFUSED:
+        warnings.warn(source, f"{source} refused: {result.reason}")
+        return None
+    if result.verdict is Verdict.RESTARTED:
+        # its own logger: the refusals before it must not throttle it away
+        warnings.warn(f"{source}_restart", f"{source}: {result.reason} at the first of them")
+    return None if result.verdict is Verdict.DUPLICATE else result
 
 
 class WheelLimits(Protocol):

@@ -75,7 +75,7 @@ def test_every_node_executable_survives_a_negative_clock(ros, tmp_path):
         ros.spin_for(1.0)
         for module, process in processes.items():
             assert process.poll() is None, f"{module} died:\n{process.stderr.read()}"
-        assert all("keeps running" in errors_of(logs, name)[0] for name in names)
+        assert all("the node goes on" in errors_of(logs, name)[0] for name in names)
     finally:
         for process in processes.values():
             process.send_signal(signal.SIGINT)
