@@ -249,8 +249,18 @@ def relocalize(executor: SingleThreadedExecutor, system: DemoSystem, options: De
     executor.add_node(node)
     try:
         publisher = node.create_publisher(PoseWithCovarianceStamped, "initialpose", 10)
-        if not _spin_until(executor, lambda: publisher.get_subscription_count() > 0, SLAM_SERVICE_TIMEOUT_S):
-            raise RuntimeError(f"slam did not subscribe to initialpose within {SLAM_SERVICE_TIMEOUT_S} s")
+        topic = publisher.topic_name
+
+        def matched() -> bool:
+            # slam is among the subscribers (odometry listens too) and every one of them is matched
+            subscribers = node.get_subscriptions_info_by_topic(topic)
+            slam_name = system.slam.get_name()
+            return any(info.node_name == slam_name for info in subscribers) and (
+                publisher.get_subscription_count() >= len(subscribers)
+            )
+
+        if not _spin_until(executor, matched, SLAM_SERVICE_TIMEOUT_S):
+            raise RuntimeError(f"slam did not subscribe to {topic} within {SLAM_SERVICE_TIMEOUT_S} s")
         msg = PoseWithCovarianceStamped()
         msg.header.frame_id = system.slam.node_config.map_id
         msg.header.stamp = node.get_clock().now().to_msg()
