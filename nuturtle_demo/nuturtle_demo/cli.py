@@ -14,7 +14,16 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from .metrics import RunMetrics
-from .run import ASSOCIATIONS, BAG_NAME, DemoOptions, DemoResult, default_world, run_demo
+from .run import (
+    ASSOCIATIONS,
+    BAG_NAME,
+    MODES,
+    MOTION_SOURCES,
+    DemoOptions,
+    DemoResult,
+    default_world,
+    run_demo,
+)
 
 # (metrics.json key, label, format, target text, check) of the printed table
 TARGETS = (
@@ -57,6 +66,27 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
                         help="upper bound on simulated seconds per wall second "
                         "when not --realtime")  # fmt: skip
     parser.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    maps = parser.add_argument_group("maps and localization (docs/maps.md)")
+    maps.add_argument("--motion-source", choices=MOTION_SOURCES, default="joint_states",
+                      help="slam's motion input: the wheel angles or the odometry node's odom (the same "
+                      "matched wheel slip as twist noise)")  # fmt: skip
+    maps.add_argument("--map-file", type=Path, default=None,
+                      help="slam's map file (JSON): loaded at start-up if it exists, "
+                      "written by --save-map")  # fmt: skip
+    maps.add_argument("--mode", choices=MODES, default="mapping",
+                      help="slam's mode; localization keeps the loaded map fixed, starts slam at the map "
+                      "origin and gives it the true start pose through initialpose")  # fmt: skip
+    maps.add_argument("--save-map", action="store_true",
+                      help="call slam's ~/save_map at the end of the run (needs --map-file)")  # fmt: skip
+    maps.add_argument("--start", type=float, nargs=3, metavar=("X", "Y", "THETA"), default=None,
+                      help="the robot's true start pose in nusim/world (m, m, rad) instead of the world "
+                      "file's x0 y0 theta0")  # fmt: skip
+    maps.add_argument("--initial-pose-std", type=float, nargs=3, metavar=("X", "Y", "THETA"),
+                      default=(0.05, 0.05, 0.05),
+                      help="standard deviations (m, m, rad) of the initialpose "
+                      "given in localization")  # fmt: skip
+    maps.add_argument("--route-radius", type=float, default=None,
+                      help="the figure eight's loop radius (m) instead of the driver's 0.75")  # fmt: skip
     return parser.parse_args(argv)
 
 
@@ -89,6 +119,9 @@ def results_table(metrics: RunMetrics) -> str:
 def report(result: DemoResult, options: DemoOptions) -> str:
     lines = [
         f"association {options.association}, seed {options.seed}, world {options.world}",
+        f"slam: {options.mode}, motion from {options.motion_source}"
+        + ("" if options.map_file is None else f", map file {options.map_file}")
+        + ("" if options.start is None else f", start {tuple(options.start)}"),
         "" if not result.interrupted else "interrupted: the figures cover the time simulated so far",
         results_table(result.metrics),
         "",
@@ -97,6 +130,9 @@ def report(result: DemoResult, options: DemoOptions) -> str:
         f"outputs in {result.out_dir}/: metrics.json trajectory.png errors.png covariance.png "
         f"{BAG_NAME}/ config.yaml",
     ]
+    if result.saved_map is not None:
+        success, message = result.saved_map
+        lines.append(f"save_map: {'ok' if success else 'FAILED'}: {message}")
     return "\n".join(line for line in lines if line is not None)
 
 
@@ -112,10 +148,17 @@ def main(argv: Sequence[str] | None = None) -> int:
             realtime=args.realtime,
             max_realtime_factor=args.max_realtime_factor,
             progress=not args.no_progress,
+            motion_source=args.motion_source,
+            map_file=args.map_file,
+            mode=args.mode,
+            save_map=args.save_map,
+            start=args.start,
+            initial_pose_std=tuple(args.initial_pose_std),
+            route_radius=args.route_radius,
         )
     except ValueError as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
     result = run_demo(options)
     print(report(result, options))
-    return 0
+    return 1 if result.saved_map is not None and not result.saved_map[0] else 0

@@ -15,9 +15,14 @@ keep pace with the simulation whatever ``realtime_factor`` asks (a busy machine 
 
 Frames: SLAM is started at the simulator's start pose ``(x0, y0, theta0)``, so ``map`` = ``nusim/world``;
 odometry starts at the identity of ``odom`` on that same pose, so ``T_world_odom = T_world_start``.
+In ``localization`` mode (docs/maps.md) slam loads a map made by an earlier run (so ``map`` is that run's
+``nusim/world``, the same world) and starts at the map origin; the demo then relocalizes it at the true
+start pose with a real `initialpose` message before nusim moves the robot.
 
-Order of start-up: every node is built, the recorder subscribes to every topic, and only then is nusim
-added to the executor, so the recording holds the run from its first physics step.
+Order of start-up: every node is built, the recorder subscribes to every topic, (localization) slam takes
+the initialpose, and only then is nusim added to the executor, so the recording holds the run from its
+first physics step. With ``save_map`` the demo calls slam's `~/save_map` service (std_srvs/Trigger) once
+the simulation has stopped, before the nodes go.
 """
 
 from __future__ import annotations
@@ -33,18 +38,22 @@ from typing import Any
 
 import numpy as np
 import rclpy
+from geometry_msgs.msg import PoseWithCovarianceStamped
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
+from std_srvs.srv import Trigger
 
 from nusim.nusim_node import NusimNode
 from nuturtle_control.odometry import OdometryNode
 from nuturtle_control.turtle_control import TurtleControlNode
+from nuturtle_ros_common.conversions import planar_covariance_6x6, pose_from_transform
 from nuturtle_ros_common.node_main import spin_once_guarded
 from nuturtle_ros_common.ros_files import load_ros_parameters, share_file
-from turtlelib.validation import integer, one_of, positive, store
+from turtlelib import Transform2D, TwistNoise, normalize_angle
+from turtlelib.validation import finite_real, integer, one_of, positive, store
 
 from . import plots
 from .driver import FigureEightDriver
@@ -54,6 +63,10 @@ from .params import matched_wheel_noise, params_file, to_parameters
 from .recorder import BagWriter, TopicRecorder
 
 ASSOCIATIONS = ("known", "unknown")
+MOTION_SOURCES = ("joint_states", "odom")
+MODES = ("mapping", "localization")
+# Wall time for slam to take the initialpose, and for its ~/save_map service to appear and answer (s)
+SLAM_SERVICE_TIMEOUT_S = 10.0
 # The recording: a rosbag2 bag directory in the output folder
 BAG_NAME = "run"
 # Landmarks closer than this to a true cylinder count as that cylinder (m)
@@ -78,7 +91,16 @@ class DemoOptions:
     """What to run: ``association`` known | unknown; ``world`` a nusim params file; ``seed`` (int >= 0)
     of every noise stream; ``duration_s`` of simulation time (> 0); ``out_dir`` for the outputs;
     ``realtime`` paces the simulation at real time, otherwise it runs up to ``max_realtime_factor`` (> 0)
-    times faster; ``progress`` shows a progress bar on stderr. ValueError for invalid values."""
+    times faster; ``progress`` shows a progress bar on stderr.
+
+    Maps (docs/maps.md): ``motion_source`` joint_states | odom of slam (odom: its ``odom_*`` twist noise
+    is ``TwistNoise.from_wheel_slip`` of the same matched wheel slip); ``map_file`` slam's map file;
+    ``mode`` mapping | localization (needs an existing ``map_file``; slam starts at the map origin and
+    is given the true start pose through `initialpose` with standard deviations ``initial_pose_std``
+    (m, m, rad, > 0)); ``save_map`` calls slam's ``~/save_map`` at the end (needs ``map_file``);
+    ``start`` (x0, y0, theta0) (m, m, rad, finite) replaces the world's true start pose;
+    ``route_radius`` (m, > 0) replaces the driver's figure-eight loop radius. ValueError for invalid
+    values."""
 
     association: str = "unknown"
     world: Path = field(default_factory=default_world)
@@ -88,26 +110,57 @@ class DemoOptions:
     realtime: bool = False
     max_realtime_factor: float = 20.0
     progress: bool = True
+    motion_source: str = "joint_states"
+    map_file: Path | None = None
+    mode: str = "mapping"
+    save_map: bool = False
+    start: tuple[float, float, float] | None = None
+    initial_pose_std: tuple[float, float, float] = (0.05, 0.05, 0.05)
+    route_radius: float | None = None
 
     def __post_init__(self) -> None:
         one_of("association", self.association, ASSOCIATIONS)
+        one_of("motion_source", self.motion_source, MOTION_SOURCES)
+        one_of("mode", self.mode, MODES)
         store(self, ("seed",), partial(integer, minimum=0))
         store(self, ("duration_s", "max_realtime_factor"), positive)
         if not Path(self.world).is_file():
             raise ValueError(f"world file {self.world} does not exist")
+        if self.start is not None:
+            object.__setattr__(self, "start", _triple("start", self.start, finite_real))
+        object.__setattr__(
+            self, "initial_pose_std", _triple("initial_pose_std", self.initial_pose_std, positive)
+        )
+        if self.route_radius is not None:
+            store(self, ("route_radius",), positive)
+        if self.map_file is not None:
+            object.__setattr__(self, "map_file", Path(self.map_file))
+        if self.save_map and self.map_file is None:
+            raise ValueError("save_map needs a map_file to save the map to")
+        if self.mode == "localization" and (self.map_file is None or not self.map_file.is_file()):
+            raise ValueError(f"localization needs an existing map_file, got {self.map_file}")
 
     @property
     def realtime_factor(self) -> float:
         return 1.0 if self.realtime else self.max_realtime_factor
 
 
+def _triple(name: str, values: Any, check: Callable[[str, object], float]) -> tuple[float, float, float]:
+    if isinstance(values, (str, bytes)) or len(values) != 3:
+        raise ValueError(f"{name} must be 3 numbers, got {values!r}")
+    return tuple(check(f"{name}[{i}]", value) for i, value in enumerate(values))
+
+
 @dataclass(frozen=True)
 class DemoResult:
+    """``saved_map``: slam's ``~/save_map`` answer (success, message) with ``save_map``, else None."""
+
     metrics: RunMetrics
     out_dir: Path
     recorded_topics: list[str]
     message_count: int
     interrupted: bool
+    saved_map: tuple[bool, str] | None = None
 
 
 class DemoSystem:
@@ -119,10 +172,13 @@ class DemoSystem:
         sim_time = [Parameter("use_sim_time", value=True)]
         world = load_ros_parameters(Path(options.world))
         world.update(seed=options.seed, realtime_factor=options.realtime_factor)
+        if options.start is not None:
+            world.update(zip(("x0", "y0", "theta0"), options.start, strict=True))
+        route = {} if options.route_radius is None else {"radius": options.route_radius}
         self.nusim = NusimNode(context=context, parameter_overrides=to_parameters(world))
         self.recorder = TopicRecorder(writer, context=context, parameter_overrides=sim_time)
         self.monitor = RunMonitor(context=context, parameter_overrides=sim_time)
-        self.driver = FigureEightDriver(context=context, parameter_overrides=sim_time)
+        self.driver = FigureEightDriver(context=context, parameter_overrides=sim_time + to_parameters(route))
         self.turtle_control = TurtleControlNode(context=context, parameter_overrides=sim_time)
         self.odometry = OdometryNode(context=context, parameter_overrides=sim_time)
         self.landmarks, self.slam = _slam_nodes(self, options, context, sim_time)
@@ -140,7 +196,8 @@ class DemoSystem:
 
 
 def _slam_nodes(system: DemoSystem, options: DemoOptions, context: Context, sim_time: list[Parameter]):
-    """The landmarks and slam nodes, SLAM started at nusim's start pose with matched process noise."""
+    """The landmarks and slam nodes, SLAM started at nusim's start pose (localization: at the map origin)
+    with matched process noise."""
     from nuslam.landmarks_node import LandmarksNode
     from nuslam.slam_node import SlamNode
 
@@ -152,13 +209,22 @@ def _slam_nodes(system: DemoSystem, options: DemoOptions, context: Context, sim_
         0.5 * (abs(left_rad_s) + abs(right_rad_s)),
         system.nusim.timing.rate,
     )
+    T_slam_start = Transform2D() if options.mode == "localization" else T_start
     slam_values = {
         "association": options.association,
-        "x0": T_start.x,
-        "y0": T_start.y,
-        "theta0": T_start.theta,
+        "x0": T_slam_start.x,
+        "y0": T_slam_start.y,
+        "theta0": T_slam_start.theta,
         "wheel_noise": wheel_noise,
+        "motion_source": options.motion_source,
+        "mode": options.mode,
     }
+    if options.map_file is not None:
+        slam_values["map_file"] = str(options.map_file)
+    if options.motion_source == "odom":
+        # the same slip as wheel_noise, as the twist noise of the odometry's pose increments
+        noise = TwistNoise.from_wheel_slip(system.driver.robot.diff_drive(), wheel_noise)
+        slam_values.update({f"odom_{name}": value for name, value in vars(noise).items()})
     landmarks = LandmarksNode(context=context, parameter_overrides=sim_time)
     slam = SlamNode(context=context, parameter_overrides=sim_time + to_parameters(slam_values))
     return landmarks, slam
@@ -171,6 +237,72 @@ def _spin_until(executor: SingleThreadedExecutor, predicate, timeout_s: float) -
             return True
         executor.spin_once(timeout_sec=0.05)
     return predicate()
+
+
+def relocalize(executor: SingleThreadedExecutor, system: DemoSystem, options: DemoOptions) -> None:
+    """Give slam nusim's true start pose through a real `initialpose` message (frame ``map_id``,
+    covariance ``diag(initial_pose_std^2)``) from a publisher node in the run's context; return once
+    slam's filter holds it. RuntimeError if slam does not subscribe or take it within
+    SLAM_SERVICE_TIMEOUT_S."""
+    T_start = system.nusim.simulation.config.arena.T_world_start
+    node = Node("demo_initialpose", context=system.nusim.context)
+    executor.add_node(node)
+    try:
+        publisher = node.create_publisher(PoseWithCovarianceStamped, "initialpose", 10)
+        topic = publisher.topic_name
+
+        def matched() -> bool:
+            # slam is among the subscribers (odometry listens too) and every one of them is matched
+            subscribers = node.get_subscriptions_info_by_topic(topic)
+            slam_name = system.slam.get_name()
+            return any(info.node_name == slam_name for info in subscribers) and (
+                publisher.get_subscription_count() >= len(subscribers)
+            )
+
+        if not _spin_until(executor, matched, SLAM_SERVICE_TIMEOUT_S):
+            raise RuntimeError(f"slam did not subscribe to {topic} within {SLAM_SERVICE_TIMEOUT_S} s")
+        msg = PoseWithCovarianceStamped()
+        msg.header.frame_id = system.slam.node_config.map_id
+        msg.header.stamp = node.get_clock().now().to_msg()
+        msg.pose.pose = pose_from_transform(T_start)
+        msg.pose.covariance = planar_covariance_6x6(np.diag(np.square(options.initial_pose_std)))
+        publisher.publish(msg)
+
+        def taken() -> bool:
+            T = system.slam.slam.pose
+            return (
+                abs(T.x - T_start.x) < 1e-9
+                and abs(T.y - T_start.y) < 1e-9
+                and abs(normalize_angle(T.theta - T_start.theta)) < 1e-9
+            )
+
+        if not _spin_until(executor, taken, SLAM_SERVICE_TIMEOUT_S):
+            raise RuntimeError(
+                f"slam did not take the initialpose {T_start} within {SLAM_SERVICE_TIMEOUT_S} s"
+            )
+    finally:
+        executor.remove_node(node)
+        node.destroy_node()
+
+
+def call_save_map(executor: SingleThreadedExecutor, system: DemoSystem) -> tuple[bool, str]:
+    """Call slam's ``~/save_map`` (std_srvs/Trigger) through a service client node in the run's context;
+    its answer (success, message). RuntimeError if it does not answer within SLAM_SERVICE_TIMEOUT_S."""
+    node = Node("demo_save_map", context=system.nusim.context)
+    executor.add_node(node)
+    try:
+        name = f"{system.slam.get_fully_qualified_name()}/save_map"
+        client = node.create_client(Trigger, name)
+        if not _spin_until(executor, client.service_is_ready, SLAM_SERVICE_TIMEOUT_S):
+            raise RuntimeError(f"{name} did not appear within {SLAM_SERVICE_TIMEOUT_S} s")
+        future = client.call_async(Trigger.Request())
+        if not _spin_until(executor, future.done, SLAM_SERVICE_TIMEOUT_S):
+            raise RuntimeError(f"{name} did not answer within {SLAM_SERVICE_TIMEOUT_S} s")
+        response = future.result()
+        return bool(response.success), str(response.message)
+    finally:
+        executor.remove_node(node)
+        node.destroy_node()
 
 
 def _progress_bar(options: DemoOptions):
@@ -215,6 +347,8 @@ def run_demo(options: DemoOptions, on_progress: ProgressCallback | None = None) 
         if not _spin_until(executor, subscribed, DISCOVERY_TIMEOUT_S):
             missing = sorted(set(REQUIRED_TOPICS) - set(system.recorder.recorded_topics))
             raise RuntimeError(f"the recorder did not discover {missing} within {DISCOVERY_TIMEOUT_S} s")
+        if options.mode == "localization":
+            relocalize(executor, system, options)
         executor.add_node(system.nusim)
         wall_start = time.monotonic()
         reported_step = system.nusim.step_count
@@ -237,13 +371,19 @@ def run_demo(options: DemoOptions, on_progress: ProgressCallback | None = None) 
         executor.remove_node(system.nusim)
         system.driver.stop()
         _spin_until(executor, lambda: False, DRAIN_S)
+        saved_map = call_save_map(executor, system) if options.save_map else None
         writer.close()
         # the pace of this run is not part of the world: reusing the file runs nusim at real time
         config = params_file(system.nodes, replace={"nusim": {"realtime_factor": 1.0}})
         (out_dir / "config.yaml").write_text(config, encoding="utf-8")
         metrics = _evaluate_and_plot(system, options, out_dir, sim_seconds, wall_seconds)
         return DemoResult(
-            metrics, out_dir, sorted(system.recorder.recorded_topics), writer.message_count, interrupted
+            metrics,
+            out_dir,
+            sorted(system.recorder.recorded_topics),
+            writer.message_count,
+            interrupted,
+            saved_map,
         )
     finally:
         writer.close()
