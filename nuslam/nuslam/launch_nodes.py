@@ -8,13 +8,15 @@ from __future__ import annotations
 
 from typing import Any
 
+from nuslam.slam_node import MOTION_SOURCES
 from nuturtle_ros_common.launch_parameters import with_arguments
 from nuturtle_ros_common.ros_files import share_file
+from turtlelib import MODES
 
 # slam's launch arguments besides association and use_sim_time: name -> (default, choices or None for any)
 SLAM_ARGUMENTS: dict[str, tuple[str, tuple[str, ...] | None]] = {
-    "motion_source": ("joint_states", ("joint_states", "odom")),
-    "mode": ("mapping", ("mapping", "localization")),
+    "motion_source": ("joint_states", MOTION_SOURCES),
+    "mode": ("mapping", MODES),
     "map_file": ("", None),
 }
 

@@ -47,12 +47,13 @@ from rclpy.signals import SignalHandlerOptions
 from std_srvs.srv import Trigger
 
 from nusim.nusim_node import NusimNode
+from nuslam.slam_node import MOTION_SOURCES
 from nuturtle_control.odometry import OdometryNode
 from nuturtle_control.turtle_control import TurtleControlNode
 from nuturtle_ros_common.conversions import planar_covariance_6x6, pose_from_transform
 from nuturtle_ros_common.node_main import spin_once_guarded
 from nuturtle_ros_common.ros_files import load_ros_parameters, share_file
-from turtlelib import Transform2D, TwistNoise, normalize_angle
+from turtlelib import MODES, Transform2D, TwistNoise, normalize_angle
 from turtlelib.validation import finite_real, integer, one_of, positive, store
 
 from . import plots
@@ -63,8 +64,6 @@ from .params import matched_wheel_noise, params_file, to_parameters
 from .recorder import BagWriter, TopicRecorder
 
 ASSOCIATIONS = ("known", "unknown")
-MOTION_SOURCES = ("joint_states", "odom")
-MODES = ("mapping", "localization")
 # Wall time for slam to take the initialpose, and for its ~/save_map service to appear and answer (s)
 SLAM_SERVICE_TIMEOUT_S = 10.0
 # The recording: a rosbag2 bag directory in the output folder
