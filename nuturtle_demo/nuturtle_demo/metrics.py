@@ -95,9 +95,10 @@ class PoseSeries:
         )
 
 
-def odom_in_world(odom: PoseSeries, T_world_start: Transform2D) -> PoseSeries:
-    """Odometry poses in the world: ``T_world_body = T_world_start @ T_odom_body`` for each sample."""
-    poses = np.array([(T_world_start @ Transform2D(*pose)).as_array() for pose in odom.poses])
+def odom_in_world(odom: PoseSeries, T_world_odom: Transform2D) -> PoseSeries:
+    """Odometry poses in the world: ``T_world_body = T_world_odom @ T_odom_body`` for each sample (the demo's
+    odom frame starts on the true start pose: ``T_world_odom = T_world_start``)."""
+    poses = np.array([(T_world_odom @ Transform2D(*pose)).as_array() for pose in odom.poses])
     return PoseSeries(odom.t_s, poses.reshape(-1, 3))
 
 

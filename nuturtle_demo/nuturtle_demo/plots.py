@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .metrics import PoseSeries
+from .metrics import PoseSeries, pose_errors
 
 TRUTH_COLOR = "tab:red"
 ODOM_COLOR = "tab:blue"
@@ -48,7 +48,7 @@ def ellipse_points(
 def plot_trajectory(
     path: str | Path,
     truth: PoseSeries | None,
-    odom: PoseSeries,
+    odom: PoseSeries | None,
     slam: PoseSeries,
     true_circles: NDArray[np.float64],
     mapped_xy: NDArray[np.float64],
@@ -57,8 +57,9 @@ def plot_trajectory(
 ) -> None:
     """trajectory.png: the arena walls, the true cylinders (rows ``[x, y, r]``), the ground truth (red),
     odometry (blue) and SLAM (green) paths in the world frame, and the mapped landmarks (n, 2) with their
-    2-sigma ellipses from ``mapped_covariances`` (n, 2, 2). Without ``truth`` (None) or true cylinders (no
-    rows) those are left out; without ``arena_xy_m`` (None) so are the walls, and the axes fit the data."""
+    2-sigma ellipses from ``mapped_covariances`` (n, 2, 2). Without ``truth`` or ``odom`` (None) or true
+    cylinders (no rows) those are left out; without ``arena_xy_m`` (None) so are the walls, and the axes fit
+    the data."""
     from matplotlib.patches import Circle, Rectangle
 
     figure = new_figure(7.0, 7.0)
@@ -74,7 +75,8 @@ def plot_trajectory(
         axes.plot([], [], "o", color="0.35", label="true cylinders")
     if truth is not None:
         axes.plot(*truth.xy.T, color=TRUTH_COLOR, linewidth=1.6, label="ground truth")
-    axes.plot(*odom.xy.T, color=ODOM_COLOR, linewidth=1.0, label="odometry")
+    if odom is not None:
+        axes.plot(*odom.xy.T, color=ODOM_COLOR, linewidth=1.0, label="odometry")
     axes.plot(*slam.xy.T, color=SLAM_COLOR, linewidth=1.0, linestyle="--", label="SLAM")
     start = truth if truth is not None else slam
     if len(start):
@@ -101,6 +103,16 @@ def plot_trajectory(
     axes.grid(True, alpha=0.3)
     axes.legend(loc="upper right", fontsize="small")
     figure.savefig(path)
+
+
+def plot_slam_errors(
+    path: str | Path, slam: PoseSeries, slam_covariances: NDArray[np.float64], truth: PoseSeries
+) -> None:
+    """errors.png of the SLAM poses (K,) with their covariances (K, 3, 3) against the ground truth, over the
+    time the truth covers (:func:`plot_errors`)."""
+    covered = slam.within(truth.t_s[0], truth.t_s[-1])
+    sigmas = np.sqrt(np.clip(np.diagonal(slam_covariances[covered], axis1=1, axis2=2), 0.0, None))
+    plot_errors(path, slam.t_s[covered], pose_errors(slam, truth), sigmas)
 
 
 def plot_errors(

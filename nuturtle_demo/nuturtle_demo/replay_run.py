@@ -52,7 +52,7 @@ from turtlelib.timebase import NS_PER_S
 
 from . import plots
 from .bag_source import BagError, BagSource, BagTopic
-from .metrics import PoseSeries, RunData, evaluate_run, pose_errors
+from .metrics import PoseSeries, RunData, evaluate_run, odom_in_world
 from .monitor import RunMonitor
 from .params import params_file, to_parameters
 from .player import (
@@ -249,13 +249,11 @@ def truth_pose_at(truth: PoseSeries, t_ns: int | None) -> Transform2D:
 
 
 def odom_in_frame(odom: PoseSeries, T_world_body0: Transform2D) -> PoseSeries:
-    """Odometry placed in the world by its first sample: ``T_world_body = T_world_odom T_odom_body`` with
+    """Odometry placed in the world by its first sample: :func:`metrics.odom_in_world` with
     ``T_world_odom = T_world_body0 T_odom_body(0)^-1``."""
     if len(odom) == 0:
         return odom
-    T_world_odom = T_world_body0 @ Transform2D(*odom.poses[0]).inverse()
-    poses = np.array([(T_world_odom @ Transform2D(*pose)).as_array() for pose in odom.poses])
-    return PoseSeries(odom.t_s, poses.reshape(-1, 3))
+    return odom_in_world(odom, T_world_body0 @ Transform2D(*odom.poses[0]).inverse())
 
 
 # --- the run -----------------------------------------------------------------------------------------------
@@ -523,15 +521,10 @@ class Replay:
         odom = odom_in_frame(odom_raw, T_world_body0)
         self._write_map(out_dir)
         circles = self._true_circles() if truth is not None else np.zeros((0, 3))
-        if len(slam) and len(odom):
+        if len(slam):
             plots.plot_trajectory(
-                out_dir / "trajectory.png", truth, odom, slam, circles, snapshot.landmarks_xy,
-                snapshot.landmark_covariances, None,
-            )  # fmt: skip
-        elif len(slam):
-            plots.plot_trajectory(
-                out_dir / "trajectory.png", truth, slam, slam, circles, snapshot.landmarks_xy,
-                snapshot.landmark_covariances, None,
+                out_dir / "trajectory.png", truth, odom if len(odom) else None, slam, circles,
+                snapshot.landmarks_xy, snapshot.landmark_covariances, None,
             )  # fmt: skip
         plots.plot_covariance(out_dir / "covariance.png", snapshot.covariance)
         if truth is None or not len(odom) or not len(slam):
@@ -552,9 +545,7 @@ class Replay:
         except ValueError as error:
             self.logger.warning(f"no accuracy metrics: {error}")
             return None
-        covered = slam.within(truth.t_s[0], truth.t_s[-1])
-        sigmas = np.sqrt(np.clip(np.diagonal(slam_covariances[covered], axis1=1, axis2=2), 0.0, None))
-        plots.plot_errors(out_dir / "errors.png", slam.t_s[covered], pose_errors(slam, truth), sigmas)
+        plots.plot_slam_errors(out_dir / "errors.png", slam, slam_covariances, truth)
         return metrics.as_dict()
 
     def _write_map(self, out_dir: Path) -> None:

@@ -58,7 +58,7 @@ from turtlelib.validation import finite_real, integer, one_of, positive, store
 
 from . import plots
 from .driver import FigureEightDriver
-from .metrics import RunData, RunMetrics, evaluate_run, odom_in_world, pose_errors
+from .metrics import RunData, RunMetrics, evaluate_run, odom_in_world
 from .monitor import RunMonitor
 from .params import matched_wheel_noise, params_file, to_parameters
 from .recorder import BagWriter, TopicRecorder
@@ -419,9 +419,7 @@ def _evaluate_and_plot(
         out_dir / "trajectory.png", truth, odom, slam, simulation.circles, snapshot.landmarks_xy,
         snapshot.landmark_covariances, (arena.arena_x_length, arena.arena_y_length),
     )  # fmt: skip
-    covered = slam.within(truth.t_s[0], truth.t_s[-1])
-    sigmas = np.sqrt(np.clip(np.diagonal(slam_covariances[covered], axis1=1, axis2=2), 0.0, None))
-    plots.plot_errors(out_dir / "errors.png", slam.t_s[covered], pose_errors(slam, truth), sigmas)
+    plots.plot_slam_errors(out_dir / "errors.png", slam, slam_covariances, truth)
     plots.plot_covariance(out_dir / "covariance.png", snapshot.covariance)
     return metrics
 

@@ -1,9 +1,9 @@
 """Localization against a fixed map (SlamConfig.mode = 'localization'): the Schmidt-Kalman update, loading and
 exporting maps (EkfSlam.load_map / landmark_map), UNMAPPED observations.
 
-The world: a TurtleBot3 Burger drives one loop of a circle of radius 0.5 m among seven landmarks (at least
-0.6 m apart); its wheels slip as the filter's model says (independent slip on sub-steps of every prediction
-step), the LDS-01 reports range and bearing of every landmark within range with Gaussian noise. The map is
+The world (slam_world.py): a TurtleBot3 Burger drives one loop of a circle of radius 0.5 m among seven
+landmarks (at least 0.6 m apart), its wheels slipping as the filter's model says, the LDS-01 reporting
+range and bearing of every landmark within range with Gaussian noise, in random order. The map is
 made by the same filter in mapping mode (known association, exact start pose), then the robot drives the
 loop again localising against it. An eighth landmark, never mapped, is seen on the second drive only.
 """
@@ -14,64 +14,21 @@ import math
 
 import numpy as np
 import pytest
+from slam_world import CONFIG, MOTION, N_SCANS, PI, World
 
-from turtlelib import MODES, DiffDrive, LandmarkMap, Transform2D, Twist2D, load_map, save_map
+from turtlelib import MODES, LandmarkMap, Transform2D, load_map, save_map
 from turtlelib.consistency import chi2_bounds, nees
 from turtlelib.ekf_slam import EkfSlam, ObservationStatus, SlamConfig
-from turtlelib.motion_models import DiffDriveMotion
 from turtlelib.range_bearing import predict_observations, residual
 
-PI = math.pi
-BURGER = DiffDrive(wheel_radius=0.033, track_width=0.16)
 LANDMARKS = np.array(
     [[1.2, 0.0], [0.9, 1.3], [-1.0, 0.6], [-0.6, -0.9], [0.6, -1.1], [-0.3, 1.7], [1.5, 0.6]]
 )
 UNMAPPED_LANDMARK = np.array([[-1.4, 1.6]])  # beyond gate_new of every mapped landmark, always in range
 UNMAPPED_ID = 99
-TWIST = Twist2D(0.4, 0.2, 0.0)
-SCAN_PERIOD_S = 0.2
-PREDICTIONS_PER_SCAN = 4
-SLIP_SUBSTEPS = 4
-N_SCANS = int(round(2.0 * PI / TWIST.omega / SCAN_PERIOD_S))
-RANGE_STD, BEARING_STD = 0.02, 0.02
-WHEEL_NOISE = 0.05
-MOTION = DiffDriveMotion(BURGER, WHEEL_NOISE)
-CONFIG = SlamConfig(sensor_x=-0.032, range_std=RANGE_STD, bearing_std=BEARING_STD, max_range=2.5)
 LOCALIZATION = dataclasses.replace(CONFIG, mode="localization")
 START_COVARIANCE = np.diag([0.05**2, 0.05**2, 0.03**2])
 MS = 1_000_000
-
-
-class World:
-    """The ground truth and the sensors, drawing noise from one seeded generator."""
-
-    def __init__(self, seed: int, landmarks: np.ndarray, T_world_body: Transform2D | None = None) -> None:
-        self.rng = np.random.default_rng(seed)
-        self.landmarks = landmarks
-        self.T_world_body = Transform2D() if T_world_body is None else T_world_body
-        speeds = BURGER.wheel_speeds(TWIST)
-        dt = SCAN_PERIOD_S / PREDICTIONS_PER_SCAN
-        self.increments = (speeds[0] * dt, speeds[1] * dt)
-
-    def drive(self) -> tuple[float, float]:
-        """Move the truth by one prediction step; returns the encoder increments (what the filter gets)."""
-        for _ in range(SLIP_SUBSTEPS):
-            left, right = (dphi / SLIP_SUBSTEPS for dphi in self.increments)
-            slip = self.rng.normal(0.0, WHEEL_NOISE * np.sqrt(np.abs([left, right])))
-            self.T_world_body = BURGER.step(self.T_world_body, left + slip[0], right + slip[1])
-        return self.increments
-
-    def observe(self) -> tuple[np.ndarray, np.ndarray]:
-        """``(index, z)``: the landmark index and [range, bearing] of every landmark within max_range."""
-        z, _, _ = predict_observations(self.T_world_body.as_array(), self.landmarks, CONFIG.T_body_sensor)
-        index = np.flatnonzero(z[:, 0] <= CONFIG.max_range)
-        z = z[index] + self.rng.normal(0.0, 1.0, (len(index), 2)) * [RANGE_STD, BEARING_STD]
-        z[:, 1] = np.remainder(z[:, 1] + PI, 2.0 * PI) - PI
-        return index, z
-
-    def step(self, slam: EkfSlam) -> None:
-        for _ in range(PREDICTIONS_PER_SCAN):
-            slam.predict(self.drive())
 
 
 @functools.cache

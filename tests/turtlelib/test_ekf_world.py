@@ -1,10 +1,9 @@
 """EKF SLAM in a seeded numpy world: filter consistency (NEES) and unknown data association.
 
-The world: a TurtleBot3 Burger drives one loop of a circle among seven landmarks. Its wheels slip as the
-filter's model says (a random walk, simulated with independent slip on sub-steps of every prediction
-step); the LDS-01 (x = -0.032 m on the body) reports range and bearing of every landmark within range
-with Gaussian noise. Known association passes the landmark index; unknown association shuffles the
-observations, and the spurious-detection test adds random clutter.
+The world (slam_world.py): a TurtleBot3 Burger drives one loop of a circle among seven landmarks, its
+wheels slipping as the filter's model says, the LDS-01 reporting range and bearing with Gaussian noise.
+Known association passes the landmark index; unknown association gets the observations shuffled, and the
+spurious-detection test adds random clutter.
 """
 
 import dataclasses
@@ -13,70 +12,30 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from slam_world import (
+    BEARING_STD,
+    BURGER,
+    CONFIG,
+    MOTION,
+    N_SCANS,
+    PI,
+    PREDICTIONS_PER_SCAN,
+    RANGE_STD,
+    SCAN_PERIOD_NS,
+    WHEEL_NOISE,
+    World,
+)
 
-from turtlelib import DiffDrive, Transform2D, Twist2D
+from turtlelib import Transform2D
 from turtlelib.consistency import chi2_bounds, nees
 from turtlelib.ekf_slam import EkfSlam, ObservationStatus, SlamConfig
 from turtlelib.motion_models import DiffDriveMotion
 from turtlelib.range_bearing import predict_observations
 
-PI = math.pi
-BURGER = DiffDrive(wheel_radius=0.033, track_width=0.16)
 # the last two only 0.25 m apart: 6 to 7 sigma in the association metric
 LANDMARKS = np.array(
     [[1.2, 0.0], [0.9, 1.3], [-1.0, 0.6], [-0.6, -0.9], [0.6, -1.1], [-0.2, 1.6], [0.05, 1.6]]
 )
-# one loop of a circle of radius 0.5 m centred at (0, 0.5): 0.2 m/s, 0.4 rad/s, 5 Hz scans
-TWIST = Twist2D(0.4, 0.2, 0.0)
-SCAN_PERIOD_S = 0.2
-SCAN_PERIOD_NS = 200_000_000
-PREDICTIONS_PER_SCAN = 4
-SLIP_SUBSTEPS = 4
-N_SCANS = int(round(2.0 * PI / TWIST.omega / SCAN_PERIOD_S))
-RANGE_STD, BEARING_STD = 0.02, 0.02
-WHEEL_NOISE = 0.05
-MOTION = DiffDriveMotion(BURGER, WHEEL_NOISE)
-CONFIG = SlamConfig(sensor_x=-0.032, range_std=RANGE_STD, bearing_std=BEARING_STD, max_range=2.5)
-
-
-class World:
-    """The ground truth and the sensors, drawing noise from one seeded generator."""
-
-    def __init__(self, seed: int, clutter_per_observation: float = 0.0) -> None:
-        self.rng = np.random.default_rng(seed)
-        self.T_world_body = Transform2D()
-        self.clutter = clutter_per_observation
-        speeds = BURGER.wheel_speeds(TWIST)
-        dt = SCAN_PERIOD_S / PREDICTIONS_PER_SCAN
-        self.increments = (speeds[0] * dt, speeds[1] * dt)
-
-    def drive(self) -> tuple[float, float]:
-        """Move the truth by one prediction step; returns the encoder increments (what the filter gets)."""
-        k = WHEEL_NOISE
-        for _ in range(SLIP_SUBSTEPS):
-            left, right = (dphi / SLIP_SUBSTEPS for dphi in self.increments)
-            slip = self.rng.normal(0.0, k * np.sqrt(np.abs([left, right])))
-            self.T_world_body = BURGER.step(self.T_world_body, left + slip[0], right + slip[1])
-        return self.increments
-
-    def observe(self) -> tuple[np.ndarray, np.ndarray]:
-        """``(source, z)``: the landmark index (-1 for clutter) and [range, bearing] of each detection, in
-        random order. Clutter is uniform over the disc within max_range."""
-        z, _, _ = predict_observations(self.T_world_body.as_array(), LANDMARKS, CONFIG.T_body_sensor)
-        source = np.flatnonzero(z[:, 0] <= CONFIG.max_range)
-        z = z[source] + self.rng.normal(0.0, 1.0, (len(source), 2)) * [RANGE_STD, BEARING_STD]
-        n_clutter = self.rng.binomial(len(source), self.clutter) if self.clutter else 0
-        clutter = np.column_stack(
-            [
-                CONFIG.max_range * np.sqrt(self.rng.uniform(0.01, 1.0, n_clutter)),
-                self.rng.uniform(-PI, PI, n_clutter),
-            ]
-        )
-        source = np.concatenate([source, np.full(n_clutter, -1)])
-        z = np.concatenate([z, clutter])
-        z[:, 1] = np.remainder(z[:, 1] + PI, 2.0 * PI) - PI
-        order = self.rng.permutation(len(z))
-        return source[order], z[order]
 
 
 def pose_nees(slam: EkfSlam, T_world_body: Transform2D) -> float:
@@ -89,7 +48,7 @@ def run(seed: int, known: bool, config: SlamConfig = CONFIG, clutter: float = 0.
     """One loop; returns the per-scan pose NEES, the filter and the (source, association) of each scan.
 
     ``on_scan(slam)`` runs after every update."""
-    world = World(seed, clutter)
+    world = World(seed, LANDMARKS, clutter)
     slam = EkfSlam(config, MOTION)
     history = []
     nees_per_scan = np.empty(N_SCANS)
@@ -129,7 +88,7 @@ def test_an_overconfident_filter_fails_the_nees_band():
     overconfident = DiffDriveMotion(BURGER, WHEEL_NOISE / 5.0)
     runs = []
     for seed in range(10):
-        world = World(seed)
+        world = World(seed, LANDMARKS)
         slam = EkfSlam(CONFIG, overconfident)
         nees_per_scan = []
         for _ in range(N_SCANS // 2):
