@@ -12,8 +12,8 @@ from nuturtle_demo.run import DemoOptions, run_demo
 from turtlelib.slam_map import load_map
 
 MAP_S = 20.0
-LOCALIZE_S = 15.0
-COMPARE_S = 15.0
+LOCALIZE_S = 10.0
+COMPARE_S = 10.0
 # 0.5 m and 0.5 rad off the map origin; with 0.6 m loops the figure eight from there keeps clear of the
 # cylinders and the walls (docs/maps.md)
 OTHER_START = (0.4, 0.3, 0.5)
