@@ -22,9 +22,11 @@ Reading it
 * Foxglove opens ``DIR/<DIR name>.mcap``.
 
 Pieces: :class:`BagWriter` (the bag, usable without a ROS graph), :func:`recording_qos` (the QoS that
-hears every publisher of a topic), :class:`TopicRecorder` (an rclpy node that discovers every topic with a
-publisher and writes what arrives). Message definitions and type hashes come from rosbags' Jazzy
-typestore, so a topic whose type it does not know (or knows in another version) is left out.
+hears every publisher of a topic), :class:`TopicTap` (discovers every topic with a publisher on a node
+and hands each raw message to a :class:`TopicSink`: the bag here, the Foxglove relay in
+``foxglove_relay``), :class:`TopicRecorder` (the node ``recorder``: a tap into a bag). Message
+definitions and type hashes come from rosbags' Jazzy typestore (:func:`check_type`), so a topic whose type
+it does not know (or knows in another version) is left out.
 """
 
 from __future__ import annotations
@@ -34,7 +36,7 @@ import threading
 from collections.abc import Collection, Iterable, Sequence
 from pathlib import Path
 from types import TracebackType
-from typing import Any
+from typing import Any, Protocol
 
 from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
@@ -96,6 +98,35 @@ def _remove_bag(path: Path) -> None:
     path.rmdir()
 
 
+def check_type(typestore: Typestore, type_name: str, type_hashes: Collection[str] = ()) -> None:
+    """LookupError unless ``typestore`` knows ``type_name`` (``pkg/msg/Name``) with the RIHS01 hash of every
+    one of ``type_hashes`` (the publishers' ``RIHS01_<hex>``): the same definition on both sides."""
+    try:
+        known_hash = typestore.hash_rihs01(type_name)
+    except (KeyError, TypesysError) as error:
+        raise LookupError(f"the typestore does not know {type_name}") from error
+    foreign = sorted(set(type_hashes) - {known_hash})
+    if foreign:
+        raise LookupError(
+            f"the publishers' {type_name} ({', '.join(foreign)}) is not the typestore's ({known_hash})"
+        )
+
+
+class TopicSink(Protocol):
+    """Where a :class:`TopicTap` sends what it hears: ``add_topic`` once per topic (ValueError, LookupError:
+    the topic is left out), then ``write(topic, cdr_bytes, timestamp_ns)`` for each message."""
+
+    def add_topic(
+        self,
+        topic: str,
+        type_name: str,
+        offered_qos_profiles: Sequence[QoSProfile] = (),
+        type_hashes: Collection[str] = (),
+    ) -> None: ...
+
+    def write(self, topic: str, data: bytes, timestamp_ns: int) -> None: ...
+
+
 class BagWriter:
     """A rosbag2 bag directory at ``path`` (module docstring) written through ``rosbags.rosbag2.Writer``;
     thread safe; use as a context manager.
@@ -155,16 +186,7 @@ class BagWriter:
         with self._lock:
             if topic in self._connections:
                 raise ValueError(f"topic {topic!r} is already recorded")
-            try:
-                known_hash = self.typestore.hash_rihs01(type_name)
-            except (KeyError, TypesysError) as error:
-                raise LookupError(f"the typestore does not know {type_name}") from error
-            foreign = sorted(set(type_hashes) - {known_hash})
-            if foreign:
-                raise LookupError(
-                    f"the publishers' {type_name} ({', '.join(foreign)}) is not the typestore's "
-                    f"({known_hash})"
-                )
+            check_type(self.typestore, type_name, type_hashes)
             self._connections[topic] = self._bag.add_connection(
                 topic,
                 type_name,
@@ -222,15 +244,75 @@ def recording_qos(offered: Iterable[QoSProfile]) -> QoSProfile:
     )
 
 
-class TopicRecorder(Node):
-    """Node ``recorder``: subscribes (raw CDR) to every topic that has a publisher and writes each message
-    to a :class:`BagWriter`, stamped with this node's clock at reception (pass ``use_sim_time`` to record
-    in simulation time).
+class TopicTap:
+    """Discovery on ``node``: subscribes (raw CDR, :func:`recording_qos`) to every topic that has a
+    publisher and hands each message to ``sink``, stamped with ``node``'s clock at reception (simulation
+    time when the node uses it).
 
-    Topics are discovered at start and then every ``discovery_period_s`` (wall time); topics in
-    ``exclude``, with several types, or whose type has no Python class here or is not the writer's
-    typestore's are left out with one warning each. kwargs go to rclpy's Node.
+    Topics are discovered now and then every ``discovery_period_s`` (wall time); topics in ``exclude``,
+    with several types, or whose type has no Python class here or that the sink refuses are left out with
+    one warning each: ``not <purpose> <topic>: <reason>``.
     """
+
+    def __init__(
+        self,
+        node: Node,
+        sink: TopicSink,
+        exclude: Iterable[str] = (),
+        discovery_period_s: float = 0.2,
+        purpose: str = "recording",
+    ) -> None:
+        self.node = node
+        self.sink = sink
+        self.purpose = purpose
+        self._exclude = set(exclude)
+        self._left_out: set[str] = set()
+        self._subscriptions: dict[str, Any] = {}
+        self.discover()
+        node.create_timer(discovery_period_s, self.discover, clock=Clock(clock_type=ClockType.STEADY_TIME))
+
+    @property
+    def topics(self) -> list[str]:
+        """The topics tapped so far, in order of discovery."""
+        return list(self._subscriptions)
+
+    def discover(self) -> None:
+        """Subscribe to every new topic that has a publisher."""
+        for topic, type_names in self.node.get_topic_names_and_types():
+            if topic in self._subscriptions or topic in self._left_out or topic in self._exclude:
+                continue
+            publishers = self.node.get_publishers_info_by_topic(topic)
+            if not publishers:
+                continue
+            if len(type_names) != 1:
+                self._leave_out(topic, f"it has several types {type_names}")
+                continue
+            offered = [p.qos_profile for p in publishers]
+            hashes = {str(p.topic_type_hash) for p in publishers} - {"INVALID"}
+            try:
+                message_type = message_class(type_names[0])
+                self.sink.add_topic(topic, type_names[0], offered, hashes)
+            except (ImportError, AttributeError, LookupError, ValueError) as error:
+                self._leave_out(topic, str(error))
+                continue
+            self._subscriptions[topic] = self.node.create_subscription(
+                message_type,
+                topic,
+                lambda data, topic=topic: self.sink.write(
+                    topic, data, self.node.get_clock().now().nanoseconds
+                ),
+                recording_qos(offered),
+                raw=True,
+            )
+
+    def _leave_out(self, topic: str, reason: str) -> None:
+        self._left_out.add(topic)
+        self.node.get_logger().warning(f"not {self.purpose} {topic}: {reason}")
+
+
+class TopicRecorder(Node):
+    """Node ``recorder``: a :class:`TopicTap` into a :class:`BagWriter` (pass ``use_sim_time`` to record in
+    simulation time); kwargs go to rclpy's Node."""
 
     def __init__(
         self,
@@ -241,46 +323,8 @@ class TopicRecorder(Node):
     ) -> None:
         super().__init__("recorder", **kwargs)
         self.writer = writer
-        self._exclude = set(exclude)
-        self._left_out: set[str] = set()
-        self._recording: dict[str, Any] = {}
-        self.discover()
-        self.create_timer(discovery_period_s, self.discover, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.tap = TopicTap(self, writer, exclude, discovery_period_s)
 
     @property
     def recorded_topics(self) -> list[str]:
-        return list(self._recording)
-
-    def discover(self) -> None:
-        """Subscribe to every new topic that has a publisher."""
-        for topic, type_names in self.get_topic_names_and_types():
-            if topic in self._recording or topic in self._left_out or topic in self._exclude:
-                continue
-            publishers = self.get_publishers_info_by_topic(topic)
-            if not publishers:
-                continue
-            if len(type_names) != 1:
-                self._leave_out(topic, f"it has several types {type_names}")
-                continue
-            offered = [p.qos_profile for p in publishers]
-            hashes = {str(p.topic_type_hash) for p in publishers} - {"INVALID"}
-            try:
-                message_type = message_class(type_names[0])
-                self.writer.add_topic(topic, type_names[0], offered, hashes)
-            except (ImportError, AttributeError, LookupError, ValueError) as error:
-                self._leave_out(topic, str(error))
-                continue
-            self._recording[topic] = self.create_subscription(
-                message_type,
-                topic,
-                lambda data, topic=topic: self._on_message(topic, data),
-                recording_qos(offered),
-                raw=True,
-            )
-
-    def _leave_out(self, topic: str, reason: str) -> None:
-        self._left_out.add(topic)
-        self.get_logger().warning(f"not recording {topic}: {reason}")
-
-    def _on_message(self, topic: str, data: bytes) -> None:
-        self.writer.write(topic, data, self.get_clock().now().nanoseconds)
+        return self.tap.topics
