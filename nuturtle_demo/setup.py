@@ -35,6 +35,7 @@ setup(
         "console_scripts": [
             "demo = nuturtle_demo.cli:main",
             "driver = nuturtle_demo.driver:main",
+            "foxglove_relay = nuturtle_demo.foxglove_relay:main",
             "replay = nuturtle_demo.replay:main",
         ],
     },

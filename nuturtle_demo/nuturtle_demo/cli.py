@@ -13,6 +13,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from .foxglove_relay import DEFAULT_HOST, DEFAULT_PORT, parse_endpoint
 from .metrics import RunMetrics
 from .run import (
     ASSOCIATIONS,
@@ -66,6 +67,7 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
                         help="upper bound on simulated seconds per wall second "
                         "when not --realtime")  # fmt: skip
     parser.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    add_foxglove_argument(parser, "--realtime")
     maps = parser.add_argument_group("maps and localization (docs/maps.md)")
     maps.add_argument("--motion-source", choices=MOTION_SOURCES, default="joint_states",
                       help="slam's motion input: the wheel angles or the odometry node's odom (the same "
@@ -88,6 +90,15 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     maps.add_argument("--route-radius", type=float, default=None,
                       help="the figure eight's loop radius (m) instead of the driver's 0.75")  # fmt: skip
     return parser.parse_args(argv)
+
+
+def add_foxglove_argument(parser: argparse.ArgumentParser, pacing: str) -> None:
+    """``--foxglove [HOST:PORT]`` (docs/live.md); ``pacing`` names the option that plays at robot speed."""
+    parser.add_argument("--foxglove", nargs="?", const=f"{DEFAULT_HOST}:{DEFAULT_PORT}", default=None,
+                        metavar="HOST:PORT",
+                        help=f"serve every topic live on a Foxglove WebSocket (default {DEFAULT_HOST}:"
+                        f"{DEFAULT_PORT}, this machine only; another address such as 0.0.0.0 exposes every "
+                        f"topic to that network); add {pacing} to watch at robot speed")  # fmt: skip
 
 
 def results_table(metrics: RunMetrics) -> str:
@@ -139,6 +150,7 @@ def report(result: DemoResult, options: DemoOptions) -> str:
 def main(argv: Sequence[str] | None = None) -> int:
     args = parse_args(argv)
     try:
+        foxglove = None if args.foxglove is None else parse_endpoint(args.foxglove)
         options = DemoOptions(
             association=args.association,
             world=args.world,
@@ -155,10 +167,15 @@ def main(argv: Sequence[str] | None = None) -> int:
             start=args.start,
             initial_pose_std=tuple(args.initial_pose_std),
             route_radius=args.route_radius,
+            foxglove=foxglove,
         )
     except ValueError as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
-    result = run_demo(options)
+    try:
+        result = run_demo(options)
+    except OSError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
     print(report(result, options))
     return 1 if result.saved_map is not None and not result.saved_map[0] else 0

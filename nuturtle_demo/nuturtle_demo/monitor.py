@@ -3,6 +3,14 @@
 Subscribes (nav_msgs/Odometry)
     `nusim/ground_truth` (frame `nusim/world`), `odom` (frame `odom`), `slam/odom` (frame `map`, with the
     EKF's pose covariance).
+Publishes
+    `demo_monitor/slam_error` (std_msgs/Float64MultiArray) ``[position_error_m, heading_error_rad,
+    nees_pose]`` for each `slam/odom` sample once the ground truth has passed its stamp: ``e = [x_hat - x,
+    y_hat - y, wrap(theta_hat - theta)]`` against the truth interpolated at that stamp
+    (``metrics.pose_errors``), ``|e_xy|``, ``e_theta`` and ``e^T P^-1 e`` (3 dof; NaN while P is not
+    positive definite, as at the exactly known start). A live view's plots (docs/live.md); nothing is
+    published without ground truth.
+
 Each stream keeps ``[t, x, y, theta]`` per message (t = header stamp, s) and, for `slam/odom`, the
 (x, y, yaw) block of the 6x6 pose covariance. A message whose stamp is not later than the previous one
 of its stream replaces that sample (an estimator may publish twice for one instant: after prediction
@@ -25,10 +33,11 @@ import numpy as np
 from nav_msgs.msg import Odometry
 from numpy.typing import NDArray
 from rclpy.node import Node
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayout
 
 from nuturtle_ros_common.conversions import covariance_from_6x6, stamp_seconds, yaw_from_quaternion
 
-from .metrics import PoseSeries
+from .metrics import PoseSeries, pose_errors, pose_nees
 
 TRUTH_TOPIC = "nusim/ground_truth"
 ODOM_TOPIC = "odom"
@@ -39,6 +48,10 @@ DEPTH = 100
 BLOCK_ROWS = 4096
 POSE_COLUMNS = 4  # t, x, y, theta
 COVARIANCE_COLUMNS = 9  # the (x, y, theta) 3x3 covariance, row-major
+ERROR_TOPIC = "~/slam_error"
+ERROR_LABELS = ("position_error_m", "heading_error_rad", "nees_pose")
+# Newest ground-truth samples the live error is interpolated in (2.5 s of a 20 Hz stream)
+ERROR_TRUTH_ROWS = 50
 
 
 class RowTable:
@@ -141,12 +154,46 @@ class RunMonitor(Node):
         self._truth = _Stream()
         self._odom = _Stream()
         self._slam = _Stream(covariances=True)
-        self.create_subscription(Odometry, TRUTH_TOPIC, self._truth.add, DEPTH)
+        # slam/odom samples (t, pose, covariance) whose error awaits the ground truth
+        self._pending: list[tuple[float, list[float], NDArray[np.float64]]] = []
+        self._errors = self.create_publisher(Float64MultiArray, ERROR_TOPIC, DEPTH)
+        self.create_subscription(Odometry, TRUTH_TOPIC, self._on_truth, DEPTH)
         self.create_subscription(Odometry, ODOM_TOPIC, self._odom.add, DEPTH)
         self.create_subscription(Odometry, SLAM_TOPIC, self._on_slam, DEPTH)
 
+    def _on_truth(self, msg: Odometry) -> None:
+        self._truth.add(msg)
+        self._publish_errors()
+
     def _on_slam(self, msg: Odometry) -> None:
-        self._slam.add(msg, covariance_from_6x6(msg.pose.covariance))
+        covariance = covariance_from_6x6(msg.pose.covariance)
+        self._slam.add(msg, covariance)
+        sample = (float(self._slam.table.last[0]), self._slam.table.last[1:POSE_COLUMNS].tolist(), covariance)
+        if self._pending and self._pending[-1][0] >= sample[0]:
+            self._pending[-1] = sample  # the same instant again (after the update): it replaces the first
+        else:
+            self._pending.append(sample)
+        self._publish_errors()
+
+    def _publish_errors(self) -> None:
+        """The error of every pending slam sample the ground truth has passed (older ones are dropped)."""
+        if not self._pending or not len(self._truth.table):
+            return
+        truth = self._truth.series(ERROR_TRUTH_ROWS)
+        passed = [sample for sample in self._pending if sample[0] < truth.t_s[-1]]
+        if not passed:
+            return
+        del self._pending[: len(passed)]
+        covered = [sample for sample in passed if sample[0] >= truth.t_s[0]]
+        if not covered or len(truth) < 2:
+            return
+        estimate = PoseSeries(np.array([s[0] for s in covered]), np.array([s[1] for s in covered]))
+        errors = pose_errors(estimate, truth)
+        nees_values = pose_nees(errors, np.array([s[2] for s in covered]))
+        layout = MultiArrayLayout(dim=[MultiArrayDimension(label=",".join(ERROR_LABELS), size=3, stride=3)])
+        for e, nees_value in zip(errors, nees_values, strict=True):
+            values = [float(np.hypot(e[0], e[1])), float(e[2]), float(nees_value)]
+            self._errors.publish(Float64MultiArray(layout=layout, data=values))
 
     @property
     def counts(self) -> dict[str, int]:

@@ -8,6 +8,7 @@ The system (real rclpy nodes talking over DDS, all in one process and one Single
                                                         |   --fake_sensor-------------------> slam (known)
                                                         +-- /clock, nusim/ground_truth --> demo_monitor
     recorder: every topic -> the rosbag2 bag run/ (metadata.yaml, run.mcap)
+    foxglove_relay (with ``foxglove``): every topic -> a Foxglove WebSocket (docs/live.md)
 
 nusim runs on a steady wall timer at ``rate * realtime_factor`` Hz and publishes /clock; every other node
 uses simulation time. The executor runs whatever is ready after each physics step, so the estimators
@@ -58,6 +59,7 @@ from turtlelib.validation import finite_real, integer, one_of, positive, store
 
 from . import plots
 from .driver import FigureEightDriver
+from .foxglove_relay import FoxgloveRelayNode, RelayConfig, StaticTransform, slam_view_transforms
 from .metrics import RunData, RunMetrics, evaluate_run, odom_in_world
 from .monitor import RunMonitor
 from .params import matched_wheel_noise, params_file, to_parameters
@@ -98,8 +100,10 @@ class DemoOptions:
     is given the true start pose through `initialpose` with standard deviations ``initial_pose_std``
     (m, m, rad, > 0)); ``save_map`` calls slam's ``~/save_map`` at the end (needs ``map_file``);
     ``start`` (x0, y0, theta0) (m, m, rad, finite) replaces the world's true start pose;
-    ``route_radius`` (m, > 0) replaces the driver's figure-eight loop radius. ValueError for invalid
-    values."""
+    ``route_radius`` (m, > 0) replaces the driver's figure-eight loop radius.
+
+    ``foxglove`` (host, port) serves every topic live on a Foxglove WebSocket there (docs/live.md; with
+    ``realtime`` it plays at robot speed). ValueError for invalid values."""
 
     association: str = "unknown"
     world: Path = field(default_factory=default_world)
@@ -116,9 +120,14 @@ class DemoOptions:
     start: tuple[float, float, float] | None = None
     initial_pose_std: tuple[float, float, float] = (0.05, 0.05, 0.05)
     route_radius: float | None = None
+    foxglove: tuple[str, int] | None = None
 
     def __post_init__(self) -> None:
         one_of("association", self.association, ASSOCIATIONS)
+        if self.foxglove is not None:
+            host, port = self.foxglove
+            endpoint = RelayConfig(host=host, port=port)
+            object.__setattr__(self, "foxglove", (endpoint.host, endpoint.port))
         one_of("motion_source", self.motion_source, MOTION_SOURCES)
         one_of("mode", self.mode, MODES)
         store(self, ("seed",), partial(integer, minimum=0))
@@ -164,8 +173,9 @@ class DemoResult:
 
 class DemoSystem:
     """The nodes of one run, built in one context (see the module docstring): ``nusim``, ``turtle_control``,
-    ``odometry``, ``landmarks``, ``slam``, ``driver``, ``recorder``, ``monitor``; ``sim_time_s`` the
-    simulation time (s) nusim has reached."""
+    ``odometry``, ``landmarks``, ``slam``, ``driver``, ``recorder``, ``monitor`` and, with
+    ``options.foxglove``, ``relay`` (else None); ``sim_time_s`` the simulation time (s) nusim has
+    reached. OSError when the relay cannot bind its port."""
 
     def __init__(self, options: DemoOptions, context: Context, writer: BagWriter) -> None:
         sim_time = [Parameter("use_sim_time", value=True)]
@@ -181,17 +191,44 @@ class DemoSystem:
         self.turtle_control = TurtleControlNode(context=context, parameter_overrides=sim_time)
         self.odometry = OdometryNode(context=context, parameter_overrides=sim_time)
         self.landmarks, self.slam = _slam_nodes(self, options, context, sim_time)
+        self.relay = (
+            None if options.foxglove is None else _relay_node(self, options.foxglove, context, sim_time)
+        )
 
     @property
     def nodes(self) -> list[Node]:
-        return [
+        nodes = [
             self.nusim, self.turtle_control, self.odometry, self.landmarks, self.slam, self.driver,
             self.recorder, self.monitor,
         ]  # fmt: skip
+        return nodes if self.relay is None else [*nodes, self.relay]
 
     @property
     def sim_time_s(self) -> float:
         return self.nusim.step_count / self.nusim.timing.rate
+
+
+def _relay_node(
+    system: DemoSystem, endpoint: tuple[str, int], context: Context, sim_time: list[Parameter]
+) -> FoxgloveRelayNode:
+    """The Foxglove relay on ``endpoint``. Without /tf it is given what the demo knows: ``map`` is
+    ``nusim/world`` and ``odom`` starts on the true start pose (module docstring), and nusim's ground truth
+    places ``nusim/base_footprint``."""
+    slam_frames = system.slam.node_config
+    T_world_start = system.nusim.simulation.config.arena.T_world_start
+    known = [
+        StaticTransform(slam_frames.map_id, "nusim/world", Transform2D()),
+        StaticTransform(slam_frames.map_id, slam_frames.odom_id, T_world_start),
+    ]
+    transforms = slam_view_transforms(system.slam, known)
+    if transforms:
+        transforms["tf_from_odometry"].append("nusim/ground_truth")
+    host, port = endpoint
+    return FoxgloveRelayNode(
+        context=context,
+        parameter_overrides=sim_time + to_parameters({"host": host, "port": port}),
+        **transforms,
+    )
 
 
 def _slam_nodes(system: DemoSystem, options: DemoOptions, context: Context, sim_time: list[Parameter]):
@@ -340,12 +377,13 @@ def run_demo(options: DemoOptions, on_progress: ProgressCallback | None = None) 
             if node is not system.nusim:
                 executor.add_node(node)
 
-        def subscribed() -> bool:
-            return set(REQUIRED_TOPICS) <= set(system.recorder.recorded_topics)
+        taps = [system.recorder.tap] + ([] if system.relay is None else [system.relay.tap])
 
-        if not _spin_until(executor, subscribed, DISCOVERY_TIMEOUT_S):
-            missing = sorted(set(REQUIRED_TOPICS) - set(system.recorder.recorded_topics))
-            raise RuntimeError(f"the recorder did not discover {missing} within {DISCOVERY_TIMEOUT_S} s")
+        def missing() -> list[str]:
+            return sorted(set(REQUIRED_TOPICS) - set.intersection(*(set(tap.topics) for tap in taps)))
+
+        if not _spin_until(executor, lambda: not missing(), DISCOVERY_TIMEOUT_S):
+            raise RuntimeError(f"the recorder did not discover {missing()} within {DISCOVERY_TIMEOUT_S} s")
         if options.mode == "localization":
             relocalize(executor, system, options)
         executor.add_node(system.nusim)

@@ -61,8 +61,9 @@ def spin_guarded(node: Node) -> None:
 def run_node(factory: Callable[[], Node], name: str, args: Sequence[str] | None = None) -> int:
     """Spin the node `factory()` builds until shutdown; returns the process exit code.
 
-    A ValueError while building the node (an invalid parameter) is logged as fatal with its message and
-    gives exit code 1, without a traceback. The node's effective parameters are logged at start-up. An
+    A ValueError (an invalid parameter) or an OSError (something the node cannot have: a port in use)
+    while building the node is logged as fatal with its message and gives exit code 1, without a
+    traceback. The node's effective parameters are logged at start-up. An
     exception in a callback is logged and the node keeps spinning (:func:`spin_guarded`). Use as
     `sys.exit(run_node(MyNode, "my_node"))`.
     """
@@ -73,6 +74,9 @@ def run_node(factory: Callable[[], Node], name: str, args: Sequence[str] | None 
             node = factory()
         except ValueError as error:
             rclpy.logging.get_logger(name).fatal(f"invalid configuration: {error}")
+            return 1
+        except OSError as error:
+            rclpy.logging.get_logger(name).fatal(f"cannot start: {error}")
             return 1
         node.get_logger().info(f"parameters: {effective_parameters(node)}")
         spin_guarded(node)
