@@ -58,12 +58,15 @@ def test_invalid_sizes_are_refused(width, block_rows):
         RowTable(width, block_rows=block_rows)
 
 
-def odometry(t_s: float, x: float) -> Odometry:
+def odometry(t_s: float, x: float, y: float = 0.0, theta: float = 0.0, variances=None) -> Odometry:
     msg = Odometry()
-    msg.header.stamp.sec = int(t_s)
-    msg.header.stamp.nanosec = round((t_s - int(t_s)) * 1e9)
-    msg.pose.pose.position.x = x
-    msg.pose.pose.orientation.w = 1.0
+    msg.header.stamp.sec, msg.header.stamp.nanosec = int(t_s), round((t_s % 1.0) * 1e9)
+    msg.pose.pose.position.x, msg.pose.pose.position.y = x, y
+    msg.pose.pose.orientation.z, msg.pose.pose.orientation.w = np.sin(theta / 2), np.cos(theta / 2)
+    if variances is not None:
+        covariance = np.zeros((6, 6))
+        covariance[0, 0], covariance[1, 1], covariance[5, 5] = variances
+        msg.pose.covariance = covariance.reshape(36).tolist()
     return msg
 
 
@@ -81,3 +84,36 @@ def test_a_stream_replaces_a_sample_that_is_not_later_and_keeps_covariances():
     assert stream.table.width == POSE_COLUMNS + 9
     with pytest.raises(ValueError):
         stream.series(0)
+
+
+@pytest.mark.ros
+def test_the_live_slam_error_is_against_the_truth_interpolated_at_the_slam_stamp(ros):
+    from std_msgs.msg import Float64MultiArray
+
+    from nuturtle_demo.monitor import ERROR_LABELS, SLAM_TOPIC, TRUTH_TOPIC, RunMonitor
+
+    monitor = ros.add(RunMonitor(context=ros.context))
+    source = ros.node("monitor_source")
+    truth = source.create_publisher(Odometry, TRUTH_TOPIC, 10)
+    slam = source.create_publisher(Odometry, SLAM_TOPIC, 10)
+    errors: list[Float64MultiArray] = []
+    source.create_subscription(Float64MultiArray, "demo_monitor/slam_error", errors.append, 10)
+    assert ros.spin_until(lambda: truth.get_subscription_count() and slam.get_subscription_count())
+    assert ros.spin_until(lambda: monitor.count_subscribers("demo_monitor/slam_error") == 1)
+    truth.publish(odometry(1.0, 0.0, 0.0, 0.0))
+    # at t = 1.5 s, between truth samples (0, 0, 0) and (1, 2, 0.4): truth (0.5, 1, 0.2)
+    slam.publish(odometry(1.5, 0.8, 1.4, 0.1, variances=(0.01, 0.04, 0.01)))
+    # a second estimate of the same instant (after the update) replaces the first
+    slam.publish(odometry(1.5, 0.8, 0.6, 0.3, variances=(0.01, 0.04, 0.01)))
+    ros.spin_for(0.3)
+    assert errors == []  # the truth has not passed 1.5 s yet
+    truth.publish(odometry(2.0, 1.0, 2.0, 0.4))
+    assert ros.spin_until(lambda: len(errors) == 1)
+    position_m, heading_rad, nees_value = errors[0].data
+    # e = (0.3, -0.4, 0.1): |e_xy| = 0.5, NEES = 0.09/0.01 + 0.16/0.04 + 0.01/0.01 = 14
+    assert position_m == pytest.approx(0.5, abs=1e-9)
+    assert heading_rad == pytest.approx(0.1, abs=1e-9)
+    assert nees_value == pytest.approx(14.0, rel=1e-9)
+    assert errors[0].layout.dim[0].label == ",".join(ERROR_LABELS)
+    ros.spin_for(0.2)
+    assert len(errors) == 1
