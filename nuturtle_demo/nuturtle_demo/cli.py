@@ -13,8 +13,8 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from .foxglove_relay import DEFAULT_HOST, DEFAULT_PORT, parse_endpoint
 from .metrics import RunMetrics
+from .relay_config import add_foxglove_argument, parse_endpoint
 from .run import (
     ASSOCIATIONS,
     BAG_NAME,
@@ -90,15 +90,6 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     maps.add_argument("--route-radius", type=float, default=None,
                       help="the figure eight's loop radius (m) instead of the driver's 0.75")  # fmt: skip
     return parser.parse_args(argv)
-
-
-def add_foxglove_argument(parser: argparse.ArgumentParser, pacing: str) -> None:
-    """``--foxglove [HOST:PORT]`` (docs/live.md); ``pacing`` names the option that plays at robot speed."""
-    parser.add_argument("--foxglove", nargs="?", const=f"{DEFAULT_HOST}:{DEFAULT_PORT}", default=None,
-                        metavar="HOST:PORT",
-                        help=f"serve every topic live on a Foxglove WebSocket (default {DEFAULT_HOST}:"
-                        f"{DEFAULT_PORT}, this machine only; another address such as 0.0.0.0 exposes every "
-                        f"topic to that network); add {pacing} to watch at robot speed")  # fmt: skip
 
 
 def results_table(metrics: RunMetrics) -> str:

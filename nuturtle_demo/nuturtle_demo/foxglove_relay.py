@@ -45,12 +45,10 @@ from rosbags.typesys.store import Typestore
 from nuturtle_ros_common.node_main import run_node
 from nuturtle_ros_common.ros_params import declare_dataclass
 from turtlelib import Transform2D
-from turtlelib.validation import integer, positive, store
 
 from .recorder import MESSAGE_ENCODING, TopicTap, check_type
+from .relay_config import DEFAULT_HOST, DEFAULT_PORT, RelayConfig
 
-DEFAULT_HOST = "127.0.0.1"
-DEFAULT_PORT = 8765
 SCHEMA_ENCODING = "ros2msg"
 # Least clock advance (ns) between two time broadcasts: 20 Hz
 TIME_PERIOD_NS = 50_000_000
@@ -58,38 +56,6 @@ TF_TOPIC = "/tf"
 TF_STATIC_TOPIC = "/tf_static"
 TF_TYPE = "tf2_msgs/msg/TFMessage"
 ODOMETRY_TYPE = "nav_msgs/msg/Odometry"
-
-
-def parse_endpoint(text: str) -> tuple[str, int]:
-    """``HOST:PORT``, ``HOST`` or ``:PORT`` (the other part from ``127.0.0.1:8765``; an IPv6 host in
-    brackets: ``[::1]:8765``) as ``(host, port)``; ValueError for anything else."""
-    host, sep, port_text = text.strip().rpartition(":")
-    if not sep or "]" in port_text:
-        host, port_text = text.strip(), ""
-    host = host.removeprefix("[").removesuffix("]") or DEFAULT_HOST
-    try:
-        port = int(port_text) if port_text else DEFAULT_PORT
-    except ValueError:
-        raise ValueError(f"expected HOST:PORT, got {text!r}") from None
-    config = RelayConfig(host=host, port=port)
-    return config.host, config.port
-
-
-@dataclass(frozen=True)
-class RelayConfig:
-    """The relay's server: ``host`` the address to bind (``127.0.0.1``: this machine only; any other, such
-    as ``0.0.0.0``, exposes every topic to that network); ``port`` the TCP port (0-65535; 0: any free
-    port); ``discovery_period`` (s, > 0) between two looks for new topics."""
-
-    host: str = DEFAULT_HOST
-    port: int = DEFAULT_PORT
-    discovery_period: float = 0.5
-
-    def __post_init__(self) -> None:
-        if not self.host or any(c.isspace() for c in self.host):
-            raise ValueError(f"host must be an address or host name, got {self.host!r}")
-        object.__setattr__(self, "port", integer("port", self.port, 0, 65535))
-        store(self, ("discovery_period",), positive)
 
 
 @dataclass(frozen=True)

@@ -20,6 +20,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from .relay_config import add_foxglove_argument, parse_endpoint
+
 DEFAULT_TOPICS = {
     "scan": "/scan",
     "joint_states": "/joint_states",
@@ -65,6 +67,7 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
                         help="with --play-only: wait up to S wall seconds for a subscriber on every played "
                         "topic before playing")  # fmt: skip
     parser.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    add_foxglove_argument(parser, "--rate 1")
     return parser.parse_args(argv)
 
 
@@ -119,6 +122,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         params = args.params if args.params is not None else recording_params(args.bag)
         if params is not None and args.params is None:
             print(f"parameters of the recorded run: {params} (--params to choose others)", file=sys.stderr)
+        foxglove = None if args.foxglove is None else parse_endpoint(args.foxglove)
         options = ReplayOptions(
             bag=args.bag,
             out_dir=args.out,
@@ -130,9 +134,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             play_only=args.play_only,
             wait_for_subscribers_s=args.wait_for_subscribers,
             progress=not args.no_progress,
+            foxglove=foxglove,
         )
         result = run_replay(options)
-    except (BagError, ValueError) as error:
+    except (BagError, ValueError, OSError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
     print(summary(result))

@@ -6,6 +6,7 @@ The system::
     bag --BagSource--> bag_player --/clock, scan, joint_states, odom, nusim/ground_truth-->
         landmarks --landmarks--> slam --slam/odom, slam/path, slam/map-->
         recorder (every topic but the played ones -> slam/ bag), demo_monitor (truth, odom, slam/odom)
+        foxglove_relay (with ``foxglove``): every topic, the played ones too -> a Foxglove WebSocket
 
 Every node but the player runs on simulation time from the played /clock (each message's log time, sent
 just before the message). The messages are played a log-time step at a time: /clock, then the messages of
@@ -52,6 +53,7 @@ from turtlelib.timebase import NS_PER_S
 
 from . import plots
 from .bag_source import BagError, BagSource, BagTopic
+from .foxglove_relay import FoxgloveRelayNode, slam_view_transforms
 from .metrics import PoseSeries, RunData, evaluate_run, odom_in_world
 from .monitor import RunMonitor
 from .params import params_file, to_parameters
@@ -66,6 +68,7 @@ from .player import (
     wait_until,
 )
 from .recorder import BagWriter, TopicRecorder, message_class
+from .relay_config import RelayConfig
 from .run import LANDMARK_GATE_M, slam_snapshot
 
 # The SLAM outputs: a rosbag2 bag directory in the output folder (slam/metadata.yaml + slam/slam.mcap)
@@ -100,7 +103,8 @@ class ReplayOptions:
     ``fake_sensor``); ``rate`` > 0 paces at that many times real time, 0 plays as fast as the nodes go
     (None: 0, or 1.0 with ``play_only``); ``play_only`` runs only the player, which first waits up to
     ``wait_for_subscribers_s`` (wall) for a subscriber on every played topic; ``progress`` a bar on
-    stderr."""
+    stderr; ``foxglove`` (host, port) serves every topic live on a Foxglove WebSocket there (docs/live.md;
+    with ``rate`` 1 it plays at robot speed)."""
 
     bag: Path
     out_dir: Path = Path("out/replay")
@@ -120,8 +124,13 @@ class ReplayOptions:
     play_only: bool = False
     wait_for_subscribers_s: float = 5.0
     progress: bool = True
+    foxglove: tuple[str, int] | None = None
 
     def __post_init__(self) -> None:
+        if self.foxglove is not None:
+            host, port = self.foxglove
+            endpoint = RelayConfig(host=host, port=port)
+            object.__setattr__(self, "foxglove", (endpoint.host, endpoint.port))
         if self.association not in (None, "known", "unknown"):
             raise ValueError(f"association must be known or unknown, got {self.association!r}")
         if self.motion_source not in (None, "joint_states", "odom"):
@@ -335,6 +344,9 @@ class Replay:
             if not self.options.play_only:
                 writer = BagWriter(out_dir / BAG_NAME, overwrite=True)
                 nodes.extend(self._build_nodes(context, writer))
+            self.relay = None if self.options.foxglove is None else self._relay_node(context)
+            if self.relay is not None:
+                nodes.append(self.relay)
             for node in nodes:
                 executor.add_node(node)
             self.logger = self.player.get_logger()
@@ -371,11 +383,28 @@ class Replay:
         self.monitor = RunMonitor(context=context, parameter_overrides=sim_time)
         return [self.landmarks, self.slam, self.recorder, self.monitor]
 
+    def _relay_node(self, context: Context) -> FoxgloveRelayNode:
+        """The Foxglove relay: every topic, the played ones included; without /tf it is given slam's pose
+        and sensor mount (none with ``play_only``: no slam here)."""
+        host, port = self.options.foxglove
+        transforms = {} if self.options.play_only else slam_view_transforms(self.slam)
+        return FoxgloveRelayNode(
+            context=context,
+            parameter_overrides=to_parameters({"use_sim_time": True, "host": host, "port": port}),
+            **transforms,
+        )
+
+    def _relayed(self, topics: set[str]) -> bool:
+        return self.relay is None or topics <= set(self.relay.tap.topics)
+
     def _wait_for_matching(self, executor: SingleThreadedExecutor) -> None:
         """Until every played topic has its in-process subscribers and the recorder hears slam's outputs."""
+        # in-process subscribers of each played topic, plus the relay's
         expected = {"scan": 1, "joint_states": 1, "odom": 2, TRUTH_PLAYED_AS: 1, "/clock": 4}
         if self.association == "known":
             expected["fake_sensor"] = 1
+        if self.relay is not None:
+            expected = {name: n + 1 for name, n in expected.items()}
         required = {"/slam/odom", "/slam/path", "/slam/map"} | (
             {"/landmarks"} if self.association == "unknown" else set()
         )
@@ -384,7 +413,12 @@ class Replay:
             counts = self.player.subscription_counts()
             matched = all(counts.get(name, n) >= n for name, n in expected.items())
             observers = self.association == "known" or self.player.count_subscribers("/landmarks") >= 2
-            return matched and observers and required <= set(self.recorder.recorded_topics)
+            return (
+                matched
+                and observers
+                and required <= set(self.recorder.recorded_topics)
+                and self._relayed(required)
+            )
 
         if not spin_until(executor, self.logger, ready, DISCOVERY_TIMEOUT_S):
             raise RuntimeError(
@@ -396,13 +430,18 @@ class Replay:
         """--play-only: until every played topic has a subscriber or ``wait_for_subscribers_s`` passed
         (messages published before a subscriber matches are lost to it)."""
 
+        # the relay subscribes to every played topic: wait for one more
+        others = int(self.relay is not None)
+
         def matched() -> bool:
             return all(
-                count > 0 for name, count in self.player.subscription_counts().items() if name != "/clock"
+                count > others
+                for name, count in self.player.subscription_counts().items()
+                if name != "/clock"
             )
 
         if not spin_until(executor, self.logger, matched, self.options.wait_for_subscribers_s):
-            unmatched = sorted(n for n, c in self.player.subscription_counts().items() if c == 0)
+            unmatched = sorted(n for n, c in self.player.subscription_counts().items() if c <= others)
             self.logger.info(f"playing although nothing subscribes to {unmatched} yet")
 
     def _play(self, executor: SingleThreadedExecutor) -> bool:

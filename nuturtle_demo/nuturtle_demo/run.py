@@ -59,11 +59,12 @@ from turtlelib.validation import finite_real, integer, one_of, positive, store
 
 from . import plots
 from .driver import FigureEightDriver
-from .foxglove_relay import FoxgloveRelayNode, RelayConfig, StaticTransform, slam_view_transforms
+from .foxglove_relay import FoxgloveRelayNode, StaticTransform, slam_view_transforms
 from .metrics import RunData, RunMetrics, evaluate_run, odom_in_world
 from .monitor import RunMonitor
 from .params import matched_wheel_noise, params_file, to_parameters
 from .recorder import BagWriter, TopicRecorder
+from .relay_config import RelayConfig
 
 ASSOCIATIONS = ("known", "unknown")
 # Wall time for slam to take the initialpose, and for its ~/save_map service to appear and answer (s)

@@ -19,15 +19,8 @@ from std_msgs.msg import String
 from visualization_msgs.msg import Marker, MarkerArray
 
 from foxglove_client import FoxgloveClient
-from nuturtle_demo.foxglove_relay import (
-    DEFAULT_HOST,
-    DEFAULT_PORT,
-    FoxgloveRelay,
-    FoxgloveRelayNode,
-    RelayConfig,
-    StaticTransform,
-    parse_endpoint,
-)
+from nuturtle_demo.foxglove_relay import FoxgloveRelay, FoxgloveRelayNode, StaticTransform
+from nuturtle_demo.relay_config import DEFAULT_HOST, DEFAULT_PORT, RelayConfig, parse_endpoint
 from turtlelib import Transform2D
 
 JAZZY = get_typestore(Stores.ROS2_JAZZY)

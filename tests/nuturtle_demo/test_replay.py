@@ -11,6 +11,8 @@ input in the same order, so in practice it is the same).
 from __future__ import annotations
 
 import json
+import socket
+import threading
 
 import pytest
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
@@ -222,3 +224,59 @@ def test_a_demo_recording_is_replayed_with_the_parameters_of_its_run(tmp_path):
     (tmp_path / "out" / "config.yaml").write_text("slam:\n  ros__parameters: {}\n")
     assert recording_params(bag) == tmp_path / "out" / "config.yaml"
     assert recording_params(bag / "run.mcap") == tmp_path / "out" / "config.yaml"
+
+
+def free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+def test_a_replay_is_watched_live_with_the_played_topics_and_the_new_outputs(live, tmp_path):
+    """`--foxglove` on the replay: the played inputs (the bag's own bytes) and slam's new outputs are
+    relayed, and the live error against the played ground truth is there for the plots."""
+    from foxglove_client import FoxgloveClient
+
+    live_out, _ = live
+    bag = copy_bag(live_out / BAG_NAME, tmp_path / "short", StoragePlugin.MCAP, until_ns=int(5e9))
+    port = free_port()
+    code: list[int] = []
+    replay = threading.Thread(
+        target=lambda: code.append(
+            main(
+                [
+                    str(bag),
+                    "--out",
+                    str(tmp_path / "out"),
+                    "--params",
+                    str(live_out / "config.yaml"),
+                    "--rate",
+                    "2",
+                    "--foxglove",
+                    f"127.0.0.1:{port}",
+                    "--no-progress",
+                ]
+            )
+        )  # fmt: skip
+    )
+    replay.start()
+    try:
+        client = FoxgloveClient(f"ws://127.0.0.1:{port}", timeout_s=60.0)
+        watched = ["/scan", "/slam/odom", "/demo_monitor/slam_error"]
+        assert client.wait_for(lambda: set(watched) <= set(client.channels), timeout_s=30.0)
+        client.subscribe(watched)
+        client.wait_for(lambda: False, timeout_s=60.0)  # until the replay ends and the server goes
+    finally:
+        replay.join(120.0)
+    assert code == [0] and client.closed
+    assert {"/clock", "/joint_states", "/odom", "/nusim/ground_truth", "/landmarks", "/slam/map"} <= set(
+        client.channels
+    )
+    with BagSource(bag) as source:
+        played_scans = {message.data for message in source.messages(["/scan"])}
+    assert len(client.messages["/scan"]) >= 5
+    assert all(received.data in played_scans for received in client.messages["/scan"])
+    assert client.decode(client.messages["/slam/odom"][-1]).header.frame_id == "map"
+    errors = [client.decode(received).data for received in client.messages["/demo_monitor/slam_error"]]
+    assert len(errors) >= 20
+    assert all(0.0 <= e[0] < 0.05 and abs(e[1]) < 0.05 for e in errors)
