@@ -13,12 +13,18 @@ from __future__ import annotations
 import json
 import socket
 import threading
+from dataclasses import dataclass
+from pathlib import Path
 
+import numpy as np
 import pytest
+from bag_reading import read_bag
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
+from foxglove_client import FoxgloveClient
 from nuturtle_demo.bag_source import BagError, BagSource
+from nuturtle_demo.foxglove_relay import tf2_msgs_installed
 from nuturtle_demo.replay import main
 from nuturtle_demo.replay_run import ReplayOptions, run_replay
 from nuturtle_demo.run import BAG_NAME, DemoOptions, run_demo
@@ -32,6 +38,8 @@ ACCURACY_KEYS = (
     "final_position_error_slam_m", "final_heading_error_slam_rad", "ate_rmse_slam_m", "ate_rmse_odom_m",
     "final_position_error_odom_m", "landmark_rmse_m", "nees_pose_within_95_fraction", "landmarks_mapped",
 )  # fmt: skip
+# what the Foxglove client watches of the live run
+WATCHED = ["/scan", "/slam/odom", "/slam/map"]
 # compared with the live run: within 20 % (or 1 mm / 1 mrad, whichever is larger: the errors are mm)
 COMPARED = ("final_position_error_slam_m", "ate_rmse_slam_m", "landmark_rmse_m")
 
@@ -63,17 +71,53 @@ def bag_count(path, topic):
         return source.topics[topic].message_count
 
 
+@dataclass(frozen=True)
+class LiveRun:
+    out: Path
+    metrics: dict
+    # a Foxglove client that watched the run (subscribed to WATCHED) until the demo's relay stopped
+    client: FoxgloveClient
+
+
 @pytest.fixture(scope="module")
-def live(tmp_path_factory):
-    """A short demo run: its output folder (run/ bag, config.yaml) and metrics."""
+def live(tmp_path_factory) -> LiveRun:
+    """A short demo run, watched live through its Foxglove relay: its output folder (run/ bag,
+    config.yaml), its metrics and the client that watched it."""
     out = tmp_path_factory.mktemp("live")
-    result = run_demo(DemoOptions(duration_s=DURATION_S, out_dir=out, progress=False))
-    return out, result.metrics.as_dict()
+    url: list[str] = []
+    started = threading.Event()
+
+    def on_progress(system, sim_time_s):
+        if not started.is_set():
+            url.append(system.relay.relay.url)
+            started.set()
+
+    options = DemoOptions(duration_s=DURATION_S, out_dir=out, progress=False, foxglove=("127.0.0.1", 0))
+    results: list = []
+
+    def run() -> None:
+        try:
+            results.append(run_demo(options, on_progress))
+        finally:
+            started.set()
+
+    demo = threading.Thread(target=run)
+    demo.start()
+    try:
+        assert started.wait(60.0) and url, "the demo did not start"
+        client = FoxgloveClient(url[0])
+        assert client.wait_for(lambda: set(WATCHED) <= set(client.channels))
+        client.subscribe(WATCHED)
+        client.wait_for(lambda: False, timeout_s=120.0)  # until the demo ends and the server goes
+    finally:
+        demo.join(180.0)
+    assert client.closed and results, "the demo did not finish"
+    return LiveRun(out, results[0].metrics.as_dict(), client)
 
 
 @pytest.mark.parametrize("form", ["mcap directory", "sqlite3 directory", "single .mcap file"])
 def test_replay_applies_every_scan_and_matches_the_live_accuracy(live, tmp_path, form):
-    live_out, live_metrics = live
+    live_out, live_metrics = live.out, live.metrics
     bag = {
         "mcap directory": lambda: live_out / BAG_NAME,
         "sqlite3 directory": lambda: copy_bag(
@@ -122,7 +166,7 @@ def test_replay_applies_every_scan_and_matches_the_live_accuracy(live, tmp_path,
 
 def test_remapped_scan_without_ground_truth_gives_counts_but_no_accuracy(live, tmp_path, capsys):
     """The CLI as a user runs it: the scan recorded as /lidar/scan (played as scan), no ground truth."""
-    live_out, _ = live
+    live_out = live.out
     bag = copy_bag(
         live_out / BAG_NAME, tmp_path / "renamed", StoragePlugin.MCAP, rename={"/scan": "/lidar/scan"},
         drop=("/nusim/ground_truth", "/landmarks", "/slam/odom"), until_ns=int(6e9),
@@ -182,7 +226,7 @@ def test_play_only_feeds_nodes_in_another_process(live, tmp_path, ros):
     from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import JointState, LaserScan
 
-    live_out, _ = live
+    live_out = live.out
     bag = copy_bag(live_out / BAG_NAME, tmp_path / "short", StoragePlugin.MCAP, until_ns=int(4e9))
     listener = ros.node("listener")
     received = {"joint_states": 0, "clock": 0}
@@ -235,9 +279,7 @@ def free_port() -> int:
 def test_a_replay_is_watched_live_with_the_played_topics_and_the_new_outputs(live, tmp_path):
     """`--foxglove` on the replay: the played inputs (the bag's own bytes) and slam's new outputs are
     relayed, and the live error against the played ground truth is there for the plots."""
-    from foxglove_client import FoxgloveClient
-
-    live_out, _ = live
+    live_out = live.out
     bag = copy_bag(live_out / BAG_NAME, tmp_path / "short", StoragePlugin.MCAP, until_ns=int(5e9))
     port = free_port()
     code: list[int] = []
@@ -280,3 +322,48 @@ def test_a_replay_is_watched_live_with_the_played_topics_and_the_new_outputs(liv
     errors = [client.decode(received).data for received in client.messages["/demo_monitor/slam_error"]]
     assert len(errors) >= 20
     assert all(0.0 <= e[0] < 0.05 and abs(e[1]) < 0.05 for e in errors)
+
+
+def test_a_running_demo_is_watched_live_and_the_messages_are_the_recorded_ones(live):
+    """Connect to the demo's relay, list the channels, subscribe to /scan, /slam/odom and /slam/map and
+    decode what arrives: each one is, byte for byte, a message the demo's recorder wrote, and decodes
+    (rosbags, from the channel's schema) to the values rclpy decodes from the recording."""
+    client = live.client
+    watched = WATCHED
+    if not tf2_msgs_installed():
+        # the 3D view's transforms, from what the demo knows
+        assert {"/tf", "/tf_static"} <= set(client.channels)
+    bag = read_bag(live.out / BAG_NAME)
+    # the recording's topics are all advertised, with the recording's schema text
+    recorded = set(bag.channels) - {"/parameter_events", "/rosout"}
+    assert recorded <= set(client.channels)
+    for topic in watched:
+        assert client.channels[topic]["schema"] == bag.schemas[bag.channel_types[topic]].data.decode()
+    assert client.server_info["capabilities"] == ["time"]
+    for topic in watched:
+        relayed = client.messages[topic]
+        assert len(relayed) >= 5, topic
+        # what the recorder heard, decoded by rclpy, by its CDR bytes
+        recorded = {r.data: m for r, m in zip(bag.topic_records(topic), bag.decoded(topic), strict=True)}
+        for received in relayed:
+            assert received.data in recorded, f"{topic}: a message the recorder never heard"
+            _assert_same(topic, client.decode(received), recorded[received.data])
+    # log times in simulation time: within the run, never decreasing
+    log_times = [m.log_time_ns for m in client.messages["/slam/odom"]]
+    assert log_times == sorted(log_times) and 0 < log_times[-1] <= (DURATION_S + 1) * 10**9
+
+
+def _assert_same(topic: str, relayed, recorded) -> None:
+    if topic == "/scan":
+        np.testing.assert_array_equal(relayed.ranges, np.asarray(recorded.ranges))
+        assert (relayed.header.frame_id, relayed.header.stamp.sec, relayed.header.stamp.nanosec) == (
+            recorded.header.frame_id, recorded.header.stamp.sec, recorded.header.stamp.nanosec,
+        )  # fmt: skip
+    elif topic == "/slam/odom":
+        p, q = relayed.pose.pose.position, recorded.pose.pose.position
+        assert (p.x, p.y) == (q.x, q.y)
+        np.testing.assert_array_equal(relayed.pose.covariance, np.asarray(recorded.pose.covariance))
+    else:
+        assert [(m.ns, m.id, m.pose.position.x, m.pose.position.y) for m in relayed.markers] == [
+            (m.ns, m.id, m.pose.position.x, m.pose.position.y) for m in recorded.markers
+        ]
