@@ -20,7 +20,7 @@ setup(
         ("share/ament_index/resource_index/packages", [f"resource/{package_name}"]),
         (f"share/{package_name}", ["package.xml"]),
     ]
-    + [share(folder) for folder in ("config", "launch", "urdf") if glob(f"{folder}/*")],
+    + [share(folder) for folder in ("config", "launch", "rviz", "urdf") if glob(f"{folder}/*")],
     install_requires=["setuptools"],
     zip_safe=True,
     maintainer="nuturtle team",

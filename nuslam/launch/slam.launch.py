@@ -8,24 +8,29 @@ Arguments
                                   moves until asked).
     motion_source:=joint_states|odom, mode:=mapping|localization, map_file:=PATH
                                   slam's motion input, localization in a saved map (see turtlebot3.launch.py).
+    rviz:=false|true              true: also RViz2 with nuslam's rviz/slam.rviz (fixed frame `map`, on the
+                                  same clock as the nodes).
 
     ros2 launch nuslam slam.launch.py cmd_src:=teleop        # our control stack (wheel_cmd firmware)
+    ros2 launch nuslam slam.launch.py rviz:=true             # ... and watch it in RViz2
     ros2 launch nuslam turtlebot3.launch.py                  # a stock TurtleBot3 (its own odom, TF, cmd_vel)
     ros2 launch nuturtle_demo nusim_slam.launch.py           # the same against the simulator
 
 Every node reads the Burger's constants from nuturtle_description/config/diff_params.yaml and its own
 defaults from config/landmarks.yaml and config/slam.yaml; the launch arguments come last, so they win
 (`nuslam.launch_nodes`).
-RViz shows the wheel odometry `odom` (blue) and SLAM's pose, path and map in `map` (green).
+RViz shows the wheel odometry's path (blue) and SLAM's pose with its covariance, path and map in `map`
+(green), with the scan and the LiDAR landmarks.
 """
 
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, IncludeLaunchDescription, OpaqueFunction
+from launch.conditions import IfCondition
 from launch.launch_description_sources import PythonLaunchDescriptionSource
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
-from nuslam.launch_nodes import SLAM_ARGUMENTS, landmarks_parameters, slam_parameters
+from nuslam.launch_nodes import SLAM_ARGUMENTS, landmarks_parameters, rviz_arguments, slam_parameters
 from nuturtle_control.launch_nodes import CMD_SOURCES
 from nuturtle_ros_common.ros_files import share_file
 
@@ -39,6 +44,14 @@ def _slam_nodes(context):
             package="nuslam",
             executable="slam",
             parameters=slam_parameters(association, use_sim_time, **arguments),
+            output="screen",
+        ),
+        Node(
+            package="rviz2",
+            executable="rviz2",
+            arguments=rviz_arguments(),
+            parameters=[{"use_sim_time": use_sim_time}],
+            condition=IfCondition(LaunchConfiguration("rviz")),
             output="screen",
         ),
     ]
@@ -60,6 +73,7 @@ def generate_launch_description() -> LaunchDescription:
             DeclareLaunchArgument("association", default_value="unknown", choices=["unknown", "known"]),
             DeclareLaunchArgument("use_sim_time", default_value="false", choices=["true", "false"]),
             DeclareLaunchArgument("cmd_src", default_value="none", choices=list(CMD_SOURCES)),
+            DeclareLaunchArgument("rviz", default_value="false", choices=["true", "false"]),
             *[
                 DeclareLaunchArgument(
                     name, default_value=default, **({"choices": list(choices)} if choices else {})

@@ -10,8 +10,10 @@ Arguments
     motion_source:=joint_states|odom   the wheel angles (default) or the robot's odom as slam's motion
     mode:=mapping|localization         SLAM (default), or localization in the map of map_file
     map_file:=PATH                     the map loaded at start-up (if there) and written by slam/save_map
+    rviz:=false|true                   true: also RViz2 with nuslam's rviz/slam.rviz (fixed frame `map`)
 
     ros2 launch nuslam turtlebot3.launch.py      # on the laptop, same ROS_DOMAIN_ID as the robot
+    ros2 launch nuslam turtlebot3.launch.py rviz:=true
     ros2 launch nuslam turtlebot3.launch.py mode:=localization map_file:=$HOME/maps/lab.json
 
 slam uses the LiDAR landmarks (association unknown: a real robot has no fake sensor).
@@ -22,10 +24,11 @@ defaults from config/landmarks.yaml and config/slam.yaml (`nuslam.launch_nodes`)
 
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, OpaqueFunction
+from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
-from nuslam.launch_nodes import SLAM_ARGUMENTS, landmarks_parameters, slam_parameters
+from nuslam.launch_nodes import SLAM_ARGUMENTS, landmarks_parameters, rviz_arguments, slam_parameters
 
 
 def _slam(context):
@@ -49,6 +52,7 @@ def generate_launch_description() -> LaunchDescription:
                 )
                 for name, (default, choices) in SLAM_ARGUMENTS.items()
             ],
+            DeclareLaunchArgument("rviz", default_value="false", choices=["true", "false"]),
             Node(
                 package="nuslam",
                 executable="landmarks",
@@ -56,5 +60,12 @@ def generate_launch_description() -> LaunchDescription:
                 output="screen",
             ),
             OpaqueFunction(function=_slam),
+            Node(
+                package="rviz2",
+                executable="rviz2",
+                arguments=rviz_arguments(),
+                condition=IfCondition(LaunchConfiguration("rviz")),
+                output="screen",
+            ),
         ]
     )

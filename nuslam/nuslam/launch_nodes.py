@@ -1,4 +1,5 @@
-"""The parameter lists of nuslam's launch files (plain functions: tests call them, launch cannot run in CI).
+"""The parameter lists of nuslam's launch files, and RViz2's arguments (plain functions: tests call them,
+launch cannot run in CI).
 
 Every list is the robot's constants (nuturtle_description/config/diff_params.yaml), the node's own
 defaults (config/<node>.yaml), then the launch arguments, which win (`launch_parameters.with_arguments`).
@@ -34,3 +35,8 @@ def slam_parameters(association: str, use_sim_time: bool, **arguments: Any) -> l
 def landmarks_parameters(use_sim_time: bool) -> list[str | dict[str, Any]]:
     """The `landmarks` node's list."""
     return with_arguments([share_file("nuslam", "config", "landmarks.yaml")], {"use_sim_time": use_sim_time})
+
+
+def rviz_arguments() -> list[str]:
+    """rviz2's arguments for the SLAM view: ``-d`` and the installed ``share/nuslam/rviz/slam.rviz``."""
+    return ["-d", str(share_file("nuslam", "rviz", "slam.rviz"))]

@@ -7,8 +7,11 @@ Arguments
                                   (default): nothing until asked, e.g. `ros2 run nuturtle_control circle
                                   --ros-args -p use_sim_time:=true` once everything is up.
     world:=<path>                 nusim's world (default: nusim/config/basic_world.yaml).
+    rviz:=false|true              true: also RViz2 with nuslam's rviz/slam.rviz on the simulator's clock
+                                  (passed on to slam.launch.py, which starts it).
 
     ros2 launch nuturtle_demo nusim_slam.launch.py association:=known
+    ros2 launch nuturtle_demo nusim_slam.launch.py rviz:=true cmd_src:=circle
 
 RViz shows nusim's ground truth in `nusim/world` (red), the wheel odometry `odom` (blue) and SLAM's pose,
 path and map in `map` (green); a static `nusim/world -> map` (the world file's start pose, where slam's map
@@ -50,6 +53,7 @@ def generate_launch_description() -> LaunchDescription:
             # none: the robot stays still until asked, so every node is up (and slam at the true start) first
             DeclareLaunchArgument("cmd_src", default_value="none", choices=["none", "circle", "teleop"]),
             DeclareLaunchArgument("world", default_value=_share("nusim", "config", "basic_world.yaml")),
+            DeclareLaunchArgument("rviz", default_value="false", choices=["true", "false"]),
             IncludeLaunchDescription(
                 PythonLaunchDescriptionSource(_share("nusim", "launch", "nusim.launch.py")),
                 launch_arguments={"config_file": LaunchConfiguration("world")}.items(),
@@ -60,6 +64,7 @@ def generate_launch_description() -> LaunchDescription:
                 launch_arguments={
                     "association": LaunchConfiguration("association"),
                     "cmd_src": LaunchConfiguration("cmd_src"),
+                    "rviz": LaunchConfiguration("rviz"),
                     "use_sim_time": "true",
                 }.items(),
             ),
