@@ -102,8 +102,12 @@ def test_ament_index_finds_every_package_and_executable(workspace: Path) -> None
     for pkg in PACKAGES:
         assert found[pkg]["package_xml"], pkg
         assert sorted(found[pkg]["executables"]) == sorted(console_scripts(packages()[pkg])), pkg
-    share = install / "nuturtle_description" / "share" / "nuturtle_description" / "config"
-    assert "diff_params.yaml" in os.listdir(share)
+    for package, folder, name in (
+        ("nuturtle_description", "config", "diff_params.yaml"),
+        ("nuslam", "rviz", "slam.rviz"),
+        ("nuturtle_demo", "config", "foxglove_layout.json"),
+    ):
+        assert name in os.listdir(install / package / "share" / package / folder), (package, name)
 
 
 def run_executable(install: Path, package: str, executable: str, workdir: Path) -> None:
