@@ -15,9 +15,10 @@ What it shows
     * tabs for ``/diagnostics`` (Diagnostics summary) and ``/slam/odom`` (Raw Messages).
 
 How to open it
-    In Foxglove, *Open connection* > *Foxglove WebSocket* ``ws://127.0.0.1:8765``, or open a bag, then
-    *Layouts* > *Import from file* and pick ``nuturtle_demo/config/foxglove_layout.json`` (installed as
-    ``share/nuturtle_demo/config/foxglove_layout.json``).
+    In Foxglove, *Open connection* > *Foxglove WebSocket* ``ws://127.0.0.1:8765`` (served by the demo's or
+    the replay's ``--foxglove``, or ``ros2 run nuturtle_demo foxglove_relay``: docs/live.md), or open a
+    bag, then *Layouts* > *Import from file* and pick ``nuturtle_demo/config/foxglove_layout.json``
+    (installed as ``share/nuturtle_demo/config/foxglove_layout.json``).
 
 The committed JSON is this module's output: ``python -P -m nuturtle_demo.foxglove_layout`` rewrites it,
 ``--check`` exits 1 when it differs from :func:`build_layout`.
