@@ -31,6 +31,8 @@ PACKAGES = sorted(packages())
 NODE_ALIVE_S = 4.0
 # Executables that are command-line tools, not nodes: run with these arguments, must exit 0
 TOOLS = {("nuturtle_demo", "demo"): ["--help"], ("nuturtle_demo", "replay"): ["--help"]}
+# Arguments a node needs beside the others: the relay on any free port, not one a running demo may hold
+NODE_ARGUMENTS = {("nuturtle_demo", "foxglove_relay"): ["-p", "port:=0"]}
 
 PROBE = """
 import json, os
@@ -110,36 +112,48 @@ def test_ament_index_finds_every_package_and_executable(workspace: Path) -> None
         assert name in os.listdir(install / package / "share" / package / folder), (package, name)
 
 
-def run_executable(install: Path, package: str, executable: str, workdir: Path) -> None:
-    """Start ``executable`` of ``package`` from ``install``: a tool must exit 0, a node must still be
-    running after NODE_ALIVE_S and stop cleanly on SIGINT; neither may print a traceback."""
+def start_executable(install: Path, package: str, executable: str, workdir: Path) -> subprocess.Popen:
+    """Start ``executable`` of ``package`` from ``install`` (a node on sim time, a tool with its TOOLS
+    arguments), its output piped."""
     path = install / package / "lib" / package / executable
     assert path.is_file(), path
     arguments = TOOLS.get((package, executable), ["--ros-args", "-p", "use_sim_time:=true"])
+    arguments += NODE_ARGUMENTS.get((package, executable), [])
     command = shlex.join([sys.executable, "-c", HIDE_EDITABLE, str(path), *arguments])
-    process = subprocess.Popen(
+    return subprocess.Popen(
         sourced(install, f"exec {command}"), cwd=workdir, text=True,
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True,
     )  # fmt: skip
+
+
+def run_executables(install: Path, package: str, executables: list[str], workdir: Path) -> None:
+    """Start every executable of ``package`` from ``install`` at once: a tool must exit 0, a node must
+    still be running after NODE_ALIVE_S and stop cleanly on SIGINT; none may print a traceback."""
+    processes = {name: start_executable(install, package, name, workdir) for name in executables}
     try:
-        if (package, executable) in TOOLS:
-            output, _ = process.communicate(timeout=120)
-            assert process.returncode == 0, output[-3000:]
-        else:
-            deadline = time.monotonic() + NODE_ALIVE_S
-            while time.monotonic() < deadline and process.poll() is None:
-                time.sleep(0.1)
-            assert process.poll() is None, (
-                f"{package} {executable} stopped:\n{process.communicate()[0][-3000:]}"
-            )
+        outputs = {}
+        for name, process in processes.items():
+            if (package, name) in TOOLS:
+                outputs[name], _ = process.communicate(timeout=120)
+                assert process.returncode == 0, outputs[name][-3000:]
+        deadline = time.monotonic() + NODE_ALIVE_S
+        nodes = {name: process for name, process in processes.items() if (package, name) not in TOOLS}
+        while time.monotonic() < deadline and all(process.poll() is None for process in nodes.values()):
+            time.sleep(0.1)
+        for name, process in nodes.items():
+            assert process.poll() is None, f"{package} {name} stopped:\n{process.communicate()[0][-3000:]}"
+        for process in nodes.values():
             process.send_signal(signal.SIGINT)
-            output, _ = process.communicate(timeout=30)
-            assert process.returncode == 0, output[-3000:]
-        assert "Traceback" not in output, output[-3000:]
+        for name, process in nodes.items():
+            outputs[name], _ = process.communicate(timeout=30)
+            assert process.returncode == 0, outputs[name][-3000:]
+        for name, output in outputs.items():
+            assert "Traceback" not in output, f"{package} {name}:\n{output[-3000:]}"
     finally:
-        if process.poll() is None:
-            os.killpg(process.pid, signal.SIGKILL)
-            process.wait()
+        for process in processes.values():
+            if process.poll() is None:
+                os.killpg(process.pid, signal.SIGKILL)
+                process.wait()
 
 
 @pytest.mark.parametrize("package", PACKAGES)
@@ -153,5 +167,4 @@ def test_each_package_built_alone_runs_its_executables(workspace: Path, package:
             break
         needed |= more
     assert built == sorted(needed)
-    for executable in console_scripts(packages()[package]):
-        run_executable(install, package, executable, tmp_path)
+    run_executables(install, package, sorted(console_scripts(packages()[package])), tmp_path)
