@@ -46,7 +46,7 @@ from nuturtle_ros_common.node_main import run_node
 from nuturtle_ros_common.ros_params import declare_dataclass
 from turtlelib import Transform2D
 
-from .recorder import MESSAGE_ENCODING, TopicTap, check_type
+from .recorder import MESSAGE_ENCODING, TopicTap, absolute, check_type
 from .relay_config import DEFAULT_HOST, DEFAULT_PORT, RelayConfig
 
 SCHEMA_ENCODING = "ros2msg"
@@ -93,7 +93,10 @@ class FoxgloveRelay:
     definition), ``write(topic, cdr_bytes, timestamp_ns)`` sends a message to the clients subscribed to it.
     ``port`` is the bound port (the free one chosen for port 0); ``url`` ``ws://host:port``. OSError with
     the address and the reason when the server cannot bind (the port is in use, the address is not this
-    machine's). ``typestore`` (default: rosbags' ROS 2 Jazzy types) gives the schemas.
+    machine's). ``typestore`` (default: rosbags' ROS 2 Jazzy types) gives the schemas; ``name`` is the
+    server's name shown to clients. ``tf_from_odometry`` (nav_msgs/Odometry topics) are also relayed as
+    their transforms on ``/tf``, and ``static_transforms`` are served on the latched ``/tf_static``: for a
+    system without tf2_msgs (module docstring).
     """
 
     def __init__(
@@ -117,7 +120,7 @@ class FoxgloveRelay:
         self._latched: dict[int, tuple[bytes, int]] = {}
         self._latched_channels: set[int] = set()
         self._counts: dict[str, int] = {}
-        self._tf_from_odometry = {_absolute(topic) for topic in tf_from_odometry}
+        self._tf_from_odometry = {absolute(topic) for topic in tf_from_odometry}
         self._last_time_ns: int | None = None
         try:
             self._server = foxglove.start_server(
@@ -130,9 +133,13 @@ class FoxgloveRelay:
                 supported_encodings=[MESSAGE_ENCODING],
             )
         except RuntimeError as error:
+            hint = (
+                " (another relay or foxglove_bridge holds it: choose another port)"
+                if "in use" in str(error)
+                else ""
+            )
             raise OSError(
-                f"cannot serve the Foxglove WebSocket on {config.host}:{config.port}: {error} (another relay "
-                f"or foxglove_bridge may hold the port: choose another one)"
+                f"cannot serve the Foxglove WebSocket on {config.host}:{config.port}: {error}{hint}"
             ) from error
         self.host = config.host
         self.port = int(self._server.port)
@@ -252,10 +259,6 @@ class FoxgloveRelay:
         self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
     ) -> None:
         self.close()
-
-
-def _absolute(topic: str) -> str:
-    return topic if topic.startswith("/") else f"/{topic}"
 
 
 def _stamped(typestore: Typestore, static: StaticTransform) -> Any:

@@ -222,6 +222,11 @@ class BagWriter:
         self.close()
 
 
+def absolute(topic: str) -> str:
+    """The topic name with its leading slash (the form discovery gives)."""
+    return topic if topic.startswith("/") else "/" + topic
+
+
 def message_class(type_name: str) -> type:
     """The generated Python class of ``pkg/msg/Name``: ValueError for another form of name,
     ImportError/AttributeError when it is not installed."""

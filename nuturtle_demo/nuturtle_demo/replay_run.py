@@ -67,7 +67,7 @@ from .player import (
     wait_for_acks,
     wait_until,
 )
-from .recorder import BagWriter, TopicRecorder, message_class
+from .recorder import BagWriter, TopicRecorder, absolute, message_class
 from .relay_config import RelayConfig
 from .run import LANDMARK_GATE_M, slam_snapshot
 
@@ -88,10 +88,6 @@ ROLES = {
     "fake_sensor": ("fake_sensor", "visualization_msgs/msg/MarkerArray"),
 }
 SENSOR_ROLES = ("scan",)
-
-
-def absolute(topic: str) -> str:
-    return topic if topic.startswith("/") else "/" + topic
 
 
 @dataclass(frozen=True)
