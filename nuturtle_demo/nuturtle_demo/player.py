@@ -39,13 +39,14 @@ from rclpy.executors import (
 )
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
 
 from nuturtle_ros_common.conversions import stamp_from_nanoseconds
 from nuturtle_ros_common.node_main import run_guarded
 
 from .bag_source import BagMessage, BagTopic
-from .recorder import message_class
+from .recorder import TopicSink, absolute, message_class
 
 CLOCK_TOPIC = "/clock"
 # Queue of each played publisher (room for a burst to an external, slower subscriber)
@@ -84,6 +85,8 @@ class BagPlayer(Node):
 
     ``play(message)`` publishes /clock (when the log time moved on) and the message on its played topic
     (KeyError for a topic not in ``topics``); ``played`` the messages published per bag topic.
+    ``relay_to(sink)`` also hands /clock and every played message, with its log time, to a
+    :class:`~nuturtle_demo.recorder.TopicSink` (the Foxglove relay) without a subscription.
     """
 
     def __init__(self, topics: Sequence[PlayedTopic], **kwargs: Any) -> None:
@@ -96,19 +99,32 @@ class BagPlayer(Node):
         self.clock_publisher = self.create_publisher(Clock, CLOCK_TOPIC, QoSProfile(depth=PLAY_DEPTH))
         self.played = dict.fromkeys(self.topics, 0)
         self.clock_ns: int | None = None
+        self._sink: TopicSink | None = None
+
+    def relay_to(self, sink: TopicSink) -> None:
+        """Hand /clock and the played messages to ``sink`` too, each on its played topic."""
+        sink.add_topic(CLOCK_TOPIC, "rosgraph_msgs/msg/Clock", [self.clock_publisher.qos_profile])
+        for topic in self.topics.values():
+            sink.add_topic(absolute(topic.name), topic.type_name, [topic.qos])
+        self._sink = sink
 
     def publish_clock(self, t_ns: int) -> bool:
         """/clock at ``t_ns`` unless the clock is there already; True when published."""
         if self.clock_ns is not None and t_ns <= self.clock_ns:
             return False
-        self.clock_publisher.publish(Clock(clock=stamp_from_nanoseconds(int(t_ns))))
+        clock = Clock(clock=stamp_from_nanoseconds(int(t_ns)))
+        self.clock_publisher.publish(clock)
         self.clock_ns = int(t_ns)
+        if self._sink is not None:
+            self._sink.write(CLOCK_TOPIC, serialize_message(clock), self.clock_ns)
         return True
 
     def publish_message(self, message: BagMessage) -> None:
         """The message's CDR bytes on its played topic."""
         self.publishers_by_topic[message.topic].publish(message.data)
         self.played[message.topic] += 1
+        if self._sink is not None:
+            self._sink.write(absolute(self.topics[message.topic].name), message.data, message.log_time_ns)
 
     def reliable_publishers(self) -> list[Any]:
         return [

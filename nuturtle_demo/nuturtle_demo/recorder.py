@@ -127,6 +127,37 @@ class TopicSink(Protocol):
     def write(self, topic: str, data: bytes, timestamp_ns: int) -> None: ...
 
 
+class TeeSink:
+    """One tap into several sinks: a topic goes to every sink that accepts it (``add_topic`` raises the
+    first refusal only when all refuse), and each message to the sinks of its topic."""
+
+    def __init__(self, *sinks: TopicSink) -> None:
+        self.sinks = sinks
+        self._routes: dict[str, list[TopicSink]] = {}
+
+    def add_topic(
+        self,
+        topic: str,
+        type_name: str,
+        offered_qos_profiles: Sequence[QoSProfile] = (),
+        type_hashes: Collection[str] = (),
+    ) -> None:
+        accepted, refusals = [], []
+        for sink in self.sinks:
+            try:
+                sink.add_topic(topic, type_name, offered_qos_profiles, type_hashes)
+                accepted.append(sink)
+            except (LookupError, ValueError) as error:
+                refusals.append(error)
+        if not accepted:
+            raise refusals[0]
+        self._routes[topic] = accepted
+
+    def write(self, topic: str, data: bytes, timestamp_ns: int) -> None:
+        for sink in self._routes[topic]:
+            sink.write(topic, data, timestamp_ns)
+
+
 class BagWriter:
     """A rosbag2 bag directory at ``path`` (module docstring) written through ``rosbags.rosbag2.Writer``;
     thread safe; use as a context manager.
@@ -316,12 +347,12 @@ class TopicTap:
 
 
 class TopicRecorder(Node):
-    """Node ``recorder``: a :class:`TopicTap` into a :class:`BagWriter` (pass ``use_sim_time`` to record in
-    simulation time); kwargs go to rclpy's Node."""
+    """Node ``recorder``: a :class:`TopicTap` into ``writer``, a :class:`BagWriter` or a :class:`TeeSink`
+    that includes one (pass ``use_sim_time`` to record in simulation time); kwargs go to rclpy's Node."""
 
     def __init__(
         self,
-        writer: BagWriter,
+        writer: TopicSink,
         exclude: Iterable[str] = (),
         discovery_period_s: float = 0.2,
         **kwargs: Any,

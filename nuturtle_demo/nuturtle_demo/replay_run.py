@@ -6,7 +6,8 @@ The system::
     bag --BagSource--> bag_player --/clock, scan, joint_states, odom, nusim/ground_truth-->
         landmarks --landmarks--> slam --slam/odom, slam/path, slam/map-->
         recorder (every topic but the played ones -> slam/ bag), demo_monitor (truth, odom, slam/odom)
-        foxglove_relay (with ``foxglove``): every topic, the played ones too -> a Foxglove WebSocket
+        with ``foxglove``, a Foxglove WebSocket: the played messages from the player, the rest from the
+        recorder's subscriptions (with ``play_only``, a tap on the player node)
 
 Every node but the player runs on simulation time from the played /clock (each message's log time, sent
 just before the message). The messages are played a log-time step at a time: /clock, then the messages of
@@ -53,7 +54,7 @@ from turtlelib.timebase import NS_PER_S
 
 from . import plots
 from .bag_source import BagError, BagSource, BagTopic
-from .foxglove_relay import FoxgloveRelayNode, slam_view_transforms
+from .foxglove_relay import FoxgloveRelay, slam_view_transforms
 from .metrics import PoseSeries, RunData, evaluate_run, odom_in_world
 from .monitor import RunMonitor
 from .params import params_file, to_parameters
@@ -67,7 +68,7 @@ from .player import (
     wait_for_acks,
     wait_until,
 )
-from .recorder import BagWriter, TopicRecorder, absolute, message_class
+from .recorder import BagWriter, TeeSink, TopicRecorder, TopicTap, absolute, message_class
 from .relay_config import RelayConfig
 from .run import LANDMARK_GATE_M, slam_snapshot
 
@@ -337,12 +338,18 @@ class Replay:
         try:
             self.player = BagPlayer(played_topics(self.topics), context=context)
             nodes.append(self.player)
+            self.relay = None
             if not self.options.play_only:
                 writer = BagWriter(out_dir / BAG_NAME, overwrite=True)
                 nodes.extend(self._build_nodes(context, writer))
-            self.relay = None if self.options.foxglove is None else self._relay_node(context)
+            elif self.options.foxglove is not None:
+                self.relay = self._relay()
+                # what the user's nodes publish: every topic but the played ones
+                self._relay_tap = TopicTap(
+                    self.player, self.relay, exclude=self._played_names(), purpose="relaying"
+                )
             if self.relay is not None:
-                nodes.append(self.relay)
+                self.player.relay_to(self.relay)
             for node in nodes:
                 executor.add_node(node)
             self.logger = self.player.get_logger()
@@ -360,6 +367,8 @@ class Replay:
         finally:
             if writer is not None:
                 writer.close()
+            if self.relay is not None:
+                self.relay.close()
             for node in nodes:
                 node.destroy_node()
             executor.shutdown()
@@ -370,37 +379,37 @@ class Replay:
         from nuslam.slam_node import SlamNode
 
         sim_time = [Parameter("use_sim_time", value=True)]
-        played = [absolute(ROLES[role][0]) for role in self.topics] + ["/clock"]
+        self.writer = writer
         self.landmarks = LandmarksNode(
             context=context, parameter_overrides=to_parameters(self.landmarks_values)
         )
         self.slam = SlamNode(context=context, parameter_overrides=to_parameters(self.slam_values))
-        self.recorder = TopicRecorder(writer, exclude=played, context=context, parameter_overrides=sim_time)
+        self.relay = None if self.options.foxglove is None else self._relay()
+        # one subscription per topic for the bag and the relay
+        sink = writer if self.relay is None else TeeSink(writer, self.relay)
+        self.recorder = TopicRecorder(
+            sink, exclude=self._played_names(), context=context, parameter_overrides=sim_time
+        )
         self.monitor = RunMonitor(context=context, parameter_overrides=sim_time)
         return [self.landmarks, self.slam, self.recorder, self.monitor]
 
-    def _relay_node(self, context: Context) -> FoxgloveRelayNode:
-        """The Foxglove relay: every topic, the played ones included; without /tf it is given slam's pose
-        and sensor mount (none with ``play_only``: no slam here)."""
+    def _played_names(self) -> list[str]:
+        return [absolute(ROLES[role][0]) for role in self.topics] + ["/clock"]
+
+    def _relay(self) -> FoxgloveRelay:
+        """The Foxglove relay; without /tf it is given slam's pose and sensor mount (none with
+        ``play_only``: no slam here). OSError when it cannot bind."""
         host, port = self.options.foxglove
         transforms = {} if self.options.play_only else slam_view_transforms(self.slam)
-        return FoxgloveRelayNode(
-            context=context,
-            parameter_overrides=to_parameters({"use_sim_time": True, "host": host, "port": port}),
-            **transforms,
-        )
-
-    def _relayed(self, topics: set[str]) -> bool:
-        return self.relay is None or topics <= set(self.relay.tap.topics)
+        relay = FoxgloveRelay(host, port, name="nuturtle_demo.replay", **transforms)
+        print(f"Foxglove WebSocket on {relay.url} (Foxglove: Open connection)", file=sys.stderr)
+        return relay
 
     def _wait_for_matching(self, executor: SingleThreadedExecutor) -> None:
         """Until every played topic has its in-process subscribers and the recorder hears slam's outputs."""
-        # in-process subscribers of each played topic, plus the relay's
         expected = {"scan": 1, "joint_states": 1, "odom": 2, TRUTH_PLAYED_AS: 1, "/clock": 4}
         if self.association == "known":
             expected["fake_sensor"] = 1
-        if self.relay is not None:
-            expected = {name: n + 1 for name, n in expected.items()}
         required = {"/slam/odom", "/slam/path", "/slam/map"} | (
             {"/landmarks"} if self.association == "unknown" else set()
         )
@@ -409,12 +418,7 @@ class Replay:
             counts = self.player.subscription_counts()
             matched = all(counts.get(name, n) >= n for name, n in expected.items())
             observers = self.association == "known" or self.player.count_subscribers("/landmarks") >= 2
-            return (
-                matched
-                and observers
-                and required <= set(self.recorder.recorded_topics)
-                and self._relayed(required)
-            )
+            return matched and observers and required <= set(self.recorder.recorded_topics)
 
         if not spin_until(executor, self.logger, ready, DISCOVERY_TIMEOUT_S):
             raise RuntimeError(
@@ -426,18 +430,13 @@ class Replay:
         """--play-only: until every played topic has a subscriber or ``wait_for_subscribers_s`` passed
         (messages published before a subscriber matches are lost to it)."""
 
-        # the relay subscribes to every played topic: wait for one more
-        others = int(self.relay is not None)
-
         def matched() -> bool:
             return all(
-                count > others
-                for name, count in self.player.subscription_counts().items()
-                if name != "/clock"
+                count > 0 for name, count in self.player.subscription_counts().items() if name != "/clock"
             )
 
         if not spin_until(executor, self.logger, matched, self.options.wait_for_subscribers_s):
-            unmatched = sorted(n for n, c in self.player.subscription_counts().items() if c <= others)
+            unmatched = sorted(n for n, c in self.player.subscription_counts().items() if c == 0)
             self.logger.info(f"playing although nothing subscribes to {unmatched} yet")
 
     def _play(self, executor: SingleThreadedExecutor) -> bool:
@@ -503,7 +502,7 @@ class Replay:
                     "observation_arrays_applied": observations["applied"],
                     "observation_arrays_skipped": observations["skipped"],
                     "observation_arrays_pending": observations["pending"],
-                    "slam_outputs_recorded": self.recorder.writer.message_counts,
+                    "slam_outputs_recorded": self.writer.message_counts,
                 }
             )
         return values

@@ -8,7 +8,7 @@ The system (real rclpy nodes talking over DDS, all in one process and one Single
                                                         |   --fake_sensor-------------------> slam (known)
                                                         +-- /clock, nusim/ground_truth --> demo_monitor
     recorder: every topic -> the rosbag2 bag run/ (metadata.yaml, run.mcap)
-    foxglove_relay (with ``foxglove``): every topic -> a Foxglove WebSocket (docs/live.md)
+    with ``foxglove``, the recorder's subscriptions also feed a Foxglove WebSocket (docs/live.md)
 
 nusim runs on a steady wall timer at ``rate * realtime_factor`` Hz and publishes /clock; every other node
 uses simulation time. The executor runs whatever is ready after each physics step, so the estimators
@@ -59,11 +59,11 @@ from turtlelib.validation import finite_real, integer, one_of, positive, store
 
 from . import plots
 from .driver import FigureEightDriver
-from .foxglove_relay import FoxgloveRelayNode, StaticTransform, slam_view_transforms
+from .foxglove_relay import FoxgloveRelay, StaticTransform, slam_view_transforms
 from .metrics import RunData, RunMetrics, evaluate_run, odom_in_world
 from .monitor import RunMonitor
 from .params import matched_wheel_noise, params_file, to_parameters
-from .recorder import BagWriter, TopicRecorder
+from .recorder import BagWriter, TeeSink, TopicRecorder
 from .relay_config import RelayConfig
 
 ASSOCIATIONS = ("known", "unknown")
@@ -175,8 +175,9 @@ class DemoResult:
 class DemoSystem:
     """The nodes of one run, built in one context (see the module docstring): ``nusim``, ``turtle_control``,
     ``odometry``, ``landmarks``, ``slam``, ``driver``, ``recorder``, ``monitor`` and, with
-    ``options.foxglove``, ``relay`` (else None); ``sim_time_s`` the simulation time (s) nusim has
-    reached. OSError when the relay cannot bind its port."""
+    ``options.foxglove``, ``relay``: the Foxglove server the recorder's subscriptions also feed (else None;
+    the caller closes it); ``sim_time_s`` the simulation time (s) nusim has reached. OSError when the relay
+    cannot bind its port."""
 
     def __init__(self, options: DemoOptions, context: Context, writer: BagWriter) -> None:
         sim_time = [Parameter("use_sim_time", value=True)]
@@ -186,32 +187,29 @@ class DemoSystem:
             world.update(zip(("x0", "y0", "theta0"), options.start, strict=True))
         route = {} if options.route_radius is None else {"radius": options.route_radius}
         self.nusim = NusimNode(context=context, parameter_overrides=to_parameters(world))
-        self.recorder = TopicRecorder(writer, context=context, parameter_overrides=sim_time)
         self.monitor = RunMonitor(context=context, parameter_overrides=sim_time)
         self.driver = FigureEightDriver(context=context, parameter_overrides=sim_time + to_parameters(route))
         self.turtle_control = TurtleControlNode(context=context, parameter_overrides=sim_time)
         self.odometry = OdometryNode(context=context, parameter_overrides=sim_time)
         self.landmarks, self.slam = _slam_nodes(self, options, context, sim_time)
-        self.relay = (
-            None if options.foxglove is None else _relay_node(self, options.foxglove, context, sim_time)
-        )
+        self.relay = None if options.foxglove is None else _relay(self, options.foxglove)
+        # one subscription per topic for both: a second tap node would slow every executor step
+        sink = writer if self.relay is None else TeeSink(writer, self.relay)
+        self.recorder = TopicRecorder(sink, context=context, parameter_overrides=sim_time)
 
     @property
     def nodes(self) -> list[Node]:
-        nodes = [
+        return [
             self.nusim, self.turtle_control, self.odometry, self.landmarks, self.slam, self.driver,
             self.recorder, self.monitor,
         ]  # fmt: skip
-        return nodes if self.relay is None else [*nodes, self.relay]
 
     @property
     def sim_time_s(self) -> float:
         return self.nusim.step_count / self.nusim.timing.rate
 
 
-def _relay_node(
-    system: DemoSystem, endpoint: tuple[str, int], context: Context, sim_time: list[Parameter]
-) -> FoxgloveRelayNode:
+def _relay(system: DemoSystem, endpoint: tuple[str, int]) -> FoxgloveRelay:
     """The Foxglove relay on ``endpoint``. Without /tf it is given what the demo knows: ``map`` is
     ``nusim/world`` and ``odom`` starts on the true start pose (module docstring), and nusim's ground truth
     places ``nusim/base_footprint``."""
@@ -225,11 +223,9 @@ def _relay_node(
     if transforms:
         transforms["tf_from_odometry"].append("nusim/ground_truth")
     host, port = endpoint
-    return FoxgloveRelayNode(
-        context=context,
-        parameter_overrides=sim_time + to_parameters({"host": host, "port": port}),
-        **transforms,
-    )
+    relay = FoxgloveRelay(host, port, name="nuturtle_demo", **transforms)
+    print(f"Foxglove WebSocket on {relay.url} (Foxglove: Open connection)", file=sys.stderr)
+    return relay
 
 
 def _slam_nodes(system: DemoSystem, options: DemoOptions, context: Context, sim_time: list[Parameter]):
@@ -378,13 +374,12 @@ def run_demo(options: DemoOptions, on_progress: ProgressCallback | None = None) 
             if node is not system.nusim:
                 executor.add_node(node)
 
-        taps = [system.recorder.tap] + ([] if system.relay is None else [system.relay.tap])
+        def subscribed() -> bool:
+            return set(REQUIRED_TOPICS) <= set(system.recorder.recorded_topics)
 
-        def missing() -> list[str]:
-            return sorted(set(REQUIRED_TOPICS) - set.intersection(*(set(tap.topics) for tap in taps)))
-
-        if not _spin_until(executor, lambda: not missing(), DISCOVERY_TIMEOUT_S):
-            raise RuntimeError(f"the recorder did not discover {missing()} within {DISCOVERY_TIMEOUT_S} s")
+        if not _spin_until(executor, subscribed, DISCOVERY_TIMEOUT_S):
+            missing = sorted(set(REQUIRED_TOPICS) - set(system.recorder.recorded_topics))
+            raise RuntimeError(f"the recorder did not discover {missing} within {DISCOVERY_TIMEOUT_S} s")
         if options.mode == "localization":
             relocalize(executor, system, options)
         executor.add_node(system.nusim)
@@ -425,6 +420,8 @@ def run_demo(options: DemoOptions, on_progress: ProgressCallback | None = None) 
         )
     finally:
         writer.close()
+        if system is not None and system.relay is not None:
+            system.relay.close()
         for node in system.nodes if system else []:
             node.destroy_node()
         executor.shutdown()

@@ -89,7 +89,7 @@ def live(tmp_path_factory) -> LiveRun:
 
     def on_progress(system, sim_time_s):
         if not started.is_set():
-            url.append(system.relay.relay.url)
+            url.append(system.relay.url)
             started.set()
 
     options = DemoOptions(duration_s=DURATION_S, out_dir=out, progress=False, foxglove=("127.0.0.1", 0))
