@@ -249,3 +249,25 @@ def test_the_demo_cli_refuses_a_port_in_use(tmp_path, capsys):
     assert code == 2
     assert f"127.0.0.1:{port}" in capsys.readouterr().err
     assert not (tmp_path / "metrics.json").exists()
+
+
+def test_a_tee_sends_each_topic_to_the_sinks_that_take_it(tmp_path):
+    from bag_reading import read_bag
+
+    from nuturtle_demo.recorder import BagWriter, TeeSink
+
+    with FoxgloveRelay(port=0, tf_from_odometry=["slam/odom"]) as relay, BagWriter(tmp_path / "bag") as bag:
+        tee = TeeSink(bag, relay)
+        tee.add_topic("/chatter", STRING)
+        tee.add_topic("/tf", "tf2_msgs/msg/TFMessage")  # the relay serves its own /tf: the bag alone
+        with pytest.raises(LookupError, match="does not know"):
+            tee.add_topic("/custom", "no_such_msgs/msg/Nothing")
+        tee.write("/chatter", string_cdr("both"), 5)
+        tee.write(
+            "/tf", cdr(JAZZY.types["tf2_msgs/msg/TFMessage"](transforms=[]), "tf2_msgs/msg/TFMessage"), 6
+        )
+        assert relay.message_counts == {"/tf": 0, "/chatter": 1}
+    assert {topic: len(read_bag(tmp_path / "bag").topic_records(topic)) for topic in ("/chatter", "/tf")} == {
+        "/chatter": 1,
+        "/tf": 1,
+    }
