@@ -31,10 +31,8 @@ from __future__ import annotations
 import importlib.util
 import math
 import sys
-import threading
 from collections.abc import Collection, Iterable, Sequence
 from dataclasses import dataclass
-from types import TracebackType
 from typing import Any
 
 from rclpy.node import Node
@@ -46,7 +44,7 @@ from nuturtle_ros_common.node_main import run_node
 from nuturtle_ros_common.ros_params import declare_dataclass
 from turtlelib import Transform2D
 
-from .recorder import MESSAGE_ENCODING, TopicTap, absolute, check_type
+from .recorder import MESSAGE_ENCODING, ClosingSink, TopicTap, absolute, check_type
 from .relay_config import DEFAULT_HOST, DEFAULT_PORT, RelayConfig
 
 SCHEMA_ENCODING = "ros2msg"
@@ -84,7 +82,7 @@ class _LatchedResend:
         """Nothing to do: the server stops sending by itself."""
 
 
-class FoxgloveRelay:
+class FoxgloveRelay(ClosingSink):
     """A Foxglove WebSocket server on ``host:port`` relaying ROS topics (module docstring); thread safe;
     use as a context manager (``close()`` stops the server).
 
@@ -115,11 +113,11 @@ class FoxgloveRelay:
         self.typestore = typestore or get_typestore(Stores.ROS2_JAZZY)
         self._foxglove = foxglove
         self._context = foxglove.Context()
-        self._lock = threading.Lock()
+        super().__init__()
         self._channels: dict[str, Any] = {}
+        # latched channels by id, and the last message (data, log time) of each
+        self._latched_channels: dict[int, Any] = {}
         self._latched: dict[int, tuple[bytes, int]] = {}
-        self._latched_channels: set[int] = set()
-        self._counts: dict[str, int] = {}
         self._tf_from_odometry = {absolute(topic) for topic in tf_from_odometry}
         self._last_time_ns: int | None = None
         try:
@@ -143,7 +141,6 @@ class FoxgloveRelay:
             ) from error
         self.host = config.host
         self.port = int(self._server.port)
-        self.closed = False
         if self._tf_from_odometry:
             self._add_channel(TF_TOPIC, TF_TYPE, latched=False)
         if static_transforms:
@@ -162,12 +159,6 @@ class FoxgloveRelay:
         """The relayed topics (channels), in order of advertisement."""
         with self._lock:
             return list(self._channels)
-
-    @property
-    def message_counts(self) -> dict[str, int]:
-        """Messages relayed so far, by topic."""
-        with self._lock:
-            return dict(self._counts)
 
     def add_topic(
         self,
@@ -195,7 +186,7 @@ class FoxgloveRelay:
             self._channels[topic] = channel
             self._counts[topic] = 0
             if latched:
-                self._latched_channels.add(channel.id())
+                self._latched_channels[channel.id()] = channel
 
     def write(self, topic: str, data: bytes, timestamp_ns: int) -> None:
         """Send one CDR message of an advertised topic (KeyError otherwise) with log time ``timestamp_ns``
@@ -221,8 +212,7 @@ class FoxgloveRelay:
             if self.closed or channel_id not in self._latched:
                 return
             data, timestamp_ns = self._latched[channel_id]
-            channel = next(c for c in self._channels.values() if c.id() == channel_id)
-            channel.log(data, log_time=timestamp_ns)
+            self._latched_channels[channel_id].log(data, log_time=timestamp_ns)
 
     def _odometry_tf(self, data: bytes) -> bytes:
         """The CDR TFMessage of one nav_msgs/Odometry: ``header.frame_id -> child_frame_id`` at its pose."""
@@ -251,14 +241,6 @@ class FoxgloveRelay:
                 return
             self.closed = True
         self._server.stop()
-
-    def __enter__(self) -> FoxgloveRelay:
-        return self
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.close()
 
 
 def _stamped(typestore: Typestore, static: StaticTransform) -> Any:

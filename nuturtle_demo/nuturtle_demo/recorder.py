@@ -127,6 +127,33 @@ class TopicSink(Protocol):
     def write(self, topic: str, data: bytes, timestamp_ns: int) -> None: ...
 
 
+class ClosingSink:
+    """What the bag and the relay share: a lock, the messages written per topic (``message_counts``),
+    ``closed``, and use as a context manager; a subclass implements ``close()``."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._counts: dict[str, int] = {}
+        self.closed = False
+
+    @property
+    def message_counts(self) -> dict[str, int]:
+        """Messages written so far, by topic."""
+        with self._lock:
+            return dict(self._counts)
+
+    def close(self) -> None:
+        raise NotImplementedError
+
+    def __enter__(self) -> ClosingSink:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
+
+
 class TeeSink:
     """One tap into several sinks: a topic goes to every sink that accepts it (``add_topic`` raises the
     first refusal only when all refuse), and each message to the sinks of its topic."""
@@ -158,7 +185,7 @@ class TeeSink:
             sink.write(topic, data, timestamp_ns)
 
 
-class BagWriter:
+class BagWriter(ClosingSink):
     """A rosbag2 bag directory at ``path`` (module docstring) written through ``rosbags.rosbag2.Writer``;
     thread safe; use as a context manager.
 
@@ -181,20 +208,12 @@ class BagWriter:
             self._bag.set_custom_data(key, value)
         self._bag.open()
         self._connections: dict[str, Connection] = {}
-        self._counts: dict[str, int] = {}
-        self._lock = threading.Lock()
-        self.closed = False
+        super().__init__()
 
     @property
     def topics(self) -> list[str]:
         """The registered topics, in order of registration."""
         return list(self._connections)
-
-    @property
-    def message_counts(self) -> dict[str, int]:
-        """Messages written so far, by topic."""
-        with self._lock:
-            return dict(self._counts)
 
     @property
     def message_count(self) -> int:
@@ -243,14 +262,6 @@ class BagWriter:
                 return
             self.closed = True
             self._bag.close()
-
-    def __enter__(self) -> BagWriter:
-        return self
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.close()
 
 
 def absolute(topic: str) -> str:
