@@ -276,6 +276,54 @@ def test_remove_is_the_marginal(slot):
     np.testing.assert_array_equal(state.covariance, P[np.ix_(indices, indices)])
 
 
+def random_state_step(rng, state):
+    """One random filter step on ``state``: predict, correct some landmarks (or consider them), append or
+    remove one."""
+    n = state.n_landmarks
+    action = rng.integers(5) if n else 2
+    if action == 0:
+        G = np.eye(3)
+        G[:2, 2] = rng.normal(0.0, 0.1, 2)
+        A = rng.normal(0.0, 0.01, (3, 3))
+        state.predict(state.mean[:3] + rng.normal(0.0, 0.01, 3), G, A @ A.T + 1e-6 * np.eye(3))
+    elif action in (1, 4):
+        slots = rng.choice(n, min(n, int(rng.integers(1, 4))), replace=False)
+        z_hat, H_robot, H_landmark = predict_observations(
+            state.mean[:3], state.landmark_positions()[slots], SENSOR
+        )
+        nu = rng.normal(0.0, 0.01, (len(slots), 2))
+        R = np.tile(np.diag([4e-4, 1e-3]), (len(slots), 1, 1))
+        state.correct(slots, H_robot, H_landmark, nu, R, consider_landmarks=action == 4)
+    elif action == 2:
+        z = np.array([[rng.uniform(0.5, 3.0), rng.uniform(-PI, PI)]])
+        p_map, G_robot, G_z = landmarks_from_observations(state.mean[:3], z, SENSOR)
+        state.append(p_map[0], G_robot[0], G_z[0], np.diag([4e-4, 1e-3]))
+    else:
+        state.remove(int(rng.integers(n)))
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_reads_between_steps_see_the_whole_covariance(seed):
+    # P is kept by its upper triangle: a state whose whole P is never read (the lower triangle stale) must
+    # give, block by block and in the end, bitwise what a state read in full after every step gives
+    rng = np.random.default_rng(seed)
+    lazy, full = grown_state(rng, 5), grown_state(np.random.default_rng(seed), 5)
+    for _ in range(60):
+        state_seed = int(rng.integers(2**31))
+        random_state_step(np.random.default_rng(state_seed), lazy)
+        random_state_step(np.random.default_rng(state_seed), full)
+        P = full.covariance
+        np.testing.assert_array_equal(P, P.T)
+        np.testing.assert_array_equal(lazy.mean, full.mean)
+        np.testing.assert_array_equal(lazy.pose_covariance, P[:3, :3])
+        n = full.n_landmarks
+        rows = 3 + 2 * np.arange(n)[:, None] + np.arange(2)
+        np.testing.assert_array_equal(lazy.landmark_blocks(), P[rows[:, :, None], rows[:, None, :]])
+        joint = np.concatenate([np.tile(np.arange(3), (n, 1)), rows], axis=1)
+        np.testing.assert_array_equal(lazy.pose_landmark_blocks(), P[joint[:, :, None], joint[:, None, :]])
+    np.testing.assert_array_equal(lazy.covariance, full.covariance)
+
+
 def test_covariance_stays_symmetric_positive_definite_under_precise_observations():
     # very precise observations, many times, of landmarks whose prior is wide: the regime where the
     # standard form P - K H P loses symmetry and definiteness

@@ -313,7 +313,7 @@ class EkfSlam:
         """As :meth:`propagated_pose` for consecutive inputs, one motion step each; none gives the current
         pose."""
         T_map_body = self.pose
-        P_qq = self._state.covariance[:ROBOT_DIM, :ROBOT_DIM].copy()
+        P_qq = self._state.pose_covariance.copy()
         for step, u in enumerate(inputs):
             q_next, G, Q = _finite_step(self._motion.step(T_map_body, u))
             # the first step from the filter's pose as predict takes it; the later ones start at their prior
@@ -539,7 +539,7 @@ class EkfSlam:
     @property
     def pose_covariance(self) -> NDArray[np.float64]:
         """``P_qq`` (3, 3) of ``[x, y, theta]`` (m^2, m^2, rad^2)."""
-        return self._state.covariance[:ROBOT_DIM, :ROBOT_DIM].copy()
+        return self._state.pose_covariance.copy()
 
     @property
     def landmark_ids(self) -> NDArray[np.int64]:
@@ -594,7 +594,7 @@ class EkfSlam:
         first = ROBOT_DIM + 2 * slot
         return (
             self._state.mean[first : first + 2].copy(),
-            self._state.covariance[first : first + 2, first : first + 2].copy(),
+            self._state.landmark_blocks(np.array([slot]))[0],
         )
 
     # --- helpers -----------------------------------------------------------------------------------------

@@ -11,20 +11,26 @@ Layout
 (``P`` is stored as the leading block of a larger C-ordered square) so that adding landmarks reallocates
 only when the capacity (grown by an eighth at a time) is exhausted.
 
+``P`` is kept by its upper triangle (with the diagonal, and the robot block ``P_qq`` whole): the filter
+steps write only that triangle, and every read of covariance entries takes ``P_ij`` for ``i > j`` from
+``P_ji``. The lower triangle is filled in (copied, bitwise) only when the whole ``P`` is read
+(:attr:`SlamState.covariance`), so that a run of predictions and updates that reads only the pose and a
+few blocks never pays the O(N^2) copy.
+
 Cost per operation (``m = 2k`` stacked observation rows)
 --------------------------------------------------------
-* :meth:`predict` touches only the robot rows and columns: O(N).
+* :meth:`predict` touches only the robot rows: O(N).
 * :meth:`correct` uses that ``H`` is non-zero only in the robot columns and the observed landmarks'
   columns: it gathers those ``3 + m`` rows of ``P`` (O(N m)), forms ``S`` (m x m), and applies one
-  symmetric rank-m downdate of ``P`` in place: BLAS ``dsyrk`` on one triangle (O(N^2 m)), then a copy
-  of that triangle into the other (O(N^2)); never an N x N temporary, product or inverse.
+  symmetric rank-m downdate of ``P``'s upper triangle in place by BLAS ``dsyrk`` (O(N^2 m)); never an
+  N x N temporary, product or inverse.
 * :meth:`correct` with ``consider_landmarks`` (the Schmidt update of a fixed map) changes only the robot
   rows and columns: O(N m).
 * :meth:`append` / :meth:`remove` of a landmark: O(N) (swap-remove; the last slot moves);
   :meth:`append_independent` of ``k`` landmarks at once: O(N k) (one reallocation at most).
 
-Every step writes ``P`` exactly (bitwise) symmetric: each off-diagonal pair ``P_ij``, ``P_ji`` is either
-computed once and copied, or computed by the same floating-point operations on equal operands.
+Every read sees ``P`` exactly (bitwise) symmetric: each off-diagonal pair ``P_ij``, ``P_ji`` is computed
+once and copied.
 """
 
 from __future__ import annotations
@@ -41,6 +47,7 @@ LANDMARK_DIM = 2
 HEADING = 2  # index of theta in x
 MIRROR_BLOCK = 256  # rows per block when copying the upper triangle of P into the lower one (measured)
 _STRICT_LOWER = np.tri(MIRROR_BLOCK, k=-1, dtype=bool)  # strictly-lower mask of a diagonal block
+_ROBOT_UPPER = np.triu_indices(ROBOT_DIM, 1)  # the strict upper triangle of the robot block
 
 
 class SlamState:
@@ -53,6 +60,8 @@ class SlamState:
         self._mean = np.zeros(capacity)
         self._cov = np.zeros((capacity, capacity))
         self._n = 0
+        # whether the lower triangle of P (below the robot block) holds the upper one's values
+        self._lower_filled = True
         self.reset_robot(pose, pose_covariance, keep_map=False)
 
     # --- views -------------------------------------------------------------------------------------------
@@ -73,9 +82,18 @@ class SlamState:
 
     @property
     def covariance(self) -> NDArray[np.float64]:
-        """``P`` (N, N), a view into the filter's storage (read it, do not write it)."""
+        """``P`` (N, N), a view into the filter's storage (read it, do not write it), valid until the next
+        filter step; filling in its lower triangle costs O(N^2) after a step."""
         dim = self.dim
+        if not self._lower_filled:
+            _mirror_upper_triangle(self._cov, dim)
+            self._lower_filled = True
         return self._cov[:dim, :dim]
+
+    @property
+    def pose_covariance(self) -> NDArray[np.float64]:
+        """``P_qq`` (3, 3), a view (read it, do not write it)."""
+        return self._cov[:ROBOT_DIM, :ROBOT_DIM]
 
     def landmark_positions(self) -> NDArray[np.float64]:
         """``[m_i]`` (n, 2), a view."""
@@ -85,7 +103,7 @@ class SlamState:
         """The marginal covariances ``P_(m_i m_i)`` (k, 2, 2) of ``slots`` (default all), gathered in O(k)."""
         slots = np.arange(self._n) if slots is None else np.asarray(slots)
         rows = (ROBOT_DIM + LANDMARK_DIM * slots)[:, None] + np.arange(LANDMARK_DIM)
-        return self._cov[rows[:, :, None], rows[:, None, :]]
+        return self._blocks(rows)
 
     def pose_landmark_blocks(self, slots: NDArray[np.int64] | None = None) -> NDArray[np.float64]:
         """Joint covariances (k, 5, 5) of ``[x, y, theta, m_ix, m_iy]`` for ``slots`` (default all), O(k)."""
@@ -93,7 +111,7 @@ class SlamState:
         rows = np.empty((len(slots), ROBOT_DIM + LANDMARK_DIM), dtype=np.int64)
         rows[:, :ROBOT_DIM] = np.arange(ROBOT_DIM)
         rows[:, ROBOT_DIM:] = (ROBOT_DIM + LANDMARK_DIM * slots)[:, None] + np.arange(LANDMARK_DIM)
-        return self._cov[rows[:, :, None], rows[:, None, :]]
+        return self._blocks(rows)
 
     # --- the filter steps --------------------------------------------------------------------------------
 
@@ -104,9 +122,10 @@ class SlamState:
         # P_qq <- G P_qq G^T + Q
         P_qq = G @ P[:ROBOT_DIM, :ROBOT_DIM] @ G.T + Q
         P[:ROBOT_DIM, :ROBOT_DIM] = 0.5 * (P_qq + P_qq.T)
-        # P_qm <- G P_qm,  P_mq = P_qm^T
-        P[:ROBOT_DIM, ROBOT_DIM:dim] = G @ P[:ROBOT_DIM, ROBOT_DIM:dim]
-        P[ROBOT_DIM:dim, :ROBOT_DIM] = P[:ROBOT_DIM, ROBOT_DIM:dim].T
+        # P_qm <- G P_qm  (P_mq = P_qm^T is in the lower triangle)
+        if dim > ROBOT_DIM:
+            P[:ROBOT_DIM, ROBOT_DIM:dim] = G @ P[:ROBOT_DIM, ROBOT_DIM:dim]
+            self._lower_filled = False
         self._mean[:ROBOT_DIM] = pose
 
     def observation_covariance(
@@ -114,7 +133,7 @@ class SlamState:
     ) -> NDArray[np.float64]:
         """``H P H^T`` (2k, 2k) for observations of ``slots`` (k,) with Jacobians (k, 2, 3) and (k, 2, 2)."""
         cols, H = self._compressed_jacobian(slots, H_robot, H_landmark)
-        return H @ self._cov[np.ix_(cols, cols)] @ H.T
+        return H @ self._blocks(cols) @ H.T
 
     def correct(
         self,
@@ -137,17 +156,13 @@ class SlamState:
         ``K = P H^T S^-1 = W^T L^-1``, written as one symmetric rank-m downdate: what is removed is
         exactly the information the observations add, ``P+ = (P^-1 + H^T R^-1 H)^-1``.
 
-        The downdate is computed on one triangle only and then mirrored, so that ``P`` stays bitwise
-        symmetric (a general ``dgemm`` rounds ``P_ij`` and ``P_ji`` differently, ~1e-19 apart):
+        The downdate is computed on the upper triangle only, the one ``P`` is kept by (a general
+        ``dgemm`` would round ``P_ij`` and ``P_ji`` differently, ~1e-19 apart):
 
-        1. ``triu(P) <- triu(P - W^T W)`` by BLAS ``dsyrk`` (m flops per entry of ``P``, half of
-           ``dgemm``), in place on the F-contiguous transpose of the whole C-ordered storage (its lower
-           triangle is the upper one of ``P``). f2py would copy any non-contiguous view, so the call spans
-           the full capacity; the spare columns of ``W_pad`` are zero and leave the spare storage unchanged.
-        2. ``tril(P, -1) <- triu(P, 1)^T``, in blocks of ``MIRROR_BLOCK`` rows ``[i0, i1)``: the block
-           column below the diagonal block is the transposed block row right of it,
-           ``P[i1:N, i0:i1] = P[i0:i1, i1:N]^T``, and the diagonal block takes its own upper triangle
-           through a strictly-lower mask. O(N^2) copies, no arithmetic.
+        ``triu(P) <- triu(P - W^T W)`` by BLAS ``dsyrk`` (m flops per entry of ``P``, half of ``dgemm``),
+        in place on the F-contiguous transpose of the whole C-ordered storage (its lower triangle is the
+        upper one of ``P``). f2py would copy any non-contiguous view, so the call spans the full capacity;
+        the spare columns of ``W_pad`` are zero and leave the spare storage unchanged.
 
         ``consider_landmarks=True``: the Schmidt-Kalman (consider-state) update, for a fixed map: the
         landmarks are "considered" (their uncertainty enters ``S`` and the robot's gain) but never
@@ -162,8 +177,8 @@ class SlamState:
             P_rm <- P_rm - K_r (H P)_m = P_rm - W_r^T W_m,      P_mr = P_rm^T
             P_mm unchanged (bit for bit)
 
-        Only the robot rows and columns change, O(N m) (no ``dsyrk``); ``P_rr`` takes its upper triangle
-        into its lower one and ``P_mr`` is copied from ``P_rm``, so ``P`` stays bitwise symmetric.
+        Only the robot rows and columns change, O(N m) (no ``dsyrk``); the robot rows are written, and
+        ``P_rr`` takes its upper triangle into its lower one.
         """
         dim, k = self.dim, len(slots)
         if k == 0:
@@ -174,7 +189,7 @@ class SlamState:
         cols, H = self._compressed_jacobian(slots, H_robot, H_landmark)
         # right-hand sides [H P, 0, nu] (m, width + 1); H P = (P H^T)^T needs only the rows `cols` of P
         rhs = np.zeros((m, width + 1), order="F")
-        np.matmul(H, self._cov[cols, :dim], out=rhs[:, :dim])
+        np.matmul(H, self._rows(cols), out=rhs[:, :dim])
         rhs[:, width] = nu.reshape(m)
         # S = H P H^T + R
         S = rhs[:, cols] @ H.T
@@ -200,8 +215,9 @@ class SlamState:
         updated = dsyrk(-1.0, W_pad, beta=1.0, c=storage_T, trans=1, lower=1, overwrite_c=1)
         if updated is not storage_T:  # f2py worked on a copy (never for this float64 Fortran array)
             storage_T[...] = updated
-        # tril(P, -1) <- triu(P, 1)^T
-        _mirror_upper_triangle(self._cov, dim)
+        # the robot block is kept whole: its upper triangle into its lower one
+        self._fill_robot_block()
+        self._lower_filled = False
         return float(w @ w)
 
     def _consider_update(self, W: NDArray[np.float64], w: NDArray[np.float64]) -> None:
@@ -214,10 +230,9 @@ class SlamState:
         # [P_rr, P_rm] <- [P_rr, P_rm] - W_r^T [W_r, W_m]
         P = self._cov
         P[:ROBOT_DIM, :dim] -= W_r.T @ W
-        # P_rr: upper triangle into the lower one; P_mr = P_rm^T
-        upper = np.triu_indices(ROBOT_DIM, 1)
-        P[upper[1], upper[0]] = P[upper]
-        P[ROBOT_DIM:dim, :ROBOT_DIM] = P[:ROBOT_DIM, ROBOT_DIM:dim].T
+        # P_rr: upper triangle into the lower one (P_mr = P_rm^T is in the lower triangle)
+        self._fill_robot_block()
+        self._lower_filled = False
 
     def append(
         self,
@@ -237,12 +252,12 @@ class SlamState:
         dim = self.dim
         new = slice(dim, dim + LANDMARK_DIM)
         P = self._cov
-        # P_mx = G_robot P_qx
-        P[new, :dim] = G_robot @ P[:ROBOT_DIM, :dim]
-        P[:dim, new] = P[new, :dim].T
+        # P_xm = (G_robot P_qx)^T  (the robot rows P_qx are whole; P_mx is in the lower triangle)
+        P[:dim, new] = (G_robot @ P[:ROBOT_DIM, :dim]).T
         # P_mm = G_robot P_qq G_robot^T + G_z R G_z^T
         P_mm = G_robot @ P[:ROBOT_DIM, :ROBOT_DIM] @ G_robot.T + G_z @ R @ G_z.T
         P[new, new] = 0.5 * (P_mm + P_mm.T)
+        self._lower_filled = False
         self._mean[new] = p_map
         self._n += 1
         return self._n - 1
@@ -258,9 +273,9 @@ class SlamState:
         dim = self.dim
         new = slice(dim, dim + LANDMARK_DIM * k)
         P = self._cov
-        P[new, :dim] = 0.0
         P[:dim, new] = 0.0
         P[new, new] = covariance
+        self._lower_filled = False
         self._mean[new] = np.reshape(xy, LANDMARK_DIM * k)
         self._n += k
         return np.arange(self._n - k, self._n)
@@ -275,10 +290,18 @@ class SlamState:
         moved = None
         if slot != last:
             P = self._cov
-            target = slice(ROBOT_DIM + LANDMARK_DIM * slot, ROBOT_DIM + LANDMARK_DIM * (slot + 1))
-            source = slice(ROBOT_DIM + LANDMARK_DIM * last, dim)
-            P[target, :dim] = P[source, :dim]
-            P[:dim, target] = P[:dim, source]
+            t0 = ROBOT_DIM + LANDMARK_DIM * slot
+            target = slice(t0, t0 + LANDMARK_DIM)
+            source = np.arange(dim - LANDMARK_DIM, dim)
+            # the source rows, whole, go to the target's place in the upper triangle: its column above the
+            # target's block, its row to the right of it (up to the new N), and the source's own block
+            rows = self._rows(source)
+            P[:t0, target] = rows[:, :t0].T
+            P[target, t0 + LANDMARK_DIM : dim - LANDMARK_DIM] = rows[
+                :, t0 + LANDMARK_DIM : dim - LANDMARK_DIM
+            ]
+            P[target, target] = rows[:, source]
+            self._lower_filled = False
             self._mean[target] = self._mean[source]
             moved = last
         self._n -= 1
@@ -297,6 +320,28 @@ class SlamState:
         self._mean[:ROBOT_DIM] = pose
 
     # --- helpers -----------------------------------------------------------------------------------------
+
+    def _fill_robot_block(self) -> None:
+        """``tril(P_qq, -1) <- triu(P_qq, 1)^T``."""
+        upper = _ROBOT_UPPER
+        self._cov[upper[1], upper[0]] = self._cov[upper]
+
+    def _rows(self, indices: NDArray[np.int64]) -> NDArray[np.float64]:
+        """The rows ``P[indices, :N]`` (r, N), each whole: ``P_ij`` from ``P_ji`` where ``j < i``. O(N r)."""
+        dim = self.dim
+        rows = self._cov[indices, :dim]
+        if not self._lower_filled:
+            below = np.arange(dim) < indices[:, None]
+            np.copyto(rows, self._cov[:dim, indices].T, where=below)
+        return rows
+
+    def _blocks(self, indices: NDArray[np.int64]) -> NDArray[np.float64]:
+        """The square blocks ``P[i, i]`` (..., r, r) for the index arrays ``i`` of ``indices`` (..., r), each
+        entry taken from the upper triangle."""
+        blocks = self._cov[indices[..., :, None], indices[..., None, :]]
+        below = indices[..., :, None] > indices[..., None, :]
+        np.copyto(blocks, np.swapaxes(blocks, -1, -2).copy(), where=below)
+        return blocks
 
     def _compressed_jacobian(
         self, slots: NDArray[np.int64], H_robot: NDArray[np.float64], H_landmark: NDArray[np.float64]
