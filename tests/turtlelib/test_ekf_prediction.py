@@ -58,7 +58,7 @@ def test_straight_line_noise_is_the_integrated_random_walk():
 @pytest.mark.parametrize("omega", [1e-3, 0.3, 0.999, 1.0, 2.5, 6.0])
 def test_spin_in_place_noise(omega):
     # dphi = (-a, a) from heading 0: omega = 2 r a / d, u = 0, A(s) = [[cos, 0], [sin, 0], [0, 1]];
-    # the quadrature (8 nodes per radian of turn) must match the closed form to ~1e-13
+    # turtlelib.arc_noise must match the hand-computed integrals to ~1e-13
     k = 0.05
     a = omega * TRACK / (2.0 * R_WHEEL)
     q = k * k * a
@@ -184,7 +184,7 @@ def test_prediction_rejects_non_finite_increments_and_keeps_the_filter():
 
 
 def test_a_turn_beyond_the_step_limit_is_refused_and_keeps_the_filter():
-    # a wheel jump of 1e9 rad (a corrupt encoder reading) would need a billion quadrature panels
+    # a wheel jump of 1e9 rad (a corrupt encoder reading) is not a motion
     slam = filter_at(Transform2D(0.2, 0.1, 0.3))
     state, cov = slam.state, slam.covariance
     with pytest.raises(ValueError, match="not a motion"):
