@@ -834,18 +834,29 @@ def _observability_constrained(
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """The OC-EKF Jacobians (k, 2, 3), (k, 2, 2): ``H* = H (I - N (N^T N)^-1 N^T)`` per observation with
     ``N = [[I_2, J p], [0, 1], [I_2, J m]]`` (5, 3), ``p`` the pose's position and ``m`` (k, 2) the
-    landmarks' (module docstring)."""
-    k = len(landmarks_xy)
-    N = np.zeros((k, 5, 3))
-    N[:, 0, 0] = N[:, 1, 1] = N[:, 3, 0] = N[:, 4, 1] = N[:, 2, 2] = 1.0
-    # J p = [-p_y, p_x],  J m = [-m_y, m_x]
-    N[:, 0, 2], N[:, 1, 2] = -pose[1], pose[0]
-    N[:, 3, 2], N[:, 4, 2] = -landmarks_xy[:, 1], landmarks_xy[:, 0]
+    landmarks' (module docstring).
+
+    The projector in closed form: ``N``'s columns orthogonalised are ``n_x = [1, 0, 0, 1, 0]``,
+    ``n_y = [0, 1, 0, 0, 1]`` (``|n|^2 = 2``) and, with ``d = m - p``,
+    ``n_theta = [d_y / 2, -d_x / 2, 1, -d_y / 2, d_x / 2]`` (``|n_theta|^2 = 1 + |d|^2 / 2``), so::
+
+        H* = H - (H n_x) n_x^T / 2 - (H n_y) n_y^T / 2 - (H n_theta) n_theta^T / |n_theta|^2
+    """
     H = np.concatenate([H_robot, H_landmark], axis=2)
-    # H* = H - (H N) (N^T N)^-1 N^T
-    HN = H @ N
-    gram = N.transpose(0, 2, 1) @ N
-    H = H - np.linalg.solve(gram, HN.transpose(0, 2, 1)).transpose(0, 2, 1) @ N.transpose(0, 2, 1)
+    d = landmarks_xy - pose[:2]
+    half = 0.5 * d
+    n_theta = np.zeros((len(d), 5))
+    n_theta[:, 0], n_theta[:, 1], n_theta[:, 2] = half[:, 1], -half[:, 0], 1.0
+    n_theta[:, 3], n_theta[:, 4] = -half[:, 1], half[:, 0]
+    # (H n_x) / 2 and (H n_y) / 2 (k, 2): the mean of the pose's and the landmark's x (y) columns
+    mean_x = 0.5 * (H[:, :, 0] + H[:, :, 3])
+    mean_y = 0.5 * (H[:, :, 1] + H[:, :, 4])
+    H_theta = np.einsum("kij,kj->ki", H, n_theta) / (1.0 + 0.5 * np.einsum("ki,ki->k", d, d))[:, None]
+    H = H - H_theta[:, :, None] * n_theta[:, None, :]
+    H[:, :, 0] -= mean_x
+    H[:, :, 3] -= mean_x
+    H[:, :, 1] -= mean_y
+    H[:, :, 4] -= mean_y
     return H[:, :, :ROBOT_DIM], H[:, :, ROBOT_DIM:]
 
 

@@ -102,16 +102,28 @@ class SlamState:
     def landmark_blocks(self, slots: NDArray[np.int64] | None = None) -> NDArray[np.float64]:
         """The marginal covariances ``P_(m_i m_i)`` (k, 2, 2) of ``slots`` (default all), gathered in O(k)."""
         slots = np.arange(self._n) if slots is None else np.asarray(slots)
-        rows = (ROBOT_DIM + LANDMARK_DIM * slots)[:, None] + np.arange(LANDMARK_DIM)
-        return self._blocks(rows)
+        first = ROBOT_DIM + LANDMARK_DIM * slots
+        # [[P_xx, P_xy], [P_xy, P_yy]] from the upper triangle, by flat index into the C-ordered storage
+        flat = self._cov.ravel()
+        diagonal = first * (self._cov.shape[0] + 1)
+        blocks = np.empty((len(slots), LANDMARK_DIM, LANDMARK_DIM))
+        blocks[:, 0, 0] = flat[diagonal]
+        blocks[:, 0, 1] = blocks[:, 1, 0] = flat[diagonal + 1]
+        blocks[:, 1, 1] = flat[diagonal + self._cov.shape[0] + 1]
+        return blocks
 
     def pose_landmark_blocks(self, slots: NDArray[np.int64] | None = None) -> NDArray[np.float64]:
         """Joint covariances (k, 5, 5) of ``[x, y, theta, m_ix, m_iy]`` for ``slots`` (default all), O(k)."""
         slots = np.arange(self._n) if slots is None else np.asarray(slots)
-        rows = np.empty((len(slots), ROBOT_DIM + LANDMARK_DIM), dtype=np.int64)
-        rows[:, :ROBOT_DIM] = np.arange(ROBOT_DIM)
-        rows[:, ROBOT_DIM:] = (ROBOT_DIM + LANDMARK_DIM * slots)[:, None] + np.arange(LANDMARK_DIM)
-        return self._blocks(rows)
+        columns = (ROBOT_DIM + LANDMARK_DIM * slots)[:, None] + np.arange(LANDMARK_DIM)
+        blocks = np.empty((len(slots), ROBOT_DIM + LANDMARK_DIM, ROBOT_DIM + LANDMARK_DIM))
+        blocks[:, :ROBOT_DIM, :ROBOT_DIM] = self._cov[:ROBOT_DIM, :ROBOT_DIM]
+        # P_q,m_i from the robot rows (whole), P_m_i,q its transpose
+        cross = self._cov[:ROBOT_DIM][:, columns].transpose(1, 0, 2)
+        blocks[:, :ROBOT_DIM, ROBOT_DIM:] = cross
+        blocks[:, ROBOT_DIM:, :ROBOT_DIM] = cross.transpose(0, 2, 1)
+        blocks[:, ROBOT_DIM:, ROBOT_DIM:] = self.landmark_blocks(slots)
+        return blocks
 
     # --- the filter steps --------------------------------------------------------------------------------
 
