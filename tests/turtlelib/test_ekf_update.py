@@ -277,15 +277,16 @@ def test_remove_is_the_marginal(slot):
 
 
 def random_state_step(rng, state):
-    """One random filter step on ``state``: predict, correct some landmarks (or consider them), append or
-    remove one."""
+    """One random filter step on ``state``: predict (1-3 times), correct some landmarks (or consider them),
+    append or remove one."""
     n = state.n_landmarks
     action = rng.integers(5) if n else 2
     if action == 0:
-        G = np.eye(3)
-        G[:2, 2] = rng.normal(0.0, 0.1, 2)
-        A = rng.normal(0.0, 0.01, (3, 3))
-        state.predict(state.mean[:3] + rng.normal(0.0, 0.01, 3), G, A @ A.T + 1e-6 * np.eye(3))
+        for _ in range(rng.integers(1, 4)):
+            G = np.eye(3)
+            G[:2, 2] = rng.normal(0.0, 0.1, 2)
+            A = rng.normal(0.0, 0.01, (3, 3))
+            state.predict(state.mean[:3] + rng.normal(0.0, 0.01, 3), G, A @ A.T + 1e-6 * np.eye(3))
     elif action in (1, 4):
         slots = rng.choice(n, min(n, int(rng.integers(1, 4))), replace=False)
         z_hat, H_robot, H_landmark = predict_observations(
@@ -322,6 +323,26 @@ def test_reads_between_steps_see_the_whole_covariance(seed):
         joint = np.concatenate([np.tile(np.arange(3), (n, 1)), rows], axis=1)
         np.testing.assert_array_equal(lazy.pose_landmark_blocks(), P[joint[:, :, None], joint[:, None, :]])
     np.testing.assert_array_equal(lazy.covariance, full.covariance)
+
+
+def test_deferred_predictions_are_the_sequential_ones():
+    # predict defers P_qm <- G P_qm into a product of the G's: after k predictions P is, to rounding, what
+    # applying each step in turn gives
+    rng = np.random.default_rng(11)
+    state = grown_state(rng, 6)
+    P = state.covariance.copy()
+    for _ in range(8):
+        G = np.eye(3)
+        G[:2, 2] = rng.normal(0.0, 0.2, 2)
+        A = rng.normal(0.0, 0.01, (3, 3))
+        Q = A @ A.T
+        state.predict(state.mean[:3], G, Q)
+        # P_qq <- G P_qq G^T + Q, P_qm <- G P_qm, P_mq = P_qm^T
+        P[:3, :3] = G @ P[:3, :3] @ G.T + Q
+        P[:3, 3:] = G @ P[:3, 3:]
+        P[3:, :3] = P[:3, 3:].T
+        np.testing.assert_allclose(state.pose_covariance, P[:3, :3], rtol=0.0, atol=1e-15)
+    np.testing.assert_allclose(state.covariance, P, rtol=0.0, atol=1e-14 * np.abs(P).max())
 
 
 def test_covariance_stays_symmetric_positive_definite_under_precise_observations():

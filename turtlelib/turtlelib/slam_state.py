@@ -19,7 +19,9 @@ few blocks never pays the O(N^2) copy.
 
 Cost per operation (``m = 2k`` stacked observation rows)
 --------------------------------------------------------
-* :meth:`predict` touches only the robot rows: O(N).
+* :meth:`predict` is O(1): it updates the pose and ``P_qq`` and defers the cross-covariance ``P_qm <- G P_qm``
+  by accumulating the product of the steps' ``G`` (3 x 3), applied to the robot rows (O(N)) when anything
+  else is read or changed. A run of predictions between two updates costs one pass over the robot rows.
 * :meth:`correct` uses that ``H`` is non-zero only in the robot columns and the observed landmarks'
   columns: it gathers those ``3 + m`` rows of ``P`` (O(N m)), forms ``S`` (m x m), and applies one
   symmetric rank-m downdate of ``P``'s upper triangle in place by BLAS ``dsyrk`` (O(N^2 m)); never an
@@ -62,6 +64,8 @@ class SlamState:
         self._n = 0
         # whether the lower triangle of P (below the robot block) holds the upper one's values
         self._lower_filled = True
+        # the product of the Jacobians G of the predictions not yet applied to P_qm (None: none pending)
+        self._pending_G: NDArray[np.float64] | None = None
         self.reset_robot(pose, pose_covariance, keep_map=False)
 
     # --- views -------------------------------------------------------------------------------------------
@@ -85,6 +89,7 @@ class SlamState:
         """``P`` (N, N), a view into the filter's storage (read it, do not write it), valid until the next
         filter step; filling in its lower triangle costs O(N^2) after a step."""
         dim = self.dim
+        self._apply_pending()
         if not self._lower_filled:
             _mirror_upper_triangle(self._cov, dim)
             self._lower_filled = True
@@ -114,6 +119,7 @@ class SlamState:
 
     def pose_landmark_blocks(self, slots: NDArray[np.int64] | None = None) -> NDArray[np.float64]:
         """Joint covariances (k, 5, 5) of ``[x, y, theta, m_ix, m_iy]`` for ``slots`` (default all), O(k)."""
+        self._apply_pending()
         slots = np.arange(self._n) if slots is None else np.asarray(slots)
         columns = (ROBOT_DIM + LANDMARK_DIM * slots)[:, None] + np.arange(LANDMARK_DIM)
         blocks = np.empty((len(slots), ROBOT_DIM + LANDMARK_DIM, ROBOT_DIM + LANDMARK_DIM))
@@ -134,16 +140,16 @@ class SlamState:
         # P_qq <- G P_qq G^T + Q
         P_qq = G @ P[:ROBOT_DIM, :ROBOT_DIM] @ G.T + Q
         P[:ROBOT_DIM, :ROBOT_DIM] = 0.5 * (P_qq + P_qq.T)
-        # P_qm <- G P_qm  (P_mq = P_qm^T is in the lower triangle)
+        # P_qm <- G P_qm, deferred: G_pending <- G G_pending
         if dim > ROBOT_DIM:
-            P[:ROBOT_DIM, ROBOT_DIM:dim] = G @ P[:ROBOT_DIM, ROBOT_DIM:dim]
-            self._lower_filled = False
+            self._pending_G = G.copy() if self._pending_G is None else G @ self._pending_G
         self._mean[:ROBOT_DIM] = pose
 
     def observation_covariance(
         self, slots: NDArray[np.int64], H_robot: NDArray[np.float64], H_landmark: NDArray[np.float64]
     ) -> NDArray[np.float64]:
         """``H P H^T`` (2k, 2k) for observations of ``slots`` (k,) with Jacobians (k, 2, 3) and (k, 2, 2)."""
+        self._apply_pending()
         cols, H = self._compressed_jacobian(slots, H_robot, H_landmark)
         return H @ self._blocks(cols) @ H.T
 
@@ -195,6 +201,7 @@ class SlamState:
         dim, k = self.dim, len(slots)
         if k == 0:
             return 0.0
+        self._apply_pending()
         m = LANDMARK_DIM * k
         # the full update's dsyrk spans the storage's capacity (step 1); the consider update only dim
         width = dim if consider_landmarks else self._cov.shape[0]
@@ -260,6 +267,7 @@ class SlamState:
             P_mx = G_robot P_qx              (cross-covariance with the pose and every landmark)
             P_mm = G_robot P_qq G_robot^T + G_z R G_z^T
         """
+        self._apply_pending()
         self._reserve(self._n + 1)
         dim = self.dim
         new = slice(dim, dim + LANDMARK_DIM)
@@ -281,6 +289,7 @@ class SlamState:
         independent of the pose and the landmarks already held (zero cross-covariance); returns their
         slots (k,). ``P <- blockdiag(P, covariance)``, one reallocation at most."""
         k = len(xy)
+        self._apply_pending()
         self._reserve(self._n + k)
         dim = self.dim
         new = slice(dim, dim + LANDMARK_DIM * k)
@@ -297,6 +306,7 @@ class SlamState:
 
         The last slot moves into the freed one: returns its old index, or None if ``slot`` was last.
         """
+        self._apply_pending()
         last = self._n - 1
         dim = self.dim
         moved = None
@@ -325,6 +335,7 @@ class SlamState:
         """New pose mean and covariance, independent of the map; ``keep_map=False`` also empties it."""
         if not keep_map:
             self._n = 0
+        self._pending_G = None
         dim = self.dim
         self._cov[:ROBOT_DIM, :dim] = 0.0
         self._cov[:dim, :ROBOT_DIM] = 0.0
@@ -333,6 +344,17 @@ class SlamState:
 
     # --- helpers -----------------------------------------------------------------------------------------
 
+    def _apply_pending(self) -> None:
+        """``P_qm <- G_pending P_qm`` for the deferred predictions (``P_mq = P_qm^T`` is in the lower
+        triangle)."""
+        if self._pending_G is None:
+            return
+        dim = self.dim
+        P = self._cov
+        P[:ROBOT_DIM, ROBOT_DIM:dim] = self._pending_G @ P[:ROBOT_DIM, ROBOT_DIM:dim]
+        self._pending_G = None
+        self._lower_filled = False
+
     def _fill_robot_block(self) -> None:
         """``tril(P_qq, -1) <- triu(P_qq, 1)^T``."""
         upper = _ROBOT_UPPER
@@ -340,6 +362,7 @@ class SlamState:
 
     def _rows(self, indices: NDArray[np.int64]) -> NDArray[np.float64]:
         """The rows ``P[indices, :N]`` (r, N), each whole: ``P_ij`` from ``P_ji`` where ``j < i``. O(N r)."""
+        self._apply_pending()
         dim = self.dim
         rows = self._cov[indices, :dim]
         if not self._lower_filled:
