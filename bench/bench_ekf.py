@@ -38,7 +38,6 @@ from turtlelib import DiffDrive, Transform2D
 from turtlelib.ekf_slam import EkfSlam, ObservationStatus, SlamConfig
 from turtlelib.motion_models import DiffDriveMotion
 from turtlelib.range_bearing import predict_observations
-from turtlelib.slam_state import MIRROR_BLOCK
 
 ROOT = Path(__file__).resolve().parents[1]
 HEADING = "## EKF SLAM"
@@ -69,7 +68,9 @@ def observations(T_world_body: Transform2D, world: np.ndarray, ids: np.ndarray, 
 
 def mapped_filter(world: np.ndarray, mode: str, rng: np.random.Generator) -> EkfSlam:
     """A filter that has mapped every landmark of ``world`` from the origin, in batches of 10."""
-    config = CONFIG if mode == "known" else dataclasses.replace(CONFIG, matcher=mode)
+    # the map holds every landmark of the world, beyond the default size bound if need be
+    config = dataclasses.replace(CONFIG, max_landmarks=max(CONFIG.max_landmarks, len(world)))
+    config = config if mode == "known" else dataclasses.replace(config, matcher=mode)
     slam = EkfSlam(config, MOTION)
     for scan, first in enumerate(range(0, len(world), OBSERVATIONS_PER_STEP)):
         ids = np.arange(first, min(first + OBSERVATIONS_PER_STEP, len(world)))
@@ -157,12 +158,14 @@ def section(sizes: tuple[int, ...]) -> str:
             "read+write pass over the N x N covariance (N = 3 + 2n, `P *= 1`) measured in the same run.",
             "The update is one rank-20 downdate `P -= W^T W` in place, computed on the upper triangle",
             "by BLAS dsyrk (20 flops per entry of P, half of dgemm; the call spans the whole storage",
-            "capacity, up to ~1/8 more than N, which f2py passes without a copy) and then copied into the",
-            f"lower triangle by blocked transposed copies ({MIRROR_BLOCK}-row blocks), so that P stays",
-            "bitwise symmetric. For large n each half costs about 2-3 passes' worth: dsyrk is compute-bound,",
-            "the transposed copy is bound by numpy's strided copy. All else is O(N) per observation. A dense",
-            "textbook EKF is O(N^3) per update.",
+            "capacity, up to ~1/8 more than N, which f2py passes without a copy). P is kept by that",
+            "triangle: its lower one is filled in (blocked transposed copies, bitwise) only when the whole",
+            "P is read, which this loop never does, and `predict` defers `P_qm <- G P_qm` to the next",
+            "update. For large n the update costs a few passes' worth: dsyrk is compute-bound. All else",
+            "is O(N) per observation. A dense textbook EKF is O(N^3) per update.",
             "Targets: <= 0.3 ms per step at n = 20; <= 10 ms at n = 1000 with unknown association.",
+            "Absolute times move several-fold with the load of the shared machine: compare the rows of one",
+            "run, and code changes by running both versions back to back.",
             "",
             "| n landmarks | N | known (ms) | unknown, NN (ms) | unknown, JCBB (ms) | pass over P (ms) "
             "| known / pass | NN / pass |",

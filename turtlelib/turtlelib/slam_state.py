@@ -11,9 +11,9 @@ Layout
 (``P`` is stored as the leading block of a larger C-ordered square) so that adding landmarks reallocates
 only when the capacity (grown by an eighth at a time) is exhausted.
 
-``P`` is kept by its upper triangle (with the diagonal, and the robot block ``P_qq`` whole): the filter
-steps write only that triangle, and every read of covariance entries takes ``P_ij`` for ``i > j`` from
-``P_ji``. The lower triangle is filled in (copied, bitwise) only when the whole ``P`` is read
+``P`` is kept by its upper triangle (with the diagonal; the robot rows, ``P_qq`` included, are kept whole):
+the filter steps write only that triangle, and every read of covariance entries takes ``P_ij`` for
+``i > j`` from ``P_ji``. The lower triangle is filled in (copied, bitwise) only when the whole ``P`` is read
 (:attr:`SlamState.covariance`), so that a run of predictions and updates that reads only the pose and a
 few blocks never pays the O(N^2) copy.
 
