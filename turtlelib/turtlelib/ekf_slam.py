@@ -816,7 +816,8 @@ def _finite_step(
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """A motion model's ``(q', G, Q)``, checked finite: ValueError otherwise (a step so large it overflows
     would make ``P`` NaN for good)."""
-    if not all(np.isfinite(part).all() for part in step):
+    q_next, G, Q = step
+    if not (np.isfinite(q_next).all() and np.isfinite(G).all() and np.isfinite(Q).all()):
         raise ValueError("the motion step gives a non-finite pose, Jacobian or noise (an implausible input)")
     return step
 
