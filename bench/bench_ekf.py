@@ -69,8 +69,8 @@ def observations(T_world_body: Transform2D, world: np.ndarray, ids: np.ndarray, 
 def mapped_filter(world: np.ndarray, mode: str, rng: np.random.Generator) -> EkfSlam:
     """A filter that has mapped every landmark of ``world`` from the origin, in batches of 10."""
     # the map holds every landmark of the world, beyond the default size bound if need be
-    config = dataclasses.replace(CONFIG, max_landmarks=max(CONFIG.max_landmarks, len(world)))
-    config = config if mode == "known" else dataclasses.replace(config, matcher=mode)
+    matcher = CONFIG.matcher if mode == "known" else mode
+    config = dataclasses.replace(CONFIG, matcher=matcher, max_landmarks=max(CONFIG.max_landmarks, len(world)))
     slam = EkfSlam(config, MOTION)
     for scan, first in enumerate(range(0, len(world), OBSERVATIONS_PER_STEP)):
         ids = np.arange(first, min(first + OBSERVATIONS_PER_STEP, len(world)))

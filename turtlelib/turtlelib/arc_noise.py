@@ -37,6 +37,7 @@ the straight line).
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -74,16 +75,33 @@ def _sinc(x: float) -> float:
     return math.sin(x) / x if x != 0.0 else 1.0
 
 
-def _arc_integrals(w: float) -> dict[str, float]:
+class _ArcIntegrals(NamedTuple):
     """The integrals over ``t`` in [0, 1] of the products of ``c = cos(w t)``, ``s = sin(w t)``,
-    ``f = sin(w t) / w`` and ``g = (1 - cos(w t)) / w`` that ``Q_end`` needs, keyed by the product::
+    ``f = sin(w t) / w`` and ``g = (1 - cos(w t)) / w`` that ``Q_end`` needs, named by the product
+    (``cc = 1 - ss``)."""
 
-        ss = 2 w^2 S3(2w),            sc = w sinc(w)^2 / 2,          c = sinc(w),    s = w sinc(w/2)^2 / 2
-        f = sinc(w/2)^2 / 2,          g = w S3(w),                   ff = 2 S3(2w),  fg = w sinc(w/2)^4 / 8
-        gg = 2 (S3(w) - S3(2w)),      cf = sinc(w)^2 / 2,            cg = w (2 S3(2w) - S3(w))
-        sf = 2 w S3(2w),              sg = w^2 sinc(w/2)^4 / 8
+    ss: float
+    sc: float
+    c: float
+    s: float
+    f: float
+    g: float
+    ff: float
+    fg: float
+    gg: float
+    cf: float
+    cg: float
+    sf: float
+    sg: float
 
-    (``S3(x) = (x - sin x) / x^3``; ``cc = 1 - ss``).
+
+def _arc_integrals(w: float) -> _ArcIntegrals:
+    """:class:`_ArcIntegrals` of turn ``w``, with ``S3(x) = (x - sin x) / x^3``::
+
+    ss = 2 w^2 S3(2w),            sc = w sinc(w)^2 / 2,          c = sinc(w),    s = w sinc(w/2)^2 / 2
+    f = sinc(w/2)^2 / 2,          g = w S3(w),                   ff = 2 S3(2w),  fg = w sinc(w/2)^4 / 8
+    gg = 2 (S3(w) - S3(2w)),      cf = sinc(w)^2 / 2,            cg = w (2 S3(2w) - S3(w))
+    sf = 2 w S3(2w),              sg = w^2 sinc(w/2)^4 / 8
     """
     s3_w, s3_2w = _s3(w), _s3(2.0 * w)
     sinc_w, sinc_half = _sinc(w), _sinc(0.5 * w)
@@ -92,21 +110,21 @@ def _arc_integrals(w: float) -> dict[str, float]:
         difference = _even_series(_S3_DIFFERENCE_SERIES, w * w) * w * w
     else:
         difference = s3_w - s3_2w
-    return {
-        "ss": 2.0 * w * w * s3_2w,
-        "sc": 0.5 * w * sinc_w * sinc_w,
-        "c": sinc_w,
-        "s": 0.5 * w * half2,
-        "f": 0.5 * half2,
-        "g": w * s3_w,
-        "ff": 2.0 * s3_2w,
-        "fg": 0.125 * w * half2 * half2,
-        "gg": 2.0 * difference,
-        "cf": 0.5 * sinc_w * sinc_w,
-        "cg": w * (2.0 * s3_2w - s3_w),
-        "sf": 2.0 * w * s3_2w,
-        "sg": 0.125 * w * w * half2 * half2,
-    }
+    return _ArcIntegrals(
+        ss=2.0 * w * w * s3_2w,
+        sc=0.5 * w * sinc_w * sinc_w,
+        c=sinc_w,
+        s=0.5 * w * half2,
+        f=0.5 * half2,
+        g=w * s3_w,
+        ff=2.0 * s3_2w,
+        fg=0.125 * w * half2 * half2,
+        gg=2.0 * difference,
+        cf=0.5 * sinc_w * sinc_w,
+        cg=w * (2.0 * s3_2w - s3_w),
+        sf=2.0 * w * s3_2w,
+        sg=0.125 * w * w * half2 * half2,
+    )
 
 
 def arc_covariance(
@@ -130,7 +148,7 @@ def arc_covariance(
             f"a step turning the body by {omega!r} rad is not a motion (> {MAX_STEP_TURN_RAD} rad)"
         )
     i = _arc_integrals(omega)
-    ss, sc = i["ss"], i["sc"]
+    ss, sc = i.ss, i.sc
     cc = 1.0 - ss
     # Q_end = var_vx int a_vx a_vx^T + var_vy int a_vy a_vy^T + var_omega int a_w a_w^T
     #         + cov_vx_omega int (a_vx a_w^T + a_w a_vx^T),   a_w = [A, B, 1]
@@ -139,11 +157,11 @@ def arc_covariance(
     q_xy = (var_vy - var_vx) * sc
     q_yy = var_vx * ss + var_vy * cc
     # int A^2, int A B, int B^2, int A, int B
-    aa = vx * vx * i["gg"] - 2.0 * vx * vy * i["fg"] + vy * vy * i["ff"]
-    ab = (vx * vx - vy * vy) * i["fg"] + vx * vy * (i["gg"] - i["ff"])
-    bb = vx * vx * i["ff"] + 2.0 * vx * vy * i["fg"] + vy * vy * i["gg"]
-    a1 = vx * i["g"] - vy * i["f"]
-    b1 = vx * i["f"] + vy * i["g"]
+    aa = vx * vx * i.gg - 2.0 * vx * vy * i.fg + vy * vy * i.ff
+    ab = (vx * vx - vy * vy) * i.fg + vx * vy * (i.gg - i.ff)
+    bb = vx * vx * i.ff + 2.0 * vx * vy * i.fg + vy * vy * i.gg
+    a1 = vx * i.g - vy * i.f
+    b1 = vx * i.f + vy * i.g
     q_xx += var_omega * aa
     q_xy += var_omega * ab
     q_yy += var_omega * bb
@@ -152,15 +170,15 @@ def arc_covariance(
     q_tt = var_omega
     if cov_vx_omega != 0.0:
         # int a_vx a_w^T = [[int c A, int c B, int c], [-int s A, -int s B, -int s], [0, 0, 0]]
-        ca = vx * i["cg"] - vy * i["cf"]
-        cb = vx * i["cf"] + vy * i["cg"]
-        sa = vx * i["sg"] - vy * i["sf"]
-        sb = vx * i["sf"] + vy * i["sg"]
+        ca = vx * i.cg - vy * i.cf
+        cb = vx * i.cf + vy * i.cg
+        sa = vx * i.sg - vy * i.sf
+        sb = vx * i.sf + vy * i.sg
         q_xx += 2.0 * cov_vx_omega * ca
         q_xy += cov_vx_omega * (cb - sa)
         q_yy -= 2.0 * cov_vx_omega * sb
-        q_xt += cov_vx_omega * i["c"]
-        q_yt -= cov_vx_omega * i["s"]
+        q_xt += cov_vx_omega * i.c
+        q_yt -= cov_vx_omega * i.s
     # Q = Rot(theta_1) Q_end Rot(theta_1)^T
     heading = theta_rad + omega
     c, s = math.cos(heading), math.sin(heading)
