@@ -43,7 +43,7 @@ from turtlelib.consistency import chi2_bounds
 from ..metrics import align_se2, associate_landmarks, pose_nees
 from .experiment import Experiment, ExperimentResult
 from .mrclam import MrclamRecording
-from .setups import LASER_X_M, LASER_Y_M, interpolate_poses
+from .setups import interpolate_poses, laser_points
 from .victoria import VictoriaRecording, gps_outliers
 
 NEES_PROB = 0.95
@@ -198,19 +198,6 @@ def evaluate_mrclam(
         T_align=T_align,
         metrics=metrics,
     )
-
-
-def laser_points(
-    poses: NDArray[np.float64], covariances: NDArray[np.float64]
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """The laser's position (S, 2) for body poses (S, 3) and its covariance (S, 2, 2) ``J P J^T``."""
-    c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
-    # r = R(theta) [a, b]
-    r = np.column_stack([c * LASER_X_M - s * LASER_Y_M, s * LASER_X_M + c * LASER_Y_M])
-    J = np.zeros((len(poses), 2, 3))
-    J[:, 0, 0] = J[:, 1, 1] = 1.0
-    J[:, 0, 2], J[:, 1, 2] = -r[:, 1], r[:, 0]
-    return poses[:, :2] + r, J @ covariances @ J.transpose(0, 2, 1)
 
 
 def evaluate_victoria(

@@ -56,6 +56,14 @@ class Scans:
     def __len__(self) -> int:
         return len(self.t_ns)
 
+    def until(self, t_ns: int) -> Scans:
+        """The scans stamped at or before ``t_ns``."""
+        n = int(np.searchsorted(self.t_ns, t_ns, side="right"))
+        rows = int(self.start[n])
+        return Scans(
+            self.t_ns[:n], self.start[: n + 1], self.z[:rows], None if self.ids is None else self.ids[:rows]
+        )
+
     def scan(self, i: int) -> tuple[NDArray[np.float64], NDArray[np.int64] | None]:
         rows = slice(self.start[i], self.start[i + 1])
         return self.z[rows], None if self.ids is None else self.ids[rows]

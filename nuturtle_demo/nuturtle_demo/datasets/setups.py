@@ -6,9 +6,9 @@
   subject numbers as ids.
 * **Victoria Park** (utility truck): :class:`turtlelib.AckermannMotion` on the held ``(speed, steering)``
   samples, the body at the rear-axle centre, the laser (and GPS antenna) at ``(LASER_X_M, LASER_Y_M)`` in
-  the body frame; unknown association. The start pose comes from the GPS only: the first
-  ``START_WINDOW_S`` of dead reckoning from the identity is rigidly aligned (least squares) to the GPS
-  fixes of that time, and the residual sets the start uncertainty.
+  the body frame; unknown association. The start pose comes from the GPS only: the filter's track over the
+  first ``START_WINDOW_S``, run from the identity, is rigidly aligned (least squares) to the GPS fixes of
+  that time, and the residual sets the start uncertainty.
 
 The noise (:class:`turtlelib.TwistNoise`) and the filter's options come from :class:`DatasetParams`; the
 defaults (:data:`MRCLAM_PARAMS`, :data:`VICTORIA_PARAMS`) are explained in docs/real_data.md, and a YAML
@@ -26,9 +26,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from turtlelib import AckermannMotion, HeldInputs, SlamConfig, Transform2D, TwistNoise, UnicycleMotion
+from turtlelib.timebase import NS_PER_S
 
 from ..metrics import align_se2
-from .experiment import Experiment, Scans
+from .experiment import Experiment, Scans, run_experiment
 from .mrclam import MrclamRecording
 from .victoria import VictoriaRecording, gps_outliers
 
@@ -168,62 +169,71 @@ def victoria_experiment(recording: VictoriaRecording, params: DatasetParams) -> 
     """The Victoria Park run (module docstring), unknown association, started from the GPS."""
     motion = AckermannMotion(WHEELBASE_M, ENCODER_Y_M, params.noise)
     samples = np.column_stack([recording.speed_mps, recording.steering_rad])
-    T_map_body0, xy_std, theta_std = gps_start(recording, motion, samples)
-    config = dataclasses.replace(
-        params.slam,
-        sensor_x=LASER_X_M,
-        sensor_y=LASER_Y_M,
-        sensor_theta=0.0,
-        initial_xy_std=xy_std,
-        initial_theta_std=theta_std,
-    )
     z = np.column_stack([recording.detection_range_m, recording.detection_bearing_rad])
-    return Experiment(
+    config = dataclasses.replace(params.slam, sensor_x=LASER_X_M, sensor_y=LASER_Y_M, sensor_theta=0.0)
+    run = Experiment(
         name="Victoria Park (unknown association)",
         motion=motion,
         signal=HeldInputs(),
         motion_t_ns=recording.odometry_t_ns,
         motion_samples=samples,
         scans=Scans.from_rows(recording.detection_t_ns, z),
+        T_map_body0=Transform2D(),
+        config=dataclasses.replace(config, initial_xy_std=0.0, initial_theta_std=0.0),
+    )
+    T_map_body0, xy_std, theta_std = gps_start(run, recording)
+    return dataclasses.replace(
+        run,
         T_map_body0=T_map_body0,
-        config=config,
+        config=dataclasses.replace(config, initial_xy_std=xy_std, initial_theta_std=theta_std),
     )
 
 
-def gps_start(
-    recording: VictoriaRecording, motion: AckermannMotion, samples: NDArray[np.float64]
-) -> tuple[Transform2D, float, float]:
-    """``(T_map_body0, xy_std, theta_std)`` from the GPS: the laser track dead-reckoned from the identity
-    over the first ``START_WINDOW_S`` aligned rigidly to the (outlier-free) fixes of that time.
+def gps_start(run: Experiment, recording: VictoriaRecording) -> tuple[Transform2D, float, float]:
+    """``(T_map_body0, xy_std, theta_std)`` from the GPS: ``run`` (which starts at the identity) filtered
+    over its first ``START_WINDOW_S``, its laser track aligned rigidly to the (outlier-free) GPS fixes of
+    that time.
 
+    The filter's track rather than dead reckoning: the trees hold its heading, while the steering-angle
+    odometry drifts by degrees within a minute, and that drift would rotate the whole map frame.
     ``xy_std`` is the RMS residual (at least ``GPS_MIN_STD_M``), ``theta_std`` that residual over the RMS
-    spread of the track (the rotation a residual of that size leaves undetermined)."""
-    t_ns = recording.odometry_t_ns
-    end_ns = t_ns[0] + round(START_WINDOW_S * 1e9)
+    spread of the track (the rotation a residual of that size leaves undetermined). ValueError if fewer
+    than 3 fixes fall in the window."""
+    t_ns = run.motion_t_ns
+    end_ns = t_ns[0] + round(START_WINDOW_S * NS_PER_S)
     inside = (recording.gps_t_ns >= t_ns[0]) & (recording.gps_t_ns <= end_ns)
     fixes = inside & ~gps_outliers(recording.gps_t_ns, recording.gps_xy)
-    # dead reckoning of the body from the identity, the laser point at each odometry sample
-    signal = HeldInputs()
-    T = Transform2D()
-    track = [T @ np.array([LASER_X_M, LASER_Y_M])]
+    if fixes.sum() < 3:
+        raise ValueError(f"fewer than 3 GPS fixes in the first {START_WINDOW_S} s: cannot place the start")
     k_end = int(np.searchsorted(t_ns, end_ns, side="right"))
-    for k in range(1, k_end):
-        q, _, _ = motion.step(
-            T, signal.input(tuple(samples[k - 1]), tuple(samples[k]), int(t_ns[k] - t_ns[k - 1]))
-        )
-        T = Transform2D(*q)
-        track.append(T @ np.array([LASER_X_M, LASER_Y_M]))
-    track = np.array(track)
+    window = dataclasses.replace(
+        run,
+        motion_t_ns=t_ns[:k_end],
+        motion_samples=run.motion_samples[:k_end],
+        scans=run.scans.until(end_ns),
+    )
+    track, _ = laser_points(run_experiment(window).track, np.zeros((k_end, 3, 3)))
     at_fixes = np.column_stack(
         [np.interp(recording.gps_t_ns[fixes], t_ns[:k_end], track[:, i]) for i in range(2)]
     )
-    if len(at_fixes) < 3:
-        raise ValueError(f"fewer than 3 GPS fixes in the first {START_WINDOW_S} s: cannot place the start")
     T_map_odo = align_se2(at_fixes, recording.gps_xy[fixes])
     residual = np.linalg.norm(T_map_odo @ at_fixes - recording.gps_xy[fixes], axis=1)
     rms = float(np.sqrt(np.mean(residual**2)))
     spread = float(np.sqrt(np.mean(np.sum((at_fixes - at_fixes.mean(axis=0)) ** 2, axis=1))))
-    return T_map_odo, max(rms, GPS_MIN_STD_M), rms / max(spread, 1.0)
+    return T_map_odo @ run.T_map_body0, max(rms, GPS_MIN_STD_M), rms / max(spread, 1.0)
+
+
+def laser_points(
+    poses: NDArray[np.float64], covariances: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The laser's position (S, 2) for body poses (S, 3) and its covariance (S, 2, 2) ``J P J^T``."""
+    c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+    # r = R(theta) [a, b]
+    r = np.column_stack([c * LASER_X_M - s * LASER_Y_M, s * LASER_X_M + c * LASER_Y_M])
+    J = np.zeros((len(poses), 2, 3))
+    J[:, 0, 0] = J[:, 1, 1] = 1.0
+    J[:, 0, 2], J[:, 1, 2] = -r[:, 1], r[:, 0]
+    return poses[:, :2] + r, J @ covariances @ J.transpose(0, 2, 1)
 
 
 def interpolate_poses(
