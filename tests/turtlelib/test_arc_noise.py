@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from scipy.integrate import quad
 
 from turtlelib import Transform2D, Twist2D
-from turtlelib.arc_noise import MAX_STEP_TURN_RAD, SERIES_BELOW, arc_covariance
+from turtlelib.arc_noise import MAX_STEP_TURN_RAD, SERIES_BELOW, arc_covariance, arc_covariances
 from turtlelib.geometry import integrate_twist
 
 
@@ -91,3 +91,32 @@ def test_a_turn_beyond_the_limit_is_refused():
         arc_covariance(0.0, 1.01 * MAX_STEP_TURN_RAD, 1.0, 0.0, 1.0, 0.0, 1.0)
     with pytest.raises(ValueError, match="not a motion"):
         arc_covariance(0.0, math.nan, 1.0, 0.0, 1.0, 0.0, 1.0)
+
+
+def test_a_batch_is_each_step_alone():
+    # turns on both sides of the series' switch, exactly straight, tiny and large, both signs
+    rng = np.random.default_rng(5)
+    omega = np.r_[
+        0.0, 1e-12, -1e-6, np.nextafter(SERIES_BELOW, 0.0), SERIES_BELOW, -2.5, 40.0, rng.normal(0, 2, 40)
+    ]
+    n = len(omega)
+    theta, vx, vy = rng.uniform(-4, 4, n), rng.normal(0, 2, n), rng.normal(0, 0.5, n)
+    var_vx, var_omega, var_vy = rng.uniform(0, 1e-2, (3, n))
+    cov = 0.5 * np.sqrt(var_vx * var_omega) * rng.uniform(-1, 1, n)
+    batch = arc_covariances(theta, omega, vx, vy, var_vx, cov, var_omega, var_vy)
+    assert batch.shape == (n, 3, 3)
+    for k in range(n):
+        one = arc_covariance(theta[k], omega[k], vx[k], vy[k], var_vx[k], cov[k], var_omega[k], var_vy[k])
+        np.testing.assert_allclose(batch[k], one, rtol=0.0, atol=1e-15 * np.abs(one).max())
+    # scalars broadcast against arrays; a batch of one is (1, 3, 3)
+    np.testing.assert_allclose(
+        arc_covariances(theta, omega, vx, 0.0, 1e-3, 0.0, 1e-4),
+        arc_covariances(theta, omega, vx, np.zeros(n), np.full(n, 1e-3), np.zeros(n), np.full(n, 1e-4)),
+    )
+    assert arc_covariances(0.0, 0.1, 1.0, 0.0, 1e-3, 0.0, 1e-4).shape == (1, 3, 3)
+
+
+def test_a_batch_with_a_turn_beyond_the_limit_is_refused():
+    for bad in (1.01 * MAX_STEP_TURN_RAD, math.nan):
+        with pytest.raises(ValueError, match="not a motion"):
+            arc_covariances(np.zeros(3), np.array([0.1, bad, 0.2]), 1.0, 0.0, 1.0, 0.0, 1.0)

@@ -40,7 +40,10 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
+
+# a float (one step) or an array of floats (a batch of steps, elementwise)
+Floats = float | NDArray[np.float64]
 
 # Largest heading change of one step (rad): a turn of more than a thousand rad between two readings is a
 # corrupt reading, not a motion.
@@ -55,24 +58,64 @@ _S3_SERIES = tuple((-1) ** k / math.factorial(2 * k + 3) for k in range(10))
 _S3_DIFFERENCE_SERIES = tuple((-1) ** (k + 1) * (4**k - 1) / math.factorial(2 * k + 3) for k in range(1, 12))
 
 
-def _even_series(coefficients: tuple[float, ...], x2: float) -> float:
-    """``sum_k coefficients[k] x2^k`` (Horner)."""
+def _even_series(coefficients: tuple[float, ...], x2: Floats) -> Floats:
+    """``sum_k coefficients[k] x2^k`` (Horner), for a float or elementwise for an array."""
     total = 0.0
     for c in reversed(coefficients):
         total = total * x2 + c
     return total
 
 
-def _s3(x: float) -> float:
-    """``S3(x) = (x - sin x) / x^3`` (1/6 at 0)."""
-    if abs(x) < SERIES_BELOW:
-        return _even_series(_S3_SERIES, x * x)
-    return (x - math.sin(x)) / x**3
+class _Floats:
+    """The elementary functions on floats (one step)."""
+
+    cos = staticmethod(math.cos)
+    sin = staticmethod(math.sin)
+
+    @staticmethod
+    def s3(x: float) -> float:
+        """``S3(x) = (x - sin x) / x^3`` (1/6 at 0)."""
+        if abs(x) < SERIES_BELOW:
+            return _even_series(_S3_SERIES, x * x)
+        return (x - math.sin(x)) / x**3
+
+    @staticmethod
+    def sinc(x: float) -> float:
+        """``sin(x) / x`` (1 at 0)."""
+        return math.sin(x) / x if x != 0.0 else 1.0
+
+    @staticmethod
+    def s3_difference(w: float, s3_w: float, s3_2w: float) -> float:
+        """``S3(w) - S3(2 w)``, by its series where the difference cancels."""
+        if abs(w) < SERIES_BELOW:
+            return _even_series(_S3_DIFFERENCE_SERIES, w * w) * w * w
+        return s3_w - s3_2w
 
 
-def _sinc(x: float) -> float:
-    """``sin(x) / x`` (1 at 0)."""
-    return math.sin(x) / x if x != 0.0 else 1.0
+class _Arrays:
+    """The same functions elementwise on arrays (a batch of steps)."""
+
+    cos = staticmethod(np.cos)
+    sin = staticmethod(np.sin)
+
+    @staticmethod
+    def s3(x: NDArray[np.float64]) -> NDArray[np.float64]:
+        small = np.abs(x) < SERIES_BELOW
+        # the direct form only where it does not cancel (1 stands in elsewhere)
+        direct = np.where(small, 1.0, x)
+        return np.where(small, _even_series(_S3_SERIES, x * x), (direct - np.sin(direct)) / direct**3)
+
+    @staticmethod
+    def sinc(x: NDArray[np.float64]) -> NDArray[np.float64]:
+        nonzero = np.where(x == 0.0, 1.0, x)
+        return np.where(x == 0.0, 1.0, np.sin(nonzero) / nonzero)
+
+    @staticmethod
+    def s3_difference(
+        w: NDArray[np.float64], s3_w: NDArray[np.float64], s3_2w: NDArray[np.float64]
+    ) -> NDArray[np.float64]:
+        small = np.abs(w) < SERIES_BELOW
+        return np.where(small, _even_series(_S3_DIFFERENCE_SERIES, w * w) * w * w, s3_w - s3_2w)
 
 
 class _ArcIntegrals(NamedTuple):
@@ -80,36 +123,34 @@ class _ArcIntegrals(NamedTuple):
     ``f = sin(w t) / w`` and ``g = (1 - cos(w t)) / w`` that ``Q_end`` needs, named by the product
     (``cc = 1 - ss``)."""
 
-    ss: float
-    sc: float
-    c: float
-    s: float
-    f: float
-    g: float
-    ff: float
-    fg: float
-    gg: float
-    cf: float
-    cg: float
-    sf: float
-    sg: float
+    ss: Floats
+    sc: Floats
+    c: Floats
+    s: Floats
+    f: Floats
+    g: Floats
+    ff: Floats
+    fg: Floats
+    gg: Floats
+    cf: Floats
+    cg: Floats
+    sf: Floats
+    sg: Floats
 
 
-def _arc_integrals(w: float) -> _ArcIntegrals:
-    """:class:`_ArcIntegrals` of turn ``w``, with ``S3(x) = (x - sin x) / x^3``::
+def _arc_integrals(w: Floats, fn: type[_Floats] | type[_Arrays]) -> _ArcIntegrals:
+    """:class:`_ArcIntegrals` of turn ``w`` (a float, or an array with ``fn = _Arrays``), with
+    ``S3(x) = (x - sin x) / x^3``::
 
     ss = 2 w^2 S3(2w),            sc = w sinc(w)^2 / 2,          c = sinc(w),    s = w sinc(w/2)^2 / 2
     f = sinc(w/2)^2 / 2,          g = w S3(w),                   ff = 2 S3(2w),  fg = w sinc(w/2)^4 / 8
     gg = 2 (S3(w) - S3(2w)),      cf = sinc(w)^2 / 2,            cg = w (2 S3(2w) - S3(w))
     sf = 2 w S3(2w),              sg = w^2 sinc(w/2)^4 / 8
     """
-    s3_w, s3_2w = _s3(w), _s3(2.0 * w)
-    sinc_w, sinc_half = _sinc(w), _sinc(0.5 * w)
+    s3_w, s3_2w = fn.s3(w), fn.s3(2.0 * w)
+    sinc_w, sinc_half = fn.sinc(w), fn.sinc(0.5 * w)
     half2 = sinc_half * sinc_half
-    if abs(w) < SERIES_BELOW:
-        difference = _even_series(_S3_DIFFERENCE_SERIES, w * w) * w * w
-    else:
-        difference = s3_w - s3_2w
+    difference = fn.s3_difference(w, s3_w, s3_2w)
     return _ArcIntegrals(
         ss=2.0 * w * w * s3_2w,
         sc=0.5 * w * sinc_w * sinc_w,
@@ -147,7 +188,55 @@ def arc_covariance(
         raise ValueError(
             f"a step turning the body by {omega!r} rad is not a motion (> {MAX_STEP_TURN_RAD} rad)"
         )
-    i = _arc_integrals(omega)
+    Q_xx, Q_xy, Q_xt, Q_yy, Q_yt, Q_tt = _arc_covariance_entries(
+        _Floats, theta_rad, omega, vx, vy, var_vx, cov_vx_omega, var_omega, var_vy
+    )
+    return np.array([[Q_xx, Q_xy, Q_xt], [Q_xy, Q_yy, Q_yt], [Q_xt, Q_yt, Q_tt]])
+
+
+def arc_covariances(
+    theta_rad: ArrayLike,
+    omega: ArrayLike,
+    vx: ArrayLike,
+    vy: ArrayLike,
+    var_vx: ArrayLike,
+    cov_vx_omega: ArrayLike,
+    var_omega: ArrayLike,
+    var_vy: ArrayLike = 0.0,
+) -> NDArray[np.float64]:
+    """:func:`arc_covariance` of a batch of steps: the arguments broadcast to a shape (n,) and the result
+    is (n, 3, 3). ValueError if any step turns by more than ``MAX_STEP_TURN_RAD``."""
+    args = np.broadcast_arrays(
+        *(np.atleast_1d(np.asarray(value, dtype=np.float64)) for value in (theta_rad, omega, vx, vy))
+    )
+    theta_rad, omega, vx, vy = args
+    turning = ~(np.abs(omega) <= MAX_STEP_TURN_RAD)
+    if turning.any():
+        raise ValueError(
+            f"a step turning the body by {omega[turning][0]!r} rad is not a motion "
+            f"(> {MAX_STEP_TURN_RAD} rad)"
+        )
+    entries = _arc_covariance_entries(
+        _Arrays, theta_rad, omega, vx, vy, var_vx, cov_vx_omega, var_omega, var_vy
+    )
+    Q_xx, Q_xy, Q_xt, Q_yy, Q_yt, Q_tt = np.broadcast_arrays(*entries)
+    return np.stack([Q_xx, Q_xy, Q_xt, Q_xy, Q_yy, Q_yt, Q_xt, Q_yt, Q_tt], axis=-1).reshape(-1, 3, 3)
+
+
+def _arc_covariance_entries(
+    fn: type[_Floats] | type[_Arrays],
+    theta_rad: Floats,
+    omega: Floats,
+    vx: Floats,
+    vy: Floats,
+    var_vx: Floats,
+    cov_vx_omega: Floats,
+    var_omega: Floats,
+    var_vy: Floats,
+) -> tuple[Floats, ...]:
+    """``(Q_xx, Q_xy, Q_xt, Q_yy, Q_yt, Q_tt)`` of :func:`arc_covariance`, on floats or (``fn = _Arrays``)
+    elementwise on arrays."""
+    i = _arc_integrals(omega, fn)
     ss, sc = i.ss, i.sc
     cc = 1.0 - ss
     # Q_end = var_vx int a_vx a_vx^T + var_vy int a_vy a_vy^T + var_omega int a_w a_w^T
@@ -162,29 +251,27 @@ def arc_covariance(
     bb = vx * vx * i.ff + 2.0 * vx * vy * i.fg + vy * vy * i.gg
     a1 = vx * i.g - vy * i.f
     b1 = vx * i.f + vy * i.g
-    q_xx += var_omega * aa
-    q_xy += var_omega * ab
-    q_yy += var_omega * bb
+    q_xx = q_xx + var_omega * aa
+    q_xy = q_xy + var_omega * ab
+    q_yy = q_yy + var_omega * bb
     q_xt = var_omega * a1
     q_yt = var_omega * b1
-    q_tt = var_omega
-    if cov_vx_omega != 0.0:
-        # int a_vx a_w^T = [[int c A, int c B, int c], [-int s A, -int s B, -int s], [0, 0, 0]]
-        ca = vx * i.cg - vy * i.cf
-        cb = vx * i.cf + vy * i.cg
-        sa = vx * i.sg - vy * i.sf
-        sb = vx * i.sf + vy * i.sg
-        q_xx += 2.0 * cov_vx_omega * ca
-        q_xy += cov_vx_omega * (cb - sa)
-        q_yy -= 2.0 * cov_vx_omega * sb
-        q_xt += cov_vx_omega * i.c
-        q_yt -= cov_vx_omega * i.s
+    # int a_vx a_w^T = [[int c A, int c B, int c], [-int s A, -int s B, -int s], [0, 0, 0]]
+    ca = vx * i.cg - vy * i.cf
+    cb = vx * i.cf + vy * i.cg
+    sa = vx * i.sg - vy * i.sf
+    sb = vx * i.sf + vy * i.sg
+    q_xx = q_xx + 2.0 * cov_vx_omega * ca
+    q_xy = q_xy + cov_vx_omega * (cb - sa)
+    q_yy = q_yy - 2.0 * cov_vx_omega * sb
+    q_xt = q_xt + cov_vx_omega * i.c
+    q_yt = q_yt - cov_vx_omega * i.s
     # Q = Rot(theta_1) Q_end Rot(theta_1)^T
     heading = theta_rad + omega
-    c, s = math.cos(heading), math.sin(heading)
+    c, s = fn.cos(heading), fn.sin(heading)
     Q_xx = c * c * q_xx + s * s * q_yy - 2.0 * c * s * q_xy
     Q_xy = c * s * (q_xx - q_yy) + (c * c - s * s) * q_xy
     Q_yy = s * s * q_xx + c * c * q_yy + 2.0 * c * s * q_xy
     Q_xt = c * q_xt - s * q_yt
     Q_yt = s * q_xt + c * q_yt
-    return np.array([[Q_xx, Q_xy, Q_xt], [Q_xy, Q_yy, Q_yt], [Q_xt, Q_yt, q_tt]])
+    return Q_xx, Q_xy, Q_xt, Q_yy, Q_yt, var_omega
