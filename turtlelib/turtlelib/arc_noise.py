@@ -56,10 +56,25 @@ _S3_SERIES = tuple((-1) ** k / math.factorial(2 * k + 3) for k in range(10))
 # (-1)^(k+1) (4^k - 1) / (2k + 3)!, k = 1 ... 11: the series of S3(w) - S3(2 w), truncated below 1e-18 of
 # its value for |w| < 1
 _S3_DIFFERENCE_SERIES = tuple((-1) ** (k + 1) * (4**k - 1) / math.factorial(2 * k + 3) for k in range(1, 12))
+# For |w| < 1, the coefficients of w^(2k), k = 0 ... 13, of S3(w), S3(2w), sinc(w), sinc(w/2) and
+# S3(w) - S3(2w) (columns), each truncated below 1e-18 of its value: (-1)^k / (2k + 3)! times 1, 4^k;
+# (-1)^k / (2k + 1)! times 1, 4^-k; (-1)^k (1 - 4^k) / (2k + 3)!
+_SMALL_TURN_SERIES = np.array(
+    [
+        [
+            (-1) ** k / math.factorial(2 * k + 3),
+            (-1) ** k * 4**k / math.factorial(2 * k + 3),
+            (-1) ** k / math.factorial(2 * k + 1),
+            (-1) ** k / (4**k * math.factorial(2 * k + 1)),
+            (-1) ** k * (1 - 4**k) / math.factorial(2 * k + 3),
+        ]
+        for k in range(14)
+    ]
+)
 
 
-def _even_series(coefficients: tuple[float, ...], x2: Floats) -> Floats:
-    """``sum_k coefficients[k] x2^k`` (Horner), for a float or elementwise for an array."""
+def _even_series(coefficients: tuple[float, ...], x2: float) -> float:
+    """``sum_k coefficients[k] x2^k`` (Horner)."""
     total = 0.0
     for c in reversed(coefficients):
         total = total * x2 + c
@@ -85,11 +100,15 @@ class _Floats:
         return math.sin(x) / x if x != 0.0 else 1.0
 
     @staticmethod
-    def s3_difference(w: float, s3_w: float, s3_2w: float) -> float:
-        """``S3(w) - S3(2 w)``, by its series where the difference cancels."""
+    def terms(w: float) -> tuple[float, float, float, float, float]:
+        """``(S3(w), S3(2w), sinc(w), sinc(w/2), S3(w) - S3(2w))``, the last by its series where it
+        cancels."""
+        s3_w, s3_2w = _Floats.s3(w), _Floats.s3(2.0 * w)
         if abs(w) < SERIES_BELOW:
-            return _even_series(_S3_DIFFERENCE_SERIES, w * w) * w * w
-        return s3_w - s3_2w
+            difference = _even_series(_S3_DIFFERENCE_SERIES, w * w) * w * w
+        else:
+            difference = s3_w - s3_2w
+        return s3_w, s3_2w, _Floats.sinc(w), _Floats.sinc(0.5 * w), difference
 
 
 class _Arrays:
@@ -103,7 +122,8 @@ class _Arrays:
         small = np.abs(x) < SERIES_BELOW
         # the direct form only where it does not cancel (1 stands in elsewhere)
         direct = np.where(small, 1.0, x)
-        return np.where(small, _even_series(_S3_SERIES, x * x), (direct - np.sin(direct)) / direct**3)
+        series = (x[:, None] ** (2 * np.arange(len(_S3_SERIES)))) @ np.array(_S3_SERIES)
+        return np.where(small, series, (direct - np.sin(direct)) / direct**3)
 
     @staticmethod
     def sinc(x: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -111,60 +131,75 @@ class _Arrays:
         return np.where(x == 0.0, 1.0, np.sin(nonzero) / nonzero)
 
     @staticmethod
-    def s3_difference(
-        w: NDArray[np.float64], s3_w: NDArray[np.float64], s3_2w: NDArray[np.float64]
-    ) -> NDArray[np.float64]:
+    def terms(w: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
+        """:meth:`_Floats.terms` elementwise; when every ``|w| < SERIES_BELOW`` (the usual short steps) all
+        five by one product of the powers of ``w^2`` with :data:`_SMALL_TURN_SERIES`."""
         small = np.abs(w) < SERIES_BELOW
-        return np.where(small, _even_series(_S3_DIFFERENCE_SERIES, w * w) * w * w, s3_w - s3_2w)
+        if small.all():
+            return tuple(((w[:, None] ** (2 * np.arange(len(_SMALL_TURN_SERIES)))) @ _SMALL_TURN_SERIES).T)
+        s3_w, s3_2w = _Arrays.s3(w), _Arrays.s3(2.0 * w)
+        series = (w[:, None] ** (2 * np.arange(len(_S3_DIFFERENCE_SERIES)))) @ np.array(_S3_DIFFERENCE_SERIES)
+        difference = np.where(small, series * w * w, s3_w - s3_2w)
+        return s3_w, s3_2w, _Arrays.sinc(w), _Arrays.sinc(0.5 * w), difference
 
 
 class _ArcIntegrals(NamedTuple):
     """The integrals over ``t`` in [0, 1] of the products of ``c = cos(w t)``, ``s = sin(w t)``,
     ``f = sin(w t) / w`` and ``g = (1 - cos(w t)) / w`` that ``Q_end`` needs, named by the product
-    (``cc = 1 - ss``)."""
+    (``cc = 1 - ss``), with ``S3(x) = (x - sin x) / x^3``::
 
+        ss = 2 w^2 S3(2w),         sc = w sinc(w)^2 / 2,     f = sinc(w/2)^2 / 2,   g = w S3(w)
+        ff = 2 S3(2w),             fg = w sinc(w/2)^4 / 8,   gg = 2 (S3(w) - S3(2w))
+
+    and those of the speed/turn correlation (:meth:`cross`). Also the terms they are made of."""
+
+    w: Floats
+    s3_w: Floats
+    s3_2w: Floats
+    sinc_w: Floats
+    half2: Floats
     ss: Floats
     sc: Floats
-    c: Floats
-    s: Floats
     f: Floats
     g: Floats
     ff: Floats
     fg: Floats
     gg: Floats
-    cf: Floats
-    cg: Floats
-    sf: Floats
-    sg: Floats
+
+    def cross(self) -> tuple[Floats, ...]:
+        """``(c, s, cf, cg, sf, sg)``::
+
+        c = sinc(w),         s = w sinc(w/2)^2 / 2,   cf = sinc(w)^2 / 2,   cg = w (2 S3(2w) - S3(w))
+        sf = 2 w S3(2w),     sg = w^2 sinc(w/2)^4 / 8
+        """
+        w, half2 = self.w, self.half2
+        return (
+            self.sinc_w,
+            0.5 * w * half2,
+            0.5 * self.sinc_w * self.sinc_w,
+            w * (2.0 * self.s3_2w - self.s3_w),
+            2.0 * w * self.s3_2w,
+            0.125 * w * w * half2 * half2,
+        )
 
 
 def _arc_integrals(w: Floats, fn: type[_Floats] | type[_Arrays]) -> _ArcIntegrals:
-    """:class:`_ArcIntegrals` of turn ``w`` (a float, or an array with ``fn = _Arrays``), with
-    ``S3(x) = (x - sin x) / x^3``::
-
-    ss = 2 w^2 S3(2w),            sc = w sinc(w)^2 / 2,          c = sinc(w),    s = w sinc(w/2)^2 / 2
-    f = sinc(w/2)^2 / 2,          g = w S3(w),                   ff = 2 S3(2w),  fg = w sinc(w/2)^4 / 8
-    gg = 2 (S3(w) - S3(2w)),      cf = sinc(w)^2 / 2,            cg = w (2 S3(2w) - S3(w))
-    sf = 2 w S3(2w),              sg = w^2 sinc(w/2)^4 / 8
-    """
-    s3_w, s3_2w = fn.s3(w), fn.s3(2.0 * w)
-    sinc_w, sinc_half = fn.sinc(w), fn.sinc(0.5 * w)
+    """:class:`_ArcIntegrals` of turn ``w`` (a float, or an array with ``fn = _Arrays``)."""
+    s3_w, s3_2w, sinc_w, sinc_half, difference = fn.terms(w)
     half2 = sinc_half * sinc_half
-    difference = fn.s3_difference(w, s3_w, s3_2w)
     return _ArcIntegrals(
+        w=w,
+        s3_w=s3_w,
+        s3_2w=s3_2w,
+        sinc_w=sinc_w,
+        half2=half2,
         ss=2.0 * w * w * s3_2w,
         sc=0.5 * w * sinc_w * sinc_w,
-        c=sinc_w,
-        s=0.5 * w * half2,
         f=0.5 * half2,
         g=w * s3_w,
         ff=2.0 * s3_2w,
         fg=0.125 * w * half2 * half2,
         gg=2.0 * difference,
-        cf=0.5 * sinc_w * sinc_w,
-        cg=w * (2.0 * s3_2w - s3_w),
-        sf=2.0 * w * s3_2w,
-        sg=0.125 * w * w * half2 * half2,
     )
 
 
@@ -213,7 +248,7 @@ def arc_covariances(
     turning = ~(np.abs(omega) <= MAX_STEP_TURN_RAD)
     if turning.any():
         raise ValueError(
-            f"a step turning the body by {omega[turning][0]!r} rad is not a motion "
+            f"a step turning the body by {float(omega[turning][0])!r} rad is not a motion "
             f"(> {MAX_STEP_TURN_RAD} rad)"
         )
     entries = _arc_covariance_entries(
@@ -256,16 +291,18 @@ def _arc_covariance_entries(
     q_yy = q_yy + var_omega * bb
     q_xt = var_omega * a1
     q_yt = var_omega * b1
-    # int a_vx a_w^T = [[int c A, int c B, int c], [-int s A, -int s B, -int s], [0, 0, 0]]
-    ca = vx * i.cg - vy * i.cf
-    cb = vx * i.cf + vy * i.cg
-    sa = vx * i.sg - vy * i.sf
-    sb = vx * i.sf + vy * i.sg
-    q_xx = q_xx + 2.0 * cov_vx_omega * ca
-    q_xy = q_xy + cov_vx_omega * (cb - sa)
-    q_yy = q_yy - 2.0 * cov_vx_omega * sb
-    q_xt = q_xt + cov_vx_omega * i.c
-    q_yt = q_yt - cov_vx_omega * i.s
+    if np.ndim(cov_vx_omega) or cov_vx_omega != 0.0:
+        # int a_vx a_w^T = [[int c A, int c B, int c], [-int s A, -int s B, -int s], [0, 0, 0]]
+        i_c, i_s, cf, cg, sf, sg = i.cross()
+        ca = vx * cg - vy * cf
+        cb = vx * cf + vy * cg
+        sa = vx * sg - vy * sf
+        sb = vx * sf + vy * sg
+        q_xx = q_xx + 2.0 * cov_vx_omega * ca
+        q_xy = q_xy + cov_vx_omega * (cb - sa)
+        q_yy = q_yy - 2.0 * cov_vx_omega * sb
+        q_xt = q_xt + cov_vx_omega * i_c
+        q_yt = q_yt - cov_vx_omega * i_s
     # Q = Rot(theta_1) Q_end Rot(theta_1)^T
     heading = theta_rad + omega
     c, s = fn.cos(heading), fn.sin(heading)

@@ -105,7 +105,7 @@ map never grows past ``max_landmarks``: what matters is the memory and time of `
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from enum import IntEnum
 from functools import partial
@@ -117,7 +117,7 @@ from numpy.typing import ArrayLike, NDArray
 from .association import chi2_gate, joint_compatibility, mahalanobis_2d, nearest_neighbour
 from .geometry import Transform2D
 from .landmark_tracks import LandmarkTracks
-from .motion_models import MotionModel
+from .motion_models import BatchMotionModel, MotionModel
 from .range_bearing import landmarks_from_observations, predict_observations, residual
 from .slam_map import LandmarkMap
 from .slam_state import ROBOT_DIM, SlamState
@@ -302,6 +302,32 @@ class EkfSlam:
         # P_qq' = G P_qq G^T + Q,  P_qm' = G P_qm
         self._state.predict(q_next, self._propagation_jacobian(G), Q)
         self._pose_prior = q_next.copy()
+
+    def predict_along(self, inputs: Sequence[tuple]) -> NDArray[np.float64]:
+        """:meth:`predict` for each of the consecutive ``inputs`` as one composite prediction; returns the
+        pose mean after each input (n, 3).
+
+        The composite of steps ``(q_k, G_k, Q_k)`` is ``(q_n, G_n ... G_1, Q)`` with ``Q = sum_k (G_n ...
+        G_(k+1)) Q_k (G_n ... G_(k+1))^T``: the n predictions, to rounding (one input: exactly
+        :meth:`predict`). A :class:`~turtlelib.motion_models.BatchMotionModel` gives it in vectorised O(n)
+        work, any other model one ``step`` per input. With FEJ / OC the composite's propagation Jacobian
+        gets the correction of one step, as after step 1 the mean is its own prior (exact for the arc
+        Jacobians ``[[1, 0, -dy], [0, 1, dx], [0, 0, 1]]``, which compose by adding their displacements).
+        ValueError (filter unchanged) as :meth:`predict` gives it for any of the inputs.
+        """
+        if len(inputs) == 0:
+            return np.zeros((0, ROBOT_DIM))
+        if isinstance(self._motion, BatchMotionModel):
+            poses, G, Q = self._motion.steps(self.pose, inputs)
+        else:
+            poses, G, Q = _composed_steps(self._motion, self.pose, inputs)
+        if not np.isfinite(poses).all():
+            raise ValueError("the motion steps give a non-finite pose (an implausible input)")
+        q_next, G, Q = _finite_step((poses[-1].copy(), G, Q))
+        # P_qq' = G P_qq G^T + Q,  P_qm' = G P_qm
+        self._state.predict(q_next, self._propagation_jacobian(G), Q)
+        self._pose_prior = q_next.copy()
+        return poses
 
     def propagated_pose(self, u: tuple) -> tuple[Transform2D, NDArray[np.float64]]:
         """The pose and its covariance (3, 3) :meth:`predict` would give for input ``u``, without changing the
@@ -820,6 +846,22 @@ def _finite_step(
     if not (np.isfinite(q_next).all() and np.isfinite(G).all() and np.isfinite(Q).all()):
         raise ValueError("the motion step gives a non-finite pose, Jacobian or noise (an implausible input)")
     return step
+
+
+def _composed_steps(
+    motion: MotionModel, T_map_body: Transform2D, inputs: Sequence[tuple]
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """``(poses (n, 3), G, Q)`` of consecutive ``inputs``, one ``motion.step`` each (see
+    :meth:`EkfSlam.predict_along`)."""
+    poses = np.empty((len(inputs), ROBOT_DIM))
+    G, Q = np.eye(ROBOT_DIM), np.zeros((ROBOT_DIM, ROBOT_DIM))
+    for k, u in enumerate(inputs):
+        q_k, G_k, Q_k = _finite_step(motion.step(T_map_body, u))
+        # G <- G_k G,  Q <- G_k Q G_k^T + Q_k
+        G, Q = G_k @ G, G_k @ Q @ G_k.T + Q_k
+        poses[k] = q_k
+        T_map_body = Transform2D(*q_k)
+    return poses, G, Q
 
 
 def _gate_or_inf(prob: float) -> float:

@@ -264,3 +264,23 @@ def integrate_twist(twist: Twist2D) -> Transform2D:
         b = 2.0 * math.sin(0.5 * omega) ** 2 / omega
     # p = V(omega) v
     return Transform2D(a * twist.vx - b * twist.vy, b * twist.vx + a * twist.vy, omega)
+
+
+def integrate_twists(
+    omega: NDArray[np.float64], vx: NDArray[np.float64], vy: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """The translations ``p_k = V(omega_k) v_k`` (n, 2) of ``exp([V_k])`` for twists given by arrays
+    ``omega``, ``vx``, ``vy`` (n,): :func:`integrate_twist` elementwise (its heading is ``omega_k``), with the
+    same closed forms and series."""
+    omega2 = omega * omega
+    small = np.abs(omega) < SMALL_ANGLE_RAD
+    # the closed forms only where they do not cancel (1 stands in elsewhere)
+    closed = np.where(small, 1.0, omega)
+    a = np.where(small, 1.0 - omega2 * (1.0 / 6.0 - omega2 / 120.0), np.sin(closed) / closed)
+    b = np.where(
+        small,
+        omega * (0.5 - omega2 * (1.0 / 24.0 - omega2 / 720.0)),
+        2.0 * np.sin(0.5 * closed) ** 2 / closed,
+    )
+    # p = V(omega) v
+    return np.column_stack([a * vx - b * vy, b * vx + a * vy])

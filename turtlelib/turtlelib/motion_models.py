@@ -37,14 +37,15 @@ raise ValueError.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import NDArray
 
-from .arc_noise import arc_covariance
-from .geometry import Transform2D, Twist2D, integrate_twist
+from .arc_noise import Floats, arc_covariance, arc_covariances
+from .geometry import Transform2D, Twist2D, integrate_twist, integrate_twists, normalize_angles
 from .kinematics import DiffDrive
 from .timebase import NS_PER_S
 from .validation import finite_real, non_negative, positive, store
@@ -54,12 +55,28 @@ from .wheel_noise import wheel_slip_covariance
 MAX_STEERING_RAD = 0.5 * math.pi - 1e-3
 
 Step = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
+# (poses (n, 3), G (3, 3), Q (3, 3)) of a batch of steps (BatchMotionModel)
+Steps = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
 
 
 class MotionModel(Protocol):
     """``step(T_map_body, u) -> (q' (3,), G (3, 3), Q (3, 3))`` (module docstring)."""
 
     def step(self, T_map_body: Transform2D, u: tuple) -> Step: ...
+
+
+@runtime_checkable
+class BatchMotionModel(MotionModel, Protocol):
+    """A motion model that also takes consecutive inputs at once: ``steps(T_map_body, (u_1, ..., u_n)) ->
+    (poses (n, 3), G (3, 3), Q (3, 3))`` with ``poses[k-1] = q_k`` the pose after input ``k`` and ``G``,
+    ``Q`` those of the composite step ``q_0 -> q_n``, so that one prediction with ``(q_n, G, Q)`` is the n
+    predictions of :meth:`MotionModel.step` (to rounding)::
+
+        G = G_n ... G_1,   Q = sum_k (G_n ... G_(k+1)) Q_k (G_n ... G_(k+1))^T
+
+    ValueError, as ``step`` gives it, if any input is refused."""
+
+    def steps(self, T_map_body: Transform2D, inputs: Sequence[tuple]) -> Steps: ...
 
 
 def _arc_step(T_map_body: Transform2D, T_next: Transform2D, Q: NDArray[np.float64]) -> Step:
@@ -170,8 +187,20 @@ class TwistNoise:
     def covariance(self, T_map_body: Transform2D, xi: Twist2D, dt_s: float) -> NDArray[np.float64]:
         """``Q`` (3, 3) of a step of twist ``xi`` over ``dt_s`` from ``T_map_body``, integrated along the
         arc."""
-        travel_m = math.hypot(xi.vx, xi.vy)
-        turn_rad = abs(xi.omega)
+        var_vx, var_omega, var_vy = self._variances(math.hypot(xi.vx, xi.vy), abs(xi.omega), dt_s)
+        return arc_covariance(T_map_body.theta, xi.omega, xi.vx, xi.vy, var_vx, 0.0, var_omega, var_vy)
+
+    def covariances(
+        self, theta_rad: NDArray[np.float64], xi: NDArray[np.float64], dt_s: NDArray[np.float64]
+    ) -> NDArray[np.float64]:
+        """:meth:`covariance` of a batch of steps: ``Q_k`` (n, 3, 3) of the twists ``xi`` (n, 3) ``[omega,
+        vx, vy]`` over ``dt_s`` (n,) from the headings ``theta_rad`` (n,)."""
+        omega, vx, vy = xi[:, 0], xi[:, 1], xi[:, 2]
+        var_vx, var_omega, var_vy = self._variances(np.hypot(vx, vy), np.abs(omega), dt_s)
+        return arc_covariances(theta_rad, omega, vx, vy, var_vx, 0.0, var_omega, var_vy)
+
+    def _variances(self, travel_m: Floats, turn_rad: Floats, dt_s: Floats) -> tuple[Floats, Floats, Floats]:
+        """``(var(dvx), var(domega), var(dvy))`` of the class docstring (floats, or elementwise)."""
         var_vx = self.forward_m2_per_m * travel_m + self.forward_m2_per_s * dt_s
         var_vy = self.lateral_m2_per_m * travel_m
         var_omega = (
@@ -179,7 +208,7 @@ class TwistNoise:
             + self.heading_rad2_per_rad * turn_rad
             + self.heading_rad2_per_s * dt_s
         )
-        return arc_covariance(T_map_body.theta, xi.omega, xi.vx, xi.vy, var_vx, 0.0, var_omega, var_vy)
+        return var_vx, var_omega, var_vy
 
 
 def _twist_step(
@@ -187,6 +216,58 @@ def _twist_step(
 ) -> Step:
     # q' = q (+) T_delta,  T_delta = exp([xi])
     return _arc_step(T_map_body, T_map_body @ T_delta, noise.covariance(T_map_body, xi, dt_ns / NS_PER_S))
+
+
+def _twist_steps(
+    T_map_body: Transform2D, xi: NDArray[np.float64], dt_ns: NDArray[np.int64], noise: TwistNoise
+) -> Steps:
+    """n consecutive constant-twist steps ``xi`` (n, 3) ``[omega, vx, vy]`` lasting ``dt_ns`` (n,) from
+    ``T_map_body`` as one composite step (module docstring)::
+
+        q_k = q_(k-1) (+) exp([xi_k])
+        G = G_n ... G_1 = [[1, 0, -(y_n - y_0)], [0, 1, x_n - x_0], [0, 0, 1]]
+        Q = sum_k Phi_k Q_k Phi_k^T
+        Phi_k = G_n ... G_(k+1) = [[1, 0, -(y_n - y_k)], [0, 1, x_n - x_k], [0, 0, 1]]
+
+    (``Q_k`` the arc noise of step k from heading ``theta_(k-1)``): what n single steps give, in O(n)
+    vectorised work."""
+    omega = xi[:, 0]
+    # theta_(k-1), the heading each step starts from (unwrapped)
+    theta_before = T_map_body.theta + np.concatenate([[0.0], np.cumsum(omega[:-1])])
+    # p_k = p_(k-1) + R(theta_(k-1)) V(omega_k) v_k
+    p_body = integrate_twists(omega, xi[:, 1], xi[:, 2])
+    c, s = np.cos(theta_before), np.sin(theta_before)
+    x = T_map_body.x + np.cumsum(c * p_body[:, 0] - s * p_body[:, 1])
+    y = T_map_body.y + np.cumsum(s * p_body[:, 0] + c * p_body[:, 1])
+    poses = np.column_stack([x, y, normalize_angles(theta_before + omega)])
+    Q_k = noise.covariances(theta_before, xi, dt_ns / NS_PER_S)
+    Phi = np.broadcast_to(np.eye(3), Q_k.shape).copy()
+    Phi[:, 0, 2], Phi[:, 1, 2] = -(y[-1] - y), x[-1] - x
+    Q = np.einsum("kij,kjl,kml->im", Phi, Q_k, Phi)
+    G = np.eye(3)
+    G[0, 2], G[1, 2] = -(y[-1] - T_map_body.y), x[-1] - T_map_body.x
+    return poses, G, 0.5 * (Q + Q.T)
+
+
+def _unpack_batch(inputs: Sequence[tuple], names: tuple[str, ...]) -> tuple[NDArray, ...]:
+    """Inputs ``(u_1, ..., u_n)``, each as :func:`_unpack` takes it, as one array (n,) per name: float64
+    finite, ``dt_ns`` (if named) int64 >= 0 of integers; ValueError otherwise."""
+    if any(len(u) != len(names) for u in inputs):
+        raise ValueError(f"every input must be ({', '.join(names)})")
+    columns = []
+    for name, column in zip(names, zip(*inputs, strict=True), strict=True):
+        if name == "dt_ns":
+            if not all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) for v in column):
+                raise ValueError("dt_ns must be an integer >= 0")
+            values = np.array(column, dtype=np.int64)
+            if (values < 0).any():
+                raise ValueError(f"dt_ns must be an integer >= 0, got {values.min()}")
+        else:
+            values = np.array(column, dtype=np.float64)
+            if not np.isfinite(values).all():
+                raise ValueError(f"{name} must be finite")
+        columns.append(values)
+    return tuple(columns)
 
 
 @dataclass(frozen=True)
@@ -216,6 +297,13 @@ class UnicycleMotion:
         xi = Twist2D(omega_rad_s * dt_s, v_mps * dt_s, 0.0)
         return _twist_step(T_map_body, integrate_twist(xi), xi, dt_ns, self.noise)
 
+    def steps(self, T_map_body: Transform2D, inputs: Sequence[tuple]) -> Steps:
+        """:meth:`step` of consecutive inputs as one composite step (:class:`BatchMotionModel`)."""
+        v_mps, omega_rad_s, dt_ns = _unpack_batch(inputs, ("v_mps", "omega_rad_s", "dt_ns"))
+        dt_s = dt_ns / NS_PER_S
+        xi = np.column_stack([omega_rad_s * dt_s, v_mps * dt_s, np.zeros(len(dt_s))])
+        return _twist_steps(T_map_body, xi, dt_ns, self.noise)
+
 
 @dataclass(frozen=True)
 class AckermannMotion:
@@ -241,15 +329,36 @@ class AckermannMotion:
 
     def step(self, T_map_body: Transform2D, u: tuple) -> Step:
         speed_mps, steering_rad, dt_ns = _unpack(u, ("speed_mps", "steering_rad", "dt_ns"))
-        if not abs(steering_rad) < MAX_STEERING_RAD:
-            raise ValueError(f"steering angle {steering_rad!r} rad is beyond +-{MAX_STEERING_RAD:.4f} rad")
-        curvature = math.tan(steering_rad) / self.wheelbase_m
+        curvature, travel_m = self._arc(np.array([speed_mps]), np.array([steering_rad]), np.array([dt_ns]))
+        # xi = [v_c tan(alpha) / L dt, v_c dt, 0]
+        xi = Twist2D(float(curvature[0] * travel_m[0]), float(travel_m[0]), 0.0)
+        return _twist_step(T_map_body, integrate_twist(xi), xi, dt_ns, self.noise)
+
+    def steps(self, T_map_body: Transform2D, inputs: Sequence[tuple]) -> Steps:
+        """:meth:`step` of consecutive inputs as one composite step (:class:`BatchMotionModel`)."""
+        speed_mps, steering_rad, dt_ns = _unpack_batch(inputs, ("speed_mps", "steering_rad", "dt_ns"))
+        curvature, travel_m = self._arc(speed_mps, steering_rad, dt_ns)
+        xi = np.column_stack([curvature * travel_m, travel_m, np.zeros(len(travel_m))])
+        return _twist_steps(T_map_body, xi, dt_ns, self.noise)
+
+    def _arc(
+        self, speed_mps: NDArray[np.float64], steering_rad: NDArray[np.float64], dt_ns: NDArray[np.int64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The curvature ``tan(alpha) / L`` (1/m) and the axle centre's travel ``v_c dt`` (m) of each step;
+        ValueError for a steering the class docstring refuses."""
+        beyond = ~(np.abs(steering_rad) < MAX_STEERING_RAD)
+        if beyond.any():
+            raise ValueError(
+                f"steering angle {float(steering_rad[beyond][0])!r} rad is beyond "
+                f"+-{MAX_STEERING_RAD:.4f} rad"
+            )
+        curvature = np.tan(steering_rad) / self.wheelbase_m
         # v_c = v_e / (1 - tan(alpha) y_e / L)
         scale = 1.0 - curvature * self.encoder_y_m
-        if not scale > 0.0:
-            raise ValueError(f"steering angle {steering_rad!r} rad turns the car about its encoder wheel")
-        dt_s = dt_ns / NS_PER_S
-        travel_m = speed_mps / scale * dt_s
-        # xi = [v_c tan(alpha) / L dt, v_c dt, 0]
-        xi = Twist2D(curvature * travel_m, travel_m, 0.0)
-        return _twist_step(T_map_body, integrate_twist(xi), xi, dt_ns, self.noise)
+        about_encoder = ~(scale > 0.0)
+        if about_encoder.any():
+            raise ValueError(
+                f"steering angle {float(steering_rad[about_encoder][0])!r} rad turns the car about its "
+                "encoder wheel"
+            )
+        return curvature, speed_mps / scale * (dt_ns / NS_PER_S)

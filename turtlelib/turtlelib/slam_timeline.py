@@ -78,10 +78,18 @@ class SlamTimeline:
     (module docstring); ``signal`` must give the inputs of the filter's motion model.
 
     ``add_motion`` and ``add_observations`` return the observations applied by the call as ``(t_o_ns,
-    Association)`` pairs, oldest first.
+    Association)`` pairs, oldest first. With ``keep_track`` the timeline also keeps the filter's pose
+    after every prediction, for :meth:`take_track` (offline runs: it grows until taken).
     """
 
-    def __init__(self, slam: EkfSlam, signal: MotionSignal, config: TimelineConfig | None = None) -> None:
+    def __init__(
+        self,
+        slam: EkfSlam,
+        signal: MotionSignal,
+        config: TimelineConfig | None = None,
+        *,
+        keep_track: bool = False,
+    ) -> None:
         self.slam = slam
         self.signal = signal
         self.config = TimelineConfig() if config is None else config
@@ -93,6 +101,7 @@ class SlamTimeline:
         self._t_f: int | None = None
         self._s_f: Sample = ()
         self._pending: list[_Observation] = []
+        self._track: list[tuple[NDArray[np.int64], NDArray[np.float64]]] | None = [] if keep_track else None
 
     @property
     def filter_time_ns(self) -> int | None:
@@ -127,7 +136,8 @@ class SlamTimeline:
         applied = []
         while self._pending and self._pending[0].t_ns <= t_ns:
             applied.append(self._apply(self._pending.pop(0)))
-        self._advance_to(max(self._t_f, t_ns - self._delay_ns))
+        if t_ns - self._delay_ns > self._t_f:
+            self._advance_to(t_ns - self._delay_ns)
         return applied
 
     def add_observations(
@@ -188,6 +198,16 @@ class SlamTimeline:
         self._t_f, self._s_f = t_ns, sample
         self._pending.clear()
 
+    def take_track(self) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+        """The filter's pose mean after every prediction since the last call, as stamps (m,) (ns) and poses
+        (m, 3) ``T_map_body``, oldest first (ValueError unless made with ``keep_track``)."""
+        if self._track is None:
+            raise ValueError("this timeline keeps no track (keep_track=False)")
+        stamps = np.concatenate([np.zeros(0, dtype=np.int64), *(t for t, _ in self._track)])
+        poses = np.concatenate([np.zeros((0, 3)), *(p for _, p in self._track)])
+        self._track.clear()
+        return stamps, poses
+
     def latest_pose(self) -> tuple[Transform2D, NDArray[np.float64]]:
         """``T_map_body`` at ``t_w`` and its covariance (3, 3): the filter moved on by the motion since
         ``t_f``, one step per sample interval as :meth:`_advance_to` would (the filter is unchanged).
@@ -222,11 +242,31 @@ class SlamTimeline:
         """Predict the filter from ``t_f`` to ``t_ns`` (``t_f <= t_ns <= t_w``) and drop older samples.
 
         One prediction per sample interval: the motion (the arc's twist) changes only at the samples, and
-        one prediction over two intervals would follow a different arc than the robot did.
+        one prediction over two intervals would follow a different arc than the robot did. They are
+        handed to the filter together (:meth:`EkfSlam.predict_along`); if it refuses them, one by one, so
+        that the filter stops right before the refused input.
         """
-        for k in range(bisect.bisect_right(self._times, self._t_f), bisect.bisect_right(self._times, t_ns)):
-            self._predict_to(self._times[k], self._samples[k])
-        self._predict_to(t_ns, self._sample_at(t_ns))
+        first = bisect.bisect_right(self._times, self._t_f)
+        last = bisect.bisect_right(self._times, t_ns)
+        ends = [(self._times[k], self._samples[k]) for k in range(first, last)]
+        ends.append((t_ns, self._sample_at(t_ns)))
+        stamps, inputs = [], []
+        t_from, s_from = self._t_f, self._s_f
+        for t_to, s_to in ends:
+            u = self.signal.input(s_from, s_to, t_to - t_from)
+            if u is not None:
+                stamps.append(t_to)
+                inputs.append(u)
+            t_from, s_from = t_to, s_to
+        try:
+            poses = self.slam.predict_along(inputs)
+        except ValueError:
+            for t_to, s_to in ends:
+                self._predict_to(t_to, s_to)
+            raise
+        self._t_f, self._s_f = ends[-1]
+        if self._track is not None and len(stamps):
+            self._track.append((np.array(stamps, dtype=np.int64), poses))
         # keep the last sample at or before t_f: interpolation from t_f needs it
         first_kept = bisect.bisect_right(self._times, t_ns) - 1
         if first_kept > 0:

@@ -28,6 +28,7 @@ from turtlelib import (
     TimelineConfig,
     Transform2D,
 )
+from turtlelib.timebase import NS_PER_S
 
 
 @dataclass(frozen=True)
@@ -89,7 +90,8 @@ class Experiment:
 @dataclass(frozen=True)
 class ExperimentResult:
     """The estimates after every applied scan: ``t_ns`` (S,), ``poses`` (S, 3) ``T_map_body``,
-    ``covariances`` (S, 3, 3); the filter's pose at every motion sample, ``track`` (M, 3); the final map
+    ``covariances`` (S, 3, 3); the filter's pose at the start and after every prediction up to the last scan
+    (at every motion sample and scan stamp), ``track`` (T, 3) at ``track_t_ns`` (T,); the final map
     (``landmark_ids`` (n,), ``landmarks`` (n, 2), ``landmark_covariances`` (n, 2, 2)); per observation
     status counts; CPU seconds of the whole run and the wall time (ms) of every timeline call that applied
     a scan (its prediction up to the stamp and its update)."""
@@ -97,6 +99,7 @@ class ExperimentResult:
     t_ns: NDArray[np.int64]
     poses: NDArray[np.float64]
     covariances: NDArray[np.float64]
+    track_t_ns: NDArray[np.int64]
     track: NDArray[np.float64]
     landmark_ids: NDArray[np.int64]
     landmarks: NDArray[np.float64]
@@ -110,17 +113,19 @@ def run_experiment(experiment: Experiment, progress: Callable[[int], None] | Non
     """Run the filter over the whole recording; ``progress(n)`` is called with the number of motion
     samples done since its last call."""
     slam = EkfSlam(experiment.config, experiment.motion, experiment.T_map_body0)
-    # offline, every observation is fed right after the motion samples of its time: none is late
-    timeline = SlamTimeline(slam, experiment.signal, TimelineConfig(max_observation_delay=0.0))
-    scans = experiment.scans
     t_motion = experiment.motion_t_ns
     samples = experiment.motion_samples
+    # offline every observation is fed right after the motion samples of its time, so none is ever late
+    # and the filter may hold all motion until the next scan: the samples between two scans are then
+    # predicted as one batch (SlamTimeline, EkfSlam.predict_along)
+    hold = TimelineConfig(max_observation_delay=(int(t_motion[-1]) - int(t_motion[0])) / NS_PER_S)
+    timeline = SlamTimeline(slam, experiment.signal, hold, keep_track=True)
+    scans = experiment.scans
     # scans before the first motion sample cannot be placed in time; the others go after the motion
     # samples of their stamp
     first_scan = int(np.searchsorted(scans.t_ns, t_motion[0], side="left"))
     scan_after = np.searchsorted(t_motion, scans.t_ns, side="right")
     t_est, poses, covariances, update_ms = [], [], [], []
-    track = np.empty((len(t_motion), 3))
     counts = {"matched": 0, "new": 0, "rejected": 0}
 
     def keep(applied: list, elapsed_ms: float) -> None:
@@ -142,7 +147,6 @@ def run_experiment(experiment: Experiment, progress: Callable[[int], None] | Non
         start = time.perf_counter()
         applied = timeline.add_motion(int(t_motion[k]), samples[k])
         keep(applied, 1e3 * (time.perf_counter() - start))
-        track[k] = slam.pose.as_array()
         # the scans whose stamp lies before the next motion sample
         while i_scan < len(scans) and scan_after[i_scan] == k + 1:
             z, ids = scans.scan(i_scan)
@@ -155,11 +159,13 @@ def run_experiment(experiment: Experiment, progress: Callable[[int], None] | Non
     cpu_seconds = time.process_time() - cpu_start
     if progress is not None:
         progress(len(t_motion) % chunk)
+    track_t_ns, track = timeline.take_track()
     return ExperimentResult(
         t_ns=np.array(t_est, dtype=np.int64),
         poses=np.array(poses).reshape(-1, 3),
         covariances=np.array(covariances).reshape(-1, 3, 3),
-        track=track,
+        track_t_ns=np.r_[t_motion[:1], track_t_ns],
+        track=np.vstack([experiment.T_map_body0.as_array(), track]),
         landmark_ids=slam.landmark_ids,
         landmarks=slam.landmarks,
         landmark_covariances=slam.landmark_covariances,

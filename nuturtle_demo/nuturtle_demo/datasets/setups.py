@@ -212,9 +212,10 @@ def gps_start(run: Experiment, recording: VictoriaRecording) -> tuple[Transform2
         motion_samples=run.motion_samples[:k_end],
         scans=run.scans.until(end_ns),
     )
-    track, _ = laser_points(run_experiment(window).track, np.zeros((k_end, 3, 3)))
+    result = run_experiment(window)
+    track, _ = laser_points(result.track, np.zeros((len(result.track), 3, 3)))
     at_fixes = np.column_stack(
-        [np.interp(recording.gps_t_ns[fixes], t_ns[:k_end], track[:, i]) for i in range(2)]
+        [np.interp(recording.gps_t_ns[fixes], result.track_t_ns, track[:, i]) for i in range(2)]
     )
     T_map_odo = align_se2(at_fixes, recording.gps_xy[fixes])
     residual = np.linalg.norm(T_map_odo @ at_fixes - recording.gps_xy[fixes], axis=1)

@@ -61,12 +61,13 @@ def test_the_start_is_the_rigid_motion_from_the_filter_track_to_the_gps(recordin
         motion_samples=run.motion_samples[:k_end],
         scans=run.scans.until(end_ns),
     )
-    track, _ = laser_points(run_experiment(window).track, np.zeros((k_end, 3, 3)))
+    result = run_experiment(window)
+    track, _ = laser_points(result.track, np.zeros((len(result.track), 3, 3)))
     T_true = Transform2D(-70.0, 40.0, 2.5)
-    # fixes only where the track is defined (between the first and last odometry samples)
-    fixes = (recording.gps_t_ns >= run.motion_t_ns[0]) & (recording.gps_t_ns <= run.motion_t_ns[k_end - 1])
+    # fixes only where the track is defined (from the start to the last scan of the window)
+    fixes = (recording.gps_t_ns >= result.track_t_ns[0]) & (recording.gps_t_ns <= result.track_t_ns[-1])
     at_fixes = np.column_stack(
-        [np.interp(recording.gps_t_ns[fixes], run.motion_t_ns[:k_end], track[:, i]) for i in range(2)]
+        [np.interp(recording.gps_t_ns[fixes], result.track_t_ns, track[:, i]) for i in range(2)]
     )
     synthetic = dataclasses.replace(recording, gps_t_ns=recording.gps_t_ns[fixes], gps_xy=T_true @ at_fixes)
     T_start, xy_std, theta_std = gps_start(from_identity, synthetic)
