@@ -81,6 +81,15 @@ def test_integrate_twists_is_integrate_twist_of_each(twists):
         np.testing.assert_allclose(p[k], [T.x, T.y], rtol=0.0, atol=1e-15 * max(1.0, abs(x), abs(y)))
 
 
+def test_integrate_twists_of_short_turns_only():
+    # every |omega| below the series switch: the batch skips the closed forms
+    omega = np.array([0.0, 1e-9, -3e-3, 9.9e-3])
+    p = integrate_twists(omega, np.full(4, 0.7), np.full(4, -0.2))
+    for k, w in enumerate(omega):
+        T = integrate_twist(Twist2D(w, 0.7, -0.2))
+        np.testing.assert_allclose(p[k], [T.x, T.y], rtol=0.0, atol=1e-16)
+
+
 def test_the_twist_models_are_batch_models_and_the_others_step_only():
     assert isinstance(TRUCK, BatchMotionModel) and isinstance(UNICYCLE, BatchMotionModel)
     assert not isinstance(OdometryMotion(NOISE), BatchMotionModel)

@@ -274,13 +274,12 @@ def integrate_twists(
     same closed forms and series."""
     omega2 = omega * omega
     small = np.abs(omega) < SMALL_ANGLE_RAD
-    # the closed forms only where they do not cancel (1 stands in elsewhere)
-    closed = np.where(small, 1.0, omega)
-    a = np.where(small, 1.0 - omega2 * (1.0 / 6.0 - omega2 / 120.0), np.sin(closed) / closed)
-    b = np.where(
-        small,
-        omega * (0.5 - omega2 * (1.0 / 24.0 - omega2 / 720.0)),
-        2.0 * np.sin(0.5 * closed) ** 2 / closed,
-    )
+    a = 1.0 - omega2 * (1.0 / 6.0 - omega2 / 120.0)
+    b = omega * (0.5 - omega2 * (1.0 / 24.0 - omega2 / 720.0))
+    if not small.all():
+        # the closed forms where they do not cancel (1 stands in elsewhere)
+        closed = np.where(small, 1.0, omega)
+        a = np.where(small, a, np.sin(closed) / closed)
+        b = np.where(small, b, 2.0 * np.sin(0.5 * closed) ** 2 / closed)
     # p = V(omega) v
     return np.column_stack([a * vx - b * vy, b * vx + a * vy])
