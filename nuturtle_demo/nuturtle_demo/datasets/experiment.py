@@ -5,7 +5,9 @@ samples, stamped scans of range-bearing observations (with ids for known associa
 the filter's configuration. :func:`run_experiment` feeds the samples and scans to a
 :class:`turtlelib.SlamTimeline` in time order (a scan after the motion samples of its own time, so each
 is applied at its stamp with the motion held or interpolated up to it) and keeps the pose estimate after
-every scan, the final map and the timing.
+every scan, the filter's track, the final map and the timing. Offline nothing arrives late, so the
+timeline holds the motion until each scan and predicts the samples between two scans as one batch
+(:meth:`turtlelib.EkfSlam.predict_along`): the node's sample-by-sample result, to rounding.
 
 Times are integer ns; the estimates are kept at the scan stamps.
 """
