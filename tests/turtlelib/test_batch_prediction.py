@@ -135,6 +135,8 @@ def test_short_steps_take_the_series_path_and_agree():
     ],
 )
 def test_a_batch_refuses_what_a_step_refuses(model, bad):
+    poses, G, Q = model.steps(Transform2D(1.0, 2.0, 0.5), [])
+    assert poses.shape == (0, 3) and np.array_equal(G, np.eye(3)) and not Q.any()
     with pytest.raises(ValueError):
         model.step(Transform2D(), bad)
     with pytest.raises(ValueError):
@@ -240,3 +242,24 @@ def test_the_timeline_batches_its_intervals_and_keeps_the_track():
     assert held.take_track()[0].shape == (0,)
     with pytest.raises(ValueError, match="keep_track"):
         eager.take_track()
+
+
+def test_a_refused_sample_stops_the_held_filter_right_before_it():
+    # held inputs: the sample at t[5] (a steering beyond 90 degrees) is the input of the interval after it
+    t = [k * 25 * MS for k in range(10)]
+    samples = [(2.0, 0.1)] * 10
+    samples[5] = (2.0, 1.6)
+    held = SlamTimeline(
+        mapped(TRUCK, "oc"), HeldInputs(), TimelineConfig(max_observation_delay=100.0), keep_track=True
+    )
+    reference = mapped(TRUCK, "oc")
+    for k in range(9):
+        held.add_motion(t[k], samples[k])
+    for k in range(5):
+        reference.predict((*samples[k], 25 * MS))
+    with pytest.raises(ValueError, match="steering"):
+        held.add_observations(t[8], np.zeros((0, 2)), ids=np.zeros(0, dtype=int))
+    assert held.filter_time_ns == t[5]
+    np.testing.assert_allclose(held.slam.state, reference.state, rtol=0.0, atol=1e-12)
+    stamps, _ = held.take_track()
+    assert stamps.tolist() == t[1:6]

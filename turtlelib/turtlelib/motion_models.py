@@ -230,7 +230,9 @@ def _twist_steps(
         Phi_k = G_n ... G_(k+1) = [[1, 0, -(y_n - y_k)], [0, 1, x_n - x_k], [0, 0, 1]]
 
     (``Q_k`` the arc noise of step k from heading ``theta_(k-1)``): what n single steps give, in O(n)
-    vectorised work."""
+    vectorised work (no steps: no motion)."""
+    if len(xi) == 0:
+        return np.zeros((0, 3)), np.eye(3), np.zeros((3, 3))
     omega = xi[:, 0]
     # theta_(k-1), the heading each step starts from (unwrapped)
     theta_before = T_map_body.theta + np.concatenate([[0.0], np.cumsum(omega[:-1])])
@@ -255,7 +257,8 @@ def _unpack_batch(inputs: Sequence[tuple], names: tuple[str, ...]) -> tuple[NDAr
     if any(len(u) != len(names) for u in inputs):
         raise ValueError(f"every input must be ({', '.join(names)})")
     columns = []
-    for name, column in zip(names, zip(*inputs, strict=True), strict=True):
+    by_name = list(zip(*inputs, strict=True)) if len(inputs) else [()] * len(names)
+    for name, column in zip(names, by_name, strict=True):
         if name == "dt_ns":
             if not all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) for v in column):
                 raise ValueError("dt_ns must be an integer >= 0")

@@ -250,27 +250,36 @@ class SlamTimeline:
         last = bisect.bisect_right(self._times, t_ns)
         ends = [(self._times[k], self._samples[k]) for k in range(first, last)]
         ends.append((t_ns, self._sample_at(t_ns)))
-        stamps, inputs = [], []
+        stamps, inputs, moves = [], [], []
         t_from, s_from = self._t_f, self._s_f
         for t_to, s_to in ends:
             u = self.signal.input(s_from, s_to, t_to - t_from)
+            moves.append(u is not None)
             if u is not None:
                 stamps.append(t_to)
                 inputs.append(u)
             t_from, s_from = t_to, s_to
         try:
-            poses = self.slam.predict_along(inputs)
+            self._keep_track(stamps, self.slam.predict_along(inputs))
         except ValueError:
-            for t_to, s_to in ends:
-                self._predict_to(t_to, s_to)
-            raise
+            # one by one: the refused input raises again, with the filter right before it
+            poses = []
+            try:
+                for (t_to, s_to), moved in zip(ends, moves, strict=True):
+                    self._predict_to(t_to, s_to)
+                    if moved:
+                        poses.append(self.slam.pose.as_array())
+            finally:
+                self._keep_track(stamps[: len(poses)], np.array(poses).reshape(-1, 3))
         self._t_f, self._s_f = ends[-1]
-        if self._track is not None and len(stamps):
-            self._track.append((np.array(stamps, dtype=np.int64), poses))
         # keep the last sample at or before t_f: interpolation from t_f needs it
         first_kept = bisect.bisect_right(self._times, t_ns) - 1
         if first_kept > 0:
             del self._times[:first_kept], self._samples[:first_kept]
+
+    def _keep_track(self, stamps: list[int], poses: NDArray[np.float64]) -> None:
+        if self._track is not None and len(stamps):
+            self._track.append((np.array(stamps, dtype=np.int64), poses))
 
     def _predict_to(self, t_ns: int, sample: Sample) -> None:
         """One prediction with the input from ``(t_f, s_f)`` to ``(t_ns, sample)`` (none if no motion)."""
