@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+from test_motion_models import NOISE, TRUCK
 
 from turtlelib import (
-    AckermannMotion,
     DiffDrive,
     DiffDriveMotion,
     EkfSlam,
@@ -25,7 +25,6 @@ from turtlelib import (
     TimelineConfig,
     Transform2D,
     Twist2D,
-    TwistNoise,
     UnicycleMotion,
     integrate_twist,
 )
@@ -33,15 +32,6 @@ from turtlelib.geometry import integrate_twists
 from turtlelib.motion_models import BatchMotionModel
 from turtlelib.range_bearing import predict_observations
 
-NOISE = TwistNoise(
-    forward_m2_per_m=0.004,
-    forward_m2_per_s=0.0005,
-    lateral_m2_per_m=0.001,
-    heading_rad2_per_m=0.003,
-    heading_rad2_per_rad=0.002,
-    heading_rad2_per_s=0.0004,
-)
-TRUCK = AckermannMotion(wheelbase_m=2.83, encoder_y_m=0.76, noise=NOISE)
 UNICYCLE = UnicycleMotion(NOISE)
 MS = 1_000_000
 LANDMARKS = np.array([[3.0, 1.0], [-2.0, 4.0], [5.0, -3.0]])
