@@ -201,10 +201,6 @@ def gps_start(run: Experiment, recording: VictoriaRecording) -> tuple[Transform2
     than 3 fixes fall in the window."""
     t_ns = run.motion_t_ns
     end_ns = t_ns[0] + round(START_WINDOW_S * NS_PER_S)
-    inside = (recording.gps_t_ns >= t_ns[0]) & (recording.gps_t_ns <= end_ns)
-    fixes = inside & ~gps_outliers(recording.gps_t_ns, recording.gps_xy)
-    if fixes.sum() < 3:
-        raise ValueError(f"fewer than 3 GPS fixes in the first {START_WINDOW_S} s: cannot place the start")
     k_end = int(np.searchsorted(t_ns, end_ns, side="right"))
     window = dataclasses.replace(
         run,
@@ -214,6 +210,11 @@ def gps_start(run: Experiment, recording: VictoriaRecording) -> tuple[Transform2
     )
     result = run_experiment(window)
     track, _ = laser_points(result.track, np.zeros((len(result.track), 3, 3)))
+    # the fixes the track spans (it ends at the window's last scan)
+    inside = (recording.gps_t_ns >= result.track_t_ns[0]) & (recording.gps_t_ns <= result.track_t_ns[-1])
+    fixes = inside & ~gps_outliers(recording.gps_t_ns, recording.gps_xy)
+    if fixes.sum() < 3:
+        raise ValueError(f"fewer than 3 GPS fixes in the first {START_WINDOW_S} s: cannot place the start")
     at_fixes = np.column_stack(
         [np.interp(recording.gps_t_ns[fixes], result.track_t_ns, track[:, i]) for i in range(2)]
     )
