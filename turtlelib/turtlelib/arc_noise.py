@@ -118,29 +118,19 @@ class _Arrays:
     sin = staticmethod(np.sin)
 
     @staticmethod
-    def s3(x: NDArray[np.float64]) -> NDArray[np.float64]:
-        small = np.abs(x) < SERIES_BELOW
-        # the direct form only where it does not cancel (1 stands in elsewhere)
-        direct = np.where(small, 1.0, x)
-        series = (x[:, None] ** (2 * np.arange(len(_S3_SERIES)))) @ np.array(_S3_SERIES)
-        return np.where(small, series, (direct - np.sin(direct)) / direct**3)
-
-    @staticmethod
-    def sinc(x: NDArray[np.float64]) -> NDArray[np.float64]:
-        nonzero = np.where(x == 0.0, 1.0, x)
-        return np.where(x == 0.0, 1.0, np.sin(nonzero) / nonzero)
-
-    @staticmethod
     def terms(w: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
-        """:meth:`_Floats.terms` elementwise; when every ``|w| < SERIES_BELOW`` (the usual short steps) all
-        five by one product of the powers of ``w^2`` with :data:`_SMALL_TURN_SERIES`."""
+        """:meth:`_Floats.terms` elementwise: for ``|w| < SERIES_BELOW`` (the usual short steps) all five by
+        one product of the powers of ``w^2`` with :data:`_SMALL_TURN_SERIES`, the direct forms elsewhere."""
         small = np.abs(w) < SERIES_BELOW
+        series = tuple(((w[:, None] ** (2 * np.arange(len(_SMALL_TURN_SERIES)))) @ _SMALL_TURN_SERIES).T)
         if small.all():
-            return tuple(((w[:, None] ** (2 * np.arange(len(_SMALL_TURN_SERIES)))) @ _SMALL_TURN_SERIES).T)
-        s3_w, s3_2w = _Arrays.s3(w), _Arrays.s3(2.0 * w)
-        series = (w[:, None] ** (2 * np.arange(len(_S3_DIFFERENCE_SERIES)))) @ np.array(_S3_DIFFERENCE_SERIES)
-        difference = np.where(small, series * w * w, s3_w - s3_2w)
-        return s3_w, s3_2w, _Arrays.sinc(w), _Arrays.sinc(0.5 * w), difference
+            return series
+        # the direct forms where |w| >= 1 (1 stands in elsewhere, so nothing divides by 0)
+        x = np.where(small, 1.0, w)
+        s3_w = (x - np.sin(x)) / x**3
+        s3_2w = (2.0 * x - np.sin(2.0 * x)) / (2.0 * x) ** 3
+        direct = (s3_w, s3_2w, np.sin(x) / x, np.sin(0.5 * x) / (0.5 * x), s3_w - s3_2w)
+        return tuple(np.where(small, by_series, d) for by_series, d in zip(series, direct, strict=True))
 
 
 class _ArcIntegrals(NamedTuple):
@@ -220,9 +210,7 @@ def arc_covariance(
     ValueError for a step that turns the body by more than ``MAX_STEP_TURN_RAD``.
     """
     if not abs(omega) <= MAX_STEP_TURN_RAD:
-        raise ValueError(
-            f"a step turning the body by {omega!r} rad is not a motion (> {MAX_STEP_TURN_RAD} rad)"
-        )
+        _refuse_turn(omega)
     Q_xx, Q_xy, Q_xt, Q_yy, Q_yt, Q_tt = _arc_covariance_entries(
         _Floats, theta_rad, omega, vx, vy, var_vx, cov_vx_omega, var_omega, var_vy
     )
@@ -247,15 +235,16 @@ def arc_covariances(
     theta_rad, omega, vx, vy = args
     turning = ~(np.abs(omega) <= MAX_STEP_TURN_RAD)
     if turning.any():
-        raise ValueError(
-            f"a step turning the body by {float(omega[turning][0])!r} rad is not a motion "
-            f"(> {MAX_STEP_TURN_RAD} rad)"
-        )
+        _refuse_turn(float(omega[turning][0]))
     entries = _arc_covariance_entries(
         _Arrays, theta_rad, omega, vx, vy, var_vx, cov_vx_omega, var_omega, var_vy
     )
     Q_xx, Q_xy, Q_xt, Q_yy, Q_yt, Q_tt = np.broadcast_arrays(*entries)
     return np.stack([Q_xx, Q_xy, Q_xt, Q_xy, Q_yy, Q_yt, Q_xt, Q_yt, Q_tt], axis=-1).reshape(-1, 3, 3)
+
+
+def _refuse_turn(omega: float) -> None:
+    raise ValueError(f"a step turning the body by {omega!r} rad is not a motion (> {MAX_STEP_TURN_RAD} rad)")
 
 
 def _arc_covariance_entries(

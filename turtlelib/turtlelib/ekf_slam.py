@@ -321,8 +321,7 @@ class EkfSlam:
             poses, G, Q = self._motion.steps(self.pose, inputs)
         else:
             poses, G, Q = _composed_steps(self._motion, self.pose, inputs)
-        if not np.isfinite(poses).all():
-            raise ValueError("the motion steps give a non-finite pose (an implausible input)")
+        # a non-finite pose anywhere carries on to the last one (the poses accumulate)
         q_next, G, Q = _finite_step((poses[-1].copy(), G, Q))
         # P_qq' = G P_qq G^T + Q,  P_qm' = G P_qm
         self._state.predict(q_next, self._propagation_jacobian(G), Q)

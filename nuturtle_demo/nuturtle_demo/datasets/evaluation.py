@@ -206,7 +206,7 @@ def evaluate_victoria(
     """Victoria Park's laser point against the GPS fixes (module docstring)."""
     t0 = experiment.motion_t_ns[0]
     points, point_covariances = laser_points(result.poses, result.covariances)
-    track, _ = laser_points(result.track, np.zeros((len(result.track), 3, 3)))
+    track, _ = laser_points(result.track)
     good = ~gps_outliers(recording.gps_t_ns, recording.gps_xy)
     covered = good & (recording.gps_t_ns >= result.t_ns[0]) & (recording.gps_t_ns <= result.t_ns[-1])
     t_gps, gps = recording.gps_t_ns[covered], recording.gps_xy[covered]

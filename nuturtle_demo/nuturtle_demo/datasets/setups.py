@@ -209,7 +209,7 @@ def gps_start(run: Experiment, recording: VictoriaRecording) -> tuple[Transform2
         scans=run.scans.until(end_ns),
     )
     result = run_experiment(window)
-    track, _ = laser_points(result.track, np.zeros((len(result.track), 3, 3)))
+    track, _ = laser_points(result.track)
     # the fixes the track spans (it ends at the window's last scan)
     inside = (recording.gps_t_ns >= result.track_t_ns[0]) & (recording.gps_t_ns <= result.track_t_ns[-1])
     fixes = inside & ~gps_outliers(recording.gps_t_ns, recording.gps_xy)
@@ -226,12 +226,15 @@ def gps_start(run: Experiment, recording: VictoriaRecording) -> tuple[Transform2
 
 
 def laser_points(
-    poses: NDArray[np.float64], covariances: NDArray[np.float64]
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """The laser's position (S, 2) for body poses (S, 3) and its covariance (S, 2, 2) ``J P J^T``."""
+    poses: NDArray[np.float64], covariances: NDArray[np.float64] | None = None
+) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
+    """The laser's position (S, 2) for body poses (S, 3) and, given their covariances (S, 3, 3), its
+    covariance (S, 2, 2) ``J P J^T`` (else None)."""
     c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
     # r = R(theta) [a, b]
     r = np.column_stack([c * LASER_X_M - s * LASER_Y_M, s * LASER_X_M + c * LASER_Y_M])
+    if covariances is None:
+        return poses[:, :2] + r, None
     J = np.zeros((len(poses), 2, 3))
     J[:, 0, 0] = J[:, 1, 1] = 1.0
     J[:, 0, 2], J[:, 1, 2] = -r[:, 1], r[:, 0]

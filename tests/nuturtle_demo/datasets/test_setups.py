@@ -62,7 +62,7 @@ def test_the_start_is_the_rigid_motion_from_the_filter_track_to_the_gps(recordin
         scans=run.scans.until(end_ns),
     )
     result = run_experiment(window)
-    track, _ = laser_points(result.track, np.zeros((len(result.track), 3, 3)))
+    track, _ = laser_points(result.track)
     T_true = Transform2D(-70.0, 40.0, 2.5)
     # fixes only where the track is defined (from the start to the last scan of the window)
     fixes = (recording.gps_t_ns >= result.track_t_ns[0]) & (recording.gps_t_ns <= result.track_t_ns[-1])
