@@ -120,13 +120,13 @@ from .landmark_tracks import LandmarkTracks
 from .motion_models import BatchMotionModel, MotionModel
 from .range_bearing import landmarks_from_observations, predict_observations, residual
 from .slam_map import LandmarkMap
-from .slam_state import ROBOT_DIM, SlamState
+from .slam_state import HEADING, ROBOT_DIM, J, SlamState
 from .timebase import NS_PER_S
 from .validation import finite_real, in_range, integer, non_negative, one_of, positive, store
 
 MATCHERS = ("nn", "jcbb")
 MODES = ("mapping", "localization")
-LINEARIZATIONS = ("standard", "fej", "oc")
+LINEARIZATIONS = ("standard", "fej", "oc", "invariant")
 
 
 @dataclass(frozen=True)
@@ -206,6 +206,11 @@ class SlamConfig:
         )
         if not self.min_range < self.max_range:
             raise ValueError(f"need min_range < max_range, got {self.min_range}, {self.max_range}")
+        if self.mode == "localization" and self.linearization == "invariant":
+            raise ValueError(
+                "linearization 'invariant' is for mapping: in localization the fixed map holds the frame "
+                "(use 'standard')"
+            )
 
     @property
     def T_body_sensor(self) -> Transform2D:
@@ -272,6 +277,7 @@ class EkfSlam:
         self._config = config
         self._motion = motion
         self._constrained = config.linearization in ("fej", "oc")
+        self._invariant = config.linearization == "invariant"
         self._T_body_sensor = config.T_body_sensor
         self._default_R = config.measurement_covariance(1)
         self._gate_associate = float(chi2_gate(config.gate_associate, 2))
@@ -482,7 +488,7 @@ class EkfSlam:
         if keep_map:
             self._state.reset_robot(pose, covariance, keep_map=True)
             return
-        self._state = SlamState(pose, covariance)
+        self._state = SlamState(pose, covariance, invariant=self._invariant)
         self._tracks = LandmarkTracks()
         self._next_id = 0
         self._association: str | None = None
@@ -514,7 +520,7 @@ class EkfSlam:
                 f"the map holds {n} landmarks, more than max_landmarks = {self._config.max_landmarks}"
             )
         pose, covariance = self._initial_pose(T_map_body, pose_covariance)
-        state = SlamState(pose, covariance, capacity_landmarks=max(16, n))
+        state = SlamState(pose, covariance, capacity_landmarks=max(16, n), invariant=self._invariant)
         state.append_independent(landmark_map.xy, landmark_map.covariance)
         tracks = LandmarkTracks(max(16, n))
         tracks.append_many(landmark_map.ids, 0, True, landmark_map.xy)
@@ -777,6 +783,11 @@ class EkfSlam:
         elif self._config.linearization == "oc":
             H_robot, H_landmark = _observability_constrained(
                 H_robot, H_landmark, self._pose_prior, self._tracks.first_xy[slots]
+            )
+        elif self._invariant:
+            # H T: the heading column gains H_p J p + H_m J m (zero for range-bearing, to rounding)
+            H_robot[:, :, HEADING] += H_robot[:, :, :2] @ (J @ pose[:2]) + np.einsum(
+                "kij,kj->ki", H_landmark, self._state.landmark_positions()[slots] @ J.T
             )
         return z_hat, H_robot, H_landmark
 

@@ -17,6 +17,36 @@ the filter steps write only that triangle, and every read of covariance entries 
 (:attr:`SlamState.covariance`), so that a run of predictions and updates that reads only the pose and a
 few blocks never pays the O(N^2) copy.
 
+Invariant coordinates (``invariant=True``: the right-invariant EKF)
+------------------------------------------------------------------
+The right-invariant EKF (Barrau & Bonnabel, "An EKF-SLAM algorithm with consistency properties", 2015)
+treats pose and landmarks as one element of the group SE_(n+1)(2), ``chi = (R(theta), p, m_0, ...)``, and
+its error as a left perturbation of the estimate, ``chi = exp(xi) chi_hat``, to first order::
+
+    theta = theta_hat + xi_theta
+    p = p_hat + xi_theta J p_hat + xi_p
+    m_i = m_i_hat + xi_theta J m_i_hat + xi_i
+
+with ``J = [[0, -1], [1, 0]]``: ``x - x_hat = T(x_hat) xi``, ``T = I + c e_theta^T`` and
+``c = [J p; 0; J m_0; J m_1; ...]``. ``P`` is then stored as the covariance of ``xi``. Its point: a global
+rotation and translation of pose and map is ``xi_theta = eps``, ``xi_p = xi_i = t``, the same directions at
+every estimate, so no choice of linearisation point can give the filter information along them. What
+changes, all inside this class:
+
+* :meth:`predict` takes the model's ``G`` and ``Q`` (standard coordinates) and applies
+  ``A = T_q(q')^-1 G T_q(q)`` (the identity for every arc model, whose ``G`` translates by the step's
+  displacement) and the noise ``xi' = xi + B w``, ``B = [T_q(q')^-1; -J m_0 e_theta^T; ...]`` (the heading
+  noise turns the robot against every landmark): ``P_qq += C Q C^T`` at once and, deferred like ``G``,
+  ``P_qm += -(C Q e_theta) c_m^T``, ``P_mm += Q_theta,theta c_m c_m^T`` (``C = T_q(q')^-1``).
+* :meth:`correct` takes ``H`` in invariant coordinates (``H T``) and moves the mean by the group
+  exponential: ``theta += xi_theta``, each point ``<- R(xi_theta) point + V(xi_theta) xi_point``.
+* :meth:`append` takes the inverse model's ``G_robot`` in standard coordinates and uses ``G_robot T_q - J m
+  e_theta^T``; :meth:`append_independent` and :meth:`reset_robot` say "independent" in standard
+  coordinates (the conversion is a rank-2 change of ``P``, O(N^2)).
+* The views :attr:`covariance`, :attr:`pose_covariance` and :meth:`landmark_blocks` give standard
+  coordinates (``T P T^T``); :meth:`pose_landmark_blocks` and :meth:`observation_covariance`, which the
+  filter combines with its Jacobians, give the stored ones.
+
 Cost per operation (``m = 2k`` stacked observation rows)
 --------------------------------------------------------
 * :meth:`predict` is O(1): it updates the pose and ``P_qq`` and defers the cross-covariance ``P_qm <- G P_qm``
@@ -50,14 +80,22 @@ HEADING = 2  # index of theta in x
 MIRROR_BLOCK = 256  # rows per block when copying the upper triangle of P into the lower one (measured)
 _STRICT_LOWER = np.tri(MIRROR_BLOCK, k=-1, dtype=bool)  # strictly-lower mask of a diagonal block
 _ROBOT_UPPER = np.triu_indices(ROBOT_DIM, 1)  # the strict upper triangle of the robot block
+J = np.array([[0.0, -1.0], [1.0, 0.0]])  # the derivative of a rotation: d/dphi R(phi) = J R(phi)
 
 
 class SlamState:
     """Mean and covariance of ``[robot pose, landmark slots]`` (see the module docstring)."""
 
     def __init__(
-        self, pose: NDArray[np.float64], pose_covariance: NDArray[np.float64], capacity_landmarks: int = 16
+        self,
+        pose: NDArray[np.float64],
+        pose_covariance: NDArray[np.float64],
+        capacity_landmarks: int = 16,
+        invariant: bool = False,
     ) -> None:
+        """``pose`` (3,) with ``pose_covariance`` (3, 3) (standard coordinates) and no landmark; ``invariant``
+        stores ``P`` in the right-invariant coordinates (module docstring)."""
+        self._invariant = invariant
         capacity = ROBOT_DIM + LANDMARK_DIM * capacity_landmarks
         self._mean = np.zeros(capacity)
         self._cov = np.zeros((capacity, capacity))
@@ -66,6 +104,9 @@ class SlamState:
         self._lower_filled = True
         # the product of the Jacobians G of the predictions not yet applied to P_qm (None: none pending)
         self._pending_G: NDArray[np.float64] | None = None
+        # invariant: the heading noise not yet applied to P_qm (-b c_m^T) and P_mm (s c_m c_m^T)
+        self._pending_b = np.zeros(ROBOT_DIM)
+        self._pending_s = 0.0
         self.reset_robot(pose, pose_covariance, keep_map=False)
 
     # --- views -------------------------------------------------------------------------------------------
@@ -85,28 +126,54 @@ class SlamState:
         return self._mean[: self.dim]
 
     @property
+    def invariant(self) -> bool:
+        """Whether ``P`` is stored in the right-invariant coordinates (module docstring)."""
+        return self._invariant
+
+    @property
     def covariance(self) -> NDArray[np.float64]:
-        """``P`` (N, N), a view into the filter's storage (read it, do not write it), valid until the next
-        filter step; filling in its lower triangle costs O(N^2) after a step."""
-        dim = self.dim
-        self._apply_pending()
-        if not self._lower_filled:
-            _mirror_upper_triangle(self._cov, dim)
-            self._lower_filled = True
-        return self._cov[:dim, :dim]
+        """``P`` (N, N) in standard coordinates: a view into the filter's storage (read it, do not write it),
+        valid until the next filter step (invariant: a copy, ``T P T^T``); filling in its lower triangle
+        costs O(N^2) after a step."""
+        P = self._full_storage()
+        if self._invariant:
+            P = P.copy()
+            _change_coordinates(P, self._rotation_column(), 1.0)
+        return P
 
     @property
     def pose_covariance(self) -> NDArray[np.float64]:
-        """``P_qq`` (3, 3), a view (read it, do not write it)."""
-        return self._cov[:ROBOT_DIM, :ROBOT_DIM]
+        """``P_qq`` (3, 3) in standard coordinates, a view (read it, do not write it; invariant: a copy,
+        ``T_q P_qq T_q^T``)."""
+        P_qq = self._cov[:ROBOT_DIM, :ROBOT_DIM]
+        if not self._invariant:
+            return P_qq
+        T_q = _pose_coordinates(self._mean, 1.0)
+        return T_q @ P_qq @ T_q.T
 
     def landmark_positions(self) -> NDArray[np.float64]:
         """``[m_i]`` (n, 2), a view."""
         return self._mean[ROBOT_DIM : self.dim].reshape(self._n, LANDMARK_DIM)
 
     def landmark_blocks(self, slots: NDArray[np.int64] | None = None) -> NDArray[np.float64]:
-        """The marginal covariances ``P_(m_i m_i)`` (k, 2, 2) of ``slots`` (default all), gathered in O(k)."""
+        """The marginal covariances ``P_(m_i m_i)`` (k, 2, 2) of ``slots`` (default all) in standard
+        coordinates, gathered in O(k). Invariant: with ``c_i = J m_i``, ``P_(m_i m_i) + c_i P_(theta m_i) +
+        P_(m_i theta) c_i^T + P_(theta theta) c_i c_i^T``."""
         slots = np.arange(self._n) if slots is None else np.asarray(slots)
+        blocks = self._stored_landmark_blocks(slots)
+        if self._invariant:
+            first = ROBOT_DIM + LANDMARK_DIM * slots
+            c = self._mean[first[:, None] + np.arange(LANDMARK_DIM)] @ J.T
+            P_theta_m = self._cov[HEADING][first[:, None] + np.arange(LANDMARK_DIM)]
+            cross = c[:, :, None] * P_theta_m[:, None, :]
+            blocks += cross + cross.transpose(0, 2, 1)
+            blocks += self._cov[HEADING, HEADING] * c[:, :, None] * c[:, None, :]
+        return blocks
+
+    def _stored_landmark_blocks(self, slots: NDArray[np.int64]) -> NDArray[np.float64]:
+        """The stored ``P_(m_i m_i)`` (k, 2, 2) of ``slots``."""
+        if self._invariant:  # the deferred heading noise reaches P_mm
+            self._apply_pending()
         first = ROBOT_DIM + LANDMARK_DIM * slots
         # [[P_xx, P_xy], [P_xy, P_yy]] from the upper triangle, by flat index into the C-ordered storage
         flat = self._cov.ravel()
@@ -118,7 +185,8 @@ class SlamState:
         return blocks
 
     def pose_landmark_blocks(self, slots: NDArray[np.int64] | None = None) -> NDArray[np.float64]:
-        """Joint covariances (k, 5, 5) of ``[x, y, theta, m_ix, m_iy]`` for ``slots`` (default all), O(k)."""
+        """Joint covariances (k, 5, 5) of ``[x, y, theta, m_ix, m_iy]`` for ``slots`` (default all), O(k), in
+        the stored coordinates (for the filter's Jacobians)."""
         self._apply_pending()
         slots = np.arange(self._n) if slots is None else np.asarray(slots)
         columns = (ROBOT_DIM + LANDMARK_DIM * slots)[:, None] + np.arange(LANDMARK_DIM)
@@ -128,15 +196,29 @@ class SlamState:
         cross = self._cov[:ROBOT_DIM][:, columns].transpose(1, 0, 2)
         blocks[:, :ROBOT_DIM, ROBOT_DIM:] = cross
         blocks[:, ROBOT_DIM:, :ROBOT_DIM] = cross.transpose(0, 2, 1)
-        blocks[:, ROBOT_DIM:, ROBOT_DIM:] = self.landmark_blocks(slots)
+        blocks[:, ROBOT_DIM:, ROBOT_DIM:] = self._stored_landmark_blocks(slots)
         return blocks
 
     # --- the filter steps --------------------------------------------------------------------------------
 
     def predict(self, pose: NDArray[np.float64], G: NDArray[np.float64], Q: NDArray[np.float64]) -> None:
-        """Robot motion ``q <- f(q, u)`` with Jacobian ``G = df/dq`` (3, 3) and process noise ``Q`` (3, 3)."""
+        """Robot motion ``q <- f(q, u)`` with Jacobian ``G = df/dq`` (3, 3) and process noise ``Q`` (3, 3),
+        both in standard coordinates (invariant: converted as the module docstring says; ValueError for
+        a ``G`` whose heading row is not ``[0, 0, 1]``, which would turn the map's coordinates too)."""
         dim = self.dim
         P = self._cov
+        if self._invariant:
+            if not np.array_equal(G[HEADING], [0.0, 0.0, 1.0]):
+                raise ValueError("the invariant filter needs motion models whose heading step is pose-free")
+            # A = T_q(q')^-1 G T_q(q),  C = T_q(q')^-1
+            C = _pose_coordinates(pose, -1.0)
+            G = C @ G @ _pose_coordinates(self._mean, 1.0)
+            if dim > ROBOT_DIM:
+                # deferred, with b = C Q e_theta: P_qm <- A (G_p P_qm - b_p c_m^T) - b c_m^T, so
+                # b_p <- A b_p + b;  P_mm += Q_theta,theta c_m c_m^T
+                self._pending_b = G @ self._pending_b + C @ Q[:, HEADING]
+                self._pending_s += Q[HEADING, HEADING]
+            Q = C @ Q @ C.T
         # P_qq <- G P_qq G^T + Q
         P_qq = G @ P[:ROBOT_DIM, :ROBOT_DIM] @ G.T + Q
         P[:ROBOT_DIM, :ROBOT_DIM] = 0.5 * (P_qq + P_qq.T)
@@ -225,19 +307,37 @@ class SlamState:
         if consider_landmarks:
             self._consider_update(W, w)
             return float(w @ w)
-        # x <- x + W^T w, with the heading kept in (-pi, pi]
-        self._mean[:dim] += W.T @ w
-        self._mean[HEADING] = normalize_angle(self._mean[HEADING])
-        # triu(P) <- triu(P - W^T W): dsyrk on the lower triangle of the storage's F-contiguous transpose
-        # (capacity x capacity, so f2py passes it without a copy; W_pad = 0 on the spare columns)
-        storage_T = self._cov.T
-        updated = dsyrk(-1.0, W_pad, beta=1.0, c=storage_T, trans=1, lower=1, overwrite_c=1)
-        if updated is not storage_T:  # f2py worked on a copy (never for this float64 Fortran array)
-            storage_T[...] = updated
+        if self._invariant:
+            # x <- exp(W^T w) x on SE_(n+1)(2)
+            self._retract(W.T @ w)
+        else:
+            # x <- x + W^T w, with the heading kept in (-pi, pi]
+            self._mean[:dim] += W.T @ w
+            self._mean[HEADING] = normalize_angle(self._mean[HEADING])
+        # triu(P) <- triu(P - W^T W) (W_pad = 0 on the spare columns)
+        self._rank_update(W_pad, -1.0)
         # the robot block is kept whole: its upper triangle into its lower one
         self._fill_robot_block()
-        self._lower_filled = False
         return float(w @ w)
+
+    def _retract(self, xi: NDArray[np.float64]) -> None:
+        """``x <- exp(xi) x`` (N,) on SE_(n+1)(2): ``theta += phi`` and every point (the pose's position and
+        the landmarks) ``<- R(phi) point + V(phi) xi_point`` with ``phi = xi_theta`` and
+        ``V(phi) = [[sin(phi), cos(phi) - 1], [1 - cos(phi), sin(phi)]] / phi`` (the identity at 0)."""
+        dim = self.dim
+        phi = xi[HEADING]
+        c, s = np.cos(phi), np.sin(phi)
+        # sin(phi) / phi and (1 - cos(phi)) / phi, by their series where they would cancel
+        if abs(phi) < 1e-4:
+            a, b = 1.0 - phi * phi / 6.0, 0.5 * phi
+        else:
+            a, b = s / phi, (1.0 - c) / phi
+        points = np.delete(self._mean[:dim], HEADING).reshape(-1, 2)
+        steps = np.delete(xi, HEADING).reshape(-1, 2)
+        moved = points @ np.array([[c, s], [-s, c]]) + steps @ np.array([[a, b], [-b, a]])
+        self._mean[HEADING] = normalize_angle(self._mean[HEADING] + phi)
+        self._mean[:2] = moved[0]
+        self._mean[ROBOT_DIM:dim] = moved[1:].ravel()
 
     def _consider_update(self, W: NDArray[np.float64], w: NDArray[np.float64]) -> None:
         """The Schmidt update of :meth:`correct` from ``W = L^-1 H P`` (m, N) and ``w = L^-1 nu`` (m,)."""
@@ -266,8 +366,13 @@ class SlamState:
 
             P_mx = G_robot P_qx              (cross-covariance with the pose and every landmark)
             P_mm = G_robot P_qq G_robot^T + G_z R G_z^T
+
+        ``G_robot`` in standard coordinates; invariant: ``G_robot T_q - J m e_theta^T`` is used.
         """
         self._apply_pending()
+        if self._invariant:
+            G_robot = G_robot @ _pose_coordinates(self._mean, 1.0)
+            G_robot[:, HEADING] -= J @ p_map
         self._reserve(self._n + 1)
         dim = self.dim
         new = slice(dim, dim + LANDMARK_DIM)
@@ -287,7 +392,10 @@ class SlamState:
     ) -> NDArray[np.int64]:
         """Add ``k`` landmarks at ``xy`` (k, 2) with joint covariance ``covariance`` (2k, 2k) (symmetric),
         independent of the pose and the landmarks already held (zero cross-covariance); returns their
-        slots (k,). ``P <- blockdiag(P, covariance)``, one reallocation at most."""
+        slots (k,). ``P <- blockdiag(P, covariance)``, one reallocation at most (invariant: in standard
+        coordinates, O(N^2))."""
+        if self._invariant:
+            self._change_storage_coordinates(to_standard=True)
         k = len(xy)
         self._apply_pending()
         self._reserve(self._n + k)
@@ -299,6 +407,8 @@ class SlamState:
         self._lower_filled = False
         self._mean[new] = np.reshape(xy, LANDMARK_DIM * k)
         self._n += k
+        if self._invariant:
+            self._change_storage_coordinates(to_standard=False)
         return np.arange(self._n - k, self._n)
 
     def remove(self, slot: int) -> int | None:
@@ -332,21 +442,30 @@ class SlamState:
     def reset_robot(
         self, pose: NDArray[np.float64], pose_covariance: NDArray[np.float64], keep_map: bool
     ) -> None:
-        """New pose mean and covariance, independent of the map; ``keep_map=False`` also empties it."""
+        """New pose mean and covariance, independent of the map (in standard coordinates; invariant: O(N^2));
+        ``keep_map=False`` also empties it."""
         if not keep_map:
             self._n = 0
+        if self._invariant:
+            self._change_storage_coordinates(to_standard=True)
         self._pending_G = None
         dim = self.dim
         self._cov[:ROBOT_DIM, :dim] = 0.0
         self._cov[:dim, :ROBOT_DIM] = 0.0
         self._cov[:ROBOT_DIM, :ROBOT_DIM] = 0.5 * (pose_covariance + pose_covariance.T)
         self._mean[:ROBOT_DIM] = pose
+        if self._invariant:
+            self._change_storage_coordinates(to_standard=False)
+
+    def _change_storage_coordinates(self, to_standard: bool) -> None:
+        """``P <- T P T^T`` (``to_standard``) or ``P <- T^-1 P T^-T`` at the current mean, O(N^2)."""
+        _change_coordinates(self._full_storage(), self._rotation_column(), 1.0 if to_standard else -1.0)
 
     # --- helpers -----------------------------------------------------------------------------------------
 
     def _apply_pending(self) -> None:
         """``P_qm <- G_pending P_qm`` for the deferred predictions (``P_mq = P_qm^T`` is in the lower
-        triangle)."""
+        triangle); invariant: then ``P_qm -= b c_m^T`` and ``triu(P_mm) += s c_m c_m^T``."""
         if self._pending_G is None:
             return
         dim = self.dim
@@ -354,6 +473,46 @@ class SlamState:
         P[:ROBOT_DIM, ROBOT_DIM:dim] = self._pending_G @ P[:ROBOT_DIM, ROBOT_DIM:dim]
         self._pending_G = None
         self._lower_filled = False
+        if not self._invariant:
+            return
+        c = self._rotation_column(capacity=True)
+        P[:ROBOT_DIM, ROBOT_DIM:dim] -= np.outer(self._pending_b, c[ROBOT_DIM:dim])
+        c[:ROBOT_DIM] = 0.0
+        # triu(P_mm) += s c_m c_m^T: dsyrk on the storage's F-contiguous transpose, as in correct
+        self._rank_update(c[None, :], self._pending_s)
+        self._pending_b = np.zeros(ROBOT_DIM)
+        self._pending_s = 0.0
+
+    def _rank_update(self, W_pad: NDArray[np.float64], alpha: float) -> None:
+        """``triu(P) <- triu(P + alpha W^T W)`` for ``W_pad`` (m, capacity) (zero on the spare columns), in
+        place by BLAS ``dsyrk`` on the lower triangle of the storage's F-contiguous transpose (capacity x
+        capacity, so f2py passes it without a copy)."""
+        storage_T = self._cov.T
+        updated = dsyrk(alpha, W_pad, beta=1.0, c=storage_T, trans=1, lower=1, overwrite_c=1)
+        if updated is not storage_T:  # f2py worked on a copy (never for this float64 Fortran array)
+            storage_T[...] = updated
+        self._lower_filled = False
+
+    def _rotation_column(self, capacity: bool = False) -> NDArray[np.float64]:
+        """``c = [J p; 0; J m_0; ...]`` (N,) (``capacity``: padded with zeros to the storage's size), the
+        standard-coordinate change of a unit rotation about the origin of every point."""
+        dim = self.dim
+        c = np.zeros(self._cov.shape[0] if capacity else dim)
+        x = self._mean
+        # J [x, y] = [-y, x] for the pose's position and every landmark
+        c[0], c[1] = -x[1], x[0]
+        c[ROBOT_DIM:dim:2] = -x[ROBOT_DIM + 1 : dim : 2]
+        c[ROBOT_DIM + 1 : dim : 2] = x[ROBOT_DIM:dim:2]
+        return c
+
+    def _full_storage(self) -> NDArray[np.float64]:
+        """The stored ``P`` (N, N), a view, with its lower triangle filled in."""
+        dim = self.dim
+        self._apply_pending()
+        if not self._lower_filled:
+            _mirror_upper_triangle(self._cov, dim)
+            self._lower_filled = True
+        return self._cov[:dim, :dim]
 
     def _fill_robot_block(self) -> None:
         """``tril(P_qq, -1) <- triu(P_qq, 1)^T``."""
@@ -429,3 +588,19 @@ def _mirror_upper_triangle(P: NDArray[np.float64], dim: int) -> None:
         np.copyto(diagonal, diagonal.T, where=_STRICT_LOWER[: i1 - i0, : i1 - i0])
         # P[i1:N, i0:i1] = P[i0:i1, i1:N]^T
         P[i1:dim, i0:i1] = P[i0:i1, i1:dim].T
+
+
+def _pose_coordinates(pose: NDArray[np.float64], sign: float) -> NDArray[np.float64]:
+    """``T_q = [[I_2, J p], [0, 1]]`` (3, 3) at ``pose`` (sign 1) or its inverse ``[[I_2, -J p], [0, 1]]``
+    (sign -1): standard from invariant pose coordinates, ``dq = T_q xi_q``."""
+    T_q = np.eye(ROBOT_DIM)
+    T_q[0, HEADING], T_q[1, HEADING] = -sign * pose[1], sign * pose[0]
+    return T_q
+
+
+def _change_coordinates(P: NDArray[np.float64], c: NDArray[np.float64], sign: float) -> None:
+    """``P <- (I + sign c e_theta^T) P (I + sign c e_theta^T)^T`` on the full (N, N) ``P`` in place, for ``c``
+    (N,) with ``c_theta = 0`` (so the inverse is the other sign): with ``u = P e_theta``,
+    ``P + sign (c u^T + u c^T) + P_theta,theta c c^T``, O(N^2)."""
+    u = P[:, HEADING].copy()
+    P += sign * (np.outer(c, u) + np.outer(u, c)) + P[HEADING, HEADING] * np.outer(c, c)
