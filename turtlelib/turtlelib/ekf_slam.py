@@ -55,6 +55,26 @@ landmark's first estimate is replaced by its current estimate ``m`` once
 estimate is statistically incompatible with what the map now says). Each such reset lets a little of the
 spurious information back in, once, in exchange for Jacobians at a sound point.
 
+Consistency without first estimates: the right-invariant EKF (``linearization = 'invariant'``)
+--------------------------------------------------------------------------------------------
+Barrau & Bonnabel ("An EKF-SLAM algorithm with consistency properties", 2015) take pose and landmarks as one
+element of the group SE_(n+1)(2) and the error as ``chi = exp(xi) chi_hat``; :class:`SlamState` then keeps
+``P`` as the covariance of ``xi`` (its module docstring has the coordinates). In those coordinates the
+unobservable directions are constant, ``N_xi = [e_theta, translation of the pose and every landmark]``,
+whatever the estimate, and the Jacobians are taken at the newest estimates:
+
+* ``H_xi = H T``, ``T = I + c e_theta^T``, ``c = [J p; 0; J m_0; ...]``: its heading column
+  ``H_theta + H_p J p + H_m J m`` is zero for a range-bearing observation (it does not change when pose and
+  landmark turn together), so ``H_xi N_xi = 0`` at every estimate: no observation can inform the global
+  heading, with no first estimate to go stale;
+* an arc motion step is the identity on ``xi``; its noise also turns the robot against every landmark
+  (``P_qm``, ``P_mm`` gain rank-one terms, applied once per run of predictions);
+* the update moves the mean by the group exponential (every point turned by ``xi_theta`` and shifted).
+
+So the global heading variance never drops below its value when the first landmark was seen (as with
+FEJ / OC), while the local accuracy is that of Jacobians at the newest estimates (unlike FEJ / OC after a
+long stretch of dead reckoning). Localization keeps ``'standard'``: there the fixed map holds the frame.
+
 Update (:meth:`EkfSlam.update_known`, :meth:`EkfSlam.update_unknown`, O(N^2) per observation)
 ----------------------------------------------------------------------------------------------
 Observation ``z = [range_m, bearing_rad]`` of a landmark from the sensor at ``T_body_sensor``
@@ -144,9 +164,10 @@ class SlamConfig:
     * ``gate_known`` in (0, 1]: chi2 probability (2 dof) of the innovation gate of known association
       (1: no gate).
     * ``linearization``: ``'standard'`` (Jacobians at the newest estimates), ``'fej'`` (first-estimates
-      Jacobians) or ``'oc'`` (observability-constrained Jacobians): the consistency remedies of the module
-      docstring; ``relinearize_gate`` in (0, 1]: chi2 probability (2 dof) beyond which a landmark's first
-      estimate is reset to its current one (1: never).
+      Jacobians), ``'oc'`` (observability-constrained Jacobians) or ``'invariant'`` (the right-invariant
+      EKF, mapping only): the consistency remedies of the module docstring; ``relinearize_gate`` in
+      (0, 1]: chi2 probability (2 dof) beyond which fej / oc reset a landmark's first estimate to its current
+      one (1: never).
     * ``confirm_count`` (>= 1): sightings that confirm a tentative landmark; ``tentative_timeout`` (s, > 0):
       how long after its first sighting a tentative landmark may stay unconfirmed.
     * ``min_range`` (m, >= 0) < ``max_range`` (m): observations nearer or farther than these are rejected

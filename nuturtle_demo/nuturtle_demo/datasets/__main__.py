@@ -127,7 +127,7 @@ def summary(metrics: dict) -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = parse_args(argv)
-    from .setups import MRCLAM_PARAMS, VICTORIA_PARAMS, load_params, mrclam_experiment, victoria_experiment
+    from .setups import VICTORIA_PARAMS, load_params, mrclam_experiment, mrclam_params, victoria_experiment
 
     try:
         if args.command == "calibrate":
@@ -137,7 +137,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             from .mrclam import load_mrclam
 
             recording = load_mrclam(args.data, args.robot)
-            params = load_params(MRCLAM_PARAMS, args.params)
+            params = load_params(mrclam_params(args.association), args.params)
             experiment = mrclam_experiment(recording, params, args.association)
             args.out = args.out or Path("results") / f"mrclam_robot{args.robot}_{args.association}"
             metrics = _write_run(args, experiment, lambda e, r: evaluate_mrclam(e, r, recording), params)
