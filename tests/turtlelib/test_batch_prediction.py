@@ -144,7 +144,7 @@ def mapped(model, linearization):
     return slam
 
 
-@pytest.mark.parametrize("linearization", ["standard", "fej", "oc"])
+@pytest.mark.parametrize("linearization", ["standard", "fej", "oc", "invariant"])
 @pytest.mark.parametrize(
     "model",
     [TRUCK, UNICYCLE, DiffDriveMotion(DiffDrive(0.033, 0.16), 0.05)],

@@ -67,6 +67,8 @@ once and copied.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import NDArray
 from scipy.linalg.blas import dsyrk
@@ -327,11 +329,11 @@ class SlamState:
         dim = self.dim
         phi = xi[HEADING]
         c, s = np.cos(phi), np.sin(phi)
-        # sin(phi) / phi and (1 - cos(phi)) / phi, by their series where they would cancel
+        # sin(phi) / phi and (1 - cos(phi)) / phi = 2 sin(phi / 2)^2 / phi, by their series near 0
         if abs(phi) < 1e-4:
             a, b = 1.0 - phi * phi / 6.0, 0.5 * phi
         else:
-            a, b = s / phi, (1.0 - c) / phi
+            a, b = s / phi, 2.0 * math.sin(0.5 * phi) ** 2 / phi
         points = np.delete(self._mean[:dim], HEADING).reshape(-1, 2)
         steps = np.delete(xi, HEADING).reshape(-1, 2)
         moved = points @ np.array([[c, s], [-s, c]]) + steps @ np.array([[a, b], [-b, a]])
