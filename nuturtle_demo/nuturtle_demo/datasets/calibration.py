@@ -1,5 +1,17 @@
-"""Noise calibration from a recording with ground truth: maximum likelihood of the motion and measurement
-errors (MRCLAM: Vicon poses and landmarks).
+"""Calibration from a recording with ground truth (MRCLAM: Vicon poses and landmarks): how the commands
+move the robot (least squares), then the motion and measurement noise (maximum likelihood).
+
+Commands
+--------
+With the held commands integrated, ``psi(t) = int omega_cmd`` (piecewise linear, exact at any time by
+interpolation), a :class:`setups.CommandCalibration` is fitted in two steps:
+
+* ``delay_s``: on a grid of ``DELAY_STEP_S`` up to ``MAX_DELAY_S``, the one whose commands, shifted by it,
+  best explain the true heading increments over short windows of ``DELAY_WINDOW_S`` (least squares with a
+  scale and an offset per grid point; the smallest residual wins);
+* with that delay, over windows of ``window_s``: ``dtheta_true = yaw_rate_scale dpsi + yaw_rate_bias dt``
+  and ``dp_true = speed_scale D`` (least squares), with ``D`` the commanded travel ``v_cmd dt`` of each
+  command interval along the true heading at its middle, summed over the window (exact to O(dt^2)).
 
 Measurement noise
 -----------------
@@ -33,19 +45,24 @@ from scipy.optimize import minimize
 
 from turtlelib import HeldInputs, Transform2D, TwistNoise, UnicycleMotion, normalize_angles
 from turtlelib.range_bearing import predict_observations, residual
+from turtlelib.timebase import NS_PER_S
 
 from .mrclam import MrclamRecording
-from .setups import interpolate_poses
+from .setups import CommandCalibration, interpolate_poses
 
 NOISE_FIELDS = tuple(f.name for f in dataclasses.fields(TwistNoise))
 TRUTH_VARIANCE = np.diag([1e-6, 1e-6, 1e-6])
 LOG_BOUNDS = (-30.0, 3.0)
+DELAY_STEP_S = 0.01
+MAX_DELAY_S = 0.5
+DELAY_WINDOW_S = 0.5
 
 
 @dataclass(frozen=True)
 class Calibration:
-    """The fitted noise (``noise``, ``range_std``, ``bearing_std``) and what it was fitted on."""
+    """The fitted commands, noise (``noise``, ``range_std``, ``bearing_std``) and what they were fitted on."""
 
+    commands: CommandCalibration
     noise: TwistNoise
     range_std: float
     bearing_std: float
@@ -55,8 +72,9 @@ class Calibration:
     negative_log_likelihood: float
 
     def params_dict(self) -> dict:
-        """The ``noise:`` / ``slam:`` sections of a params YAML (``--params``)."""
+        """The ``commands:`` / ``noise:`` / ``slam:`` sections of a params YAML (``--params``)."""
         return {
+            "commands": dataclasses.asdict(self.commands),
             "noise": dataclasses.asdict(self.noise),
             "slam": {"range_std": self.range_std, "bearing_std": self.bearing_std},
         }
@@ -66,6 +84,7 @@ class Calibration:
             f"fitted on {self.windows} windows of {self.window_s} s and {self.observations} observations "
             f"(motion: sum of ln det S + e^T S^-1 e = {self.negative_log_likelihood:.1f}):"
         ]
+        lines += [f"  {name:22s} {value:.4g}" for name, value in dataclasses.asdict(self.commands).items()]
         lines += [f"  {name:22s} {getattr(self.noise, name):.4g}" for name in NOISE_FIELDS]
         lines += [
             f"  {'range_std':22s} {self.range_std:.4g} m",
@@ -87,6 +106,54 @@ def measurement_residuals(recording: MrclamRecording) -> NDArray[np.float64]:
         z_hat, _, _ = predict_observations(poses[k], landmarks[k : k + 1], Transform2D())
         nu[k] = residual(z[k], z_hat[0])
     return nu
+
+
+def fit_commands(recording: MrclamRecording, window_s: float = 2.0) -> CommandCalibration:
+    """The :class:`setups.CommandCalibration` of ``recording`` by least squares (module docstring)."""
+    t = recording.odometry_t_ns
+    dt_s = np.diff(t) / NS_PER_S
+    # psi, s at each command stamp: the held commands integrated (exact, piecewise linear in time)
+    psi = np.r_[0.0, np.cumsum(recording.odometry_omega_rad_s[:-1] * dt_s)]
+    first = max(int(t[0]) + round(MAX_DELAY_S * NS_PER_S), int(recording.truth_t_ns[0]))
+    last = min(int(t[-1]), int(recording.truth_t_ns[-1]))
+
+    def windows(length_s: float) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+        edges = np.arange(first, last, round(length_s * NS_PER_S), dtype=np.int64)
+        if len(edges) < 4:
+            raise ValueError(f"the recording's ground truth spans too few {length_s} s windows")
+        return edges, interpolate_poses(recording.truth_t_ns, recording.truth_poses, edges)
+
+    edges, truth = windows(DELAY_WINDOW_S)
+    dtheta = np.diff(np.unwrap(truth[:, 2]))
+    best = (np.inf, 0.0)
+    for delay_s in np.arange(0.0, MAX_DELAY_S + 0.5 * DELAY_STEP_S, DELAY_STEP_S):
+        # the commands that act on [a, b] were stamped delay_s earlier
+        dpsi = np.diff(np.interp(edges - round(delay_s * NS_PER_S), t, psi))
+        A = np.column_stack([dpsi, np.ones_like(dpsi)])
+        residual = dtheta - A @ np.linalg.lstsq(A, dtheta, rcond=None)[0]
+        best = min(best, (float(residual @ residual), float(delay_s)))
+    delay_s = best[1]
+    delay_ns = round(delay_s * NS_PER_S)
+
+    edges, truth = windows(window_s)
+    t_acting = t + delay_ns
+    dtheta = np.diff(np.unwrap(truth[:, 2]))
+    dpsi = np.diff(np.interp(edges, t_acting, psi))
+    # dtheta = yaw_rate_scale dpsi + yaw_rate_bias dt
+    (yaw_rate_scale, yaw_rate_bias), *_ = np.linalg.lstsq(
+        np.column_stack([dpsi, np.diff(edges) / NS_PER_S]), dtheta, rcond=None
+    )
+    # dp = speed_scale D: D the commanded travel of each interval along the true heading at its middle
+    middle = interpolate_poses(
+        recording.truth_t_ns, recording.truth_poses, t_acting[:-1] + np.diff(t_acting) // 2
+    )[:, 2]
+    step = recording.odometry_v_mps[:-1] * dt_s
+    D = np.zeros((len(t), 2))
+    D[1:] = np.cumsum(step[:, None] * np.column_stack([np.cos(middle), np.sin(middle)]), axis=0)
+    dD = np.diff(np.column_stack([np.interp(edges, t_acting, D[:, i]) for i in range(2)]), axis=0)
+    dp = np.diff(truth[:, :2], axis=0)
+    speed_scale = float(np.sum(dD * dp) / np.sum(dD * dD))
+    return CommandCalibration(delay_s, speed_scale, float(yaw_rate_scale), float(yaw_rate_bias))
 
 
 def motion_windows(
@@ -153,17 +220,20 @@ def calibrate_mrclam(
     window_s: float = 2.0,
     progress: Callable[[int], None] | None = None,
 ) -> Calibration:
-    """Fit the motion noise and the measurement noise of ``recording`` to its Vicon truth."""
+    """Fit how the commands move the robot, then the motion noise of the calibrated commands and the
+    measurement noise of ``recording`` to its Vicon truth."""
     if not window_s > 0.0:
         raise ValueError(f"window must be > 0 s, got {window_s!r}")
     nu = measurement_residuals(recording)
-    errors, bases = motion_windows(recording, window_s, progress)
+    commands = fit_commands(recording, window_s)
+    errors, bases = motion_windows(commands.apply(recording), window_s, progress)
     if len(errors) < len(NOISE_FIELDS):
         raise ValueError(
             f"only {len(errors)} windows of {window_s} s: too few to fit {len(NOISE_FIELDS)} parameters"
         )
     noise, nll = fit_motion_noise(errors, bases)
     return Calibration(
+        commands=commands,
         noise=noise,
         range_std=float(np.sqrt(np.mean(nu[:, 0] ** 2))),
         bearing_std=float(np.sqrt(np.mean(nu[:, 1] ** 2))),

@@ -1,6 +1,6 @@
 """The dataset command end to end on the excerpts (60 s of MRCLAM Dataset 7 robot 1, 30 s of Victoria
-Park), its building blocks (scan grouping, parameter files, SE(2) alignment) and the noise calibration on
-synthetic data with known noise."""
+Park), its building blocks (scan grouping, parameter files, SE(2) alignment) and the calibration (commands
+and noise) on synthetic data with known commands and noise."""
 
 from __future__ import annotations
 
@@ -14,10 +14,21 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from nuturtle_demo.datasets.__main__ import main
-from nuturtle_demo.datasets.calibration import fit_motion_noise, measurement_residuals, motion_windows
+from nuturtle_demo.datasets.calibration import (
+    fit_commands,
+    fit_motion_noise,
+    measurement_residuals,
+    motion_windows,
+)
 from nuturtle_demo.datasets.experiment import Scans
 from nuturtle_demo.datasets.mrclam import MrclamRecording
-from nuturtle_demo.datasets.setups import MRCLAM_PARAMS, load_params
+from nuturtle_demo.datasets.setups import (
+    MRCLAM_PARAMS,
+    VICTORIA_PARAMS,
+    CommandCalibration,
+    load_params,
+    mrclam_params,
+)
 from nuturtle_demo.metrics import align_se2
 from turtlelib import Transform2D, TwistNoise, UnicycleMotion
 
@@ -88,9 +99,11 @@ def test_a_missing_directory_is_a_clear_error(tmp_path, capsys):
 
 def test_params_file_replaces_defaults(tmp_path):
     path = tmp_path / "params.yaml"
-    path.write_text("noise:\n  forward_m2_per_m: 0.5\nslam:\n  range_std: 0.3\n")
+    path.write_text("noise:\n  forward_m2_per_m: 0.5\nslam:\n  range_std: 0.3\ncommands:\n  delay_s: 0.1\n")
     params = load_params(MRCLAM_PARAMS, path)
     assert params.noise.forward_m2_per_m == 0.5 and params.slam.range_std == 0.3
+    assert params.commands.delay_s == 0.1
+    assert params.commands.speed_scale == MRCLAM_PARAMS.commands.speed_scale
     assert params.noise.heading_rad2_per_rad == MRCLAM_PARAMS.noise.heading_rad2_per_rad
     path.write_text("slam:\n  range_sd: 0.3\n")
     with pytest.raises(ValueError, match="range_sd"):
@@ -98,6 +111,35 @@ def test_params_file_replaces_defaults(tmp_path):
     path.write_text("slam:\n  range_std: -1\n")
     with pytest.raises(ValueError, match="range_std"):
         load_params(MRCLAM_PARAMS, path)
+    # Victoria Park's inputs are measured, not commanded: no commands section to ignore
+    path.write_text("commands:\n  delay_s: 0.1\n")
+    with pytest.raises(ValueError, match="commands"):
+        load_params(VICTORIA_PARAMS, path)
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [
+        ("delay_s", -0.1),
+        ("delay_s", 2.5),
+        ("speed_scale", 0.0),
+        ("yaw_rate_scale", -1.0),
+        ("yaw_rate_bias", math.nan),
+    ],
+)
+def test_command_calibration_refuses_invalid_values(field, value):
+    with pytest.raises(ValueError, match=field):
+        CommandCalibration(**{field: value})
+
+
+def test_mrclam_defaults_by_association():
+    assert mrclam_params("known").slam.linearization == "invariant"
+    assert mrclam_params("unknown").slam.linearization == "oc"
+    # one robot calibration whatever the association
+    assert mrclam_params("unknown").commands == mrclam_params("known").commands
+    assert mrclam_params("unknown").noise == mrclam_params("known").noise
+    with pytest.raises(ValueError, match="association"):
+        mrclam_params("both")
 
 
 def test_scans_group_rows_of_one_stamp():
@@ -182,3 +224,79 @@ def test_calibration_recovers_the_noise_of_synthetic_data():
     nu = measurement_residuals(recording)
     assert np.sqrt(np.mean(nu[:, 0] ** 2)) == pytest.approx(0.05, rel=0.15)
     assert np.sqrt(np.mean(nu[:, 1] ** 2)) == pytest.approx(0.02, rel=0.15)
+
+
+def _commanded_recording(
+    commands: CommandCalibration, seed: int, duration_s: float = 300.0
+) -> MrclamRecording:
+    """Commands at 50 Hz and the noise-free motion they make through ``commands``: the command stamped ``t``
+    acts from ``t + delay_s`` (a whole number of samples here) at the scaled speed and yaw rate."""
+    rng = np.random.default_rng(seed)
+    dt_ns = 20_000_000
+    n = int(duration_s * 50)
+    t = np.arange(n, dtype=np.int64) * dt_ns + 1_000_000_000_000
+    # piecewise-constant commands held 0.2-2 s, as a waypoint follower gives them
+    v, omega = np.empty(n), np.empty(n)
+    k = 0
+    while k < n:
+        hold = int(rng.integers(10, 100))
+        v[k : k + hold], omega[k : k + hold] = rng.uniform(0.0, 0.3), rng.uniform(-0.6, 0.6)
+        k += hold
+    lag = round(commands.delay_s * 1e9 / dt_ns)
+    model = UnicycleMotion(TwistNoise())
+    truth = np.zeros((n, 3))
+    T = Transform2D(0.5, -0.3, 0.2)
+    truth[0] = T.as_array()
+    for k in range(n - 1):
+        # the motion over [t_k, t_k+1] is that of the command stamped lag samples earlier (none before)
+        j = k - lag
+        u = (0.0, 0.0) if j < 0 else (v[j], omega[j])
+        actual = (commands.speed_scale * u[0], commands.yaw_rate_scale * u[1] + commands.yaw_rate_bias)
+        T = Transform2D(*model.step(T, (*actual, dt_ns))[0])
+        truth[k + 1] = T.as_array()
+    return MrclamRecording(
+        robot=1,
+        odometry_t_ns=t,
+        odometry_v_mps=v,
+        odometry_omega_rad_s=omega,
+        measurement_t_ns=t[:0],
+        measurement_subject=np.zeros(0, dtype=np.int64),
+        measurement_range_m=np.zeros(0),
+        measurement_bearing_rad=np.zeros(0),
+        truth_t_ns=t,
+        truth_poses=truth,
+        landmark_subjects=np.array([6], dtype=np.int64),
+        landmark_xy=np.array([[1.0, 2.0]]),
+        dropped_measurements=0,
+    )
+
+
+@pytest.mark.parametrize(
+    "commands",
+    [
+        CommandCalibration(delay_s=0.2, speed_scale=0.9, yaw_rate_scale=0.94, yaw_rate_bias=-0.004),
+        CommandCalibration(delay_s=0.0, speed_scale=1.1, yaw_rate_scale=1.05, yaw_rate_bias=0.002),
+        CommandCalibration(),
+    ],
+)
+def test_fit_commands_recovers_how_the_commands_move_the_robot(commands):
+    fitted = fit_commands(_commanded_recording(commands, seed=5))
+    assert fitted.delay_s == pytest.approx(commands.delay_s, abs=1e-9)
+    assert fitted.speed_scale == pytest.approx(commands.speed_scale, rel=1e-3)
+    assert fitted.yaw_rate_scale == pytest.approx(commands.yaw_rate_scale, rel=1e-3)
+    assert fitted.yaw_rate_bias == pytest.approx(commands.yaw_rate_bias, abs=1e-4)
+
+
+def test_applied_commands_dead_reckon_the_truth():
+    commands = CommandCalibration(delay_s=0.2, speed_scale=0.9, yaw_rate_scale=0.94, yaw_rate_bias=-0.004)
+    recording = _commanded_recording(commands, seed=7, duration_s=60.0)
+    identity = CommandCalibration().apply(recording)
+    for name in ("odometry_t_ns", "odometry_v_mps", "odometry_omega_rad_s"):
+        np.testing.assert_array_equal(getattr(identity, name), getattr(recording, name))
+    calibrated = commands.apply(recording)
+    np.testing.assert_array_equal(calibrated.odometry_t_ns, recording.odometry_t_ns + 200_000_000)
+    errors, _ = motion_windows(calibrated, window_s=2.0)
+    raw_errors, _ = motion_windows(recording, window_s=2.0)
+    # the calibrated commands explain the motion to rounding; the raw ones do not
+    assert np.abs(errors).max() < 1e-9
+    assert np.abs(raw_errors).max() > 1e-2
