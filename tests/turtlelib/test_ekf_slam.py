@@ -12,7 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from turtlelib import DiffDrive, Transform2D
+from turtlelib import DiffDrive, Transform2D, TwistNoise, UnicycleMotion
 from turtlelib.ekf_slam import EkfSlam, ObservationStatus, SlamConfig
 from turtlelib.motion_models import DiffDriveMotion
 from turtlelib.range_bearing import predict_observations
@@ -64,6 +64,32 @@ def test_default_config_knows_no_robot():
     np.testing.assert_array_equal(config.initial_pose_covariance(), np.zeros((3, 3)))
 
 
+def test_the_default_range_noise_grows_with_the_range():
+    """``sigma_r = range_std + range_std_per_m r``: a hand case, and the update's default R uses it."""
+    config = SlamConfig(range_std=0.02, range_std_per_m=0.03, bearing_std=0.01, max_range=10.0)
+    np.testing.assert_allclose(
+        config.observation_covariances(np.array([0.0, 2.0])),
+        [np.diag([0.02**2, 0.01**2]), np.diag([0.08**2, 0.01**2])],
+        rtol=1e-15,
+    )
+    # without the range part, every range gets R of range_std (bit for bit what it was)
+    flat = SlamConfig(range_std=0.02, bearing_std=0.01)
+    np.testing.assert_array_equal(
+        flat.observation_covariances(np.array([0.5, 3.0])), flat.measurement_covariance(2)
+    )
+    # an update without R fuses the far observation with its larger range noise: the same as given explicitly
+    z = np.array([[1.0, 0.2], [4.0, -0.3]])
+    implicit, explicit = (
+        EkfSlam(config, UnicycleMotion(TwistNoise())),
+        EkfSlam(config, UnicycleMotion(TwistNoise())),
+    )
+    for z_k in (z, z + 0.01):
+        implicit.update_known([0, 1], z_k)
+        explicit.update_known([0, 1], z_k, config.observation_covariances(z_k[:, 0]))
+    np.testing.assert_array_equal(implicit.covariance, explicit.covariance)
+    np.testing.assert_array_equal(implicit.state, explicit.state)
+
+
 @pytest.mark.parametrize(
     "field, value",
     [
@@ -80,6 +106,8 @@ def test_default_config_knows_no_robot():
         ("gate_known", 1.5),
         ("gate_known", math.nan),
         ("linearization", "exact"),
+        ("range_std_per_m", -0.01),
+        ("range_std_per_m", math.nan),
         ("confirm_count", 0),
         ("confirm_count", 2.0),
         ("confirm_count", True),

@@ -153,8 +153,10 @@ LINEARIZATIONS = ("standard", "fej", "oc", "invariant")
 class SlamConfig:
     """Parameters of :class:`EkfSlam`; the field names are the slam node's ROS parameters.
 
-    * ``range_std`` (m), ``bearing_std`` (rad), > 0: default observation noise ``R = diag(range_std^2,
-      bearing_std^2)`` when an update is given no ``R``.
+    * ``range_std`` (m), ``bearing_std`` (rad), > 0: default observation noise ``R = diag(sigma_r^2,
+      bearing_std^2)`` when an update is given no ``R``, with ``sigma_r = range_std + range_std_per_m r``
+      for an observed range ``r``; ``range_std_per_m`` (m/m, >= 0, default 0): the part of the range noise
+      that grows with the range (a camera's range from apparent size; 0 for a LiDAR).
     * ``sensor_x``, ``sensor_y`` (m), ``sensor_theta`` (rad): ``T_body_sensor``, the sensor mounting in the
       body frame (default: at the body origin; the robot's description says where it is).
     * ``matcher``: how unknown association pairs observations with landmarks, ``'nn'`` (nearest neighbour)
@@ -188,6 +190,7 @@ class SlamConfig:
 
     range_std: float = 0.02
     bearing_std: float = 0.02
+    range_std_per_m: float = 0.0
     sensor_x: float = 0.0
     sensor_y: float = 0.0
     sensor_theta: float = 0.0
@@ -210,7 +213,7 @@ class SlamConfig:
 
     def __post_init__(self) -> None:
         store(self, ("sensor_x", "sensor_y", "sensor_theta"), finite_real)
-        store(self, ("initial_xy_std", "initial_theta_std", "min_range"), non_negative)
+        store(self, ("initial_xy_std", "initial_theta_std", "min_range", "range_std_per_m"), non_negative)
         store(self, ("range_std", "bearing_std", "max_range", "tentative_timeout"), positive)
         one_of("matcher", self.matcher, MATCHERS)
         one_of("linearization", self.linearization, LINEARIZATIONS)
@@ -238,8 +241,16 @@ class SlamConfig:
         return Transform2D(self.sensor_x, self.sensor_y, self.sensor_theta)
 
     def measurement_covariance(self, count: int) -> NDArray[np.float64]:
-        """``count`` copies (count, 2, 2) of the default ``R = diag(range_std^2, bearing_std^2)``."""
+        """``count`` copies (count, 2, 2) of ``R = diag(range_std^2, bearing_std^2)``, the noise at range 0"""
         return np.broadcast_to(np.diag([self.range_std**2, self.bearing_std**2]), (count, 2, 2)).copy()
+
+    def observation_covariances(self, range_m: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The default ``R`` (K, 2, 2) of observations at ranges ``range_m`` (K,):
+        ``diag((range_std + range_std_per_m r)^2, bearing_std^2)``."""
+        R = self.measurement_covariance(len(range_m))
+        if self.range_std_per_m > 0.0:
+            R[:, 0, 0] = (self.range_std + self.range_std_per_m * np.asarray(range_m)) ** 2
+        return R
 
     def initial_pose_covariance(self) -> NDArray[np.float64]:
         """``diag(initial_xy_std^2, initial_xy_std^2, initial_theta_std^2)`` (3, 3)."""
@@ -300,7 +311,6 @@ class EkfSlam:
         self._constrained = config.linearization in ("fej", "oc")
         self._invariant = config.linearization == "invariant"
         self._T_body_sensor = config.T_body_sensor
-        self._default_R = config.measurement_covariance(1)
         self._gate_associate = float(chi2_gate(config.gate_associate, 2))
         self._gate_new = float(chi2_gate(config.gate_new, 2))
         self._gate_known = _gate_or_inf(config.gate_known)
@@ -689,7 +699,7 @@ class EkfSlam:
         if not (z[:, 0] > 0.0).all():
             raise ValueError("observed ranges must be > 0")
         if R is None:
-            return z, np.repeat(self._default_R, len(z), axis=0)
+            return z, self._config.observation_covariances(z[:, 0])
         R = np.array(R, dtype=np.float64)
         if R.shape != (len(z), 2, 2):
             raise ValueError(f"R must have shape ({len(z)}, 2, 2), got {R.shape}")

@@ -16,8 +16,11 @@ interpolation), a :class:`setups.CommandCalibration` is fitted in two steps:
 Measurement noise
 -----------------
 Each landmark observation ``z`` is compared with ``h(q_true(t), m_true)`` (the Vicon pose interpolated at
-its stamp; :mod:`turtlelib.range_bearing`); the ML standard deviations of zero-mean Gaussian residuals are
-``range_std = sqrt(mean(nu_r^2))`` and ``bearing_std = sqrt(mean(nu_b^2))``.
+its stamp; :mod:`turtlelib.range_bearing`). The residuals are taken as zero-mean Gaussians; the bearing's
+ML standard deviation is ``bearing_std = sqrt(mean(nu_b^2))``, and the range's grows with the observed range
+``r`` (``SlamConfig``: ``sigma_r = range_std + range_std_per_m r``, ``range_std_per_m >= 0``), fitted by::
+
+    argmin  sum_k ln sigma_r(r_k)^2 + nu_rk^2 / sigma_r(r_k)^2     (L-BFGS-B over the two parameters)
 
 Motion noise
 ------------
@@ -65,6 +68,7 @@ class Calibration:
     commands: CommandCalibration
     noise: TwistNoise
     range_std: float
+    range_std_per_m: float
     bearing_std: float
     windows: int
     window_s: float
@@ -76,7 +80,11 @@ class Calibration:
         return {
             "commands": dataclasses.asdict(self.commands),
             "noise": dataclasses.asdict(self.noise),
-            "slam": {"range_std": self.range_std, "bearing_std": self.bearing_std},
+            "slam": {
+                "range_std": self.range_std,
+                "range_std_per_m": self.range_std_per_m,
+                "bearing_std": self.bearing_std,
+            },
         }
 
     def report(self) -> str:
@@ -88,13 +96,15 @@ class Calibration:
         lines += [f"  {name:22s} {getattr(self.noise, name):.4g}" for name in NOISE_FIELDS]
         lines += [
             f"  {'range_std':22s} {self.range_std:.4g} m",
+            f"  {'range_std_per_m':22s} {self.range_std_per_m:.4g} m/m",
             f"  {'bearing_std':22s} {self.bearing_std:.4g} rad",
         ]
         return "\n".join(lines)
 
 
-def measurement_residuals(recording: MrclamRecording) -> NDArray[np.float64]:
-    """``nu = z - h(q_true, m_true)`` (K, 2) of the observations within the ground truth's time span."""
+def measurement_residuals(recording: MrclamRecording) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``(r, nu)``: the observed ranges (K,) and ``nu = z - h(q_true, m_true)`` (K, 2) of the observations
+    within the ground truth's time span."""
     t = recording.measurement_t_ns
     inside = (t >= recording.truth_t_ns[0]) & (t <= recording.truth_t_ns[-1])
     poses = interpolate_poses(recording.truth_t_ns, recording.truth_poses, t[inside])
@@ -105,7 +115,23 @@ def measurement_residuals(recording: MrclamRecording) -> NDArray[np.float64]:
     for k in range(len(z)):
         z_hat, _, _ = predict_observations(poses[k], landmarks[k : k + 1], Transform2D())
         nu[k] = residual(z[k], z_hat[0])
-    return nu
+    return z[:, 0], nu
+
+
+def fit_range_noise(range_m: NDArray[np.float64], nu_range: NDArray[np.float64]) -> tuple[float, float]:
+    """The ML ``(range_std, range_std_per_m)`` of range residuals ``nu_range`` (K,) at ranges ``range_m``
+    (K,) (module docstring); ValueError for fewer than 2 observations."""
+    if len(range_m) < 2:
+        raise ValueError(f"{len(range_m)} observations: too few to fit the range noise")
+
+    def cost(parameters: NDArray[np.float64]) -> float:
+        variance = (parameters[0] + parameters[1] * range_m) ** 2
+        return float(np.sum(np.log(variance) + nu_range**2 / variance))
+
+    rms = float(np.sqrt(np.mean(nu_range**2)))
+    floor = 1e-6 * max(rms, 1e-9)
+    best = minimize(cost, [rms, 0.0], method="L-BFGS-B", bounds=[(floor, None), (0.0, None)])
+    return float(best.x[0]), float(best.x[1])
 
 
 def fit_commands(recording: MrclamRecording, window_s: float = 2.0) -> CommandCalibration:
@@ -224,7 +250,8 @@ def calibrate_mrclam(
     measurement noise of ``recording`` to its Vicon truth."""
     if not window_s > 0.0:
         raise ValueError(f"window must be > 0 s, got {window_s!r}")
-    nu = measurement_residuals(recording)
+    range_m, nu = measurement_residuals(recording)
+    range_std, range_std_per_m = fit_range_noise(range_m, nu[:, 0])
     commands = fit_commands(recording, window_s)
     errors, bases = motion_windows(commands.apply(recording), window_s, progress)
     if len(errors) < len(NOISE_FIELDS):
@@ -235,7 +262,8 @@ def calibrate_mrclam(
     return Calibration(
         commands=commands,
         noise=noise,
-        range_std=float(np.sqrt(np.mean(nu[:, 0] ** 2))),
+        range_std=range_std,
+        range_std_per_m=range_std_per_m,
         bearing_std=float(np.sqrt(np.mean(nu[:, 1] ** 2))),
         windows=len(errors),
         window_s=window_s,

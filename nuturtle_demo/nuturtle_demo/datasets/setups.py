@@ -152,7 +152,8 @@ MRCLAM_PARAMS = MrclamParams(
         heading_rad2_per_s=1.14e-4,
     ),
     slam=SlamConfig(
-        range_std=0.125,
+        range_std=0.0238,
+        range_std_per_m=0.0293,
         bearing_std=0.0275,
         max_range=10.0,
         initial_xy_std=0.001,

@@ -17,6 +17,7 @@ from nuturtle_demo.datasets.__main__ import main
 from nuturtle_demo.datasets.calibration import (
     fit_commands,
     fit_motion_noise,
+    fit_range_noise,
     measurement_residuals,
     motion_windows,
 )
@@ -221,9 +222,25 @@ def test_calibration_recovers_the_noise_of_synthetic_data():
     assert fitted.heading_rad2_per_rad == pytest.approx(2e-2, rel=0.25)
     assert fitted.lateral_m2_per_m == pytest.approx(5e-4, rel=0.4)
     assert fitted.heading_rad2_per_s < 2e-3 and fitted.forward_m2_per_s < 4e-4
-    nu = measurement_residuals(recording)
-    assert np.sqrt(np.mean(nu[:, 0] ** 2)) == pytest.approx(0.05, rel=0.15)
+    range_m, nu = measurement_residuals(recording)
+    # constant range noise: the range-proportional part is small against it
+    range_std, range_std_per_m = fit_range_noise(range_m, nu[:, 0])
+    assert range_std + range_std_per_m * np.mean(range_m) == pytest.approx(0.05, rel=0.15)
+    assert range_std_per_m * np.mean(range_m) < 0.3 * range_std
     assert np.sqrt(np.mean(nu[:, 1] ** 2)) == pytest.approx(0.02, rel=0.15)
+
+
+@pytest.mark.parametrize(("range_std", "range_std_per_m"), [(0.02, 0.03), (0.1, 0.0), (0.005, 0.05)])
+def test_fit_range_noise_recovers_noise_that_grows_with_the_range(range_std, range_std_per_m):
+    rng = np.random.default_rng(11)
+    range_m = rng.uniform(0.5, 8.0, 4000)
+    nu = rng.normal(size=4000) * (range_std + range_std_per_m * range_m)
+    fitted_std, fitted_per_m = fit_range_noise(range_m, nu)
+    # 4000 samples: sigma at 1 m and at 6 m within 5 %
+    for r in (1.0, 6.0):
+        assert fitted_std + fitted_per_m * r == pytest.approx(range_std + range_std_per_m * r, rel=0.05)
+    with pytest.raises(ValueError, match="too few"):
+        fit_range_noise(range_m[:1], nu[:1])
 
 
 def _commanded_recording(
