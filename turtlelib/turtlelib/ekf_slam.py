@@ -241,7 +241,7 @@ class SlamConfig:
         return Transform2D(self.sensor_x, self.sensor_y, self.sensor_theta)
 
     def measurement_covariance(self, count: int) -> NDArray[np.float64]:
-        """``count`` copies (count, 2, 2) of ``R = diag(range_std^2, bearing_std^2)``, the noise at range 0"""
+        """``R = diag(range_std^2, bearing_std^2)`` (count, 2, 2): an observation's noise at range 0."""
         return np.broadcast_to(np.diag([self.range_std**2, self.bearing_std**2]), (count, 2, 2)).copy()
 
     def observation_covariances(self, range_m: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -51,7 +51,8 @@ Cost per operation (``m = 2k`` stacked observation rows)
 --------------------------------------------------------
 * :meth:`predict` is O(1): it updates the pose and ``P_qq`` and defers the cross-covariance ``P_qm <- G P_qm``
   by accumulating the product of the steps' ``G`` (3 x 3), applied to the robot rows (O(N)) when anything
-  else is read or changed. A run of predictions between two updates costs one pass over the robot rows.
+  else is read or changed. A run of predictions between two updates costs one pass over the robot rows
+  (invariant: and one rank-one pass over ``P``'s upper triangle, O(N^2), for the heading noise).
 * :meth:`correct` uses that ``H`` is non-zero only in the robot columns and the observed landmarks'
   columns: it gathers those ``3 + m`` rows of ``P`` (O(N m)), forms ``S`` (m x m), and applies one
   symmetric rank-m downdate of ``P``'s upper triangle in place by BLAS ``dsyrk`` (O(N^2 m)); never an
@@ -126,11 +127,6 @@ class SlamState:
     def mean(self) -> NDArray[np.float64]:
         """``x`` (N,), a view into the filter's storage (read it, do not write it)."""
         return self._mean[: self.dim]
-
-    @property
-    def invariant(self) -> bool:
-        """Whether ``P`` is stored in the right-invariant coordinates (module docstring)."""
-        return self._invariant
 
     @property
     def covariance(self) -> NDArray[np.float64]:
@@ -480,8 +476,9 @@ class SlamState:
         c = self._rotation_column(capacity=True)
         P[:ROBOT_DIM, ROBOT_DIM:dim] -= np.outer(self._pending_b, c[ROBOT_DIM:dim])
         c[:ROBOT_DIM] = 0.0
-        # triu(P_mm) += s c_m c_m^T: dsyrk on the storage's F-contiguous transpose, as in correct
-        self._rank_update(c[None, :], self._pending_s)
+        # triu(P_mm) += s c_m c_m^T (none without heading noise)
+        if self._pending_s > 0.0:
+            self._rank_update(c[None, :], self._pending_s)
         self._pending_b = np.zeros(ROBOT_DIM)
         self._pending_s = 0.0
 

@@ -63,7 +63,8 @@ DELAY_WINDOW_S = 0.5
 
 @dataclass(frozen=True)
 class Calibration:
-    """The fitted commands, noise (``noise``, ``range_std``, ``bearing_std``) and what they were fitted on."""
+    """The fitted commands and noise (``noise``, ``range_std``, ``range_std_per_m``, ``bearing_std``), and
+    what they were fitted on."""
 
     commands: CommandCalibration
     noise: TwistNoise
@@ -138,7 +139,7 @@ def fit_commands(recording: MrclamRecording, window_s: float = 2.0) -> CommandCa
     """The :class:`setups.CommandCalibration` of ``recording`` by least squares (module docstring)."""
     t = recording.odometry_t_ns
     dt_s = np.diff(t) / NS_PER_S
-    # psi, s at each command stamp: the held commands integrated (exact, piecewise linear in time)
+    # psi at each command stamp: the held yaw-rate commands integrated (exact, piecewise linear in time)
     psi = np.r_[0.0, np.cumsum(recording.odometry_omega_rad_s[:-1] * dt_s)]
     first = max(int(t[0]) + round(MAX_DELAY_S * NS_PER_S), int(recording.truth_t_ns[0]))
     last = min(int(t[-1]), int(recording.truth_t_ns[-1]))
@@ -156,8 +157,8 @@ def fit_commands(recording: MrclamRecording, window_s: float = 2.0) -> CommandCa
         # the commands that act on [a, b] were stamped delay_s earlier
         dpsi = np.diff(np.interp(edges - round(delay_s * NS_PER_S), t, psi))
         A = np.column_stack([dpsi, np.ones_like(dpsi)])
-        residual = dtheta - A @ np.linalg.lstsq(A, dtheta, rcond=None)[0]
-        best = min(best, (float(residual @ residual), float(delay_s)))
+        misfit = dtheta - A @ np.linalg.lstsq(A, dtheta, rcond=None)[0]
+        best = min(best, (float(misfit @ misfit), float(delay_s)))
     delay_s = best[1]
     delay_ns = round(delay_s * NS_PER_S)
 

@@ -13,7 +13,8 @@
 
 The noise (:class:`turtlelib.TwistNoise`) and the filter's options come from :class:`DatasetParams`; the
 defaults (:func:`mrclam_params`, :data:`VICTORIA_PARAMS`) are explained in docs/real_data.md, and a YAML
-file (``noise:`` and ``slam:`` mappings, e.g. written by the calibrate command) replaces any of them.
+file (``noise:`` and ``slam:`` mappings, and ``commands:`` for MRCLAM, e.g. written by the calibrate command)
+replaces any of them.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ import math
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
-from typing import TypeVar
+from typing import Self, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -86,7 +87,7 @@ class DatasetParams:
     noise: TwistNoise
     slam: SlamConfig
 
-    def replaced(self, values: dict) -> DatasetParams:
+    def replaced(self, values: dict) -> Self:
         """A copy with ``values[section]`` (mappings of field names) replacing fields of its sections
         (``noise``, ``slam`` and, for MRCLAM, ``commands``); ValueError for an unknown section or field (and
         for invalid values)."""
