@@ -23,6 +23,9 @@ from typing import TYPE_CHECKING
 
 from .experiment import Experiment, ExperimentResult, run_experiment
 
+# the calibrate command's default window (docs/real_data.md: chosen on MRCLAM robot 1)
+WINDOW_S = 10.0
+
 if TYPE_CHECKING:
     from .evaluation import Evaluation
     from .setups import DatasetParams
@@ -52,7 +55,12 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     )
     calibrate.add_argument("--data", required=True, type=Path, help="an MRCLAM_DatasetN directory")
     calibrate.add_argument("--robot", required=True, type=int, choices=range(1, 6), help="robot 1..5")
-    calibrate.add_argument("--window", type=float, default=2.0, help="window length of the motion fit (s)")
+    calibrate.add_argument(
+        "--window",
+        type=float,
+        default=WINDOW_S,
+        help=f"window length of the motion and command fits (s, default {WINDOW_S:g})",
+    )
     calibrate.add_argument("--out", type=Path, default=None, help="params YAML (default: stdout)")
     calibrate.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
     return parser.parse_args(argv)

@@ -135,7 +135,7 @@ def fit_range_noise(range_m: NDArray[np.float64], nu_range: NDArray[np.float64])
     return float(best.x[0]), float(best.x[1])
 
 
-def fit_commands(recording: MrclamRecording, window_s: float = 2.0) -> CommandCalibration:
+def fit_commands(recording: MrclamRecording, window_s: float) -> CommandCalibration:
     """The :class:`setups.CommandCalibration` of ``recording`` by least squares (module docstring)."""
     t = recording.odometry_t_ns
     dt_s = np.diff(t) / NS_PER_S
@@ -244,7 +244,7 @@ def fit_motion_noise(errors: NDArray[np.float64], bases: NDArray[np.float64]) ->
 
 def calibrate_mrclam(
     recording: MrclamRecording,
-    window_s: float = 2.0,
+    window_s: float,
     progress: Callable[[int], None] | None = None,
 ) -> Calibration:
     """Fit how the commands move the robot, then the motion noise of the calibrated commands and the

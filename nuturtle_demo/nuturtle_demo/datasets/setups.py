@@ -139,18 +139,18 @@ def load_params(defaults: Params, path: str | Path | None) -> Params:
 
 
 # MRCLAM robot 1 (Dataset 7), from `calibrate mrclam --robot 1` (docs/real_data.md): the only tuning.
-# Known association runs the right-invariant EKF (honest heading, Jacobians at the newest estimates)
+# The right-invariant EKF: an honest heading with Jacobians at the newest estimates
 MRCLAM_PARAMS = MrclamParams(
     commands=CommandCalibration(
-        delay_s=0.19, speed_scale=0.9145, yaw_rate_scale=0.9387, yaw_rate_bias=-3.80e-3
+        delay_s=0.19, speed_scale=0.9238, yaw_rate_scale=0.9341, yaw_rate_bias=-3.82e-3
     ),
     noise=TwistNoise(
-        forward_m2_per_m=2.79e-3,
+        forward_m2_per_m=6.99e-3,
         forward_m2_per_s=0.0,
-        lateral_m2_per_m=9.29e-5,
-        heading_rad2_per_m=0.0,
-        heading_rad2_per_rad=9.16e-3,
-        heading_rad2_per_s=1.14e-4,
+        lateral_m2_per_m=1.47e-4,
+        heading_rad2_per_m=2.37e-3,
+        heading_rad2_per_rad=1.07e-2,
+        heading_rad2_per_s=0.0,
     ),
     slam=SlamConfig(
         range_std=0.0238,
@@ -167,9 +167,8 @@ MRCLAM_PARAMS = MrclamParams(
         tentative_timeout=30.0,
     ),
 )
-# unknown association keeps the observability-constrained EKF with first-estimate resets: on robot 1 it maps
-# 13 of the 15 tubes once (1 spurious) against 8 (5 spurious) for the invariant filter (docs/real_data.md)
-MRCLAM_UNKNOWN_PARAMS = MRCLAM_PARAMS.replaced({"slam": {"linearization": "oc", "relinearize_gate": 0.99999}})
+# unknown association pairs observations by joint compatibility (JCBB): the tubes stand in pairs 0.18 m apart
+MRCLAM_UNKNOWN_PARAMS = MRCLAM_PARAMS.replaced({"slam": {"matcher": "jcbb"}})
 
 
 def mrclam_params(association: str) -> MrclamParams:
@@ -197,6 +196,7 @@ VICTORIA_PARAMS = DatasetParams(
         sensor_y=LASER_Y_M,
         max_range=30.0,
         linearization="invariant",
+        matcher="jcbb",
         gate_associate=0.99,
         gate_new=0.9999,
         confirm_count=3,

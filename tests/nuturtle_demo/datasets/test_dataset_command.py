@@ -135,7 +135,8 @@ def test_command_calibration_refuses_invalid_values(field, value):
 
 def test_mrclam_defaults_by_association():
     assert mrclam_params("known").slam.linearization == "invariant"
-    assert mrclam_params("unknown").slam.linearization == "oc"
+    assert mrclam_params("unknown").slam.linearization == "invariant"
+    assert (mrclam_params("known").slam.matcher, mrclam_params("unknown").slam.matcher) == ("nn", "jcbb")
     # one robot calibration whatever the association
     assert mrclam_params("unknown").commands == mrclam_params("known").commands
     assert mrclam_params("unknown").noise == mrclam_params("known").noise
@@ -297,7 +298,7 @@ def _commanded_recording(
     ],
 )
 def test_fit_commands_recovers_how_the_commands_move_the_robot(commands):
-    fitted = fit_commands(_commanded_recording(commands, seed=5))
+    fitted = fit_commands(_commanded_recording(commands, seed=5), window_s=2.0)
     assert fitted.delay_s == pytest.approx(commands.delay_s, abs=1e-9)
     assert fitted.speed_scale == pytest.approx(commands.speed_scale, rel=1e-3)
     assert fitted.yaw_rate_scale == pytest.approx(commands.yaw_rate_scale, rel=1e-3)
