@@ -643,6 +643,7 @@ def invalid(name: str, value, message: str):
         invalid("tentative_timeout", "2", "tentative_timeout must be of type float"),
         invalid("gate_known", 1.5, "gate_known"),
         invalid("linearization", "exact", "linearization must be one of"),
+        invalid("range_std_per_m", -0.01, "range_std_per_m"),
         invalid("wheel_noise", -0.1, "wheel_noise"),
         invalid("max_observation_delay", -0.1, "max_observation_delay"),
         invalid("wheel_right", "wheel_left_joint", "wheel_left, wheel_right must be distinct joint names"),
@@ -672,19 +673,31 @@ def test_the_default_parameters(ros):
     assert node.get_parameter("wheel_radius").value == R_WHEEL
 
 
-def test_the_filter_parameters_reach_the_filter(ros):
+@pytest.mark.parametrize("linearization", ["fej", "invariant"])
+def test_the_filter_parameters_reach_the_filter(ros, linearization):
     overrides = [
         Parameter("wheel_noise", value=0.2),
         Parameter("tentative_timeout", value=0.5),
         Parameter("gate_known", value=1.0),
-        Parameter("linearization", value="fej"),
+        Parameter("linearization", value=linearization),
+        Parameter("range_std_per_m", value=0.01),
     ]
     node = ros.add(SlamNode(context=ros.context, parameter_overrides=overrides))
     assert node.slam.motion == DiffDriveMotion(DRIVE, 0.2)
     assert node.node_config.wheel_noise == 0.2
     assert node.config == SlamConfig(
-        sensor_x=T_BODY_SENSOR.x, tentative_timeout=0.5, gate_known=1.0, linearization="fej"
+        sensor_x=T_BODY_SENSOR.x,
+        tentative_timeout=0.5,
+        gate_known=1.0,
+        linearization=linearization,
+        range_std_per_m=0.01,
     )
+
+
+def test_the_invariant_filter_in_localization_is_refused_at_start_up(ros):
+    overrides = [Parameter("mode", value="localization"), Parameter("linearization", value="invariant")]
+    with pytest.raises(ValueError, match="'invariant' is for mapping"):
+        SlamNode(context=ros.context, parameter_overrides=overrides)
 
 
 def test_the_filter_s_sensor_mount_is_the_robot_s_lidar_mount(ros):
