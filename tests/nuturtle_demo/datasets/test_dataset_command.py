@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -91,6 +92,27 @@ def test_victoria_excerpt_end_to_end(tmp_path):
     # started from the GPS: within a few metres of it over the first 30 s
     assert metrics["ate_rmse_m"] < 5.0
     assert metrics["nees_dof"] == 2
+
+
+def test_calibrate_writes_params_that_a_run_takes(tmp_path, capsys):
+    """``calibrate`` on the excerpt (2 s windows: 60 s hold too few of the default 10 s) writes the
+    commands, noise and measurement sections; ``mrclam --params`` runs with them and records them."""
+    data = ["--data", str(DATA / "mrclam7_robot1_60s"), "--robot", "1", "--no-progress"]
+    params = tmp_path / "params.yaml"
+    assert main(["calibrate", *data, "--window", "2", "--out", str(params)]) == 0
+    fitted = yaml.safe_load(params.read_text())
+    assert set(fitted) == {"commands", "noise", "slam"}
+    assert set(fitted["slam"]) == {"range_std", "range_std_per_m", "bearing_std"}
+    # the excerpt's robot, like every MRCLAM robot, acts on its commands about 0.2 s late
+    assert 0.1 <= fitted["commands"]["delay_s"] <= 0.3
+    out = tmp_path / "run"
+    assert main(["mrclam", *data, "--params", str(params), "--out", str(out)]) == 0
+    used = yaml.safe_load((out / "params.yaml").read_text())
+    assert used["commands"] == fitted["commands"] and used["noise"] == fitted["noise"]
+    assert used["slam"]["range_std_per_m"] == fitted["slam"]["range_std_per_m"]
+    # the default window needs more than 60 s of ground truth: a clear error
+    assert main(["calibrate", *data]) == 2
+    assert "too few" in capsys.readouterr().err
 
 
 def test_a_missing_directory_is_a_clear_error(tmp_path, capsys):
