@@ -35,6 +35,7 @@ import math
 import numpy as np
 import pytest
 import scipy.linalg
+from dense_batches import fuse_known_batch, random_noise
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import chi2
@@ -218,15 +219,6 @@ class DenseInvariantEkf:
         return self.x[indices], P[np.ix_(indices, indices)]
 
 
-def random_noise(rng, count):
-    """Per-observation noise covariances with different scales and correlations."""
-    R = np.empty((count, 2, 2))
-    for k in range(count):
-        A = rng.normal(size=(2, 2)) * [[0.03], [0.02]]
-        R[k] = A @ A.T + np.diag([1e-4, 1e-4])
-    return R
-
-
 def random_input(rng):
     return (
         float(rng.uniform(-0.2, 1.0)),
@@ -318,16 +310,7 @@ def test_fast_filter_equals_the_dense_invariant_filter(motion):
         z, _, _ = predict_observations(truth.as_array(), world[which], SENSOR)
         z = z + rng.normal(0.0, 0.02, z.shape)
         R = random_noise(rng, len(ids))
-        result = slam.update_known(ids, z, R)
-
-        old = np.array([int(i) in seen for i in ids], dtype=bool)
-        expected = np.where(old, ObservationStatus.MATCHED, ObservationStatus.NEW)
-        np.testing.assert_array_equal(result.status, expected)
-        if old.any():
-            dense.update(ids[old], z[old], R[old])
-        for k in np.flatnonzero(~old):
-            dense.augment(int(ids[k]), z[k], R[k])
-            seen.add(int(ids[k]))
+        fuse_known_batch(slam, dense, seen, ids, z, R)
         assert_agrees(slam, dense)
     assert len(seen) > 16
 

@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 import pytest
+from dense_batches import fuse_known_batch, random_noise
 
 from turtlelib import DiffDrive, Transform2D
 from turtlelib.ekf_slam import EkfSlam, ObservationStatus, SlamConfig
@@ -95,15 +96,6 @@ class DenseEkf:
         return self.x[indices], self.P[np.ix_(indices, indices)]
 
 
-def random_noise(rng, count):
-    """Per-observation noise covariances with different scales and correlations."""
-    R = np.empty((count, 2, 2))
-    for k in range(count):
-        A = rng.normal(size=(2, 2)) * [[0.03], [0.02]]
-        R[k] = A @ A.T + np.diag([1e-4, 1e-4])
-    return R
-
-
 def assert_agrees(slam: EkfSlam, dense: DenseEkf, atol=1e-9) -> None:
     x, P = dense.sorted_by_id()
     state = slam.state
@@ -133,17 +125,8 @@ def test_fast_filter_equals_the_dense_textbook_filter():
         z, _, _ = predict_observations(truth.as_array(), world[ids], SENSOR)
         z = z + rng.normal(0.0, 0.02, z.shape)
         R = random_noise(rng, len(ids))
-        result = slam.update_known(ids, z, R)
-
-        old = np.array([i in seen for i in ids], dtype=bool)
-        expected_status = np.where(old, ObservationStatus.MATCHED, ObservationStatus.NEW)
-        np.testing.assert_array_equal(result.status, expected_status)
+        result = fuse_known_batch(slam, dense, seen, ids, z, R)
         np.testing.assert_array_equal(result.landmark_ids, ids)
-        if old.any():
-            dense.update(ids[old], z[old], R[old])
-        for k in np.flatnonzero(~old):
-            dense.augment(int(ids[k]), z[k], R[k])
-            seen.add(int(ids[k]))
         assert_agrees(slam, dense)
     assert len(seen) > 16
 
