@@ -21,7 +21,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from .experiment import Experiment, ExperimentResult, run_experiment
+from .experiment import ASSOCIATIONS, Experiment, ExperimentResult, run_experiment
 
 # the calibrate command's default window (docs/real_data.md: chosen on MRCLAM robot 1)
 WINDOW_S = 10.0
@@ -40,7 +40,7 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     mrclam = commands.add_parser("mrclam", help="one robot of a UTIAS MRCLAM dataset")
     mrclam.add_argument("--data", required=True, type=Path, help="an MRCLAM_DatasetN directory")
     mrclam.add_argument("--robot", required=True, type=int, choices=range(1, 6), help="robot 1..5")
-    mrclam.add_argument("--association", choices=("known", "unknown"), default="known")
+    mrclam.add_argument("--association", choices=ASSOCIATIONS, default="known")
     victoria = commands.add_parser("victoria", help="the Victoria Park run (tree detections, GPS)")
     victoria.add_argument("--data", required=True, type=Path, help="the victoria_park directory")
     for command in (mrclam, victoria):

@@ -32,6 +32,9 @@ from turtlelib import (
 )
 from turtlelib.timebase import NS_PER_S
 
+# data association: landmark ids given with the observations (known) or found by the filter (unknown)
+ASSOCIATIONS = ("known", "unknown")
+
 
 @dataclass(frozen=True)
 class Scans:

@@ -31,10 +31,10 @@ from numpy.typing import NDArray
 
 from turtlelib import AckermannMotion, HeldInputs, SlamConfig, Transform2D, TwistNoise, UnicycleMotion
 from turtlelib.timebase import NS_PER_S
-from turtlelib.validation import finite_real, in_range, positive, store
+from turtlelib.validation import finite_real, in_range, one_of, positive, store
 
 from ..metrics import align_se2
-from .experiment import Experiment, Scans, run_experiment
+from .experiment import ASSOCIATIONS, Experiment, Scans, run_experiment
 from .mrclam import MrclamRecording
 from .victoria import VictoriaRecording, gps_outliers
 
@@ -173,8 +173,7 @@ MRCLAM_UNKNOWN_PARAMS = MRCLAM_PARAMS.replaced({"slam": {"matcher": "jcbb"}})
 
 def mrclam_params(association: str) -> MrclamParams:
     """The MRCLAM defaults for ``association`` (``known`` or ``unknown``)."""
-    if association not in ("known", "unknown"):
-        raise ValueError(f"association must be known or unknown, got {association!r}")
+    one_of("association", association, ASSOCIATIONS)
     return MRCLAM_PARAMS if association == "known" else MRCLAM_UNKNOWN_PARAMS
 
 
@@ -208,8 +207,7 @@ VICTORIA_PARAMS = DatasetParams(
 def mrclam_experiment(recording: MrclamRecording, params: MrclamParams, association: str) -> Experiment:
     """MRCLAM robot ``recording.robot`` (module docstring), its commands through ``params.commands``;
     ``association`` is ``known`` or ``unknown``."""
-    if association not in ("known", "unknown"):
-        raise ValueError(f"association must be known or unknown, got {association!r}")
+    one_of("association", association, ASSOCIATIONS)
     recording = params.commands.apply(recording)
     t0 = recording.odometry_t_ns[0]
     truth = recording.truth_t_ns
