@@ -8,9 +8,17 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.stats import chi2
 
-from turtlelib.association import chi2_gate, joint_compatibility, mahalanobis_2d, nearest_neighbour
+from turtlelib.association import (
+    chi2_gate,
+    joint_compatibility,
+    mahalanobis_2d,
+    mahalanobis_lower_bound,
+    nearest_neighbour,
+)
 
 
 @pytest.mark.parametrize("prob", [0.5, 0.95, 0.99, 0.9999])
@@ -37,6 +45,43 @@ def test_mahalanobis_hand_case_and_batch():
     expected = np.einsum("...i,...i->...", nu, np.linalg.solve(S, nu[..., None])[..., 0])
     np.testing.assert_allclose(d2, expected, rtol=1e-12)
     np.testing.assert_allclose(log_det, np.linalg.slogdet(S)[1], rtol=1e-12)
+
+
+def test_mahalanobis_lower_bound_hand_case():
+    # P = diag(1, 4), H = I, R = 0: S = P, and an innovation along one axis gives D2 itself
+    H = np.eye(2)[None]
+    std = np.array([[1.0, 2.0]])
+    R = np.zeros((2, 2, 2))
+    nu = np.array([[[2.0, 0.0]], [[0.0, 2.0]]])
+    np.testing.assert_allclose(mahalanobis_lower_bound(nu, R, H, std), [[4.0], [1.0]], rtol=1e-15)
+    # H = [1, 1] in both rows, perfectly correlated worst case: (1 + 2)^2 + R_ii = 9 + 1
+    bound = mahalanobis_lower_bound(np.array([[[3.0, 1.0]]]), np.eye(2)[None], np.ones((1, 2, 2)), std)
+    np.testing.assert_allclose(bound, [[0.9]], rtol=1e-15)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    correlation=st.floats(0.0, 1.0),
+    d=st.integers(1, 6),
+    n_obs=st.integers(1, 4),
+    n_landmarks=st.integers(1, 5),
+)
+def test_mahalanobis_lower_bound_never_exceeds_d2(seed, correlation, d, n_obs, n_landmarks):
+    rng = np.random.default_rng(seed)
+    # P_j: a mix of a rank-one (perfectly correlated) and a random full-rank covariance, scales apart
+    scale = 10.0 ** rng.uniform(-3, 2, size=(n_landmarks, d))
+    u = rng.normal(size=(n_landmarks, d, 1))
+    A = rng.normal(size=(n_landmarks, d, d))
+    P = correlation * (u @ u.transpose(0, 2, 1)) + (1.0 - correlation) * (A @ A.transpose(0, 2, 1))
+    P = scale[:, :, None] * P * scale[:, None, :] + 1e-12 * np.eye(d)
+    H = rng.normal(size=(n_landmarks, 2, d)) * 10.0 ** rng.uniform(-2, 2, size=(n_landmarks, 2, 1))
+    B = rng.normal(size=(n_obs, 2, 2))
+    R = 0.01 * (B @ B.transpose(0, 2, 1)) + 1e-4 * np.eye(2)
+    nu = rng.normal(size=(n_obs, n_landmarks, 2)) * 10.0 ** rng.uniform(-2, 2, size=(n_obs, n_landmarks, 1))
+    std = np.sqrt(np.diagonal(P, axis1=1, axis2=2))
+    d2, _ = mahalanobis_2d(nu, (H @ P @ H.transpose(0, 2, 1))[None] + R[:, None])
+    assert np.all(mahalanobis_lower_bound(nu, R, H, std) <= d2 * (1.0 + 1e-9))
 
 
 # --- nearest neighbour -------------------------------------------------------------------------------------

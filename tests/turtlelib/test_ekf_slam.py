@@ -300,6 +300,34 @@ def test_observation_between_the_gates_is_discarded():
     np.testing.assert_array_equal(result.status, [REJECTED, MATCHED, NEW])
 
 
+@pytest.mark.parametrize("linearization", ["standard", "fej", "oc", "invariant"])
+def test_gating_leaves_out_only_landmarks_beyond_gate_new_of_every_observation(linearization):
+    # unknown association forms S only for the landmarks a bound of D2 cannot rule out: every landmark
+    # some observation lies within gate_new of must be kept, with the D2 the full gating gives
+    rng = np.random.default_rng(7)
+    config = SlamConfig(sensor_x=0.3, sensor_y=-0.1, confirm_count=1, linearization=linearization)
+    slam = EkfSlam(config, UnicycleMotion(TwistNoise(forward_m2_per_m=0.01, heading_rad2_per_m=0.01)))
+    truth = rng.uniform(-6.0, 6.0, size=(40, 2))
+    for k in range(6):
+        slam.update_unknown(observe(slam, truth, config) + rng.normal(0.0, 0.01, (40, 2)), stamp_ns=k)
+        slam.predict((0.5, 0.3, 1_000_000_000))
+    kept = 0
+    for _ in range(20):
+        # three observations near mapped landmarks (some inside the gates, some between them), three anywhere
+        mapped = slam.state[3:].reshape(-1, 2)[rng.choice(len(slam.landmark_ids), 3, replace=False)]
+        near_mapped = observe(slam, mapped, config) + rng.normal(0.0, [0.3, 0.1], (3, 2))
+        z = np.vstack([near_mapped, np.column_stack([rng.uniform(0.2, 9.0, 3), rng.uniform(-PI, PI, 3)])])
+        R = config.observation_covariances(z[:, 0])
+        near, _, d2_near, _, _, _ = slam._gate_near(z, R)
+        _, d2_all, _, _, _ = slam._gate(z, R, np.arange(len(slam.landmark_ids)))
+        within = (d2_all <= slam._gate_new).any(axis=0).nonzero()[0]
+        assert set(within) <= set(near)
+        np.testing.assert_array_equal(d2_near, d2_all[:, near])
+        kept += len(near)
+    # and it does leave landmarks out (6 observations against 40 landmarks spread around)
+    assert kept < 0.8 * 20 * len(slam.landmark_ids)
+
+
 def test_two_detections_in_one_scan_never_start_two_landmarks_on_one_spot():
     slam = EkfSlam(SlamConfig(sensor_x=-0.032, confirm_count=1), MOTION)
     result = slam.update_unknown([[1.0, 0.0], [1.005, 0.001], [2.0, 1.0]], stamp_ns=0)

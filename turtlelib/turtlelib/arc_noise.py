@@ -236,11 +236,15 @@ def arc_covariances(
     turning = ~(np.abs(omega) <= MAX_STEP_TURN_RAD)
     if turning.any():
         _refuse_turn(float(omega[turning][0]))
-    entries = _arc_covariance_entries(
+    Q_xx, Q_xy, Q_xt, Q_yy, Q_yt, Q_tt = _arc_covariance_entries(
         _Arrays, theta_rad, omega, vx, vy, var_vx, cov_vx_omega, var_omega, var_vy
     )
-    Q_xx, Q_xy, Q_xt, Q_yy, Q_yt, Q_tt = np.broadcast_arrays(*entries)
-    return np.stack([Q_xx, Q_xy, Q_xt, Q_xy, Q_yy, Q_yt, Q_xt, Q_yt, Q_tt], axis=-1).reshape(-1, 3, 3)
+    Q = np.empty((len(omega), 3, 3))
+    Q[:, 0, 0], Q[:, 1, 1], Q[:, 2, 2] = Q_xx, Q_yy, Q_tt
+    Q[:, 0, 1] = Q[:, 1, 0] = Q_xy
+    Q[:, 0, 2] = Q[:, 2, 0] = Q_xt
+    Q[:, 1, 2] = Q[:, 2, 1] = Q_yt
+    return Q
 
 
 def _refuse_turn(omega: float) -> None:

@@ -45,6 +45,24 @@ def mahalanobis_2d(
     return d2, np.log(det)
 
 
+def mahalanobis_lower_bound(
+    nu: NDArray[np.float64], R: NDArray[np.float64], H: NDArray[np.float64], std: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """A lower bound (K, n) of ``D2_kj = nu_kj^T S_kj^-1 nu_kj``, ``S_kj = H_j P_j H_j^T + R_k``, that needs
+    only the standard deviations ``sigma_j = sqrt(diag P_j)``, not the covariances of ``P_j``::
+
+        (H_j P_j H_j^T)_ii <= (sum_l |H_j,il| sigma_j,l)^2     (|P_lm| <= sigma_l sigma_m)
+        D2_kj >= nu_kj,i^2 / S_kj,ii   for i = 1, 2             (the marginal of one component)
+
+    ``nu`` (K, n, 2), ``R`` (K, 2, 2), ``H`` (n, 2, d), ``std`` (n, d). O(K n d), for discarding the landmarks
+    no observation can come near before their ``S`` is formed.
+    """
+    spread = np.einsum("nid,nd->ni", np.abs(H), std)
+    # S_ii upper bound (K, n, 2)
+    S_ii = (spread * spread)[None] + np.diagonal(R, axis1=1, axis2=2)[:, None, :]
+    return (nu * nu / S_ii).max(axis=2)
+
+
 def nearest_neighbour(cost: NDArray[np.float64], compatible: NDArray[np.bool_]) -> NDArray[np.int64]:
     """Greedy most-likely assignment: (K,) landmark index per observation, -1 where none is left.
 

@@ -134,7 +134,13 @@ from numbers import Integral
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .association import chi2_gate, joint_compatibility, mahalanobis_2d, nearest_neighbour
+from .association import (
+    chi2_gate,
+    joint_compatibility,
+    mahalanobis_2d,
+    mahalanobis_lower_bound,
+    nearest_neighbour,
+)
 from .geometry import Transform2D
 from .landmark_tracks import LandmarkTracks
 from .motion_models import BatchMotionModel, MotionModel
@@ -452,20 +458,26 @@ class EkfSlam:
         landmark_ids = np.full(len(z), -1, dtype=np.int64)
         status = np.full(len(z), _REJECTED, dtype=np.int8)
 
-        # gate every usable observation against every landmark, associate, fuse the matched ones at once
+        # gate every usable observation against the landmarks near it, associate, fuse the matched ones
         match = np.full(len(usable), -1, dtype=np.int64)
         far_from_all = np.ones(len(usable), dtype=bool)
         nis = 0.0
         if self._state.n_landmarks and len(usable):
-            nu, d2, log_det, H_robot, H_landmark = self._gate(z_usable, R_usable)
-            match = self._associate(nu, d2, log_det, R_usable, H_robot, H_landmark)
+            near, nu, d2, log_det, H_robot, H_landmark = self._gate_near(z_usable, R_usable)
+            match = self._associate(nu, d2, log_det, R_usable, H_robot, H_landmark, near)
             far_from_all = (d2 > self._gate_new).all(axis=1)
             rows = (match >= 0).nonzero()[0]
-            slots = match[rows]
+            columns = match[rows]
+            slots = near[columns]
             landmark_ids[usable[rows]] = self._tracks.ids[slots]
             status[usable[rows]] = _MATCHED
             nis = self._state.correct(
-                slots, H_robot[slots], H_landmark[slots], nu[rows, slots], R_usable[rows], self._localization
+                slots,
+                H_robot[columns],
+                H_landmark[columns],
+                nu[rows, columns],
+                R_usable[rows],
+                self._localization,
             )
             self._relinearize_first_estimates(slots)
             confirmed_ids = [self._tracks.sighted(slots, self._config.confirm_count)]
@@ -738,6 +750,29 @@ class EkfSlam:
         d2, log_det = mahalanobis_2d(nu, S)
         return nu, d2, log_det, H_robot, H_landmark
 
+    def _gate_near(self, z: NDArray[np.float64], R: NDArray[np.float64]) -> tuple[NDArray, ...]:
+        """:meth:`_gate` of observations ``z`` (K, 2) against the landmark slots ``near`` (k,) (ascending)
+        that may come within ``gate_new`` of one of them; returns ``(near, nu, D2, ln det S, H_robot,
+        H_landmark)``. The others are left out before their ``S`` is formed, by a lower bound of their
+        ``D2`` from the standard deviations of ``P`` (:func:`~turtlelib.association.mahalanobis_lower_bound`):
+        every landmark left out has ``D2 > gate_new`` for every observation, so it could neither be
+        associated nor keep an observation from starting a landmark. O(K n), with ``S`` for ``k`` only.
+        """
+        z_hat, H_robot, H_landmark = self._predicted_observations(np.arange(self._state.n_landmarks))
+        nu = residual(z[:, None, :], z_hat[None, :, :])
+        std = self._state.stored_std()
+        std_robot = np.broadcast_to(std[:ROBOT_DIM], (len(z_hat), ROBOT_DIM))
+        std_pose_landmark = np.concatenate([std_robot, std[ROBOT_DIM:].reshape(-1, 2)], axis=1)
+        bound = mahalanobis_lower_bound(
+            nu, R, np.concatenate([H_robot, H_landmark], axis=2), std_pose_landmark
+        )
+        # margin: D2 and its bound are computed differently, to rounding
+        near = (bound <= self._gate_new * (1.0 + 1e-6)).any(axis=0).nonzero()[0]
+        nu, H_robot, H_landmark = nu[:, near], H_robot[near], H_landmark[near]
+        S = self._predicted_covariances(H_robot, H_landmark, near)[None] + R[:, None]
+        d2, log_det = mahalanobis_2d(nu, S)
+        return near, nu, d2, log_det, H_robot, H_landmark
+
     def _predicted_covariances(
         self, H_robot: NDArray[np.float64], H_landmark: NDArray[np.float64], slots: NDArray[np.int64] | None
     ) -> NDArray[np.float64]:
@@ -756,17 +791,19 @@ class EkfSlam:
         R: NDArray[np.float64],
         H_robot: NDArray[np.float64],
         H_landmark: NDArray[np.float64],
+        slots: NDArray[np.int64],
     ) -> NDArray[np.int64]:
-        """The slot (or -1) for each observation: confirmed landmarks first; tentative landmarks only take
-        observations that no confirmed landmark is compatible with."""
+        """The column of ``d2`` (K, k) (or -1) for each observation, the columns being landmark ``slots``
+        (k,): confirmed landmarks first; tentative landmarks only take observations that no confirmed
+        landmark is compatible with."""
         compatible = d2 < self._gate_associate
-        confirmed = self._tracks.confirmed
+        confirmed = self._tracks.confirmed[slots]
         with_confirmed = compatible & confirmed
-        match = self._pair(nu, d2, log_det, with_confirmed, R, H_robot, H_landmark)
+        match = self._pair(nu, d2, log_det, with_confirmed, R, H_robot, H_landmark, slots)
         unexplained = ~with_confirmed.any(axis=1)
         if unexplained.any() and not confirmed.all():
             to_tentative = compatible & ~confirmed & unexplained[:, None]
-            tentative_match = self._pair(nu, d2, log_det, to_tentative, R, H_robot, H_landmark)
+            tentative_match = self._pair(nu, d2, log_det, to_tentative, R, H_robot, H_landmark, slots)
             match = np.where(unexplained, tentative_match, match)
         return match
 
@@ -779,15 +816,19 @@ class EkfSlam:
         R: NDArray[np.float64],
         H_robot: NDArray[np.float64],
         H_landmark: NDArray[np.float64],
+        slots: NDArray[np.int64],
     ) -> NDArray[np.int64]:
-        """Observations to ``compatible`` slots by nearest neighbour or JCBB (the ``matcher`` option)."""
+        """Observations to ``compatible`` columns (landmark ``slots``) by nearest neighbour or JCBB (the
+        ``matcher`` option)."""
         if self._config.matcher == "nn":
             # most likely: the smallest -2 log N(nu; 0, S) = D2 + ln det S (+ const)
             return nearest_neighbour(d2 + log_det, compatible)
         candidates = compatible.any(axis=0).nonzero()[0]
         if len(candidates) == 0:
             return np.full(len(nu), -1, dtype=np.int64)
-        joint = self._state.observation_covariance(candidates, H_robot[candidates], H_landmark[candidates])
+        joint = self._state.observation_covariance(
+            slots[candidates], H_robot[candidates], H_landmark[candidates]
+        )
         match = joint_compatibility(
             nu[:, candidates],
             compatible[:, candidates],

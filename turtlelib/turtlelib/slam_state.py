@@ -182,6 +182,11 @@ class SlamState:
         blocks[:, 1, 1] = flat[diagonal + self._cov.shape[0] + 1]
         return blocks
 
+    def stored_std(self) -> NDArray[np.float64]:
+        """``sqrt(diag P)`` (N,) in the stored coordinates (as :meth:`pose_landmark_blocks`), O(N)."""
+        self._apply_pending()
+        return np.sqrt(np.diagonal(self._cov)[: self.dim])
+
     def pose_landmark_blocks(self, slots: NDArray[np.int64] | None = None) -> NDArray[np.float64]:
         """Joint covariances (k, 5, 5) of ``[x, y, theta, m_ix, m_iy]`` for ``slots`` (default all), O(k), in
         the stored coordinates (for the filter's Jacobians)."""
