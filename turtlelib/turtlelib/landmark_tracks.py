@@ -1,5 +1,5 @@
-"""Bookkeeping of EKF SLAM landmark slots: id, sightings, time of creation, first estimate, confirmed or
-tentative.
+"""Bookkeeping of EKF SLAM landmark slots: id, sightings, time of creation, first estimate, where the sensor
+last viewed it, confirmed or tentative.
 
 The slots mirror :class:`turtlelib.slam_state.SlamState`'s: :meth:`LandmarkTracks.append` adds the last
 slot, :meth:`LandmarkTracks.remove` swap-removes exactly as ``SlamState.remove`` does. Arrays grow with
@@ -14,15 +14,17 @@ from numpy.typing import NDArray
 
 class LandmarkTracks:
     """Per-slot ``ids``, ``seen`` (sightings), ``born`` (stamp of the first sighting, ns), ``first_xy`` (the
-    position the landmark was initialised at, m) and ``confirmed`` flags."""
+    position the landmark was initialised at, m), ``last_view_xy`` (the sensor's map position at its last
+    fused observation, m; inf before any) and ``confirmed`` flags."""
 
-    _ARRAYS = ("_ids", "_seen", "_born", "_first_xy", "_confirmed")
+    _ARRAYS = ("_ids", "_seen", "_born", "_first_xy", "_last_view_xy", "_confirmed")
 
     def __init__(self, capacity: int = 16) -> None:
         self._ids = np.zeros(capacity, dtype=np.int64)
         self._seen = np.zeros(capacity, dtype=np.int64)
         self._born = np.zeros(capacity, dtype=np.int64)
         self._first_xy = np.zeros((capacity, 2))
+        self._last_view_xy = np.full((capacity, 2), np.inf)
         self._confirmed = np.zeros(capacity, dtype=bool)
         self._n = 0
         self._slot_of: dict[int, int] = {}
@@ -36,6 +38,15 @@ class LandmarkTracks:
     def first_xy(self) -> NDArray[np.float64]:
         """First estimate (n, 2) of every slot, a view."""
         return self._first_xy[: self._n]
+
+    @property
+    def last_view_xy(self) -> NDArray[np.float64]:
+        """Sensor position (n, 2) at every slot's last fused observation (inf: none yet), a view."""
+        return self._last_view_xy[: self._n]
+
+    def viewed(self, slots: NDArray[np.int64], sensor_xy: NDArray[np.float64]) -> None:
+        """Record ``sensor_xy`` (2,) as the last view of ``slots`` (k,)."""
+        self._last_view_xy[slots] = sensor_xy
 
     def relinearize(self, slots: NDArray[np.int64], xy: NDArray[np.float64]) -> None:
         """Replace the first estimates of ``slots`` (k,) by ``xy`` (k, 2)."""
@@ -57,6 +68,7 @@ class LandmarkTracks:
         slot = self._n
         self._ids[slot], self._seen[slot], self._born[slot] = landmark_id, 1, stamp_ns
         self._first_xy[slot] = first_xy
+        self._last_view_xy[slot] = np.inf
         self._confirmed[slot] = confirmed
         self._slot_of[landmark_id] = slot
         self._n += 1
@@ -72,6 +84,7 @@ class LandmarkTracks:
         new = slice(self._n, self._n + k)
         self._ids[new], self._seen[new], self._born[new] = landmark_ids, 1, stamp_ns
         self._first_xy[new] = first_xy
+        self._last_view_xy[new] = np.inf
         self._confirmed[new] = confirmed
         self._slot_of.update(zip(np.asarray(landmark_ids).tolist(), range(self._n, self._n + k), strict=True))
         self._n += k
