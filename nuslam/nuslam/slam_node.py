@@ -56,7 +56,8 @@ Services (std_srvs/Trigger)
 Parameters
     `SlamNodeConfig` (association, motion_source, x0, y0, theta0, frame ids, fake_sensor_std,
     landmark_radius, wheel_noise, map_file, observation_timeout), `turtlelib.TwistNoise` as `odom_*`,
-    `turtlelib.SlamConfig` (mode, range_std, bearing_std, matcher, gates,
+    `turtlelib.SlamConfig` (mode, range_std, bearing_std, range_std_per_m, noise_correlation,
+    noise_correlation_length, matcher, gates,
     linearization, confirm_count, tentative_timeout, min_range, max_range, max_landmarks, max_observations,
     initial_*_std, jcbb_max_nodes),
     `turtlelib.TimelineConfig`

@@ -22,6 +22,13 @@ ML standard deviation is ``bearing_std = sqrt(mean(nu_b^2))``, and the range's g
 
     argmin  sum_k ln sigma_r(r_k)^2 + nu_rk^2 / sigma_r(r_k)^2     (L-BFGS-B over the two parameters)
 
+The errors of one landmark's successive observations are correlated through the viewpoint
+(``SlamConfig.noise_correlation``): with the residuals whitened by the fitted standard deviations,
+``w = [nu_r / sigma_r, nu_b / bearing_std]``, and ``d_k`` the distance the (true) sensor moved between two
+successive sightings of a landmark, ``E[w_(k-1) w_k] = c exp(-d_k / l)`` (range and bearing pooled) gives
+``noise_correlation = c`` and ``noise_correlation_length = l`` by least squares over every such pair
+(``c <= MAX_CORRELATION``).
+
 Motion noise
 ------------
 The run is cut into windows of ``window_s``. In window ``w`` the motion model is run from the true pose at
@@ -41,10 +48,11 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import minimize
+from scipy.optimize import least_squares, minimize
 
 from turtlelib import HeldInputs, Transform2D, TwistNoise, UnicycleMotion, normalize_angles
 from turtlelib.range_bearing import predict_observations, residual
@@ -59,18 +67,22 @@ LOG_BOUNDS = (-30.0, 3.0)
 DELAY_STEP_S = 0.01
 MAX_DELAY_S = 0.5
 DELAY_WINDOW_S = 0.5
+# the largest error correlation the fit returns (SlamConfig.noise_correlation < 1)
+MAX_CORRELATION = 0.99
 
 
 @dataclass(frozen=True)
 class Calibration:
-    """The fitted commands and noise (``noise``, ``range_std``, ``range_std_per_m``, ``bearing_std``), and
-    what they were fitted on."""
+    """The fitted commands and noise (``noise``, ``range_std``, ``range_std_per_m``, ``bearing_std``,
+    ``noise_correlation``, ``noise_correlation_length``), and what they were fitted on."""
 
     commands: CommandCalibration
     noise: TwistNoise
     range_std: float
     range_std_per_m: float
     bearing_std: float
+    noise_correlation: float
+    noise_correlation_length: float
     windows: int
     window_s: float
     observations: int
@@ -85,6 +97,8 @@ class Calibration:
                 "range_std": self.range_std,
                 "range_std_per_m": self.range_std_per_m,
                 "bearing_std": self.bearing_std,
+                "noise_correlation": self.noise_correlation,
+                "noise_correlation_length": self.noise_correlation_length,
             },
         }
 
@@ -93,30 +107,43 @@ class Calibration:
             f"fitted on {self.windows} windows of {self.window_s} s and {self.observations} observations "
             f"(motion: sum of ln det S + e^T S^-1 e = {self.negative_log_likelihood:.1f}):"
         ]
-        lines += [f"  {name:22s} {value:.4g}" for name, value in dataclasses.asdict(self.commands).items()]
-        lines += [f"  {name:22s} {getattr(self.noise, name):.4g}" for name in NOISE_FIELDS]
+        lines += [f"  {name:24s} {value:.4g}" for name, value in dataclasses.asdict(self.commands).items()]
+        lines += [f"  {name:24s} {getattr(self.noise, name):.4g}" for name in NOISE_FIELDS]
         lines += [
-            f"  {'range_std':22s} {self.range_std:.4g} m",
-            f"  {'range_std_per_m':22s} {self.range_std_per_m:.4g} m/m",
-            f"  {'bearing_std':22s} {self.bearing_std:.4g} rad",
+            f"  {'range_std':24s} {self.range_std:.4g} m",
+            f"  {'range_std_per_m':24s} {self.range_std_per_m:.4g} m/m",
+            f"  {'bearing_std':24s} {self.bearing_std:.4g} rad",
+            f"  {'noise_correlation':24s} {self.noise_correlation:.4g}",
+            f"  {'noise_correlation_length':24s} {self.noise_correlation_length:.4g} m",
         ]
         return "\n".join(lines)
 
 
-def measurement_residuals(recording: MrclamRecording) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """``(r, nu)``: the observed ranges (K,) and ``nu = z - h(q_true, m_true)`` (K, 2) of the observations
-    within the ground truth's time span."""
+class Residuals(NamedTuple):
+    """The observations within the ground truth's time span, in time order: the landmark ``subject`` (K,),
+    the true sensor position ``sensor_xy`` (K, 2) (the camera sits at the body origin), the observed
+    ``range_m`` (K,) and ``nu = z - h(q_true, m_true)`` (K, 2)."""
+
+    subject: NDArray[np.int64]
+    sensor_xy: NDArray[np.float64]
+    range_m: NDArray[np.float64]
+    nu: NDArray[np.float64]
+
+
+def measurement_residuals(recording: MrclamRecording) -> Residuals:
+    """The :class:`Residuals` of ``recording``'s landmark observations against its ground truth."""
     t = recording.measurement_t_ns
     inside = (t >= recording.truth_t_ns[0]) & (t <= recording.truth_t_ns[-1])
     poses = interpolate_poses(recording.truth_t_ns, recording.truth_poses, t[inside])
     position = {int(s): xy for s, xy in zip(recording.landmark_subjects, recording.landmark_xy, strict=True)}
-    landmarks = np.array([position[int(s)] for s in recording.measurement_subject[inside]]).reshape(-1, 2)
+    subject = recording.measurement_subject[inside]
+    landmarks = np.array([position[int(s)] for s in subject]).reshape(-1, 2)
     z = np.column_stack([recording.measurement_range_m[inside], recording.measurement_bearing_rad[inside]])
     nu = np.empty_like(z)
     for k in range(len(z)):
         z_hat, _, _ = predict_observations(poses[k], landmarks[k : k + 1], Transform2D())
         nu[k] = residual(z[k], z_hat[0])
-    return z[:, 0], nu
+    return Residuals(subject, poses[:, :2], z[:, 0], nu)
 
 
 def fit_range_noise(range_m: NDArray[np.float64], nu_range: NDArray[np.float64]) -> tuple[float, float]:
@@ -133,6 +160,35 @@ def fit_range_noise(range_m: NDArray[np.float64], nu_range: NDArray[np.float64])
     floor = 1e-6 * max(rms, 1e-9)
     best = minimize(cost, [rms, 0.0], method="L-BFGS-B", bounds=[(floor, None), (0.0, None)])
     return float(best.x[0]), float(best.x[1])
+
+
+def fit_noise_correlation(
+    residuals: Residuals, range_std: float, range_std_per_m: float, bearing_std: float
+) -> tuple[float, float]:
+    """The least-squares ``(noise_correlation, noise_correlation_length)`` of the observation errors
+    (module docstring); ValueError without two sightings of one landmark."""
+    sigma = np.column_stack(
+        [range_std + range_std_per_m * residuals.range_m, np.full(len(residuals.range_m), bearing_std)]
+    )
+    w = residuals.nu / sigma
+    moved, products = [], []
+    for subject in np.unique(residuals.subject):
+        k = np.flatnonzero(residuals.subject == subject)
+        moved.append(np.linalg.norm(np.diff(residuals.sensor_xy[k], axis=0), axis=1))
+        products.append(w[k[:-1]] * w[k[1:]])
+    d = np.repeat(np.concatenate(moved), 2)
+    p = np.concatenate(products).ravel()
+    if len(p) == 0:
+        raise ValueError("no landmark seen twice: the error correlation cannot be fitted")
+
+    # E[w_(k-1) w_k] = c exp(-d / l)
+    def misfit(parameters: NDArray[np.float64]) -> NDArray[np.float64]:
+        c, length = parameters
+        return c * np.exp(-d / length) - p
+
+    start = [0.5, max(float(np.median(d)), 1e-3)]
+    fit = least_squares(misfit, start, bounds=([0.0, 1e-4], [MAX_CORRELATION, 1e3]))
+    return float(fit.x[0]), float(fit.x[1])
 
 
 def fit_commands(recording: MrclamRecording, window_s: float) -> CommandCalibration:
@@ -251,8 +307,13 @@ def calibrate_mrclam(
     measurement noise of ``recording`` to its Vicon truth."""
     if not window_s > 0.0:
         raise ValueError(f"window must be > 0 s, got {window_s!r}")
-    range_m, nu = measurement_residuals(recording)
-    range_std, range_std_per_m = fit_range_noise(range_m, nu[:, 0])
+    residuals = measurement_residuals(recording)
+    nu = residuals.nu
+    range_std, range_std_per_m = fit_range_noise(residuals.range_m, nu[:, 0])
+    bearing_std = float(np.sqrt(np.mean(nu[:, 1] ** 2)))
+    correlation, correlation_length = fit_noise_correlation(
+        residuals, range_std, range_std_per_m, bearing_std
+    )
     commands = fit_commands(recording, window_s)
     errors, bases = motion_windows(commands.apply(recording), window_s, progress)
     if len(errors) < len(NOISE_FIELDS):
@@ -265,7 +326,9 @@ def calibrate_mrclam(
         noise=noise,
         range_std=range_std,
         range_std_per_m=range_std_per_m,
-        bearing_std=float(np.sqrt(np.mean(nu[:, 1] ** 2))),
+        bearing_std=bearing_std,
+        noise_correlation=correlation,
+        noise_correlation_length=correlation_length,
         windows=len(errors),
         window_s=window_s,
         observations=len(nu),

@@ -156,6 +156,8 @@ MRCLAM_PARAMS = MrclamParams(
         range_std=0.0238,
         range_std_per_m=0.0293,
         bearing_std=0.0275,
+        noise_correlation=0.906,
+        noise_correlation_length=0.323,
         max_range=10.0,
         initial_xy_std=0.001,
         initial_theta_std=0.001,
@@ -167,8 +169,12 @@ MRCLAM_PARAMS = MrclamParams(
         tentative_timeout=30.0,
     ),
 )
-# unknown association pairs observations by joint compatibility (JCBB): the tubes stand in pairs 0.18 m apart
-MRCLAM_UNKNOWN_PARAMS = MRCLAM_PARAMS.replaced({"slam": {"matcher": "jcbb"}})
+# unknown association pairs observations by joint compatibility (JCBB): the tubes stand in pairs 0.18 m apart,
+# and it takes the errors as independent: with the honest (wider) covariance of the correlated model the
+# gates admit both tubes of a pair, and fewer are mapped once (docs/real_data.md)
+MRCLAM_UNKNOWN_PARAMS = MRCLAM_PARAMS.replaced(
+    {"slam": {"matcher": "jcbb", "noise_correlation": 0.0, "noise_correlation_length": 0.0}}
+)
 
 
 def mrclam_params(association: str) -> MrclamParams:

@@ -16,8 +16,10 @@ from hypothesis import strategies as st
 
 from nuturtle_demo.datasets.__main__ import main
 from nuturtle_demo.datasets.calibration import (
+    Residuals,
     fit_commands,
     fit_motion_noise,
+    fit_noise_correlation,
     fit_range_noise,
     measurement_residuals,
     motion_windows,
@@ -102,7 +104,15 @@ def test_calibrate_writes_params_that_a_run_takes(tmp_path, capsys):
     assert main(["calibrate", *data, "--window", "2", "--out", str(params)]) == 0
     fitted = yaml.safe_load(params.read_text())
     assert set(fitted) == {"commands", "noise", "slam"}
-    assert set(fitted["slam"]) == {"range_std", "range_std_per_m", "bearing_std"}
+    assert set(fitted["slam"]) == {
+        "range_std",
+        "range_std_per_m",
+        "bearing_std",
+        "noise_correlation",
+        "noise_correlation_length",
+    }
+    # the camera's errors repeat from one viewpoint (docs/real_data.md): strongly correlated
+    assert fitted["slam"]["noise_correlation"] > 0.5
     # the excerpt's robot, like every MRCLAM robot, acts on its commands about 0.2 s late
     assert 0.1 <= fitted["commands"]["delay_s"] <= 0.3
     out = tmp_path / "run"
@@ -110,6 +120,7 @@ def test_calibrate_writes_params_that_a_run_takes(tmp_path, capsys):
     used = yaml.safe_load((out / "params.yaml").read_text())
     assert used["commands"] == fitted["commands"] and used["noise"] == fitted["noise"]
     assert used["slam"]["range_std_per_m"] == fitted["slam"]["range_std_per_m"]
+    assert used["slam"]["noise_correlation_length"] == fitted["slam"]["noise_correlation_length"]
     # the default window needs more than 60 s of ground truth: a clear error
     assert main(["calibrate", *data]) == 2
     assert "too few" in capsys.readouterr().err
@@ -245,12 +256,45 @@ def test_calibration_recovers_the_noise_of_synthetic_data():
     assert fitted.heading_rad2_per_rad == pytest.approx(2e-2, rel=0.25)
     assert fitted.lateral_m2_per_m == pytest.approx(5e-4, rel=0.4)
     assert fitted.heading_rad2_per_s < 2e-3 and fitted.forward_m2_per_s < 4e-4
-    range_m, nu = measurement_residuals(recording)
+    _, _, range_m, nu = measurement_residuals(recording)
     # constant range noise: the range-proportional part is small against it
     range_std, range_std_per_m = fit_range_noise(range_m, nu[:, 0])
     assert range_std + range_std_per_m * np.mean(range_m) == pytest.approx(0.05, rel=0.15)
     assert range_std_per_m * np.mean(range_m) < 0.3 * range_std
     assert np.sqrt(np.mean(nu[:, 1] ** 2)) == pytest.approx(0.02, rel=0.15)
+    # independent errors: no correlation to speak of
+    correlation, _ = fit_noise_correlation(measurement_residuals(recording), range_std, range_std_per_m, 0.02)
+    assert correlation < 0.1
+
+
+@pytest.mark.parametrize(("c", "length"), [(0.9, 0.3), (0.6, 1.0), (0.95, 0.1)])
+def test_fit_noise_correlation_recovers_viewpoint_correlated_errors(c, length):
+    """Three landmarks, each seen 2000 times along a line with steps of 0 to 0.2 m (a third of them
+    standing still), errors ``sqrt(c) AR(1) + sqrt(1 - c) white`` with ``rho = exp(-step / length)``: the
+    fit recovers ``c`` and ``length``."""
+    rng = np.random.default_rng(5)
+    subjects, positions, errors = [], [], []
+    for subject in (6, 7, 8):
+        step = np.where(rng.random(2000) < 1 / 3, 0.0, rng.uniform(0.0, 0.2, 2000))
+        rho = np.exp(-step / length)
+        ar1 = np.empty((2000, 2))
+        ar1[0] = rng.normal(size=2)
+        for k in range(1, 2000):
+            ar1[k] = rho[k] * ar1[k - 1] + math.sqrt(1.0 - rho[k] ** 2) * rng.normal(size=2)
+        subjects.append(np.full(2000, subject))
+        positions.append(np.column_stack([np.cumsum(step), np.zeros(2000)]))
+        errors.append(math.sqrt(c) * ar1 + math.sqrt(1.0 - c) * rng.normal(size=(2000, 2)))
+    range_m = np.full(6000, 2.0)
+    # sigma_r = 0.02 + 0.01 r = 0.04 m, bearing 0.03 rad
+    nu = np.concatenate(errors) * [0.04, 0.03]
+    residuals = Residuals(np.concatenate(subjects), np.concatenate(positions), range_m, nu)
+    fitted_c, fitted_length = fit_noise_correlation(residuals, 0.02, 0.01, 0.03)
+    assert fitted_c == pytest.approx(c, abs=0.05)
+    assert fitted_length == pytest.approx(length, rel=0.2)
+    with pytest.raises(ValueError, match="seen twice"):
+        fit_noise_correlation(
+            Residuals(np.array([6, 7]), np.zeros((2, 2)), np.ones(2), np.zeros((2, 2))), 0.1, 0, 0.1
+        )
 
 
 @pytest.mark.parametrize(("range_std", "range_std_per_m"), [(0.02, 0.03), (0.1, 0.0), (0.005, 0.05)])
