@@ -145,6 +145,7 @@ map never grows past ``max_landmarks``: what matters is the memory and time of `
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from enum import IntEnum
@@ -295,12 +296,17 @@ class SlamConfig:
             R[:, 0, 0] = (self.range_std + self.range_std_per_m * np.asarray(range_m)) ** 2
         return R
 
+    @property
+    def independent_noise(self) -> bool:
+        """Whether observation errors are taken as independent (``noise_correlation`` or its length 0)."""
+        return self.noise_correlation == 0.0 or self.noise_correlation_length == 0.0
+
     def fusion_scale(self, moved_m: NDArray[np.float64]) -> NDArray[np.float64]:
         """``(1 + rho) / (1 - rho)`` (k,), ``rho = noise_correlation exp(-d / noise_correlation_length)``, for
         observations whose landmark was last viewed from ``moved_m`` (k,) away (inf: never); 1 with
         independent errors."""
         moved_m = np.asarray(moved_m, dtype=np.float64)
-        if self.noise_correlation == 0.0 or self.noise_correlation_length == 0.0:
+        if self.independent_noise:
             return np.ones(moved_m.shape)
         rho = self.noise_correlation * np.exp(-moved_m / self.noise_correlation_length)
         return (1.0 + rho) / (1.0 - rho)
@@ -926,6 +932,8 @@ class EkfSlam:
         as they are fused: scaled by ``(1 + rho) / (1 - rho)`` for the distance from each one's last view
         (module docstring)."""
         sensor_xy = self._sensor_xy()
+        if self._config.independent_noise:
+            return sensor_xy, R
         moved_m = np.linalg.norm(sensor_xy - self._tracks.last_view_xy[slots], axis=1)
         return sensor_xy, R * self._config.fusion_scale(moved_m)[:, None, None]
 
@@ -954,9 +962,11 @@ class EkfSlam:
         return slot
 
     def _sensor_xy(self) -> NDArray[np.float64]:
-        """The sensor's map position (2,) at the pose mean."""
-        T_map_sensor = self.pose @ self._T_body_sensor
-        return np.array([T_map_sensor.x, T_map_sensor.y])
+        """The sensor's map position (2,) at the pose mean: ``p + R(theta) [sensor_x, sensor_y]``."""
+        x, y, theta = self._state.mean[:ROBOT_DIM]
+        c, s = math.cos(theta), math.sin(theta)
+        sx, sy = self._T_body_sensor.x, self._T_body_sensor.y
+        return np.array([x + c * sx - s * sy, y + s * sx + c * sy])
 
     def _start_landmark(
         self, z: NDArray[np.float64], R: NDArray[np.float64], started: list[int], stamp_ns: int
