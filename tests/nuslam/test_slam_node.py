@@ -644,6 +644,8 @@ def invalid(name: str, value, message: str):
         invalid("gate_known", 1.5, "gate_known"),
         invalid("linearization", "exact", "linearization must be one of"),
         invalid("range_std_per_m", -0.01, "range_std_per_m"),
+        invalid("noise_correlation", 1.0, "noise_correlation"),
+        invalid("noise_correlation_length", -0.3, "noise_correlation_length"),
         invalid("wheel_noise", -0.1, "wheel_noise"),
         invalid("max_observation_delay", -0.1, "max_observation_delay"),
         invalid("wheel_right", "wheel_left_joint", "wheel_left, wheel_right must be distinct joint names"),
@@ -681,6 +683,8 @@ def test_the_filter_parameters_reach_the_filter(ros, linearization):
         Parameter("gate_known", value=1.0),
         Parameter("linearization", value=linearization),
         Parameter("range_std_per_m", value=0.01),
+        Parameter("noise_correlation", value=0.9),
+        Parameter("noise_correlation_length", value=0.3),
     ]
     node = ros.add(SlamNode(context=ros.context, parameter_overrides=overrides))
     assert node.slam.motion == DiffDriveMotion(DRIVE, 0.2)
@@ -691,6 +695,8 @@ def test_the_filter_parameters_reach_the_filter(ros, linearization):
         gate_known=1.0,
         linearization=linearization,
         range_std_per_m=0.01,
+        noise_correlation=0.9,
+        noise_correlation_length=0.3,
     )
 
 
