@@ -787,17 +787,28 @@ class EkfSlam:
         self._association = mode
 
     def _gate(
-        self, z: NDArray[np.float64], R: NDArray[np.float64], slots: NDArray[np.int64] | None = None
+        self, z: NDArray[np.float64], R: NDArray[np.float64], slots: NDArray[np.int64]
     ) -> tuple[NDArray[np.float64], ...]:
-        """Observations ``z`` (K, 2) against landmark ``slots`` (k,) (default all), O(K k).
+        """Observations ``z`` (K, 2) against landmark ``slots`` (k,), O(K k).
 
         Returns innovations ``nu_kj`` (K, k, 2), ``D2_kj`` and ``ln det S_kj`` (K, k) with
         ``S_kj = H_j P H_j^T + R_k``, and the Jacobians ``H_robot`` (k, 2, 3), ``H_landmark`` (k, 2, 2).
         """
-        slots = np.arange(self._state.n_landmarks) if slots is None else slots
         z_hat, H_robot, H_landmark = self._predicted_observations(slots)
-        # nu_kj = z_k - z_hat_j,  S_kj = H_j P H_j^T + R_k
+        # nu_kj = z_k - z_hat_j
         nu = residual(z[:, None, :], z_hat[None, :, :])
+        return self._distances(nu, R, H_robot, H_landmark, slots)
+
+    def _distances(
+        self,
+        nu: NDArray[np.float64],
+        R: NDArray[np.float64],
+        H_robot: NDArray[np.float64],
+        H_landmark: NDArray[np.float64],
+        slots: NDArray[np.int64],
+    ) -> tuple[NDArray[np.float64], ...]:
+        """:meth:`_gate`'s result from the innovations ``nu`` (K, k, 2) and Jacobians of ``slots`` (k,)."""
+        # S_kj = H_j P H_j^T + R_k
         S = self._predicted_covariances(H_robot, H_landmark, slots)[None] + R[:, None]
         d2, log_det = mahalanobis_2d(nu, S)
         return nu, d2, log_det, H_robot, H_landmark
@@ -820,10 +831,7 @@ class EkfSlam:
         )
         # margin: D2 and its bound are computed differently, to rounding
         near = (bound <= self._gate_new * (1.0 + 1e-6)).any(axis=0).nonzero()[0]
-        nu, H_robot, H_landmark = nu[:, near], H_robot[near], H_landmark[near]
-        S = self._predicted_covariances(H_robot, H_landmark, near)[None] + R[:, None]
-        d2, log_det = mahalanobis_2d(nu, S)
-        return near, nu, d2, log_det, H_robot, H_landmark
+        return (near, *self._distances(nu[:, near], R, H_robot[near], H_landmark[near], near))
 
     def _predicted_covariances(
         self, H_robot: NDArray[np.float64], H_landmark: NDArray[np.float64], slots: NDArray[np.int64] | None
