@@ -186,7 +186,7 @@ def fit_noise_correlation(
         c, length = parameters
         return c * np.exp(-d / length) - p
 
-    start = [0.5, max(float(np.median(d)), 1e-3)]
+    start = [0.5, float(np.clip(np.median(d), 1e-3, 1e2))]
     fit = least_squares(misfit, start, bounds=([0.0, 1e-4], [MAX_CORRELATION, 1e3]))
     return float(fit.x[0]), float(fit.x[1])
 
