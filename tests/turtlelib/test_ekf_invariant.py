@@ -35,7 +35,7 @@ import math
 import numpy as np
 import pytest
 import scipy.linalg
-from dense_batches import fuse_known_batch, random_noise
+from dense_batches import augmented, fuse_known_batch, random_noise, stacked_observations
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import chi2
@@ -43,7 +43,7 @@ from scipy.stats import chi2
 from turtlelib import Transform2D, TwistNoise, UnicycleMotion
 from turtlelib.consistency import nees
 from turtlelib.ekf_slam import EkfSlam, ObservationStatus, SlamConfig
-from turtlelib.range_bearing import landmarks_from_observations, predict_observations, residual
+from turtlelib.range_bearing import predict_observations
 from turtlelib.slam_map import LandmarkMap
 
 PI = math.pi
@@ -174,38 +174,18 @@ class DenseInvariantEkf:
         self.x = x_next
 
     def update(self, ids, z, R) -> None:
-        N, K = len(self.x), len(ids)
-        H_standard = np.zeros((2 * K, N))
-        nu = np.zeros(2 * K)
-        R_full = np.zeros((2 * K, 2 * K))
-        for k, landmark_id in enumerate(ids):
-            i = 3 + 2 * self.ids.index(landmark_id)
-            z_hat, H_robot, H_landmark = predict_observations(self.x[:3], self.x[None, i : i + 2], SENSOR)
-            H_standard[2 * k : 2 * k + 2, :3] = H_robot[0]
-            H_standard[2 * k : 2 * k + 2, i : i + 2] = H_landmark[0]
-            nu[2 * k : 2 * k + 2] = residual(z[k], z_hat[0])
-            R_full[2 * k : 2 * k + 2, 2 * k : 2 * k + 2] = R[k]
+        H_standard, nu, R_full = stacked_observations(self.x, self.ids, ids, z, R, SENSOR)
         H = H_standard @ coordinates(self.x)
         S = H @ self.P @ H.T + R_full
         gain = np.linalg.solve(S, H @ self.P).T
-        A = np.eye(N) - gain @ H
+        A = np.eye(len(self.x)) - gain @ H
         self.P = A @ self.P @ A.T + gain @ R_full @ gain.T
         self.x = retract(self.x, gain @ nu)
 
     def augment(self, landmark_id: int, z: np.ndarray, R: np.ndarray) -> None:
         # in standard coordinates, as the textbook EKF does, then back to xi at the augmented mean
-        N = len(self.x)
         T = coordinates(self.x)
-        P_standard = T @ self.P @ T.T
-        p_map, G_robot, G_z = landmarks_from_observations(self.x[:3], z[None], SENSOR)
-        G_x = np.zeros((2, N))
-        G_x[:, :3] = G_robot[0]
-        P_new = np.zeros((N + 2, N + 2))
-        P_new[:N, :N] = P_standard
-        P_new[N:, :N] = G_x @ P_standard
-        P_new[:N, N:] = P_new[N:, :N].T
-        P_new[N:, N:] = G_x @ P_standard @ G_x.T + G_z[0] @ R @ G_z[0].T
-        self.x = np.concatenate([self.x, p_map[0]])
+        self.x, P_new = augmented(self.x, T @ self.P @ T.T, z, R, SENSOR)
         T_new = coordinates(self.x)
         self.P = np.linalg.solve(T_new, np.linalg.solve(T_new, P_new).T)
         self.ids.append(landmark_id)

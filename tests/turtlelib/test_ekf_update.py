@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 import pytest
-from dense_batches import fuse_known_batch, random_noise
+from dense_batches import augmented, fuse_known_batch, random_noise, stacked_observations
 
 from turtlelib import DiffDrive, Transform2D
 from turtlelib.ekf_slam import EkfSlam, ObservationStatus, SlamConfig
@@ -57,37 +57,16 @@ class DenseEkf:
         return self.x[i : i + 2]
 
     def update(self, ids, z, R) -> None:
-        N, K = len(self.x), len(ids)
-        H = np.zeros((2 * K, N))
-        nu = np.zeros(2 * K)
-        for k, landmark_id in enumerate(ids):
-            i = 3 + 2 * self.ids.index(landmark_id)
-            z_hat, H_robot, H_landmark = predict_observations(self.x[:3], self.x[None, i : i + 2], SENSOR)
-            H[2 * k : 2 * k + 2, :3] = H_robot[0]
-            H[2 * k : 2 * k + 2, i : i + 2] = H_landmark[0]
-            nu[2 * k : 2 * k + 2] = residual(z[k], z_hat[0])
-        R_full = np.zeros((2 * K, 2 * K))
-        for k in range(K):
-            R_full[2 * k : 2 * k + 2, 2 * k : 2 * k + 2] = R[k]
+        H, nu, R_full = stacked_observations(self.x, self.ids, ids, z, R, SENSOR)
         S = H @ self.P @ H.T + R_full
         gain = self.P @ H.T @ np.linalg.inv(S)
         self.x = self.x + gain @ nu
         self.x[2] = math.remainder(self.x[2], 2.0 * PI)
-        A = np.eye(N) - gain @ H
+        A = np.eye(len(self.x)) - gain @ H
         self.P = A @ self.P @ A.T + gain @ R_full @ gain.T
 
     def augment(self, landmark_id: int, z: np.ndarray, R: np.ndarray) -> None:
-        N = len(self.x)
-        p_map, G_robot, G_z = landmarks_from_observations(self.x[:3], z[None], SENSOR)
-        G_x = np.zeros((2, N))
-        G_x[:, :3] = G_robot[0]
-        P_new = np.zeros((N + 2, N + 2))
-        P_new[:N, :N] = self.P
-        P_new[N:, :N] = G_x @ self.P
-        P_new[:N, N:] = P_new[N:, :N].T
-        P_new[N:, N:] = G_x @ self.P @ G_x.T + G_z[0] @ R @ G_z[0].T
-        self.x = np.concatenate([self.x, p_map[0]])
-        self.P = P_new
+        self.x, self.P = augmented(self.x, self.P, z, R, SENSOR)
         self.ids.append(landmark_id)
 
     def sorted_by_id(self) -> tuple[np.ndarray, np.ndarray]:
