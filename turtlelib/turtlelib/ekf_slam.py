@@ -905,9 +905,8 @@ class EkfSlam:
         """``z_hat`` (k, 2) of landmark ``slots`` from the newest estimates and the Jacobians ``H_robot``
         (k, 2, 3), ``H_landmark`` (k, 2, 2) of the configured ``linearization`` (module docstring)."""
         pose = self._state.mean[:ROBOT_DIM]
-        z_hat, H_robot, H_landmark = predict_observations(
-            pose, self._state.landmark_positions()[slots], self._T_body_sensor
-        )
+        landmarks = self._state.landmark_positions()[slots]
+        z_hat, H_robot, H_landmark = predict_observations(pose, landmarks, self._T_body_sensor)
         if self._config.linearization == "fej":
             _, H_robot, H_landmark = predict_observations(
                 self._pose_prior, self._tracks.first_xy[slots], self._T_body_sensor
@@ -919,7 +918,7 @@ class EkfSlam:
         elif self._invariant:
             # H T: the heading column gains H_p J p + H_m J m (zero for range-bearing, to rounding)
             H_robot[:, :, HEADING] += H_robot[:, :, :2] @ (J @ pose[:2]) + np.einsum(
-                "kij,kj->ki", H_landmark, self._state.landmark_positions()[slots] @ J.T
+                "kij,kj->ki", H_landmark, landmarks @ J.T
             )
         return z_hat, H_robot, H_landmark
 

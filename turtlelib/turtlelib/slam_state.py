@@ -160,9 +160,9 @@ class SlamState:
         slots = np.arange(self._n) if slots is None else np.asarray(slots)
         blocks = self._stored_landmark_blocks(slots)
         if self._invariant:
-            first = ROBOT_DIM + LANDMARK_DIM * slots
-            c = self._mean[first[:, None] + np.arange(LANDMARK_DIM)] @ J.T
-            P_theta_m = self._cov[HEADING][first[:, None] + np.arange(LANDMARK_DIM)]
+            columns = (ROBOT_DIM + LANDMARK_DIM * slots)[:, None] + np.arange(LANDMARK_DIM)
+            c = self._mean[columns] @ J.T
+            P_theta_m = self._cov[HEADING][columns]
             cross = c[:, :, None] * P_theta_m[:, None, :]
             blocks += cross + cross.transpose(0, 2, 1)
             blocks += self._cov[HEADING, HEADING] * c[:, :, None] * c[:, None, :]
