@@ -834,9 +834,9 @@ class EkfSlam:
         return (near, *self._distances(nu[:, near], R, H_robot[near], H_landmark[near], near))
 
     def _predicted_covariances(
-        self, H_robot: NDArray[np.float64], H_landmark: NDArray[np.float64], slots: NDArray[np.int64] | None
+        self, H_robot: NDArray[np.float64], H_landmark: NDArray[np.float64], slots: NDArray[np.int64]
     ) -> NDArray[np.float64]:
-        """``Sigma_j = H_j P H_j^T`` (k, 2, 2) for ``slots`` (default all), O(k): ``H_j`` is non-zero only on
+        """``Sigma_j = H_j P H_j^T`` (k, 2, 2) for ``slots`` (k,), O(k): ``H_j`` is non-zero only on
         the pose and landmark j, so ``Sigma_j = J_j P_(q m_j) J_j^T`` with ``J_j = [H_robot_j, H_landmark_j]``
         and ``P_(q m_j)`` the 5x5 joint covariance of the pose and landmark j.
         """

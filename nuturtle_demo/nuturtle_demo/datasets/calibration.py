@@ -176,10 +176,10 @@ def fit_noise_correlation(
         k = np.flatnonzero(residuals.subject == subject)
         moved.append(np.linalg.norm(np.diff(residuals.sensor_xy[k], axis=0), axis=1))
         products.append(w[k[:-1]] * w[k[1:]])
+    if sum(len(m) for m in moved) == 0:
+        raise ValueError("no landmark seen twice: the error correlation cannot be fitted")
     d = np.repeat(np.concatenate(moved), 2)
     p = np.concatenate(products).ravel()
-    if len(p) == 0:
-        raise ValueError("no landmark seen twice: the error correlation cannot be fitted")
 
     # E[w_(k-1) w_k] = c exp(-d / l)
     def misfit(parameters: NDArray[np.float64]) -> NDArray[np.float64]:

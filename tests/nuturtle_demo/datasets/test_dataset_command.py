@@ -295,6 +295,13 @@ def test_fit_noise_correlation_recovers_viewpoint_correlated_errors(c, length):
         fit_noise_correlation(
             Residuals(np.array([6, 7]), np.zeros((2, 2)), np.ones(2), np.zeros((2, 2))), 0.1, 0, 0.1
         )
+    with pytest.raises(ValueError, match="seen twice"):
+        fit_noise_correlation(
+            Residuals(np.zeros(0, dtype=np.int64), np.zeros((0, 2)), np.zeros(0), np.zeros((0, 2))),
+            0.1,
+            0,
+            0.1,
+        )
 
 
 @pytest.mark.parametrize(("range_std", "range_std_per_m"), [(0.02, 0.03), (0.1, 0.0), (0.005, 0.05)])
