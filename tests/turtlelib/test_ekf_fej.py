@@ -115,14 +115,14 @@ def test_final_heading_error_against_the_filter_sigma(linearization, consistent)
     seed=st.integers(0, 1000),
 )
 def test_oc_jacobians_have_the_unobservable_directions_in_their_null_space(pose, offset, shift, seed):
-    from turtlelib.ekf_slam import _observability_constrained
+    from turtlelib.linearization import observability_constrained
 
     landmarks = np.random.default_rng(seed).uniform(-6.0, 6.0, (4, 2)) + pose[:2] + 0.5
     T_body_sensor = Transform2D(*offset, 0.0)
     _, H_robot, H_landmark = predict_observations(np.array(pose), landmarks, T_body_sensor)
     # N built at other (first) estimates than the Jacobians' own point
     first = landmarks + shift
-    H_robot_oc, H_landmark_oc = _observability_constrained(H_robot, H_landmark, np.array(pose), first)
+    H_robot_oc, H_landmark_oc = observability_constrained(H_robot, H_landmark, np.array(pose), first)
     for k in range(len(landmarks)):
         N = np.zeros((5, 3))
         N[[0, 1, 3, 4], [0, 1, 0, 1]] = 1.0
@@ -135,12 +135,12 @@ def test_oc_jacobians_have_the_unobservable_directions_in_their_null_space(pose,
 
 
 def test_oc_changes_nothing_when_the_jacobian_already_respects_the_null_space():
-    from turtlelib.ekf_slam import _observability_constrained
+    from turtlelib.linearization import observability_constrained
 
     pose, landmarks = np.array([0.3, -0.2, 0.7]), np.array([[2.0, 1.0], [-1.0, 3.0]])
     # sensor at the body origin, N at the Jacobians' own point: H N = 0 already
     _, H_robot, H_landmark = predict_observations(pose, landmarks, Transform2D())
-    H_robot_oc, H_landmark_oc = _observability_constrained(H_robot, H_landmark, pose, landmarks)
+    H_robot_oc, H_landmark_oc = observability_constrained(H_robot, H_landmark, pose, landmarks)
     np.testing.assert_allclose(H_robot_oc, H_robot, atol=1e-12)
     np.testing.assert_allclose(H_landmark_oc, H_landmark, atol=1e-12)
 

@@ -349,7 +349,7 @@ def test_the_invariant_jacobian_annihilates_the_constant_unobservable_directions
     z, _, _ = predict_observations(slam.pose.as_array(), world, config.T_body_sensor)
     slam.update_known(np.arange(4), z + rng.normal(0.0, 0.02, z.shape))
 
-    _, H_robot, H_landmark = slam._predicted_observations(np.arange(4))
+    _, H_robot, H_landmark = slam.view().observe(np.arange(4))
     x = slam.state
     H = np.zeros((8, len(x)))
     for k in range(4):

@@ -13,6 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from turtlelib import DiffDrive, Transform2D, TwistNoise, UnicycleMotion
+from turtlelib.association import chi2_gate
 from turtlelib.ekf_slam import EkfSlam, ObservationStatus, SlamConfig
 from turtlelib.motion_models import DiffDriveMotion
 from turtlelib.range_bearing import predict_observations
@@ -318,9 +319,11 @@ def test_gating_leaves_out_only_landmarks_beyond_gate_new_of_every_observation(l
         near_mapped = observe(slam, mapped, config) + rng.normal(0.0, [0.3, 0.1], (3, 2))
         z = np.vstack([near_mapped, np.column_stack([rng.uniform(0.2, 9.0, 3), rng.uniform(-PI, PI, 3)])])
         R = config.observation_covariances(z[:, 0])
-        near, _, d2_near, _, _, _ = slam._gate_near(z, R)
-        _, d2_all, _, _, _ = slam._gate(z, R, np.arange(len(slam.landmark_ids)))
-        within = (d2_all <= slam._gate_new).any(axis=0).nonzero()[0]
+        gate_new = chi2_gate(config.gate_new, 2)
+        gating_near = slam.view().gate_near(z, R, gate_new)
+        near, d2_near = gating_near.slots, gating_near.d2
+        d2_all = slam.view().gate(z, R, np.arange(len(slam.landmark_ids))).d2
+        within = (d2_all <= gate_new).any(axis=0).nonzero()[0]
         assert set(within) <= set(near)
         np.testing.assert_array_equal(d2_near, d2_all[:, near])
         kept += len(near)

@@ -145,7 +145,6 @@ map never grows past ``max_landmarks``: what matters is the memory and time of `
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from enum import IntEnum
@@ -155,25 +154,29 @@ from numbers import Integral
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .association import (
-    chi2_gate,
-    joint_compatibility,
-    mahalanobis_2d,
-    mahalanobis_lower_bound,
-    nearest_neighbour,
+from .data_association import (
+    MATCHED,
+    MATCHERS,
+    NEW,
+    REJECTED,
+    UNMAPPED,
+    AssociationPolicy,
+    GatedTracks,
+    KnownIds,
+    Matcher,
+    Plan,
+    SlamView,
 )
 from .geometry import Transform2D
-from .landmark_tracks import LandmarkTracks
+from .linearization import LINEARIZATIONS
+from .measurement_models import MeasurementModel, RangeBearing, range_bearing_noise
 from .motion_models import BatchMotionModel, MotionModel
-from .range_bearing import landmarks_from_observations, predict_observations, residual
 from .slam_map import LandmarkMap
-from .slam_state import HEADING, ROBOT_DIM, J, SlamState
+from .slam_state import ROBOT_DIM, SlamState
 from .timebase import NS_PER_S
 from .validation import finite_real, in_range, integer, non_negative, one_of, positive, store
 
-MATCHERS = ("nn", "jcbb")
 MODES = ("mapping", "localization")
-LINEARIZATIONS = ("standard", "fej", "oc", "invariant")
 
 
 @dataclass(frozen=True)
@@ -259,8 +262,8 @@ class SlamConfig:
         )
         store(self, ("noise_correlation",), partial(in_range, low=0.0, high=1.0, open_high=True))
         store(self, ("range_std", "bearing_std", "max_range", "tentative_timeout"), positive)
-        one_of("matcher", self.matcher, MATCHERS)
-        one_of("linearization", self.linearization, LINEARIZATIONS)
+        one_of("matcher", self.matcher, tuple(MATCHERS))
+        one_of("linearization", self.linearization, tuple(LINEARIZATIONS))
         one_of("mode", self.mode, MODES)
         probability = partial(in_range, low=0.0, high=1.0, open_low=True, open_high=True)
         store(self, ("gate_associate", "gate_new"), probability)
@@ -284,17 +287,25 @@ class SlamConfig:
     def T_body_sensor(self) -> Transform2D:
         return Transform2D(self.sensor_x, self.sensor_y, self.sensor_theta)
 
+    def measurement_model(self) -> RangeBearing:
+        """The range-bearing model of these parameters: sensor mount, default noise, range limits."""
+        return RangeBearing(
+            self.T_body_sensor,
+            self.range_std,
+            self.bearing_std,
+            self.range_std_per_m,
+            self.min_range,
+            self.max_range,
+        )
+
     def measurement_covariance(self, count: int) -> NDArray[np.float64]:
         """``R = diag(range_std^2, bearing_std^2)`` (count, 2, 2): an observation's noise at range 0."""
-        return np.broadcast_to(np.diag([self.range_std**2, self.bearing_std**2]), (count, 2, 2)).copy()
+        return range_bearing_noise(np.zeros(count), self.range_std, self.bearing_std)
 
     def observation_covariances(self, range_m: NDArray[np.float64]) -> NDArray[np.float64]:
         """The default ``R`` (K, 2, 2) of observations at ranges ``range_m`` (K,):
         ``diag((range_std + range_std_per_m r)^2, bearing_std^2)``."""
-        R = self.measurement_covariance(len(range_m))
-        if self.range_std_per_m > 0.0:
-            R[:, 0, 0] = (self.range_std + self.range_std_per_m * np.asarray(range_m)) ** 2
-        return R
+        return range_bearing_noise(range_m, self.range_std, self.bearing_std, self.range_std_per_m)
 
     @property
     def independent_noise(self) -> bool:
@@ -319,18 +330,11 @@ class SlamConfig:
 class ObservationStatus(IntEnum):
     """What an update did with one observation."""
 
-    MATCHED = 0  # joined an existing landmark (confirmed or tentative)
-    NEW = 1  # started a new landmark (tentative unless confirm_count == 1 or the association is known)
-    REJECTED = 2  # unused: outside [min_range, max_range], between the two gates, outbid for its landmark,
-    # outside the known-association gate, or new while the map is full
-    UNMAPPED = 3  # would start a landmark, but the map is fixed (localization)
-
-
-# the status values as plain integers, for filling int8 arrays
-_MATCHED = int(ObservationStatus.MATCHED)
-_NEW = int(ObservationStatus.NEW)
-_REJECTED = int(ObservationStatus.REJECTED)
-_UNMAPPED = int(ObservationStatus.UNMAPPED)
+    MATCHED = MATCHED  # joined an existing landmark (confirmed or tentative)
+    NEW = NEW  # started a new landmark (tentative unless confirm_count == 1 or the association is known)
+    REJECTED = REJECTED  # unused: outside [min_range, max_range], between the two gates, outbid for its
+    # landmark, outside the known-association gate, or new while the map is full
+    UNMAPPED = UNMAPPED  # would start a landmark, but the map is fixed (localization)
 
 
 @dataclass(frozen=True)
@@ -351,30 +355,50 @@ class Association:
     nis: float = 0.0
     nis_dof: int = 0
 
+    @property
+    def counts(self) -> dict[str, int]:
+        """How many observations each status got, by lower-case status name."""
+        tally = np.bincount(self.status, minlength=len(ObservationStatus))
+        return {status.name.lower(): int(tally[status]) for status in ObservationStatus}
+
 
 class EkfSlam:
-    """EKF SLAM (see the module docstring for the maths).
+    """EKF SLAM (see the module docstring for the maths): the filter itself, with its models and policies
+    passed in.
 
     ``motion`` is the motion model (:class:`turtlelib.motion_models.MotionModel`: its ``step`` gives
     ``q'``, ``G`` and ``Q`` for an input ``u``); ``T_map_body0`` the initial pose, with covariance from
-    ``config.initial_pose_covariance()``. A filter runs either with known association
-    (:meth:`update_known`) or with unknown association (:meth:`update_unknown`), fixed by the first update
-    until :meth:`reset`.
+    ``config.initial_pose_covariance()``; ``measurement`` the measurement model
+    (:class:`turtlelib.measurement_models.MeasurementModel`; default: ``config.measurement_model()``, the
+    range-bearing LiDAR), which an update may replace for one call (a second sensor); ``matcher`` the
+    unknown association's matcher (:class:`turtlelib.data_association.Matcher`; default: ``config.matcher``).
+    The linearisation strategy is ``config.linearization`` (:mod:`turtlelib.linearization`). A filter runs
+    either with known association (:meth:`update_known`) or with unknown association
+    (:meth:`update_unknown`), fixed by the first update until :meth:`reset`.
     """
 
     def __init__(
-        self, config: SlamConfig, motion: MotionModel, T_map_body0: Transform2D | None = None
+        self,
+        config: SlamConfig,
+        motion: MotionModel,
+        T_map_body0: Transform2D | None = None,
+        *,
+        measurement: MeasurementModel | None = None,
+        matcher: Matcher | None = None,
     ) -> None:
         self._config = config
         self._motion = motion
-        self._constrained = config.linearization in ("fej", "oc")
-        self._invariant = config.linearization == "invariant"
-        self._T_body_sensor = config.T_body_sensor
-        self._gate_associate = float(chi2_gate(config.gate_associate, 2))
-        self._gate_new = float(chi2_gate(config.gate_new, 2))
-        self._gate_known = _gate_or_inf(config.gate_known)
-        self._relinearize = _gate_or_inf(config.relinearize_gate) if self._constrained else np.inf
-        self._timeout_ns = round(config.tentative_timeout * NS_PER_S)
+        self._measurement = config.measurement_model() if measurement is None else measurement
+        self._linearization = LINEARIZATIONS[config.linearization](config.relinearize_gate)
+        if matcher is None:
+            matcher = MATCHERS[config.matcher](config.gate_associate, config.jcbb_max_nodes)
+        timeout_ns = round(config.tentative_timeout * NS_PER_S)
+        self._policies: dict[str, AssociationPolicy] = {
+            "known": KnownIds(config.gate_known),
+            "unknown": GatedTracks(
+                matcher, config.gate_associate, config.gate_new, config.confirm_count, timeout_ns
+            ),
+        }
         self._localization = config.mode == "localization"
         self.reset(Transform2D() if T_map_body0 is None else T_map_body0)
 
@@ -386,6 +410,11 @@ class EkfSlam:
     def motion(self) -> MotionModel:
         return self._motion
 
+    @property
+    def measurement(self) -> MeasurementModel:
+        """The default measurement model of the updates."""
+        return self._measurement
+
     # --- the filter steps --------------------------------------------------------------------------------
 
     def predict(self, u: tuple) -> None:
@@ -396,8 +425,8 @@ class EkfSlam:
         """
         q_next, G, Q = _finite_step(self._motion.step(self.pose, u))
         # P_qq' = G P_qq G^T + Q,  P_qm' = G P_qm
-        self._state.predict(q_next, self._propagation_jacobian(G), Q)
-        self._pose_prior = q_next.copy()
+        self._state.predict(q_next, self._linearization.propagation_jacobian(self._state, G), Q)
+        self._linearization.predicted(q_next)
 
     def predict_along(self, inputs: Sequence[tuple]) -> NDArray[np.float64]:
         """:meth:`predict` for each of the consecutive ``inputs`` as one composite prediction; returns the
@@ -420,8 +449,8 @@ class EkfSlam:
         # a non-finite pose anywhere carries on to the last one (the poses accumulate)
         q_next, G, Q = _finite_step((poses[-1].copy(), G, Q))
         # P_qq' = G P_qq G^T + Q,  P_qm' = G P_qm
-        self._state.predict(q_next, self._propagation_jacobian(G), Q)
-        self._pose_prior = q_next.copy()
+        self._state.predict(q_next, self._linearization.propagation_jacobian(self._state, G), Q)
+        self._linearization.predicted(q_next)
         return poses
 
     def propagated_pose(self, u: tuple) -> tuple[Transform2D, NDArray[np.float64]]:
@@ -438,131 +467,133 @@ class EkfSlam:
         for step, u in enumerate(inputs):
             q_next, G, Q = _finite_step(self._motion.step(T_map_body, u))
             # the first step from the filter's pose as predict takes it; the later ones start at their prior
-            G = self._propagation_jacobian(G) if step == 0 else G
+            G = self._linearization.propagation_jacobian(self._state, G) if step == 0 else G
             # P_qq' = G P_qq G^T + Q
             P_qq = G @ P_qq @ G.T + Q
             P_qq = 0.5 * (P_qq + P_qq.T)
             T_map_body = Transform2D(*q_next)
         return T_map_body, P_qq
 
-    def _propagation_jacobian(self, G: NDArray[np.float64]) -> NDArray[np.float64]:
-        """The model's ``G``, or with FEJ / OC ``G + J (p_(k|k) - p_(k|k-1))`` in its heading column: ``G`` at
-        ``p_(k+1|k) - p_(k|k-1)`` (module docstring)."""
-        if not self._constrained:
-            return G
-        G = G.copy()
-        G[0, 2] -= self._state.mean[1] - self._pose_prior[1]
-        G[1, 2] += self._state.mean[0] - self._pose_prior[0]
-        return G
-
-    def update_known(self, ids: ArrayLike, z: ArrayLike, R: ArrayLike | None = None) -> Association:
-        """Update with observations ``z`` (K, 2) [range_m, bearing_rad] (sensor frame) of landmarks ``ids``.
+    def update_known(
+        self,
+        ids: ArrayLike,
+        z: ArrayLike,
+        R: ArrayLike | None = None,
+        measurement: MeasurementModel | None = None,
+    ) -> Association:
+        """Update with observations ``z`` (K, 2) (sensor frame; [range_m, bearing_rad] for the default model)
+        of landmarks ``ids``.
 
         ``ids`` (K,) distinct integers >= 0 are the truth: an id never seen before starts a new (confirmed)
         landmark from its observation (in localization: is UNMAPPED); an observation of a mapped landmark
         outside the ``gate_known`` innovation gate is rejected. ``R`` (K, 2, 2) the observation noise
-        (default from the config).
+        (default from the measurement model); ``measurement`` the model of this update (default: the
+        filter's).
         """
-        z, R, landmark_ids = self.checked_observations(z, R, ids)
+        model = self._measurement if measurement is None else measurement
+        z, R, landmark_ids = self.checked_observations(z, R, ids, measurement=model)
         self._enter_mode("known")
+        return self._update(self._policies["known"], model, z, R, landmark_ids, stamp_ns=0)
 
-        in_range = self._in_range(z)
-        slot_of = [self._tracks.slot(i) for i in landmark_ids.tolist()]
-        known = np.array([slot is not None for slot in slot_of], dtype=bool)
-        seen_before = np.flatnonzero(in_range & known)
-        slots = np.array([slot_of[k] for k in seen_before], dtype=np.int64)
-        # D2 = nu^T S^-1 nu of each observation against its landmark; fuse those inside the gate
-        nu, d2, H_robot, H_landmark = self._innovations(slots, z[seen_before], R[seen_before])
-        inside = d2 < self._gate_known
-        matched = seen_before[inside]
-        # one stacked update with the landmarks seen before, then the new ones from the updated pose
-        sensor_xy, R_fused = self._fusion_noise(slots[inside], R[matched])
-        nis = self._state.correct(
-            slots[inside], H_robot[inside], H_landmark[inside], nu[inside], R_fused, self._localization
-        )
-        self._tracks.viewed(slots[inside], sensor_xy)
-        self._relinearize_first_estimates(slots[inside])
-        status = np.full(len(z), _REJECTED, dtype=np.int8)
-        status[matched] = _MATCHED
-        if self._localization:
-            status[in_range & ~known] = _UNMAPPED
-            return Association(
-                status, np.where(status == _MATCHED, landmark_ids, -1), nis=nis, nis_dof=2 * len(matched)
-            )
-        for k in np.flatnonzero(in_range & ~known):
-            if self.map_full:
-                break
-            self._add_landmark(int(landmark_ids[k]), z[k], R[k], confirmed=True, stamp_ns=0)
-            status[k] = _NEW
-        used = status != _REJECTED
-        return Association(status, np.where(used, landmark_ids, -1), nis=nis, nis_dof=2 * len(matched))
-
-    def update_unknown(self, z: ArrayLike, R: ArrayLike | None = None, *, stamp_ns: int) -> Association:
-        """Associate and fuse one scan's observations ``z`` (K, 2) [range_m, bearing_rad] (sensor frame),
-        taken at ``stamp_ns`` (integer ns; the tentative timeout runs on these stamps).
+    def update_unknown(
+        self,
+        z: ArrayLike,
+        R: ArrayLike | None = None,
+        *,
+        stamp_ns: int,
+        measurement: MeasurementModel | None = None,
+    ) -> Association:
+        """Associate and fuse one scan's observations ``z`` (K, 2) (sensor frame; [range_m, bearing_rad] for
+        the default model), taken at ``stamp_ns`` (integer ns; the tentative timeout runs on these stamps).
 
         Call it once per scan, also with no observations (K = 0), so that tentative landmarks expire.
-        ``R`` (K, 2, 2) the observation noise (default from the config). In localization an observation
-        that would start a landmark is UNMAPPED instead.
+        ``R`` (K, 2, 2) the observation noise (default from the measurement model); ``measurement`` the
+        model of this update (default: the filter's). In localization an observation that would start a
+        landmark is UNMAPPED instead.
         """
         stamp_ns = integer("stamp_ns", stamp_ns)
-        z, R, _ = self.checked_observations(z, R)
+        model = self._measurement if measurement is None else measurement
+        z, R, _ = self.checked_observations(z, R, measurement=model)
         self._enter_mode("unknown")
-        usable = self._in_range(z).nonzero()[0]
-        z_usable, R_usable = (z, R) if len(usable) == len(z) else (z[usable], R[usable])
-        landmark_ids = np.full(len(z), -1, dtype=np.int64)
-        status = np.full(len(z), _REJECTED, dtype=np.int8)
+        return self._update(self._policies["unknown"], model, z, R, None, stamp_ns)
 
-        # gate every usable observation against the landmarks near it, associate, fuse the matched ones
-        match = np.full(len(usable), -1, dtype=np.int64)
-        far_from_all = np.ones(len(usable), dtype=bool)
-        nis = 0.0
-        if self._state.n_landmarks and len(usable):
-            near, nu, d2, log_det, H_robot, H_landmark = self._gate_near(z_usable, R_usable)
-            match = self._associate(nu, d2, log_det, R_usable, H_robot, H_landmark, near)
-            far_from_all = (d2 > self._gate_new).all(axis=1)
-            rows = (match >= 0).nonzero()[0]
-            columns = match[rows]
-            slots = near[columns]
-            landmark_ids[usable[rows]] = self._tracks.ids[slots]
-            status[usable[rows]] = _MATCHED
-            sensor_xy, R_fused = self._fusion_noise(slots, R_usable[rows])
-            nis = self._state.correct(
-                slots, H_robot[columns], H_landmark[columns], nu[rows, columns], R_fused, self._localization
-            )
-            self._tracks.viewed(slots, sensor_xy)
-            self._relinearize_first_estimates(slots)
-            confirmed_ids = [self._tracks.sighted(slots, self._config.confirm_count)]
-        else:
-            slots, confirmed_ids = match[:0], []
-
-        # new (tentative) landmarks from the observations incompatible with every landmark
-        started: list[int] = []
-        unexplained = usable[(match < 0) & far_from_all]
+    def _update(
+        self,
+        policy: AssociationPolicy,
+        model: MeasurementModel,
+        z: NDArray[np.float64],
+        R: NDArray[np.float64],
+        ids: NDArray[np.int64] | None,
+        stamp_ns: int,
+    ) -> Association:
+        """One update: the policy's plan, its fusion, the landmarks it starts, the ones it drops."""
+        view = self.view(model)
+        plan = policy.plan(view, z, R, ids)
+        status, landmark_ids = plan.status, plan.landmark_ids
+        # one stacked update with the matched observations, then the new landmarks from the updated pose
+        nis = self._fuse(model, plan, R[plan.rows])
+        confirmed_ids = [policy.sighted(self._state.tracks, plan.slots)]
+        births = plan.births
         if self._localization:
-            status[unexplained] = _UNMAPPED
-            unexplained = unexplained[:0]
-        for k in unexplained:
-            if self._start_landmark(z[k], R[k], started, stamp_ns):
-                landmark_ids[k] = self._next_id - 1
-                status[k] = _NEW
-                if self._config.confirm_count == 1:
-                    confirmed_ids.append(landmark_ids[k : k + 1])
-
-        # tentative landmarks still unconfirmed tentative_timeout after their first sighting are marginalised
+            status[births] = UNMAPPED
+            births = births[:0]
+        started: list[int] = []
+        for b, k in enumerate(births.tolist()):
+            if view.map_full or not policy.admits(view, z[k], R[k], started):
+                continue
+            landmark_id = self._state.tracks.next_id if plan.birth_ids is None else int(plan.birth_ids[b])
+            started.append(self._add_landmark(model, landmark_id, z[k], R[k], plan.birth_confirmed, stamp_ns))
+            landmark_ids[k], status[k] = landmark_id, NEW
+            if plan.birth_confirmed and policy.tentative:
+                confirmed_ids.append(landmark_ids[k : k + 1])
+        # tentative landmarks the policy gives up are marginalised
         dropped_ids = []
-        for slot in self._tracks.expired(stamp_ns, self._timeout_ns):
-            dropped_ids.append(int(self._tracks.ids[slot]))
-            self._tracks.remove(slot)
+        for slot in policy.expired(view, stamp_ns):
+            dropped_ids.append(int(self._state.tracks.ids[slot]))
             self._state.remove(slot)
         return Association(
             status,
             landmark_ids,
-            np.concatenate([np.zeros(0, dtype=np.int64), *confirmed_ids]),
+            np.concatenate(confirmed_ids),
             np.sort(np.array(dropped_ids, dtype=np.int64)),
             nis,
-            2 * len(slots),
+            2 * len(plan.slots),
         )
+
+    def _fuse(self, model: MeasurementModel, plan: Plan, R: NDArray[np.float64]) -> float:
+        """The plan's observations (noise ``R`` (m, 2, 2)) in one stacked update; returns the joint NIS.
+
+        With correlated errors each one's ``R`` is scaled by ``(1 + rho) / (1 - rho)`` for the sensor's
+        distance from its landmark's last view (module docstring)."""
+        slots = plan.slots
+        if len(slots) == 0:
+            return 0.0
+        sensor_xy = model.sensor_xy(self._state.mean)
+        if not self._config.independent_noise:
+            moved_m = np.linalg.norm(sensor_xy - self._state.tracks.last_view_xy[slots], axis=1)
+            R = R * self._config.fusion_scale(moved_m)[:, None, None]
+        nis = self._state.correct(slots, plan.H_robot, plan.H_landmark, plan.nu, R, self._localization)
+        self._state.tracks.viewed(slots, sensor_xy)
+        self._linearization.fused(self._state, slots)
+        return nis
+
+    def _add_landmark(
+        self,
+        model: MeasurementModel,
+        landmark_id: int,
+        z: NDArray[np.float64],
+        R: NDArray[np.float64],
+        confirmed: bool,
+        stamp_ns: int,
+    ) -> int:
+        """Initialise a landmark from one observation by the inverse model (see :meth:`SlamState.append`),
+        first seen at ``stamp_ns``; returns its slot."""
+        p_map, G_robot, G_z = model.inverse(self._state.mean[:ROBOT_DIM], z[None, :])
+        slot = self._state.append(p_map[0], G_robot[0], G_z[0], R, landmark_id, stamp_ns, confirmed)
+        self._linearization.added(self._state, np.array([slot]))
+        # the sensor position of this first view: the landmark's estimate carries its error
+        self._state.tracks.viewed(np.array([slot]), model.sensor_xy(self._state.mean))
+        return slot
 
     def reset(
         self,
@@ -578,15 +609,12 @@ class EkfSlam:
         a relocalization, also after :meth:`load_map` and in localization.
         """
         pose, covariance = self._initial_pose(T_map_body, pose_covariance)
-        # the pose prior q_(k|k-1) of the first-estimates Jacobians
-        self._pose_prior = pose.copy()
         if keep_map:
             self._state.reset_robot(pose, covariance, keep_map=True)
-            return
-        self._state = SlamState(pose, covariance, invariant=self._invariant)
-        self._tracks = LandmarkTracks()
-        self._next_id = 0
-        self._association: str | None = None
+        else:
+            self._state = SlamState(pose, covariance, invariant=self._linearization.invariant)
+            self._association: str | None = None
+        self._linearization.start(self._state)
 
     def load_map(
         self,
@@ -615,13 +643,13 @@ class EkfSlam:
                 f"the map holds {n} landmarks, more than max_landmarks = {self._config.max_landmarks}"
             )
         pose, covariance = self._initial_pose(T_map_body, pose_covariance)
-        state = SlamState(pose, covariance, capacity_landmarks=max(16, n), invariant=self._invariant)
-        state.append_independent(landmark_map.xy, landmark_map.covariance)
-        tracks = LandmarkTracks(max(16, n))
-        tracks.append_many(landmark_map.ids, 0, True, landmark_map.xy)
-        self._state, self._tracks = state, tracks
-        self._pose_prior = pose.copy()
-        self._next_id = int(landmark_map.ids.max()) + 1 if n else 0
+        state = SlamState(
+            pose, covariance, capacity_landmarks=max(16, n), invariant=self._linearization.invariant
+        )
+        slots = state.append_independent(landmark_map.xy, landmark_map.covariance, landmark_map.ids)
+        self._linearization.start(state)
+        self._linearization.added(state, slots)
+        self._state = state
         self._association = None
 
     def landmark_map(
@@ -632,12 +660,13 @@ class EkfSlam:
         covariance (2n, 2n) from ``P``, cross-covariances included; ``parameters`` (default none) for the
         record. ValueError for an invalid frame, stamp or parameters.
         """
-        slots = self._tracks.slots_by_id(confirmed=True)
+        tracks = self._state.tracks
+        slots = tracks.slots_by_id(confirmed=True)
         indices = (ROBOT_DIM + 2 * slots[:, None] + np.arange(2)).ravel()
         return LandmarkMap(
             frame_id=frame_id,
             stamp_ns=stamp_ns,
-            ids=self._tracks.ids[slots],
+            ids=tracks.ids[slots],
             xy=self._state.landmark_positions()[slots],
             covariance=self._state.covariance[np.ix_(indices, indices)],
             parameters={} if parameters is None else parameters,
@@ -656,6 +685,12 @@ class EkfSlam:
 
     # --- estimates ---------------------------------------------------------------------------------------
 
+    def view(self, measurement: MeasurementModel | None = None) -> SlamView:
+        """The filter as data association sees it (read-only, live), through ``measurement`` (default: the
+        filter's model); landmarks by slot."""
+        model = self._measurement if measurement is None else measurement
+        return SlamView(self._state, self._linearization, model, self._config.max_landmarks)
+
     @property
     def pose(self) -> Transform2D:
         """``T_map_body``, the pose mean."""
@@ -670,17 +705,18 @@ class EkfSlam:
     @property
     def landmark_ids(self) -> NDArray[np.int64]:
         """Ids (n,) of the confirmed landmarks, ascending; the order of every landmark view."""
-        return self._tracks.ids[self._tracks.slots_by_id(confirmed=True)]
+        tracks = self._state.tracks
+        return tracks.ids[tracks.slots_by_id(confirmed=True)]
 
     @property
     def landmarks(self) -> NDArray[np.float64]:
         """Map positions (n, 2) (m) of the confirmed landmarks."""
-        return self._state.landmark_positions()[self._tracks.slots_by_id(confirmed=True)]
+        return self._state.landmark_positions()[self._state.tracks.slots_by_id(confirmed=True)]
 
     @property
     def landmark_covariances(self) -> NDArray[np.float64]:
         """Marginal covariances (n, 2, 2) (m^2) of the confirmed landmarks."""
-        return self._state.landmark_blocks(self._tracks.slots_by_id(confirmed=True))
+        return self._state.landmark_blocks(self._state.tracks.slots_by_id(confirmed=True))
 
     @property
     def state(self) -> NDArray[np.float64]:
@@ -702,20 +738,22 @@ class EkfSlam:
     @property
     def tentative_ids(self) -> NDArray[np.int64]:
         """Ids of the tentative (unconfirmed) landmarks, ascending."""
-        return self._tracks.ids[self._tracks.slots_by_id(confirmed=False)]
+        tracks = self._state.tracks
+        return tracks.ids[tracks.slots_by_id(confirmed=False)]
 
     @property
     def tentative_landmarks(self) -> NDArray[np.float64]:
         """Map positions (t, 2) of the tentative landmarks, in the order of :attr:`tentative_ids`."""
-        return self._state.landmark_positions()[self._tracks.slots_by_id(confirmed=False)]
+        return self._state.landmark_positions()[self._state.tracks.slots_by_id(confirmed=False)]
 
     def landmark_estimate(self, landmark_id: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Position (2,) and covariance (2, 2) of confirmed landmark ``landmark_id``.
 
         ValueError if no confirmed landmark has that id.
         """
-        slot = self._tracks.slot(int(landmark_id)) if isinstance(landmark_id, Integral) else None
-        if slot is None or not self._tracks.confirmed[slot]:
+        tracks = self._state.tracks
+        slot = tracks.slot(int(landmark_id)) if isinstance(landmark_id, Integral) else None
+        if slot is None or not tracks.confirmed[slot]:
             raise ValueError(f"no confirmed landmark with id {landmark_id!r}")
         first = ROBOT_DIM + 2 * slot
         return (
@@ -726,10 +764,15 @@ class EkfSlam:
     # --- helpers -----------------------------------------------------------------------------------------
 
     def checked_observations(
-        self, z: ArrayLike, R: ArrayLike | None = None, ids: ArrayLike | None = None
+        self,
+        z: ArrayLike,
+        R: ArrayLike | None = None,
+        ids: ArrayLike | None = None,
+        measurement: MeasurementModel | None = None,
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64] | None]:
-        """What the updates take, validated: ``z`` (K, 2) finite with range > 0, ``R`` (K, 2, 2) symmetric
-        positive definite (default from the config) and, if given, ``ids`` (K,) distinct integers >= 0.
+        """What the updates take, validated: ``z`` (K, 2) finite and taken by the measurement model
+        (``measurement``, default the filter's; range > 0 for range-bearing), ``R`` (K, 2, 2) symmetric
+        positive definite (default from the model) and, if given, ``ids`` (K,) distinct integers >= 0.
         Observations with ``ids`` are for :meth:`update_known`, without for :meth:`update_unknown`: they
         must fit the filter's association mode.
 
@@ -739,7 +782,8 @@ class EkfSlam:
         if self._association not in (None, mode):
             raise ValueError(f"this filter runs with {self._association} association; reset() to switch")
         landmark_ids = None if ids is None else _landmark_ids(ids)
-        z, R = self._observations(z, R)
+        model = self._measurement if measurement is None else measurement
+        z, R = _observations(model, z, R)
         if len(z) > self._config.max_observations:
             raise ValueError(
                 f"{len(z)} observations in one update, more than max_observations = "
@@ -749,254 +793,44 @@ class EkfSlam:
             raise ValueError(f"{len(landmark_ids)} ids for {len(z)} observations")
         return z, R, landmark_ids
 
-    def _observations(
-        self, z: ArrayLike, R: ArrayLike | None
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """Validated ``z`` (K, 2) with finite values and range > 0, and ``R`` (K, 2, 2) symmetric PD."""
-        z = np.array(z, dtype=np.float64)
-        if z.size == 0:
-            z = z.reshape(0, 2)
-        if z.ndim != 2 or z.shape[1] != 2:
-            raise ValueError(f"observations must have shape (K, 2), got {z.shape}")
-        if not np.isfinite(z).all():
-            raise ValueError("observations must be finite")
-        if not (z[:, 0] > 0.0).all():
-            raise ValueError("observed ranges must be > 0")
-        if R is None:
-            return z, self._config.observation_covariances(z[:, 0])
-        R = np.array(R, dtype=np.float64)
-        if R.shape != (len(z), 2, 2):
-            raise ValueError(f"R must have shape ({len(z)}, 2, 2), got {R.shape}")
-        if not np.isfinite(R).all():
-            raise ValueError("R must be finite")
-        scale = np.abs(R).max(initial=0.0)
-        if np.any(np.abs(R[:, 0, 1] - R[:, 1, 0]) > 1e-12 * scale):
-            raise ValueError("R must be symmetric")
-        det = R[:, 0, 0] * R[:, 1, 1] - R[:, 0, 1] * R[:, 1, 0]
-        if not ((R[:, 0, 0] > 0.0).all() and (R[:, 1, 1] > 0.0).all() and (det > 0.0).all()):
-            raise ValueError("R must be positive definite (positive variances)")
-        return z, R
-
-    def _in_range(self, z: NDArray[np.float64]) -> NDArray[np.bool_]:
-        """``min_range <= range <= max_range`` per observation (K,)."""
-        return (z[:, 0] >= self._config.min_range) & (z[:, 0] <= self._config.max_range)
-
     def _enter_mode(self, mode: str) -> None:
         if self._association not in (None, mode):
             raise ValueError(f"this filter runs with {self._association} association; reset() to switch")
         self._association = mode
 
-    def _gate(
-        self, z: NDArray[np.float64], R: NDArray[np.float64], slots: NDArray[np.int64]
-    ) -> tuple[NDArray[np.float64], ...]:
-        """Observations ``z`` (K, 2) against landmark ``slots`` (k,), O(K k).
-
-        Returns innovations ``nu_kj`` (K, k, 2), ``D2_kj`` and ``ln det S_kj`` (K, k) with
-        ``S_kj = H_j P H_j^T + R_k``, and the Jacobians ``H_robot`` (k, 2, 3), ``H_landmark`` (k, 2, 2).
-        """
-        z_hat, H_robot, H_landmark = self._predicted_observations(slots)
-        # nu_kj = z_k - z_hat_j
-        nu = residual(z[:, None, :], z_hat[None, :, :])
-        return self._distances(nu, R, H_robot, H_landmark, slots)
-
-    def _distances(
-        self,
-        nu: NDArray[np.float64],
-        R: NDArray[np.float64],
-        H_robot: NDArray[np.float64],
-        H_landmark: NDArray[np.float64],
-        slots: NDArray[np.int64],
-    ) -> tuple[NDArray[np.float64], ...]:
-        """:meth:`_gate`'s result from the innovations ``nu`` (K, k, 2) and Jacobians of ``slots`` (k,)."""
-        # S_kj = H_j P H_j^T + R_k
-        S = self._predicted_covariances(H_robot, H_landmark, slots)[None] + R[:, None]
-        d2, log_det = mahalanobis_2d(nu, S)
-        return nu, d2, log_det, H_robot, H_landmark
-
-    def _gate_near(self, z: NDArray[np.float64], R: NDArray[np.float64]) -> tuple[NDArray, ...]:
-        """:meth:`_gate` of observations ``z`` (K, 2) against the landmark slots ``near`` (k,) (ascending)
-        that may come within ``gate_new`` of one of them; returns ``(near, nu, D2, ln det S, H_robot,
-        H_landmark)``. The others are left out before their ``S`` is formed, by a lower bound of their
-        ``D2`` from the standard deviations of ``P`` (:func:`~turtlelib.association.mahalanobis_lower_bound`):
-        every landmark left out has ``D2 > gate_new`` for every observation, so it could neither be
-        associated nor keep an observation from starting a landmark. O(K n), with ``S`` for ``k`` only.
-        """
-        z_hat, H_robot, H_landmark = self._predicted_observations(np.arange(self._state.n_landmarks))
-        nu = residual(z[:, None, :], z_hat[None, :, :])
-        std = self._state.stored_std()
-        std_robot = np.broadcast_to(std[:ROBOT_DIM], (len(z_hat), ROBOT_DIM))
-        std_pose_landmark = np.concatenate([std_robot, std[ROBOT_DIM:].reshape(-1, 2)], axis=1)
-        bound = mahalanobis_lower_bound(
-            nu, R, np.concatenate([H_robot, H_landmark], axis=2), std_pose_landmark
-        )
-        # margin: D2 and its bound are computed differently, to rounding
-        near = (bound <= self._gate_new * (1.0 + 1e-6)).any(axis=0).nonzero()[0]
-        return (near, *self._distances(nu[:, near], R, H_robot[near], H_landmark[near], near))
-
-    def _predicted_covariances(
-        self, H_robot: NDArray[np.float64], H_landmark: NDArray[np.float64], slots: NDArray[np.int64]
-    ) -> NDArray[np.float64]:
-        """``Sigma_j = H_j P H_j^T`` (k, 2, 2) for ``slots`` (k,), O(k): ``H_j`` is non-zero only on
-        the pose and landmark j, so ``Sigma_j = J_j P_(q m_j) J_j^T`` with ``J_j = [H_robot_j, H_landmark_j]``
-        and ``P_(q m_j)`` the 5x5 joint covariance of the pose and landmark j.
-        """
-        J = np.concatenate([H_robot, H_landmark], axis=2)
-        return J @ self._state.pose_landmark_blocks(slots) @ J.transpose(0, 2, 1)
-
-    def _associate(
-        self,
-        nu: NDArray[np.float64],
-        d2: NDArray[np.float64],
-        log_det: NDArray[np.float64],
-        R: NDArray[np.float64],
-        H_robot: NDArray[np.float64],
-        H_landmark: NDArray[np.float64],
-        slots: NDArray[np.int64],
-    ) -> NDArray[np.int64]:
-        """The column of ``d2`` (K, k) (or -1) for each observation, the columns being landmark ``slots``
-        (k,): confirmed landmarks first; tentative landmarks only take observations that no confirmed
-        landmark is compatible with."""
-        compatible = d2 < self._gate_associate
-        confirmed = self._tracks.confirmed[slots]
-        with_confirmed = compatible & confirmed
-        match = self._pair(nu, d2, log_det, with_confirmed, R, H_robot, H_landmark, slots)
-        unexplained = ~with_confirmed.any(axis=1)
-        if unexplained.any() and not confirmed.all():
-            to_tentative = compatible & ~confirmed & unexplained[:, None]
-            tentative_match = self._pair(nu, d2, log_det, to_tentative, R, H_robot, H_landmark, slots)
-            match = np.where(unexplained, tentative_match, match)
-        return match
-
-    def _pair(
-        self,
-        nu: NDArray[np.float64],
-        d2: NDArray[np.float64],
-        log_det: NDArray[np.float64],
-        compatible: NDArray[np.bool_],
-        R: NDArray[np.float64],
-        H_robot: NDArray[np.float64],
-        H_landmark: NDArray[np.float64],
-        slots: NDArray[np.int64],
-    ) -> NDArray[np.int64]:
-        """Observations to ``compatible`` columns (landmark ``slots``) by nearest neighbour or JCBB (the
-        ``matcher`` option)."""
-        if self._config.matcher == "nn":
-            # most likely: the smallest -2 log N(nu; 0, S) = D2 + ln det S (+ const)
-            return nearest_neighbour(d2 + log_det, compatible)
-        candidates = compatible.any(axis=0).nonzero()[0]
-        if len(candidates) == 0:
-            return np.full(len(nu), -1, dtype=np.int64)
-        joint = self._state.observation_covariance(
-            slots[candidates], H_robot[candidates], H_landmark[candidates]
-        )
-        match = joint_compatibility(
-            nu[:, candidates],
-            compatible[:, candidates],
-            joint,
-            R,
-            self._config.gate_associate,
-            self._config.jcbb_max_nodes,
-        )
-        return np.where(match >= 0, candidates[match], -1)
-
-    def _predicted_observations(
-        self, slots: NDArray[np.int64]
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-        """``z_hat`` (k, 2) of landmark ``slots`` from the newest estimates and the Jacobians ``H_robot``
-        (k, 2, 3), ``H_landmark`` (k, 2, 2) of the configured ``linearization`` (module docstring)."""
-        pose = self._state.mean[:ROBOT_DIM]
-        landmarks = self._state.landmark_positions()[slots]
-        z_hat, H_robot, H_landmark = predict_observations(pose, landmarks, self._T_body_sensor)
-        if self._config.linearization == "fej":
-            _, H_robot, H_landmark = predict_observations(
-                self._pose_prior, self._tracks.first_xy[slots], self._T_body_sensor
-            )
-        elif self._config.linearization == "oc":
-            H_robot, H_landmark = _observability_constrained(
-                H_robot, H_landmark, self._pose_prior, self._tracks.first_xy[slots]
-            )
-        elif self._invariant:
-            # H T: the heading column gains H_p J p + H_m J m (zero for range-bearing, to rounding)
-            H_robot[:, :, HEADING] += H_robot[:, :, :2] @ (J @ pose[:2]) + np.einsum(
-                "kij,kj->ki", H_landmark, landmarks @ J.T
-            )
-        return z_hat, H_robot, H_landmark
-
-    def _innovations(
-        self, slots: NDArray[np.int64], z: NDArray[np.float64], R: NDArray[np.float64]
-    ) -> tuple[NDArray[np.float64], ...]:
-        """Observations ``z`` (k, 2) of ``slots`` (k,): innovations ``nu`` (k, 2), ``D2 = nu^T S^-1 nu`` (k,)
-        with ``S = H P H^T + R`` of each one alone, and the Jacobians ``H_robot``, ``H_landmark``."""
-        z_hat, H_robot, H_landmark = self._predicted_observations(slots)
-        nu = residual(z, z_hat)
-        d2, _ = mahalanobis_2d(nu, self._predicted_covariances(H_robot, H_landmark, slots) + R)
-        return nu, d2, H_robot, H_landmark
-
-    def _fusion_noise(
-        self, slots: NDArray[np.int64], R: NDArray[np.float64]
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """The sensor's map position (2,) now and the noise ``R`` (k, 2, 2) of observations of ``slots`` (k,)
-        as they are fused: scaled by ``(1 + rho) / (1 - rho)`` for the distance from each one's last view
-        (module docstring)."""
-        sensor_xy = self._sensor_xy()
-        if self._config.independent_noise:
-            return sensor_xy, R
-        moved_m = np.linalg.norm(sensor_xy - self._tracks.last_view_xy[slots], axis=1)
-        return sensor_xy, R * self._config.fusion_scale(moved_m)[:, None, None]
-
-    def _relinearize_first_estimates(self, slots: NDArray[np.int64]) -> None:
-        """Reset the first estimates of ``slots`` that lie beyond ``relinearize_gate`` of the current ones."""
-        if self._relinearize == np.inf or len(slots) == 0:
-            return
-        current = self._state.landmark_positions()[slots]
-        # D2 = (m - m_first)^T P_mm^-1 (m - m_first)
-        d2, _ = mahalanobis_2d(current - self._tracks.first_xy[slots], self._state.landmark_blocks(slots))
-        far = d2 > self._relinearize
-        self._tracks.relinearize(slots[far], current[far])
-
-    def _add_landmark(
-        self, landmark_id: int, z: NDArray[np.float64], R: NDArray[np.float64], confirmed: bool, stamp_ns: int
-    ) -> int:
-        """Initialise a landmark from one observation by the inverse model (see :meth:`SlamState.append`),
-        first seen at ``stamp_ns``; returns its slot."""
-        p_map, G_robot, G_z = landmarks_from_observations(
-            self._state.mean[:ROBOT_DIM], z[None, :], self._T_body_sensor
-        )
-        slot = self._state.append(p_map[0], G_robot[0], G_z[0], R)
-        self._tracks.append(landmark_id, stamp_ns, confirmed, p_map[0])
-        # the sensor position of this first view: the landmark's estimate carries its error
-        self._tracks.viewed(np.array([slot]), self._sensor_xy())
-        return slot
-
-    def _sensor_xy(self) -> NDArray[np.float64]:
-        """The sensor's map position (2,) at the pose mean: ``p + R(theta) [sensor_x, sensor_y]``."""
-        x, y, theta = self._state.mean[:ROBOT_DIM]
-        c, s = math.cos(theta), math.sin(theta)
-        sx, sy = self._T_body_sensor.x, self._T_body_sensor.y
-        return np.array([x + c * sx - s * sy, y + s * sx + c * sy])
-
-    def _start_landmark(
-        self, z: NDArray[np.float64], R: NDArray[np.float64], started: list[int], stamp_ns: int
-    ) -> bool:
-        """Start a landmark (id ``_next_id``) from an observation ``z`` (2,) that no landmark explains, unless
-        it lies within gate_new of one this scan has ``started`` (slots) already: one object gives one
-        detection per scan, or the map is full. Returns whether it did (and appends the new slot to
-        ``started``)."""
-        if self.map_full:
-            return False
-        if started:
-            _, d2, _, _, _ = self._gate(z[None], R[None], np.array(started))
-            if np.any(d2 <= self._gate_new):
-                return False
-        confirmed = self._config.confirm_count == 1
-        started.append(self._add_landmark(self._next_id, z, R, confirmed=confirmed, stamp_ns=stamp_ns))
-        self._next_id += 1
-        return True
-
     def _confirmed_indices(self) -> NDArray[np.int64]:
         """State indices of the pose and the confirmed landmarks (in id order)."""
-        first = ROBOT_DIM + 2 * self._tracks.slots_by_id(confirmed=True)
+        first = ROBOT_DIM + 2 * self._state.tracks.slots_by_id(confirmed=True)
         return np.concatenate([np.arange(ROBOT_DIM), (first[:, None] + np.arange(2)).ravel()])
+
+
+def _observations(
+    model: MeasurementModel, z: ArrayLike, R: ArrayLike | None
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Validated ``z`` (K, 2) with finite values the model takes, and ``R`` (K, 2, 2) symmetric PD (default:
+    the model's)."""
+    z = np.array(z, dtype=np.float64)
+    if z.size == 0:
+        z = z.reshape(0, 2)
+    if z.ndim != 2 or z.shape[1] != 2:
+        raise ValueError(f"observations must have shape (K, 2), got {z.shape}")
+    if not np.isfinite(z).all():
+        raise ValueError("observations must be finite")
+    model.check(z)
+    if R is None:
+        return z, model.noise(z)
+    R = np.array(R, dtype=np.float64)
+    if R.shape != (len(z), 2, 2):
+        raise ValueError(f"R must have shape ({len(z)}, 2, 2), got {R.shape}")
+    if not np.isfinite(R).all():
+        raise ValueError("R must be finite")
+    scale = np.abs(R).max(initial=0.0)
+    if np.any(np.abs(R[:, 0, 1] - R[:, 1, 0]) > 1e-12 * scale):
+        raise ValueError("R must be symmetric")
+    det = R[:, 0, 0] * R[:, 1, 1] - R[:, 0, 1] * R[:, 1, 0]
+    if not ((R[:, 0, 0] > 0.0).all() and (R[:, 1, 1] > 0.0).all() and (det > 0.0).all()):
+        raise ValueError("R must be positive definite (positive variances)")
+    return z, R
 
 
 def _finite_step(
@@ -1024,45 +858,6 @@ def _composed_steps(
         poses[k] = q_k
         T_map_body = Transform2D(*q_k)
     return poses, G, Q
-
-
-def _gate_or_inf(prob: float) -> float:
-    """``chi2_2^-1(prob)``, infinite for ``prob = 1``."""
-    return float(chi2_gate(prob, 2)) if prob < 1.0 else np.inf
-
-
-def _observability_constrained(
-    H_robot: NDArray[np.float64],
-    H_landmark: NDArray[np.float64],
-    pose: NDArray[np.float64],
-    landmarks_xy: NDArray[np.float64],
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """The OC-EKF Jacobians (k, 2, 3), (k, 2, 2): ``H* = H (I - N (N^T N)^-1 N^T)`` per observation with
-    ``N = [[I_2, J p], [0, 1], [I_2, J m]]`` (5, 3), ``p`` the pose's position and ``m`` (k, 2) the
-    landmarks' (module docstring).
-
-    The projector in closed form: ``N``'s columns orthogonalised are ``n_x = [1, 0, 0, 1, 0]``,
-    ``n_y = [0, 1, 0, 0, 1]`` (``|n|^2 = 2``) and, with ``d = m - p``,
-    ``n_theta = [d_y / 2, -d_x / 2, 1, -d_y / 2, d_x / 2]`` (``|n_theta|^2 = 1 + |d|^2 / 2``), so::
-
-        H* = H - (H n_x) n_x^T / 2 - (H n_y) n_y^T / 2 - (H n_theta) n_theta^T / |n_theta|^2
-    """
-    H = np.concatenate([H_robot, H_landmark], axis=2)
-    d = landmarks_xy - pose[:2]
-    half = 0.5 * d
-    n_theta = np.zeros((len(d), 5))
-    n_theta[:, 0], n_theta[:, 1], n_theta[:, 2] = half[:, 1], -half[:, 0], 1.0
-    n_theta[:, 3], n_theta[:, 4] = -half[:, 1], half[:, 0]
-    # (H n_x) / 2 and (H n_y) / 2 (k, 2): the mean of the pose's and the landmark's x (y) columns
-    mean_x = 0.5 * (H[:, :, 0] + H[:, :, 3])
-    mean_y = 0.5 * (H[:, :, 1] + H[:, :, 4])
-    H_theta = np.einsum("kij,kj->ki", H, n_theta) / (1.0 + 0.5 * np.einsum("ki,ki->k", d, d))[:, None]
-    H = H - H_theta[:, :, None] * n_theta[:, None, :]
-    H[:, :, 0] -= mean_x
-    H[:, :, 3] -= mean_x
-    H[:, :, 1] -= mean_y
-    H[:, :, 4] -= mean_y
-    return H[:, :, :ROBOT_DIM], H[:, :, ROBOT_DIM:]
 
 
 def _landmark_ids(ids: ArrayLike) -> NDArray[np.int64]:

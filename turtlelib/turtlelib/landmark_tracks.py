@@ -1,8 +1,8 @@
-"""Bookkeeping of EKF SLAM landmark slots: id, sightings, time of creation, first estimate, where the sensor
-last viewed it, confirmed or tentative.
+"""The records of EKF SLAM landmark slots: id, sightings, time of creation, where the sensor last viewed it,
+confirmed or tentative, and the columns a strategy adds (first estimates: :mod:`turtlelib.linearization`).
 
-The slots mirror :class:`turtlelib.slam_state.SlamState`'s: :meth:`LandmarkTracks.append` adds the last
-slot, :meth:`LandmarkTracks.remove` swap-removes exactly as ``SlamState.remove`` does. Arrays grow with
+:class:`turtlelib.slam_state.SlamState` owns one and is its only writer of rows: it appends rows with its
+landmark slots and swap-removes a row with its slot, so records and state never disagree. Arrays grow with
 spare capacity; every query is vectorised (O(n) numpy, no per-landmark Python loop).
 """
 
@@ -13,21 +13,25 @@ from numpy.typing import NDArray
 
 
 class LandmarkTracks:
-    """Per-slot ``ids``, ``seen`` (sightings), ``born`` (stamp of the first sighting, ns), ``first_xy`` (the
-    position the landmark was initialised at, m), ``last_view_xy`` (the sensor's map position at its last
-    fused observation, m; inf before any) and ``confirmed`` flags."""
-
-    _ARRAYS = ("_ids", "_seen", "_born", "_first_xy", "_last_view_xy", "_confirmed")
+    """Per-slot ``ids``, ``seen`` (sightings), ``born`` (stamp of the first sighting, ns), ``last_view_xy``
+    (the sensor's map position at its last fused observation, m; inf before any), ``confirmed`` flags and
+    the float columns added by :meth:`add_column`; ``next_id`` is one more than the largest id ever held
+    (0 at first)."""
 
     def __init__(self, capacity: int = 16) -> None:
         self._ids = np.zeros(capacity, dtype=np.int64)
         self._seen = np.zeros(capacity, dtype=np.int64)
         self._born = np.zeros(capacity, dtype=np.int64)
-        self._first_xy = np.zeros((capacity, 2))
         self._last_view_xy = np.full((capacity, 2), np.inf)
         self._confirmed = np.zeros(capacity, dtype=bool)
+        # the columns strategies add, by name
+        self._columns: dict[str, NDArray[np.float64]] = {}
         self._n = 0
+        self.next_id = 0
         self._slot_of: dict[int, int] = {}
+
+    def __len__(self) -> int:
+        return self._n
 
     @property
     def ids(self) -> NDArray[np.int64]:
@@ -35,79 +39,56 @@ class LandmarkTracks:
         return self._ids[: self._n]
 
     @property
-    def first_xy(self) -> NDArray[np.float64]:
-        """First estimate (n, 2) of every slot, a view."""
-        return self._first_xy[: self._n]
-
-    @property
     def last_view_xy(self) -> NDArray[np.float64]:
         """Sensor position (n, 2) at every slot's last fused observation (inf: none yet), a view."""
         return self._last_view_xy[: self._n]
-
-    def viewed(self, slots: NDArray[np.int64], sensor_xy: NDArray[np.float64]) -> None:
-        """Record ``sensor_xy`` (2,) as the last view of ``slots`` (k,)."""
-        self._last_view_xy[slots] = sensor_xy
-
-    def relinearize(self, slots: NDArray[np.int64], xy: NDArray[np.float64]) -> None:
-        """Replace the first estimates of ``slots`` (k,) by ``xy`` (k, 2)."""
-        self._first_xy[slots] = xy
 
     @property
     def confirmed(self) -> NDArray[np.bool_]:
         """Confirmed flag of every slot (n,), a view."""
         return self._confirmed[: self._n]
 
+    def add_column(self, name: str, width: int) -> None:
+        """A float column ``name`` (n, width), zero for the rows held (no-op if it exists); it grows and
+        swap-removes with the rows, and new rows start at zero."""
+        if name not in self._columns:
+            self._columns[name] = np.zeros((len(self._ids), width))
+
+    def column(self, name: str) -> NDArray[np.float64]:
+        """Column ``name`` (n, width), a view its owner writes."""
+        return self._columns[name][: self._n]
+
+    def viewed(self, slots: NDArray[np.int64], sensor_xy: NDArray[np.float64]) -> None:
+        """Record ``sensor_xy`` (2,) as the last view of ``slots`` (k,)."""
+        self._last_view_xy[slots] = sensor_xy
+
     def slot(self, landmark_id: int) -> int | None:
         """The slot of ``landmark_id``, or None."""
         return self._slot_of.get(landmark_id)
 
-    def append(self, landmark_id: int, stamp_ns: int, confirmed: bool, first_xy: NDArray[np.float64]) -> int:
-        """A new last slot for ``landmark_id`` first seen at ``stamp_ns`` at ``first_xy`` (2,); returns the
-        slot."""
-        self._reserve(self._n + 1)
-        slot = self._n
-        self._ids[slot], self._seen[slot], self._born[slot] = landmark_id, 1, stamp_ns
-        self._first_xy[slot] = first_xy
-        self._last_view_xy[slot] = np.inf
-        self._confirmed[slot] = confirmed
-        self._slot_of[landmark_id] = slot
-        self._n += 1
-        return slot
-
-    def append_many(
-        self, landmark_ids: NDArray[np.int64], stamp_ns: int, confirmed: bool, first_xy: NDArray[np.float64]
-    ) -> NDArray[np.int64]:
-        """New last slots for the distinct ``landmark_ids`` (k,) (none held already), first seen at
-        ``stamp_ns`` at ``first_xy`` (k, 2); returns the slots (k,). O(k), one reallocation at most."""
+    def append(self, landmark_ids: NDArray[np.int64], stamp_ns: int, confirmed: bool) -> NDArray[np.int64]:
+        """New last rows for the distinct ``landmark_ids`` (k,) (none held already), first seen at
+        ``stamp_ns``; returns their slots (k,). O(k), one reallocation at most."""
         k = len(landmark_ids)
         self._reserve(self._n + k)
         new = slice(self._n, self._n + k)
         self._ids[new], self._seen[new], self._born[new] = landmark_ids, 1, stamp_ns
-        self._first_xy[new] = first_xy
         self._last_view_xy[new] = np.inf
         self._confirmed[new] = confirmed
+        for column in self._columns.values():
+            column[new] = 0.0
         self._slot_of.update(zip(np.asarray(landmark_ids).tolist(), range(self._n, self._n + k), strict=True))
         self._n += k
+        if k:
+            self.next_id = max(self.next_id, int(np.max(landmark_ids)) + 1)
         return np.arange(new.start, new.stop)
 
-    def _reserve(self, n: int) -> None:
-        """Grow the arrays (at least doubling) so that ``n`` slots fit."""
-        if n <= len(self._ids):
-            return
-        capacity = max(n, 2 * len(self._ids))
-        for name in self._ARRAYS:
-            old = getattr(self, name)
-            grown = np.zeros((capacity, *old.shape[1:]), dtype=old.dtype)
-            grown[: self._n] = old[: self._n]
-            setattr(self, name, grown)
-
     def remove(self, slot: int) -> None:
-        """Forget ``slot``; the last slot moves into it (as in ``SlamState.remove``)."""
+        """Forget ``slot``; the last row moves into it."""
         del self._slot_of[int(self._ids[slot])]
         last = self._n - 1
         if slot != last:
-            for name in self._ARRAYS:
-                array = getattr(self, name)
+            for array in self._arrays():
                 array[slot] = array[last]
             self._slot_of[int(self._ids[slot])] = slot
         self._n = last
@@ -131,3 +112,27 @@ class LandmarkTracks:
         """The confirmed (or the tentative) slots in ascending id order."""
         slots = (self._confirmed[: self._n] == confirmed).nonzero()[0]
         return slots[np.argsort(self._ids[slots], kind="stable")]
+
+    def _arrays(self) -> list[NDArray]:
+        """Every per-slot array, full capacity."""
+        return [
+            self._ids,
+            self._seen,
+            self._born,
+            self._last_view_xy,
+            self._confirmed,
+            *self._columns.values(),
+        ]
+
+    def _reserve(self, n: int) -> None:
+        """Grow the arrays (at least doubling) so that ``n`` slots fit."""
+        if n <= len(self._ids):
+            return
+        capacity = max(n, 2 * len(self._ids))
+        grown = []
+        for old in self._arrays():
+            array = np.zeros((capacity, *old.shape[1:]), dtype=old.dtype)
+            array[: self._n] = old[: self._n]
+            grown.append(array)
+        self._ids, self._seen, self._born, self._last_view_xy, self._confirmed = grown[:5]
+        self._columns = dict(zip(self._columns, grown[5:], strict=True))

@@ -76,6 +76,7 @@ from scipy.linalg.blas import dsyrk
 from scipy.linalg.lapack import dpotrf, dtrtrs
 
 from .geometry import normalize_angle
+from .landmark_tracks import LandmarkTracks
 
 ROBOT_DIM = 3
 LANDMARK_DIM = 2
@@ -97,7 +98,8 @@ class SlamState:
         invariant: bool = False,
     ) -> None:
         """``pose`` (3,) with ``pose_covariance`` (3, 3) (standard coordinates) and no landmark; ``invariant``
-        stores ``P`` in the right-invariant coordinates (module docstring)."""
+        stores ``P`` in the right-invariant coordinates (module docstring). The slots' records
+        (:attr:`tracks`) are appended and removed with the slots."""
         self._invariant = invariant
         capacity = ROBOT_DIM + LANDMARK_DIM * capacity_landmarks
         self._mean = np.zeros(capacity)
@@ -117,6 +119,17 @@ class SlamState:
     @property
     def n_landmarks(self) -> int:
         return self._n
+
+    @property
+    def invariant(self) -> bool:
+        """Whether ``P`` is stored in the right-invariant coordinates."""
+        return self._invariant
+
+    @property
+    def tracks(self) -> LandmarkTracks:
+        """The records of the landmark slots (row ``i`` is slot ``i``); this state appends and removes
+        their rows."""
+        return self._tracks
 
     @property
     def dim(self) -> int:
@@ -362,10 +375,15 @@ class SlamState:
         G_robot: NDArray[np.float64],
         G_z: NDArray[np.float64],
         R: NDArray[np.float64],
+        landmark_id: int | None = None,
+        stamp_ns: int = 0,
+        confirmed: bool = True,
     ) -> int:
         """Add a landmark ``m = g(q, z)`` (2,) from the inverse observation model; returns its slot.
 
-        ``G_robot = dg/dq`` (2, 3), ``G_z = dg/dz`` (2, 2), ``R`` (2, 2) the observation noise::
+        Its record: ``landmark_id`` (default: the tracks' ``next_id``), first seen at ``stamp_ns``,
+        ``confirmed`` or tentative. ``G_robot = dg/dq`` (2, 3), ``G_z = dg/dz`` (2, 2), ``R`` (2, 2) the
+        observation noise::
 
             P_mx = G_robot P_qx              (cross-covariance with the pose and every landmark)
             P_mm = G_robot P_qq G_robot^T + G_z R G_z^T
@@ -387,16 +405,22 @@ class SlamState:
         P[new, new] = 0.5 * (P_mm + P_mm.T)
         self._lower_filled = False
         self._mean[new] = p_map
+        landmark_id = self._tracks.next_id if landmark_id is None else landmark_id
+        self._tracks.append(np.array([landmark_id]), stamp_ns, confirmed)
         self._n += 1
         return self._n - 1
 
     def append_independent(
-        self, xy: NDArray[np.float64], covariance: NDArray[np.float64]
+        self,
+        xy: NDArray[np.float64],
+        covariance: NDArray[np.float64],
+        landmark_ids: NDArray[np.int64] | None = None,
     ) -> NDArray[np.int64]:
-        """Add ``k`` landmarks at ``xy`` (k, 2) with joint covariance ``covariance`` (2k, 2k) (symmetric),
-        independent of the pose and the landmarks already held (zero cross-covariance); returns their
-        slots (k,). ``P <- blockdiag(P, covariance)``, one reallocation at most (invariant: in standard
-        coordinates, O(N^2))."""
+        """Add ``k`` confirmed landmarks ``landmark_ids`` (k,) (distinct, none held; default the next ``k``
+        free ids) at ``xy`` (k, 2) with
+        joint covariance ``covariance`` (2k, 2k) (symmetric), independent of the pose and the landmarks
+        already held (zero cross-covariance); returns their slots (k,). ``P <- blockdiag(P, covariance)``,
+        one reallocation at most (invariant: in standard coordinates, O(N^2))."""
         if self._invariant:
             self._change_storage_coordinates(to_standard=True)
         k = len(xy)
@@ -409,15 +433,19 @@ class SlamState:
         P[new, new] = covariance
         self._lower_filled = False
         self._mean[new] = np.reshape(xy, LANDMARK_DIM * k)
+        if landmark_ids is None:
+            landmark_ids = self._tracks.next_id + np.arange(k)
+        self._tracks.append(np.asarray(landmark_ids, dtype=np.int64), 0, True)
         self._n += k
         if self._invariant:
             self._change_storage_coordinates(to_standard=False)
         return np.arange(self._n - k, self._n)
 
     def remove(self, slot: int) -> int | None:
-        """Marginalise landmark ``slot`` out (delete its rows and columns); O(N).
+        """Marginalise landmark ``slot`` out (delete its rows and columns, and its record); O(N).
 
-        The last slot moves into the freed one: returns its old index, or None if ``slot`` was last.
+        The last slot (and its record) moves into the freed one: returns its old index, or None if ``slot``
+        was last.
         """
         self._apply_pending()
         last = self._n - 1
@@ -439,6 +467,7 @@ class SlamState:
             self._lower_filled = False
             self._mean[target] = self._mean[source]
             moved = last
+        self._tracks.remove(slot)
         self._n -= 1
         return moved
 
@@ -449,6 +478,7 @@ class SlamState:
         ``keep_map=False`` also empties it."""
         if not keep_map:
             self._n = 0
+            self._tracks = LandmarkTracks((len(self._mean) - ROBOT_DIM) // LANDMARK_DIM)
         if self._invariant:
             self._change_storage_coordinates(to_standard=True)
         self._pending_G = None
