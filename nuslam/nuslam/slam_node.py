@@ -126,7 +126,6 @@ from nuturtle_ros_common.wheel_stream import declare_wheel_stream
 from turtlelib import (
     DiffDriveMotion,
     EkfSlam,
-    ObservationStatus,
     OdometryMotion,
     OdometryPoses,
     SlamConfig,
@@ -498,11 +497,11 @@ class SlamNode(Node):
         self._update_time.add(1e3 * (time.perf_counter() - start))
         self._counts["arrays_applied"] += len(applied)
         for _, association in applied:
-            rejected = int(np.count_nonzero(association.status == ObservationStatus.REJECTED))
-            unmapped = int(np.count_nonzero(association.status == ObservationStatus.UNMAPPED))
+            tally = association.counts
+            rejected = tally["rejected"]
             self._counts["rejected"] += rejected
-            self._counts["unmapped"] += unmapped
-            self._counts["fused"] += len(association.status) - rejected - unmapped
+            self._counts["unmapped"] += tally["unmapped"]
+            self._counts["fused"] += tally["matched"] + tally["new"]
             if rejected and self.slam.map_full:
                 self._warnings.warn(
                     "map",

@@ -138,10 +138,9 @@ def run_experiment(experiment: Experiment, progress: Callable[[int], None] | Non
             t_est.append(t_ns)
             poses.append(slam.pose.as_array())
             covariances.append(slam.pose_covariance)
-            status = np.bincount(association.status, minlength=3)
-            counts["matched"] += int(status[0])
-            counts["new"] += int(status[1])
-            counts["rejected"] += int(status[2])
+            tally = association.counts
+            for status in counts:
+                counts[status] += tally[status]
         if applied:
             update_ms.append(elapsed_ms)
 
