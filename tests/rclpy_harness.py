@@ -70,9 +70,6 @@ class RosHarness:
                 self.callback_failures += 1
         return predicate()
 
-    def spin_guarded_for(self, duration_s: float) -> None:
-        self.spin_guarded_until(lambda: False, duration_s)
-
     def remove(self, node: Node) -> None:
         """Stop spinning ``node`` and destroy it (a test that builds nodes one after the other)."""
         self.nodes.remove(node)

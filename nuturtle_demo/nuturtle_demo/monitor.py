@@ -131,10 +131,6 @@ class _Stream:
         else:
             self.table.append(row)
 
-    @property
-    def latest_s(self) -> float:
-        return float(self.table.last[0]) if len(self.table) else 0.0
-
     def series(self, last: int | None) -> PoseSeries:
         if last is not None and last < 1:
             raise ValueError(f"last must be >= 1, got {last!r}")
@@ -202,11 +198,6 @@ class RunMonitor(Node):
             ODOM_TOPIC: len(self._odom.table),
             SLAM_TOPIC: len(self._slam.table),
         }
-
-    @property
-    def latest_truth_s(self) -> float:
-        """Stamp (s) of the latest ground truth, 0 before the first."""
-        return self._truth.latest_s
 
     def truth(self, last: int | None = None) -> PoseSeries:
         return self._truth.series(last)

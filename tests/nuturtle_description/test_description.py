@@ -38,9 +38,6 @@ class Urdf:
         self.joints = {joint.get("name"): joint for joint in self.robot.findall("joint")}
         self.materials = {m.get("name"): m for m in self.robot.findall("material")}
 
-    def joint_xyz(self, name: str) -> list[float]:
-        return floats(self.joints[name].find("origin").get("xyz"))
-
     def cylinder(self, link: str, part: str = "collision") -> tuple[float, float]:
         cylinder = self.links[link].find(f"{part}/geometry/cylinder")
         return float(cylinder.get("radius")), float(cylinder.get("length"))

@@ -1,4 +1,20 @@
-"""EKF SLAM for a planar robot with a range-bearing landmark sensor; the motion model is passed in.
+"""EKF SLAM for a planar robot observing 2D point landmarks; the models and policies are passed in.
+
+Structure
+---------
+:class:`EkfSlam` is the filter itself: predict, correct, add and remove landmarks, reset, load and give
+maps, and its views. What varies is passed in or chosen by a parameter, one class each:
+
+* the motion model (:mod:`turtlelib.motion_models`): ``q' = f(q, u)``, ``G``, ``Q``;
+* the measurement model (:mod:`turtlelib.measurement_models`; default the range-bearing LiDAR of the
+  config), per filter and optionally per update (a second sensor): ``h``, its Jacobians, its inverse, the
+  residual, the default noise, the usable range;
+* the data association (:mod:`turtlelib.data_association`): a policy (known ids with a gate, or gated
+  tracks with tentative landmarks and a matcher: nearest neighbour, JCBB, or one passed in) plans each
+  update from a read-only view of the filter;
+* the linearisation (:mod:`turtlelib.linearization`): standard, FEJ, OC or invariant;
+* the state and the records of its landmark slots (:class:`turtlelib.slam_state.SlamState`, which owns
+  both).
 
 State
 -----

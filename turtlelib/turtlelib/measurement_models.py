@@ -71,9 +71,11 @@ def range_bearing_noise(
     range_m: NDArray[np.float64], range_std: float, bearing_std: float, range_std_per_m: float = 0.0
 ) -> NDArray[np.float64]:
     """``R = diag((range_std + range_std_per_m r)^2, bearing_std^2)`` (K, 2, 2) at ranges ``range_m`` (K,)."""
-    R = np.broadcast_to(np.diag([range_std**2, bearing_std**2]), (len(range_m), 2, 2)).copy()
-    if range_std_per_m > 0.0:
-        R[:, 0, 0] = (range_std + range_std_per_m * np.asarray(range_m)) ** 2
+    R = np.zeros((len(range_m), 2, 2))
+    R[:, 0, 0] = (
+        (range_std + range_std_per_m * np.asarray(range_m)) ** 2 if range_std_per_m > 0.0 else range_std**2
+    )
+    R[:, 1, 1] = bearing_std**2
     return R
 
 
