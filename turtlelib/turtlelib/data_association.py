@@ -10,11 +10,12 @@ landmarks it drops (:meth:`AssociationPolicy.expired`). The maths of gates, near
 * :class:`KnownIds` (known association): the observation's id names its landmark; an observation of a
   mapped landmark outside ``D2 < chi2_2^-1(gate_known)`` is rejected; an unseen id starts a confirmed
   landmark.
-* :class:`GatedTracks` (unknown association): every observation is gated against the landmarks that may
-  come near it (:meth:`SlamView.gate_near`); compatible pairs (``D2 < chi2_2^-1(gate_associate)``) are
-  matched by a :class:`Matcher` (:data:`MATCHERS`: nearest neighbour or JCBB), confirmed landmarks first; an
-  observation beyond ``gate_new`` of every landmark starts a tentative one, confirmed after
-  ``confirm_count`` sightings or dropped ``tentative_timeout`` after its first.
+* :class:`GatedTracks` (unknown association): every observation is gated against every landmark (in large
+  maps only against those that may come near it, :meth:`SlamView.gate_near`); compatible pairs
+  (``D2 < chi2_2^-1(gate_associate)``) are matched by a :class:`Matcher` (:data:`MATCHERS`: nearest
+  neighbour or JCBB), confirmed landmarks first; an observation beyond ``gate_new`` of every landmark starts
+  a tentative one, confirmed after ``confirm_count`` sightings or dropped ``tentative_timeout`` after its
+  first.
 
 A new matcher is one class with :meth:`Matcher.match` and one entry in :data:`MATCHERS`.
 """
@@ -22,8 +23,7 @@ A new matcher is one class with :meth:`Matcher.match` and one entry in :data:`MA
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
-from typing import Protocol
+from typing import NamedTuple, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -42,10 +42,13 @@ from .slam_state import ROBOT_DIM, SlamState
 
 # what an update did with one observation (turtlelib.ekf_slam.ObservationStatus), as plain integers
 MATCHED, NEW, REJECTED, UNMAPPED = 0, 1, 2, 3
+# unknown association bounds D2 before gating (SlamView.gate_near) from this many landmarks on: the bound
+# costs about 40 us per scan at 20 landmarks, where gating all of them is cheaper (bench/bench_ekf.py), and
+# saves about 70 us at 300 spread over a park (Victoria Park, docs/real_data.md "Speed")
+PREFILTER_MIN_LANDMARKS = 64
 
 
-@dataclass(frozen=True)
-class Gating:
+class Gating(NamedTuple):
     """``K`` observations against landmark ``slots`` (k,): innovations ``nu`` (K, k, 2), ``d2 = nu^T S^-1 nu``
     and ``log_det = ln det S`` (K, k) with ``S_kj = H_j P H_j^T + R_k``, and the Jacobians ``H_robot``
     (k, 2, 3), ``H_landmark`` (k, 2, 2) of the slots."""
@@ -149,8 +152,7 @@ class SlamView:
         return J @ self._state.pose_landmark_blocks(slots) @ J.transpose(0, 2, 1)
 
 
-@dataclass(frozen=True)
-class Plan:
+class Plan(NamedTuple):
     """What to do with an update's ``K`` observations.
 
     ``status`` (K,) and ``landmark_ids`` (K,) so far (``MATCHED`` with the landmark's id, else
@@ -252,6 +254,9 @@ class AssociationPolicy(Protocol):
         ...
 
 
+_NO_ROWS = np.zeros(0, dtype=np.int64)  # read-only by convention: an empty index
+
+
 def _empty_plan(count: int) -> tuple[NDArray[np.int8], NDArray[np.int64]]:
     return np.full(count, REJECTED, dtype=np.int8), np.full(count, -1, dtype=np.int64)
 
@@ -270,26 +275,31 @@ class KnownIds:
         if ids is None:
             raise ValueError("known association needs the observations' landmark ids")
         usable = view.model.usable(z)
-        slot_of = [view.tracks.slot(i) for i in ids.tolist()]
-        known = np.array([slot is not None for slot in slot_of], dtype=bool)
-        seen_before = np.flatnonzero(usable & known)
-        slots = np.array([slot_of[k] for k in seen_before], dtype=np.int64)
+        slot_of = view.tracks.slot
+        # the slot of each observation's landmark, -1 for an id not in the map
+        slots = np.array([-1 if (slot := slot_of(i)) is None else slot for i in ids.tolist()], dtype=np.int64)
+        seen_before = usable & (slots >= 0)
+        if seen_before.all():  # the usual scan: every observation of a mapped landmark, no copies
+            rows, births = np.arange(len(z)), _NO_ROWS
+        else:
+            rows, births = seen_before.nonzero()[0], (usable & (slots < 0)).nonzero()[0]
+            slots, z, R = slots[rows], z[rows], R[rows]
         # D2 = nu^T S^-1 nu of each observation against its landmark; fuse those inside the gate
-        nu, d2, H_robot, H_landmark = view.innovations(slots, z[seen_before], R[seen_before])
+        nu, d2, H_robot, H_landmark = view.innovations(slots, z, R)
         inside = d2 < self._gate
-        rows = seen_before[inside]
-        status, landmark_ids = _empty_plan(len(z))
+        if not inside.all():
+            rows, slots, nu, H_robot, H_landmark = (a[inside] for a in (rows, slots, nu, H_robot, H_landmark))
+        status, landmark_ids = _empty_plan(len(ids))
         status[rows] = MATCHED
         landmark_ids[rows] = ids[rows]
-        births = np.flatnonzero(usable & ~known)
         return Plan(
             status,
             landmark_ids,
             rows,
-            slots[inside],
-            nu[inside],
-            H_robot[inside],
-            H_landmark[inside],
+            slots,
+            nu,
+            H_robot,
+            H_landmark,
             births,
             ids[births],
             birth_confirmed=True,
@@ -331,7 +341,10 @@ class GatedTracks:
         match = np.full(len(usable), -1, dtype=np.int64)
         far_from_all = np.ones(len(usable), dtype=bool)
         if view.n_landmarks and len(usable):
-            gating = view.gate_near(z_usable, R_usable, self._gate_new)
+            if view.n_landmarks >= PREFILTER_MIN_LANDMARKS:
+                gating = view.gate_near(z_usable, R_usable, self._gate_new)
+            else:
+                gating = view.gate(z_usable, R_usable, np.arange(view.n_landmarks))
             match = self._associate(gating, R_usable, view)
             far_from_all = (gating.d2 > self._gate_new).all(axis=1)
             rows = (match >= 0).nonzero()[0]

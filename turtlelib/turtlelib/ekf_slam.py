@@ -161,6 +161,7 @@ map never grows past ``max_landmarks``: what matters is the memory and time of `
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from enum import IntEnum
@@ -416,6 +417,8 @@ class EkfSlam:
             ),
         }
         self._localization = config.mode == "localization"
+        # the viewpoints of correlated errors are recorded only when they are modelled
+        self._independent_noise = config.independent_noise
         self.reset(Transform2D() if T_map_body0 is None else T_map_body0)
 
     @property
@@ -584,12 +587,14 @@ class EkfSlam:
         slots = plan.slots
         if len(slots) == 0:
             return 0.0
-        sensor_xy = model.sensor_xy(self._state.mean)
-        if not self._config.independent_noise:
+        if self._independent_noise:
+            nis = self._state.correct(slots, plan.H_robot, plan.H_landmark, plan.nu, R, self._localization)
+        else:
+            sensor_xy = model.sensor_xy(self._state.mean)
             moved_m = np.linalg.norm(sensor_xy - self._state.tracks.last_view_xy[slots], axis=1)
             R = R * self._config.fusion_scale(moved_m)[:, None, None]
-        nis = self._state.correct(slots, plan.H_robot, plan.H_landmark, plan.nu, R, self._localization)
-        self._state.tracks.viewed(slots, sensor_xy)
+            nis = self._state.correct(slots, plan.H_robot, plan.H_landmark, plan.nu, R, self._localization)
+            self._state.tracks.viewed(slots, sensor_xy)
         self._linearization.fused(self._state, slots)
         return nis
 
@@ -607,8 +612,9 @@ class EkfSlam:
         p_map, G_robot, G_z = model.inverse(self._state.mean[:ROBOT_DIM], z[None, :])
         slot = self._state.append(p_map[0], G_robot[0], G_z[0], R, landmark_id, stamp_ns, confirmed)
         self._linearization.added(self._state, np.array([slot]))
-        # the sensor position of this first view: the landmark's estimate carries its error
-        self._state.tracks.viewed(np.array([slot]), model.sensor_xy(self._state.mean))
+        if not self._independent_noise:
+            # the sensor position of this first view: the landmark's estimate carries its error
+            self._state.tracks.viewed(np.array([slot]), model.sensor_xy(self._state.mean))
         return slot
 
     def reset(
@@ -855,7 +861,7 @@ def _finite_step(
     """A motion model's ``(q', G, Q)``, checked finite: ValueError otherwise (a step so large it overflows
     would make ``P`` NaN for good)."""
     q_next, G, Q = step
-    if not (np.isfinite(q_next).all() and np.isfinite(G).all() and np.isfinite(Q).all()):
+    if not all(map(math.isfinite, [*q_next.tolist(), *G.ravel().tolist(), *Q.ravel().tolist()])):
         raise ValueError("the motion step gives a non-finite pose, Jacobian or noise (an implausible input)")
     return step
 

@@ -205,15 +205,15 @@ class SlamState:
         the stored coordinates (for the filter's Jacobians)."""
         self._apply_pending()
         slots = np.arange(self._n) if slots is None else np.asarray(slots)
-        columns = (ROBOT_DIM + LANDMARK_DIM * slots)[:, None] + np.arange(LANDMARK_DIM)
-        blocks = np.empty((len(slots), ROBOT_DIM + LANDMARK_DIM, ROBOT_DIM + LANDMARK_DIM))
-        blocks[:, :ROBOT_DIM, :ROBOT_DIM] = self._cov[:ROBOT_DIM, :ROBOT_DIM]
-        # P_q,m_i from the robot rows (whole), P_m_i,q its transpose
-        cross = self._cov[:ROBOT_DIM][:, columns].transpose(1, 0, 2)
-        blocks[:, :ROBOT_DIM, ROBOT_DIM:] = cross
-        blocks[:, ROBOT_DIM:, :ROBOT_DIM] = cross.transpose(0, 2, 1)
-        blocks[:, ROBOT_DIM:, ROBOT_DIM:] = self._stored_landmark_blocks(slots)
-        return blocks
+        # the state indices [0, 1, 2, 3 + 2i, 4 + 2i] of each slot (k, 5); every entry from the upper
+        # triangle, P_ab at flat index min(a, b) * capacity + max(a, b), in one gather
+        indices = np.empty((len(slots), ROBOT_DIM + LANDMARK_DIM), dtype=np.int64)
+        indices[:, :ROBOT_DIM] = np.arange(ROBOT_DIM)
+        indices[:, ROBOT_DIM] = ROBOT_DIM + LANDMARK_DIM * slots
+        indices[:, ROBOT_DIM + 1] = indices[:, ROBOT_DIM] + 1
+        rows, columns = indices[:, :, None], indices[:, None, :]
+        flat = np.minimum(rows, columns) * self._cov.shape[0] + np.maximum(rows, columns)
+        return self._cov.ravel()[flat]
 
     # --- the filter steps --------------------------------------------------------------------------------
 
