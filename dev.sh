@@ -2,7 +2,9 @@
 # One entry point for a fresh machine (only Python 3.11 + pip needed):
 #   ./dev.sh run  [demo options]   set up .venv if needed, then run the simulation + SLAM demo
 #   ./dev.sh test                  set up if needed, then everything CI checks: ruff (format and lint),
-#                                  turtlelib's tests in a venv without ROS (.venv-core), the whole suite
+#                                  turtlelib's tests in a venv without ROS (.venv-core), then the rest of
+#                                  the suite in .venv (tests/turtlelib runs once); each pytest run prints
+#                                  its 20 slowest tests
 #   ./dev.sh test [pytest options] set up if needed, then only pytest with these options
 #   ./dev.sh lint                  ruff format --check and ruff check
 #   ./dev.sh datasets ARGS         set up if needed, then EKF SLAM on a real dataset (docs/real_data.md)
@@ -50,7 +52,7 @@ core_tests() {
       exit 1
     fi
   done
-  "$root/.venv-core/bin/python" -P -m pytest -q -p no:cacheprovider tests/turtlelib
+  "$root/.venv-core/bin/python" -P -m pytest -q -p no:cacheprovider --durations=20 tests/turtlelib
 }
 
 # Shared-machine hygiene: one BLAS thread (2-core machines stall on small matrices otherwise),
@@ -69,7 +71,8 @@ case "$cmd" in
     if [ $# -gt 0 ]; then exec "$py" -P -m pytest "$@"; fi
     lint
     core_tests
-    exec "$py" -P -m pytest
+    echo "[dev.sh] the suite in .venv, tests/turtlelib left out (it ran in .venv-core)"
+    exec "$py" -P -m pytest --ignore=tests/turtlelib --durations=20
     ;;
   lint) setup; lint ;;
   setup) setup ;;
