@@ -73,7 +73,7 @@ case "$cmd" in
     ;;
   lint) setup; lint ;;
   setup) setup ;;
-  datasets) setup; exec "$py" -P -m nuturtle_demo.datasets "$@" ;;
+  datasets) setup; exec "$py" -P -m nuturtle_eval.datasets "$@" ;;
   replay) setup; exec "$py" -P -m nuturtle_demo.replay "$@" ;;
   *) echo "usage: ./dev.sh run|test|lint|setup|datasets|replay [args]" >&2; exit 2 ;;
 esac

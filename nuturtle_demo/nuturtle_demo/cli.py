@@ -13,7 +13,8 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from .metrics import RunMetrics
+from nuturtle_eval.metrics import RunMetrics
+
 from .relay_config import add_foxglove_argument, parse_endpoint
 from .run import (
     ASSOCIATIONS,

@@ -34,7 +34,7 @@ from pathlib import Path
 
 import foxglove.layouts as fl
 
-from nuturtle_demo.metrics import POSE_DOF, nees_band
+from nuturtle_eval.metrics import POSE_DOF, nees_band
 from nuturtle_ros_common.ros_files import share_file
 
 SLAM_ERROR_TOPIC = "/demo_monitor/slam_error"

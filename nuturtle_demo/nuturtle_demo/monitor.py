@@ -35,9 +35,8 @@ from numpy.typing import NDArray
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayout
 
+from nuturtle_eval.metrics import PoseSeries, pose_errors, pose_nees
 from nuturtle_ros_common.conversions import covariance_from_6x6, stamp_seconds, yaw_from_quaternion
-
-from .metrics import PoseSeries, pose_errors, pose_nees
 
 TRUTH_TOPIC = "nusim/ground_truth"
 ODOM_TOPIC = "odom"

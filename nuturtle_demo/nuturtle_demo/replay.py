@@ -78,8 +78,9 @@ def summary(result: Any) -> str:
     if result.interrupted:
         lines.append("interrupted: the outputs cover what was played so far")
     if result.accuracy:
+        from nuturtle_eval.metrics import RunMetrics
+
         from .cli import results_table
-        from .metrics import RunMetrics
 
         fields = RunMetrics.__dataclass_fields__
         values = {key: metrics[key] for key in fields}

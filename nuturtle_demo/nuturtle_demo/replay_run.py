@@ -46,16 +46,16 @@ from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message
 from rclpy.signals import SignalHandlerOptions
 
+from nuturtle_eval import plots
+from nuturtle_eval.metrics import PoseSeries, RunData, evaluate_run, odom_in_world
 from nuturtle_ros_common.conversions import stamp_nanoseconds, transform_from_pose
 from nuturtle_ros_common.ros_files import flatten
 from turtlelib import Transform2D
 from turtlelib.slam_map import save_map
 from turtlelib.timebase import NS_PER_S
 
-from . import plots
 from .bag_source import BagError, BagSource, BagTopic
 from .foxglove_relay import FoxgloveRelay, slam_view_transforms
-from .metrics import PoseSeries, RunData, evaluate_run, odom_in_world
 from .monitor import RunMonitor
 from .params import params_file, to_parameters
 from .player import (

@@ -51,16 +51,16 @@ from nusim.nusim_node import NusimNode
 from nuslam.slam_node import MOTION_SOURCES
 from nuturtle_control.odometry import OdometryNode
 from nuturtle_control.turtle_control import TurtleControlNode
+from nuturtle_eval import plots
+from nuturtle_eval.metrics import RunData, RunMetrics, evaluate_run, odom_in_world
 from nuturtle_ros_common.conversions import planar_covariance_6x6, pose_from_transform
 from nuturtle_ros_common.node_main import spin_once_guarded
 from nuturtle_ros_common.ros_files import load_ros_parameters, share_file
 from turtlelib import MODES, Transform2D, TwistNoise, normalize_angle
 from turtlelib.validation import finite_real, integer, one_of, positive, store
 
-from . import plots
 from .driver import FigureEightDriver
 from .foxglove_relay import FoxgloveRelay, StaticTransform, slam_view_transforms
-from .metrics import RunData, RunMetrics, evaluate_run, odom_in_world
 from .monitor import RunMonitor
 from .params import matched_wheel_noise, params_file, to_parameters
 from .recorder import BagWriter, TeeSink, TopicRecorder

@@ -10,7 +10,6 @@ import threading
 import numpy as np
 import pytest
 import yaml
-from bag_reading import SEPARATOR, definition_sections, rclpy_definitions, read_bag
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Point
 from rclpy.duration import Duration
@@ -30,6 +29,7 @@ from sensor_msgs.msg import JointState, LaserScan
 from std_msgs.msg import String
 from visualization_msgs.msg import Marker, MarkerArray
 
+from bag_reading import SEPARATOR, definition_sections, rclpy_definitions, read_bag
 from nuturtle_demo.recorder import RECORD_DEPTH, BagWriter, TopicRecorder, recording_qos
 from rclpy_harness import RosHarness, matched, record_rosout, warnings_of
 

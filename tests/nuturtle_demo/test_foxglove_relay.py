@@ -253,7 +253,6 @@ def test_the_demo_cli_refuses_a_port_in_use(tmp_path, capsys):
 
 def test_a_tee_sends_each_topic_to_the_sinks_that_take_it(tmp_path):
     from bag_reading import read_bag
-
     from nuturtle_demo.recorder import BagWriter, TeeSink
 
     with FoxgloveRelay(port=0, tf_from_odometry=["slam/odom"]) as relay, BagWriter(tmp_path / "bag") as bag:

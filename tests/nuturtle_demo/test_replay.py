@@ -18,10 +18,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from bag_reading import read_bag
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
+from bag_reading import read_bag
 from foxglove_client import FoxgloveClient
 from nuturtle_demo.bag_source import BagError, BagSource
 from nuturtle_demo.foxglove_relay import tf2_msgs_installed

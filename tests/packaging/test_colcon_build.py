@@ -30,7 +30,11 @@ PACKAGES = sorted(packages())
 # How long a node must keep running after start-up to count as started (s)
 NODE_ALIVE_S = 4.0
 # Executables that are command-line tools, not nodes: run with these arguments, must exit 0
-TOOLS = {("nuturtle_demo", "demo"): ["--help"], ("nuturtle_demo", "replay"): ["--help"]}
+TOOLS = {
+    ("nuturtle_demo", "demo"): ["--help"],
+    ("nuturtle_demo", "replay"): ["--help"],
+    ("nuturtle_eval", "datasets"): ["--help"],
+}
 # Arguments a node needs beside the others: the relay on any free port, not one a running demo may hold
 NODE_ARGUMENTS = {("nuturtle_demo", "foxglove_relay"): ["-p", "port:=0"]}
 

@@ -1,6 +1,7 @@
 """Package boundaries: every import and launch reference declared in package.xml, no stale workspace
-dependency, no cycle, turtlelib free of ROS, launch files that name real files and executables, console
-scripts that resolve, and the package picture in docs/architecture.md equal to the package.xml files."""
+dependency, no cycle, turtlelib and nuturtle_eval free of ROS, launch files that name real files and
+executables, console scripts that resolve, and the package picture in docs/architecture.md equal to the
+package.xml files."""
 
 from __future__ import annotations
 
@@ -25,10 +26,11 @@ from workspace import (
 PACKAGES = sorted(packages())
 
 
-def test_the_workspace_has_the_seven_packages():
+def test_the_workspace_has_the_eight_packages():
     assert PACKAGES == sorted(
         [
             "turtlelib",
+            "nuturtle_eval",
             "nuturtle_ros_common",
             "nuturtle_description",
             "nusim",
@@ -67,6 +69,20 @@ def test_turtlelib_imports_numpy_scipy_and_the_standard_library_only():
     keys = used_dependencies(package)
     assert keys <= {"python3-numpy", "python3-scipy"}, keys
     assert package.exec_depends == {"python3-numpy", "python3-scipy"}
+
+
+def test_nuturtle_eval_declares_exactly_what_it_imports_and_no_ros_package():
+    package = packages()["nuturtle_eval"]
+    keys = used_dependencies(package)
+    assert keys == package.exec_depends
+    assert keys <= {
+        "turtlelib",
+        "python3-numpy",
+        "python3-scipy",
+        "python3-yaml",
+        "python3-matplotlib",
+        "python3-tqdm",
+    }
 
 
 def test_the_simulator_and_the_robot_side_do_not_depend_on_each_other():

@@ -10,11 +10,11 @@ The estimate ``T_map_body`` after every scan (stamps ``t_k``) is compared with t
 * Victoria Park: the GPS antenna sits at the laser, so the compared point is the laser's,
   ``p_k = p_body + R(theta) [a, b]`` with covariance ``J P_k J^T``, ``J = [I_2, [-r_y, r_x]^T]``
   (``r = R(theta) [a, b]``), interpolated linearly at each GPS fix (outliers removed,
-  :func:`~nuturtle_demo.datasets.victoria.gps_outliers`); 2 dof. The GPS's own metre-level error counts
+  :func:`~nuturtle_eval.datasets.victoria.gps_outliers`); 2 dof. The GPS's own metre-level error counts
   as filter error here, so this NEES is biased high.
 
 ``ate_rmse_m = sqrt(mean |e_xy|^2)``; ``ate_rmse_aligned_m`` the same after the rigid SE(2) motion that
-best fits the estimated positions to the reference (:func:`~nuturtle_demo.metrics.align_se2`), which
+best fits the estimated positions to the reference (:func:`~nuturtle_eval.metrics.align_se2`), which
 removes the unobservable global frame. NEES ``e^T P^-1 e`` per sample, its mean and the fraction inside the
 two-sided 95 % chi2 interval of one sample.
 
@@ -22,7 +22,7 @@ Map (MRCLAM)
 ------------
 Known association pairs each mapped landmark with the true one of its id. Unknown association first
 moves the map by the trajectory alignment, then pairs mapped and true landmarks one-to-one (Hungarian,
-gated at ``gate_m``, :func:`~nuturtle_demo.metrics.associate_landmarks`): a true landmark is *mapped once*
+gated at ``gate_m``, :func:`~nuturtle_eval.metrics.associate_landmarks`): a true landmark is *mapped once*
 when paired and no other mapped landmark has it as its nearest (within the gate); *merged* when unpaired
 while its nearest mapped landmark (within the gate) is paired to another true one (two landmarks mapped as
 one); a mapped landmark is *spurious* with no true one within the gate and a *duplicate* when unpaired

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nuturtle_demo.datasets.experiment import Experiment, Scans, run_experiment
-from nuturtle_demo.datasets.setups import (
+from nuturtle_eval.datasets.experiment import Experiment, Scans, run_experiment
+from nuturtle_eval.datasets.setups import (
     GPS_MIN_STD_M,
     START_WINDOW_S,
     VICTORIA_PARAMS,
@@ -18,7 +18,7 @@ from nuturtle_demo.datasets.setups import (
     laser_points,
     victoria_experiment,
 )
-from nuturtle_demo.datasets.victoria import load_victoria
+from nuturtle_eval.datasets.victoria import load_victoria
 from turtlelib import Transform2D
 
 EXCERPT = Path(__file__).parent / "data" / "victoria_30s"

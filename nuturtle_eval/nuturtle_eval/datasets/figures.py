@@ -1,6 +1,6 @@
 """The dataset run's figures (PNG): trajectory and map, error against +-2 sigma, NEES over time.
 
-matplotlib is imported lazily through :mod:`nuturtle_demo.plots` (object-oriented API, Agg canvas).
+matplotlib is imported lazily through :mod:`nuturtle_eval.plots` (object-oriented API, Agg canvas).
 """
 
 from __future__ import annotations

@@ -14,8 +14,8 @@ import yaml
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from nuturtle_demo.datasets.__main__ import main
-from nuturtle_demo.datasets.calibration import (
+from nuturtle_eval.datasets.__main__ import main
+from nuturtle_eval.datasets.calibration import (
     Residuals,
     fit_commands,
     fit_motion_noise,
@@ -24,16 +24,16 @@ from nuturtle_demo.datasets.calibration import (
     measurement_residuals,
     motion_windows,
 )
-from nuturtle_demo.datasets.experiment import Scans
-from nuturtle_demo.datasets.mrclam import MrclamRecording
-from nuturtle_demo.datasets.setups import (
+from nuturtle_eval.datasets.experiment import Scans
+from nuturtle_eval.datasets.mrclam import MrclamRecording
+from nuturtle_eval.datasets.setups import (
     MRCLAM_PARAMS,
     VICTORIA_PARAMS,
     CommandCalibration,
     load_params,
     mrclam_params,
 )
-from nuturtle_demo.metrics import align_se2
+from nuturtle_eval.metrics import align_se2
 from turtlelib import Transform2D, TwistNoise, UnicycleMotion
 
 DATA = Path(__file__).parent / "data"

@@ -1,4 +1,4 @@
-"""Unit tests of nuturtle_demo.metrics: hand-computed cases, properties, Monte Carlo NEES."""
+"""Unit tests of nuturtle_eval.metrics: hand-computed cases, properties, Monte Carlo NEES."""
 
 import math
 
@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from nuturtle_demo.metrics import (
+from nuturtle_eval.metrics import (
     PoseSeries,
     RunData,
     associate_landmarks,

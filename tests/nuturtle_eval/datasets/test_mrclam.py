@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nuturtle_demo.datasets.mrclam import MrclamRecording, load_mrclam
+from nuturtle_eval.datasets.mrclam import MrclamRecording, load_mrclam
 
 EXCERPT = Path(__file__).parent / "data" / "mrclam7_robot1_60s"
 FULL = Path("/work/shared/datasets/utias_mrclam/MRCLAM_Dataset7")

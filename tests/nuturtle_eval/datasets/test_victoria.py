@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import scipy.io
 
-from nuturtle_demo.datasets.victoria import VictoriaRecording, gps_outliers, load_victoria
+from nuturtle_eval.datasets.victoria import VictoriaRecording, gps_outliers, load_victoria
 
 EXCERPT = Path(__file__).parent / "data" / "victoria_30s"
 FULL = Path("/work/shared/datasets/victoria_park")

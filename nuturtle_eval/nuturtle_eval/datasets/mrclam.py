@@ -42,7 +42,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from nuturtle_demo.datasets._files import read_table
+from nuturtle_eval.datasets._files import read_table
 
 ROBOTS = range(1, 6)
 

@@ -1,11 +1,11 @@
-"""nuturtle_demo.plots: the ellipse geometry, and that each figure renders to a PNG."""
+"""nuturtle_eval.plots: the ellipse geometry, and that each figure renders to a PNG."""
 
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from nuturtle_demo.metrics import PoseSeries
-from nuturtle_demo.plots import ellipse_points, plot_covariance, plot_errors, plot_trajectory
+from nuturtle_eval.metrics import PoseSeries
+from nuturtle_eval.plots import ellipse_points, plot_covariance, plot_errors, plot_trajectory
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 

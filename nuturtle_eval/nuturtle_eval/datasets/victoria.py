@@ -42,7 +42,7 @@ import numpy as np
 import scipy.io
 from numpy.typing import NDArray
 
-from nuturtle_demo.datasets._files import existing_file, read_table
+from nuturtle_eval.datasets._files import existing_file, read_table
 
 
 @dataclass(frozen=True)

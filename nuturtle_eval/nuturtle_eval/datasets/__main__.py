@@ -1,10 +1,10 @@
-"""``python -m nuturtle_demo.datasets``: EKF SLAM on real datasets, and noise calibration from ground truth.
+"""``python -m nuturtle_eval.datasets``: EKF SLAM on real datasets, and noise calibration from ground truth.
 
 ::
 
-    python -m nuturtle_demo.datasets mrclam --data DIR --robot K [--association known|unknown] [--out DIR]
-    python -m nuturtle_demo.datasets victoria --data DIR [--out DIR]
-    python -m nuturtle_demo.datasets calibrate --data DIR --robot K [--out FILE]
+    python -m nuturtle_eval.datasets mrclam --data DIR --robot K [--association known|unknown] [--out DIR]
+    python -m nuturtle_eval.datasets victoria --data DIR [--out DIR]
+    python -m nuturtle_eval.datasets calibrate --data DIR --robot K [--out FILE]
 
 ``mrclam`` / ``victoria`` write ``metrics.json``, ``trajectory.png``, ``errors.png``, ``nees.png`` and the
 parameters used (``params.yaml``) into ``--out``; ``--params FILE`` replaces the defaults (e.g. with what
@@ -33,7 +33,7 @@ if TYPE_CHECKING:
 
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(
-        prog="python -m nuturtle_demo.datasets",
+        prog="python -m nuturtle_eval.datasets",
         description="EKF SLAM on the MRCLAM and Victoria Park datasets.",
     )
     commands = parser.add_subparsers(dest="command", required=True)
