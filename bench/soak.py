@@ -62,8 +62,9 @@ from typing import Any
 
 import numpy as np
 
-from nuturtle_demo.run import ASSOCIATIONS, LANDMARK_GATE_M, DemoOptions, DemoSystem, run_demo
+from nuturtle_demo.run import ASSOCIATIONS, DemoOptions, DemoSystem, run_demo
 from nuturtle_eval.metrics import associate_landmarks, pose_errors
+from nuturtle_eval.run_evaluation import LANDMARK_GATE_M
 
 SAMPLE_PERIOD_S = 10.0
 # Targets

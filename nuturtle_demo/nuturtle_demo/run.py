@@ -53,26 +53,26 @@ from nuturtle_control.odometry import OdometryNode
 from nuturtle_control.turtle_control import TurtleControlNode
 from nuturtle_eval import plots
 from nuturtle_eval.metrics import RunData, RunMetrics, evaluate_run, odom_in_world
+from nuturtle_eval.run_evaluation import LANDMARK_GATE_M, slam_snapshot
 from nuturtle_ros_common.conversions import planar_covariance_6x6, pose_from_transform
 from nuturtle_ros_common.node_main import spin_once_guarded
 from nuturtle_ros_common.ros_files import load_ros_parameters, share_file
+from nuturtle_tools.foxglove_relay import FoxgloveRelay, StaticTransform, slam_view_transforms
+from nuturtle_tools.monitor import RunMonitor
+from nuturtle_tools.params import params_file, to_parameters
+from nuturtle_tools.recorder import BagWriter, TeeSink, TopicRecorder
+from nuturtle_tools.relay_config import RelayConfig
 from turtlelib import MODES, Transform2D, TwistNoise, normalize_angle
 from turtlelib.validation import finite_real, integer, one_of, positive, store
 
 from .driver import FigureEightDriver
-from .foxglove_relay import FoxgloveRelay, StaticTransform, slam_view_transforms
-from .monitor import RunMonitor
-from .params import matched_wheel_noise, params_file, to_parameters
-from .recorder import BagWriter, TeeSink, TopicRecorder
-from .relay_config import RelayConfig
+from .slip_noise import matched_wheel_noise
 
 ASSOCIATIONS = ("known", "unknown")
 # Wall time for slam to take the initialpose, and for its ~/save_map service to appear and answer (s)
 SLAM_SERVICE_TIMEOUT_S = 10.0
 # The recording: a rosbag2 bag directory in the output folder
 BAG_NAME = "run"
-# Landmarks closer than this to a true cylinder count as that cylinder (m)
-LANDMARK_GATE_M = 0.2
 # Wall time to wait for the recorder to subscribe to every topic before the simulation starts (s)
 DISCOVERY_TIMEOUT_S = 10.0
 # Wall time to let the last messages arrive after the simulation stops (s)
@@ -458,26 +458,6 @@ def _evaluate_and_plot(
     plots.plot_slam_errors(out_dir / "errors.png", slam, slam_covariances, truth)
     plots.plot_covariance(out_dir / "covariance.png", snapshot.covariance)
     return metrics
-
-
-@dataclass(frozen=True)
-class SlamSnapshot:
-    """The filter's final state: ``covariance`` (N, N) of ``[x, y, theta, m_0x, m_0y, ...]``,
-    ``landmarks_xy`` (n, 2) and their ``landmark_covariances`` (n, 2, 2)."""
-
-    covariance: np.ndarray
-    landmarks_xy: np.ndarray
-    landmark_covariances: np.ndarray
-
-
-def slam_snapshot(slam_node: Any) -> SlamSnapshot:
-    """Read the final state straight from the in-process slam node's filter."""
-    ekf = slam_node.slam
-    return SlamSnapshot(
-        covariance=np.array(ekf.covariance),
-        landmarks_xy=np.array(ekf.landmarks).reshape(-1, 2),
-        landmark_covariances=np.array(ekf.landmark_covariances).reshape(-1, 2, 2),
-    )
 
 
 def _sensor_range_m(system: DemoSystem, options: DemoOptions) -> float | np.ndarray:

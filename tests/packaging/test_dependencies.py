@@ -26,7 +26,7 @@ from workspace import (
 PACKAGES = sorted(packages())
 
 
-def test_the_workspace_has_the_eight_packages():
+def test_the_workspace_has_the_nine_packages():
     assert PACKAGES == sorted(
         [
             "turtlelib",
@@ -36,6 +36,7 @@ def test_the_workspace_has_the_eight_packages():
             "nusim",
             "nuturtle_control",
             "nuslam",
+            "nuturtle_tools",
             "nuturtle_demo",
         ]
     )
@@ -85,10 +86,17 @@ def test_nuturtle_eval_declares_exactly_what_it_imports_and_no_ros_package():
     }
 
 
+def test_the_evaluation_depends_on_turtlelib_only_and_nothing_but_the_demo_and_the_tools_on_it():
+    graph = workspace_graph()
+    assert graph["nuturtle_eval"] == ["turtlelib"]
+    users = {name for name, depends in graph.items() if "nuturtle_eval" in depends}
+    assert users <= {"nuturtle_tools", "nuturtle_demo"}, users
+
+
 def test_the_simulator_and_the_robot_side_do_not_depend_on_each_other():
     graph = workspace_graph()
     assert set(graph["nusim"]) <= {"turtlelib", "nuturtle_ros_common", "nuturtle_description"}
-    for robot_side in ("nuturtle_control", "nuslam"):
+    for robot_side in ("nuturtle_control", "nuslam", "nuturtle_tools"):
         assert "nusim" not in graph[robot_side] and "nuturtle_demo" not in graph[robot_side]
     assert set(graph["nuturtle_description"]) <= {"turtlelib", "nuturtle_ros_common"}
 

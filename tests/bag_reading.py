@@ -14,7 +14,7 @@ from mcap.reader import make_reader
 from mcap.records import Channel, Schema
 from rclpy.serialization import deserialize_message
 
-from nuturtle_demo.recorder import message_class
+from nuturtle_tools.recorder import message_class
 
 SEPARATOR = "\n" + "=" * 80 + "\n"
 # a message type inside an rclpy field type: 'std_msgs/Header', 'sequence<geometry_msgs/Point, 3>'

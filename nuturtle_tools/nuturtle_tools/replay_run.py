@@ -48,6 +48,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from nuturtle_eval import plots
 from nuturtle_eval.metrics import PoseSeries, RunData, evaluate_run, odom_in_world
+from nuturtle_eval.run_evaluation import LANDMARK_GATE_M, slam_snapshot
 from nuturtle_ros_common.conversions import stamp_nanoseconds, transform_from_pose
 from nuturtle_ros_common.ros_files import flatten
 from turtlelib import Transform2D
@@ -70,7 +71,6 @@ from .player import (
 )
 from .recorder import BagWriter, TeeSink, TopicRecorder, TopicTap, absolute, message_class
 from .relay_config import RelayConfig
-from .run import LANDMARK_GATE_M, slam_snapshot
 
 # The SLAM outputs: a rosbag2 bag directory in the output folder (slam/metadata.yaml + slam/slam.mcap)
 BAG_NAME = "slam"
@@ -401,7 +401,7 @@ class Replay:
         ``play_only``: no slam here). OSError when it cannot bind."""
         host, port = self.options.foxglove
         transforms = {} if self.options.play_only else slam_view_transforms(self.slam)
-        relay = FoxgloveRelay(host, port, name="nuturtle_demo.replay", **transforms)
+        relay = FoxgloveRelay(host, port, name="nuturtle_tools.replay", **transforms)
         print(f"Foxglove WebSocket on {relay.url} (Foxglove: Open connection)", file=sys.stderr)
         return relay
 

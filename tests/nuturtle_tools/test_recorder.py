@@ -1,4 +1,4 @@
-"""nuturtle_demo.recorder: the rosbag2 bag writer and the live topic recorder.
+"""nuturtle_tools.recorder: the rosbag2 bag writer and the live topic recorder.
 
 Every bag is read back independently of rosbags (which writes it), see bag_reading.py: the `mcap` library for
 the MCAP layer, rclpy's deserialize_message with the real message classes for the CDR, yaml for metadata.yaml.
@@ -30,7 +30,7 @@ from std_msgs.msg import String
 from visualization_msgs.msg import Marker, MarkerArray
 
 from bag_reading import SEPARATOR, definition_sections, rclpy_definitions, read_bag
-from nuturtle_demo.recorder import RECORD_DEPTH, BagWriter, TopicRecorder, recording_qos
+from nuturtle_tools.recorder import RECORD_DEPTH, BagWriter, TopicRecorder, recording_qos
 from rclpy_harness import RosHarness, matched, record_rosout, warnings_of
 
 SCAN = "sensor_msgs/msg/LaserScan"

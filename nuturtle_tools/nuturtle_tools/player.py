@@ -86,7 +86,7 @@ class BagPlayer(Node):
     ``play(message)`` publishes /clock (when the log time moved on) and the message on its played topic
     (KeyError for a topic not in ``topics``); ``played`` the messages published per bag topic.
     ``relay_to(sink)`` also hands /clock and every played message, with its log time, to a
-    :class:`~nuturtle_demo.recorder.TopicSink` (the Foxglove relay) without a subscription.
+    :class:`~nuturtle_tools.recorder.TopicSink` (the Foxglove relay) without a subscription.
     """
 
     def __init__(self, topics: Sequence[PlayedTopic], **kwargs: Any) -> None:

@@ -16,11 +16,11 @@ What it shows
 
 How to open it
     In Foxglove, *Open connection* > *Foxglove WebSocket* ``ws://127.0.0.1:8765`` (served by the demo's or
-    the replay's ``--foxglove``, or ``ros2 run nuturtle_demo foxglove_relay``: docs/live.md), or open a
-    bag, then *Layouts* > *Import from file* and pick ``nuturtle_demo/config/foxglove_layout.json``
-    (installed as ``share/nuturtle_demo/config/foxglove_layout.json``).
+    the replay's ``--foxglove``, or ``ros2 run nuturtle_tools foxglove_relay``: docs/live.md), or open a
+    bag, then *Layouts* > *Import from file* and pick ``nuturtle_tools/config/foxglove_layout.json``
+    (installed as ``share/nuturtle_tools/config/foxglove_layout.json``).
 
-The committed JSON is this module's output: ``python -P -m nuturtle_demo.foxglove_layout`` rewrites it,
+The committed JSON is this module's output: ``python -P -m nuturtle_tools.foxglove_layout`` rewrites it,
 ``--check`` exits 1 when it differs from :func:`build_layout`.
 """
 
@@ -188,13 +188,13 @@ def layout_json(layout: fl.Layout) -> str:
 
 
 def committed_layout_path() -> Path:
-    """``share/nuturtle_demo/config/foxglove_layout.json`` (the source folder in a pip install)."""
-    return share_file("nuturtle_demo", "config", "foxglove_layout.json")
+    """``share/nuturtle_tools/config/foxglove_layout.json`` (the source folder in a pip install)."""
+    return share_file("nuturtle_tools", "config", "foxglove_layout.json")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
-        prog="python -m nuturtle_demo.foxglove_layout",
+        prog="python -m nuturtle_tools.foxglove_layout",
         description="Write the demo's Foxglove layout (or check the file against build_layout()).",
     )
     parser.add_argument("--out", type=Path, default=None, help="the file (default: the committed layout)")
@@ -209,7 +209,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if current != text:
             state = "is missing" if current is None else "differs from build_layout()"
             print(
-                f"{path} {state}: regenerate it with `python -P -m nuturtle_demo.foxglove_layout`",
+                f"{path} {state}: regenerate it with `python -P -m nuturtle_tools.foxglove_layout`",
                 file=sys.stderr,
             )
             return 1

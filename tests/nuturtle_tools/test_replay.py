@@ -1,4 +1,4 @@
-"""The bag replay (nuturtle_demo.replay) with real rclpy nodes, no mocks: a short demo run recorded by the
+"""The bag replay (nuturtle_tools.replay) with real rclpy nodes, no mocks: a short demo run recorded by the
 demo's own recorder (an MCAP bag with ground truth), the same recording written again by rosbags' Writer
 into a sqlite3 bag, and a bag without ground truth whose scan is on another topic, each replayed into the
 real landmarks and slam nodes.
@@ -23,11 +23,11 @@ from rosbags.typesys import Stores, get_typestore
 
 from bag_reading import read_bag
 from foxglove_client import FoxgloveClient
-from nuturtle_demo.bag_source import BagError, BagSource
-from nuturtle_demo.foxglove_relay import tf2_msgs_installed
-from nuturtle_demo.replay import main
-from nuturtle_demo.replay_run import ReplayOptions, run_replay
 from nuturtle_demo.run import BAG_NAME, DemoOptions, run_demo
+from nuturtle_tools.bag_source import BagError, BagSource
+from nuturtle_tools.foxglove_relay import tf2_msgs_installed
+from nuturtle_tools.replay import main
+from nuturtle_tools.replay_run import ReplayOptions, run_replay
 from turtlelib.slam_map import load_map
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
@@ -239,7 +239,7 @@ def test_play_only_feeds_nodes_in_another_process(live, tmp_path, ros):
     for topic in ("odom", "nusim/ground_truth"):
         listener.create_subscription(Odometry, topic, lambda _: None, 1000)
     player = subprocess.Popen(
-        [sys.executable, "-P", "-m", "nuturtle_demo.replay", str(bag), "--play-only", "--rate", "4",
+        [sys.executable, "-P", "-m", "nuturtle_tools.replay", str(bag), "--play-only", "--rate", "4",
          "--out", str(tmp_path / "out"), "--no-progress"],
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
     )  # fmt: skip
@@ -259,7 +259,7 @@ def test_play_only_feeds_nodes_in_another_process(live, tmp_path, ros):
 
 
 def test_a_demo_recording_is_replayed_with_the_parameters_of_its_run(tmp_path):
-    from nuturtle_demo.replay import recording_params
+    from nuturtle_tools.replay import recording_params
 
     bag = tmp_path / "out" / "run"
     bag.mkdir(parents=True)

@@ -18,9 +18,9 @@ the relay the transforms the 3D panel needs from what the run already knows: ``t
 (nav_msgs/Odometry) are also relayed as ``/tf`` (tf2_msgs/TFMessage, ``header.frame_id ->
 child_frame_id``), and ``static_transforms`` are served on the latched ``/tf_static``.
 
-Pieces: :class:`FoxgloveRelay` (the server, a :class:`~nuturtle_demo.recorder.TopicSink`, usable without a
+Pieces: :class:`FoxgloveRelay` (the server, a :class:`~nuturtle_tools.recorder.TopicSink`, usable without a
 ROS graph), :class:`FoxgloveRelayNode` (the node ``foxglove_relay``: a
-:class:`~nuturtle_demo.recorder.TopicTap` into a relay, ``ros2 run nuturtle_demo foxglove_relay``).
+:class:`~nuturtle_tools.recorder.TopicTap` into a relay, ``ros2 run nuturtle_tools foxglove_relay``).
 
 Binding: ``host`` 127.0.0.1 (the default) serves this machine only. Any other address (``0.0.0.0``: every
 interface) lets anyone on that network read every topic of the system: choose it explicitly.
@@ -281,7 +281,7 @@ class FoxgloveRelayNode(Node):
     """Node ``foxglove_relay``: every topic with a publisher relayed to a Foxglove WebSocket (module
     docstring), discovered every ``discovery_period`` s, including topics that appear later; each
     subscription's QoS hears all of its publishers (best effort if any publisher is, transient local if
-    all are: :func:`~nuturtle_demo.recorder.recording_qos`).
+    all are: :func:`~nuturtle_tools.recorder.recording_qos`).
 
     Parameters: :class:`RelayConfig` (read-only). ``exclude`` topics are not relayed;
     ``tf_from_odometry`` and ``static_transforms`` as for :class:`FoxgloveRelay`. kwargs go to rclpy's

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from nav_msgs.msg import Odometry
 
-from nuturtle_demo.monitor import POSE_COLUMNS, RowTable, _Stream
+from nuturtle_tools.monitor import POSE_COLUMNS, RowTable, _Stream
 
 
 def table_with(n: int, width: int = 3, block_rows: int = 4, directory=None) -> tuple[RowTable, np.ndarray]:
@@ -90,7 +90,7 @@ def test_a_stream_replaces_a_sample_that_is_not_later_and_keeps_covariances():
 def test_the_live_slam_error_is_against_the_truth_interpolated_at_the_slam_stamp(ros):
     from std_msgs.msg import Float64MultiArray
 
-    from nuturtle_demo.monitor import ERROR_LABELS, SLAM_TOPIC, TRUTH_TOPIC, RunMonitor
+    from nuturtle_tools.monitor import ERROR_LABELS, SLAM_TOPIC, TRUTH_TOPIC, RunMonitor
 
     monitor = ros.add(RunMonitor(context=ros.context))
     source = ros.node("monitor_source")

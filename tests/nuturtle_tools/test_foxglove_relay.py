@@ -18,8 +18,8 @@ from std_msgs.msg import String
 from visualization_msgs.msg import Marker, MarkerArray
 
 from foxglove_client import FoxgloveClient
-from nuturtle_demo.foxglove_relay import FoxgloveRelay, FoxgloveRelayNode, StaticTransform
-from nuturtle_demo.relay_config import DEFAULT_HOST, DEFAULT_PORT, RelayConfig, parse_endpoint
+from nuturtle_tools.foxglove_relay import FoxgloveRelay, FoxgloveRelayNode, StaticTransform
+from nuturtle_tools.relay_config import DEFAULT_HOST, DEFAULT_PORT, RelayConfig, parse_endpoint
 from turtlelib import Transform2D
 
 JAZZY = get_typestore(Stores.ROS2_JAZZY)
@@ -227,7 +227,7 @@ def test_the_node_stops_at_start_up_when_its_port_is_in_use(tmp_path):
         holder.listen()
         port = holder.getsockname()[1]
         result = subprocess.run(
-            [sys.executable, "-m", "nuturtle_demo.foxglove_relay", "--ros-args", "-p", f"port:={port}"],
+            [sys.executable, "-m", "nuturtle_tools.foxglove_relay", "--ros-args", "-p", f"port:={port}"],
             capture_output=True, text=True, timeout=60, cwd=tmp_path,
         )  # fmt: skip
     assert result.returncode == 1, result.stderr
@@ -253,7 +253,7 @@ def test_the_demo_cli_refuses_a_port_in_use(tmp_path, capsys):
 
 def test_a_tee_sends_each_topic_to_the_sinks_that_take_it(tmp_path):
     from bag_reading import read_bag
-    from nuturtle_demo.recorder import BagWriter, TeeSink
+    from nuturtle_tools.recorder import BagWriter, TeeSink
 
     with FoxgloveRelay(port=0, tf_from_odometry=["slam/odom"]) as relay, BagWriter(tmp_path / "bag") as bag:
         tee = TeeSink(bag, relay)

@@ -1,4 +1,4 @@
-"""Command line of the bag replay: ``python -m nuturtle_demo.replay BAG [options]`` (``nuturtle-replay``,
+"""Command line of the bag replay: ``python -m nuturtle_tools.replay BAG [options]`` (``nuturtle-replay``,
 ``./dev.sh replay``).
 
 Plays a rosbag2 recording (a bag directory of MCAP or sqlite3 storage, or a single .mcap file such as the
@@ -33,7 +33,7 @@ DEFAULT_TOPICS = {
 
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(
-        prog="python -m nuturtle_demo.replay",
+        prog="python -m nuturtle_tools.replay",
         description="Replay a rosbag2 recording (MCAP or sqlite3 bag directory, or a single .mcap) with "
         "/clock into the landmarks and slam nodes: SLAM outputs, trajectory, map and metrics.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
@@ -79,8 +79,7 @@ def summary(result: Any) -> str:
         lines.append("interrupted: the outputs cover what was played so far")
     if result.accuracy:
         from nuturtle_eval.metrics import RunMetrics
-
-        from .cli import results_table
+        from nuturtle_eval.run_evaluation import results_table
 
         fields = RunMetrics.__dataclass_fields__
         values = {key: metrics[key] for key in fields}
