@@ -28,7 +28,6 @@ bag's ``/nusim/obstacles`` markers. Without it SLAM starts at the params' ``x0, 
 
 from __future__ import annotations
 
-import json
 import math
 import sys
 import time
@@ -46,9 +45,15 @@ from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message
 from rclpy.signals import SignalHandlerOptions
 
-from nuturtle_eval import plots
-from nuturtle_eval.metrics import PoseSeries, RunData, evaluate_run, odom_in_world
-from nuturtle_eval.run_evaluation import LANDMARK_GATE_M, slam_snapshot
+from nuturtle_eval.metrics import PoseSeries, odom_in_world
+from nuturtle_eval.run_evaluation import (
+    ProgressBar,
+    RunRecord,
+    evaluate_and_plot,
+    sensor_range_m,
+    slam_snapshot,
+    write_metrics,
+)
 from nuturtle_ros_common.conversions import stamp_nanoseconds, transform_from_pose
 from nuturtle_ros_common.ros_files import flatten
 from turtlelib import Transform2D
@@ -296,15 +301,6 @@ def played_topics(topics: dict[str, BagTopic]) -> list[PlayedTopic]:
     ]
 
 
-def _progress_bar(total_s: float, enabled: bool):
-    from tqdm import tqdm
-
-    return tqdm(
-        total=round(total_s, 1), unit="bag s", file=sys.stderr, disable=not enabled,
-        bar_format="{l_bar}{bar}| {n:.1f}/{total:.1f} bag s [{elapsed}<{remaining}{postfix}]",
-    )  # fmt: skip
-
-
 class Replay:
     """The nodes and state of one replay (module docstring)."""
 
@@ -447,8 +443,7 @@ class Replay:
         reliable = {id(p) for p in self.player.reliable_publishers()}
         start_ns = self.source.start_ns
         total_s = (self.source.end_ns - start_ns) * 1e-9
-        wall_start = time.monotonic()
-        with _progress_bar(total_s, self.options.progress) as progress:
+        with ProgressBar(total_s, "bag", self.options.progress) as progress:
             try:
                 # the topics published since the executor last ran until idle, all of one log time
                 step: set[str] = set()
@@ -466,14 +461,10 @@ class Replay:
                         publisher = self.player.publishers_by_topic[message.topic]
                         if id(publisher) in reliable:
                             wait_for_acks([publisher], ACK_TIMEOUT_S)
-                    now_s = (message.log_time_ns - start_ns) * 1e-9
-                    if now_s - progress.n >= 0.5:
-                        wall_s = time.monotonic() - wall_start
-                        progress.set_postfix_str(f"{now_s / max(wall_s, 1e-9):.1f}x real time", refresh=False)
-                        progress.update(round(now_s - progress.n, 1))
+                    progress.advance((message.log_time_ns - start_ns) * 1e-9)
                 if in_process:
                     run_until_idle(executor, self.logger)
-                progress.update(max(round(total_s - progress.n, 1), 0.0))
+                progress.advance(total_s)
             except KeyboardInterrupt:
                 return True
         if self.options.play_only:
@@ -514,10 +505,18 @@ class Replay:
         accuracy = False
         if not self.options.play_only:
             (out_dir / "config.yaml").write_text(params_file([self.landmarks, self.slam]), encoding="utf-8")
-            accuracy_values = self._evaluate_and_plot(out_dir, wall_seconds)
-            accuracy = accuracy_values is not None
-            values = {**(accuracy_values or {}), **values}
-        (out_dir / "metrics.json").write_text(json.dumps(values, indent=2) + "\n", encoding="utf-8")
+            self._write_map(out_dir)
+            bag_seconds = (self.source.end_ns - self.source.start_ns) / NS_PER_S
+            try:
+                metrics = evaluate_and_plot(
+                    out_dir, self._run_record(), sim_seconds=bag_seconds, wall_seconds=wall_seconds
+                )
+            except ValueError as error:
+                self.logger.warning(f"no accuracy metrics: {error}")
+                metrics = None
+            accuracy = metrics is not None
+            values = {**(metrics.as_dict() if metrics is not None else {}), **values}
+        write_metrics(out_dir, values)
         return ReplayResult(values, out_dir, accuracy, interrupted)
 
     def _true_circles(self) -> np.ndarray:
@@ -528,21 +527,10 @@ class Replay:
             return self.facts.obstacles
         return np.zeros((0, 3))
 
-    def _sensor_range_m(self, circles: np.ndarray) -> float | np.ndarray:
-        """As the demo's (run._sensor_range_m), from the params file and the first scan."""
-        slam_range = float(self.slam.config.max_range)
-        if self.association == "known":
-            return float(self.nusim_values.get("max_range", slam_range))
-        if self.facts.angle_increment is None or not circles.shape[0]:
-            return slam_range
-        detectable = 2.0 * circles[:, 2] / (self.landmarks.config.min_points * self.facts.angle_increment)
-        return np.minimum(detectable, min(slam_range, self.facts.range_max))
-
-    def _evaluate_and_plot(self, out_dir: Path, wall_seconds: float) -> dict[str, Any] | None:
+    def _run_record(self) -> RunRecord:
+        """What the replay produced, in the truth's frame (module docstring), for
+        :func:`nuturtle_eval.run_evaluation.evaluate_and_plot`."""
         truth = self.facts.truth
-        slam = self.monitor.slam()
-        slam_covariances = self.monitor.slam_covariances()
-        snapshot = slam_snapshot(self.slam)
         T_start = Transform2D(
             float(self.slam_values.get("x0", 0.0)),
             float(self.slam_values.get("y0", 0.0)),
@@ -552,35 +540,25 @@ class Replay:
         T_world_body0 = T_start
         if truth is not None and len(odom_raw):
             T_world_body0 = truth_pose_at(truth, round(odom_raw.t_s[0] * 1e9))
-        odom = odom_in_frame(odom_raw, T_world_body0)
-        self._write_map(out_dir)
         circles = self._true_circles() if truth is not None else np.zeros((0, 3))
-        if len(slam):
-            plots.plot_trajectory(
-                out_dir / "trajectory.png", truth, odom if len(odom) else None, slam, circles,
-                snapshot.landmarks_xy, snapshot.landmark_covariances, None,
-            )  # fmt: skip
-        plots.plot_covariance(out_dir / "covariance.png", snapshot.covariance)
-        if truth is None or not len(odom) or not len(slam):
-            return None
-        data = RunData(
+        slam_range_m = float(self.slam.config.max_range)
+        return RunRecord(
             truth=truth,
-            odom=odom,
-            slam=slam,
-            slam_covariances=slam_covariances,
-            mapped_xy=snapshot.landmarks_xy,
-            true_xy=circles[:, :2],
-            sensor_range_m=self._sensor_range_m(circles),
-            gate_m=LANDMARK_GATE_M,
+            odom=odom_in_frame(odom_raw, T_world_body0),
+            slam=self.monitor.slam(),
+            slam_covariances=self.monitor.slam_covariances(),
+            snapshot=slam_snapshot(self.slam),
+            circles=circles,
+            sensor_range_m=sensor_range_m(
+                self.association,
+                fake_sensor_range_m=float(self.nusim_values.get("max_range", slam_range_m)),
+                slam_range_m=slam_range_m,
+                radii_m=circles[:, 2],
+                min_points=self.landmarks.config.min_points,
+                angle_increment=self.facts.angle_increment,
+                lidar_range_m=self.facts.range_max,
+            ),
         )
-        try:
-            metrics = evaluate_run(data, sim_seconds=(self.source.end_ns - self.source.start_ns) / NS_PER_S,
-                                   wall_seconds=wall_seconds)  # fmt: skip
-        except ValueError as error:
-            self.logger.warning(f"no accuracy metrics: {error}")
-            return None
-        plots.plot_slam_errors(out_dir / "errors.png", slam, slam_covariances, truth)
-        return metrics.as_dict()
 
     def _write_map(self, out_dir: Path) -> None:
         """map.json: the final map in the slam node's own map file format (:mod:`turtlelib.slam_map`: ids,
