@@ -76,7 +76,7 @@ case "$cmd" in
     ;;
   lint) setup; lint ;;
   setup) setup ;;
-  datasets) setup; exec "$py" -P -m nuturtle_demo.datasets "$@" ;;
-  replay) setup; exec "$py" -P -m nuturtle_demo.replay "$@" ;;
+  datasets) setup; exec "$py" -P -m nuturtle_eval.datasets "$@" ;;
+  replay) setup; exec "$py" -P -m nuturtle_tools.replay "$@" ;;
   *) echo "usage: ./dev.sh run|test|lint|setup|datasets|replay [args]" >&2; exit 2 ;;
 esac

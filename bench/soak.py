@@ -62,8 +62,9 @@ from typing import Any
 
 import numpy as np
 
-from nuturtle_demo.metrics import associate_landmarks, pose_errors
-from nuturtle_demo.run import ASSOCIATIONS, LANDMARK_GATE_M, DemoOptions, DemoSystem, run_demo
+from nuturtle_demo.run import ASSOCIATIONS, DemoOptions, DemoSystem, run_demo
+from nuturtle_eval.metrics import associate_landmarks, pose_errors
+from nuturtle_eval.run_evaluation import LANDMARK_GATE_M
 
 SAMPLE_PERIOD_S = 10.0
 # Targets
@@ -311,7 +312,7 @@ def plot_soak(path: str | Path, samples: Sequence[SoakSample], landmarks_true: i
     """soak.png: over robot time (min), VmRSS (MiB), the smallest eigenvalue of P (log), the landmarks
     mapped and tentative, and the SLAM position error (mm) with the 2 cm target and the time the map was
     complete."""
-    from nuturtle_demo.plots import new_figure
+    from nuturtle_eval.plots import new_figure
 
     t_min = np.array([s.sim_time_s for s in samples]) / 60.0
     figure = new_figure(8.0, 9.0)

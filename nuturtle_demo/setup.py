@@ -26,8 +26,8 @@ setup(
     maintainer="nuturtle team",
     maintainer_email="team@nuturtle.dev",
     description=(
-        "The simulation + SLAM demo: the headless run, its route driver, the rosbag2 recorder, "
-        "metrics and figures."
+        "The simulation + SLAM demo: the headless run, its route driver and the simulated system's "
+        "launch file."
     ),
     license="Apache-2.0",
     tests_require=["pytest"],
@@ -35,8 +35,6 @@ setup(
         "console_scripts": [
             "demo = nuturtle_demo.cli:main",
             "driver = nuturtle_demo.driver:main",
-            "foxglove_relay = nuturtle_demo.foxglove_relay:main",
-            "replay = nuturtle_demo.replay:main",
         ],
     },
 )

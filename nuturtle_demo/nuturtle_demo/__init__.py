@@ -1,8 +1,7 @@
 """The one-command simulation + SLAM demo: headless run of every node, metrics, figures, rosbag2 recording.
 
-Modules: ``cli`` (command line), ``run`` (the run), ``driver`` (figure-eight route node), ``monitor``
-(pose streams), ``metrics`` (pure accuracy/consistency metrics), ``recorder`` (rosbag2 bag, MCAP storage),
-``plots`` (figures, matplotlib imported lazily), ``params`` (parameter files), ``datasets`` (readers of
-the real MRCLAM and Victoria Park datasets, no ROS), ``foxglove_layout`` (the committed Foxglove layout).
-See docs/demo.md.
+Modules: ``cli`` (command line), ``run`` (the run), ``driver`` (figure-eight route node), ``slip_noise``
+(SLAM's wheel noise matched to the simulated slip), ``launch_nodes`` (what the launch file computes). The
+recorder, monitor and Foxglove relay are nuturtle_tools', the metrics and figures nuturtle_eval's. See
+docs/demo.md.
 """

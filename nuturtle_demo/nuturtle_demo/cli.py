@@ -13,8 +13,9 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from .metrics import RunMetrics
-from .relay_config import add_foxglove_argument, parse_endpoint
+from nuturtle_eval.run_evaluation import results_table
+from nuturtle_tools.relay_config import add_foxglove_argument, parse_endpoint
+
 from .run import (
     ASSOCIATIONS,
     BAG_NAME,
@@ -25,24 +26,6 @@ from .run import (
     default_world,
     run_demo,
 )
-
-# (metrics.json key, label, format, target text, check) of the printed table
-TARGETS = (
-    ("final_position_error_slam_m", "final position error, SLAM (m)", "{:.4f}", "<= 0.02",
-     lambda v: v <= 0.02),
-    ("final_heading_error_slam_rad", "final heading error, SLAM (rad)", "{:.4f}", "<= 0.02",
-     lambda v: v <= 0.02),
-    ("final_position_error_odom_m", "final position error, odometry (m)", "{:.4f}", ">= 0.2",
-     lambda v: v >= 0.2),
-    ("final_heading_error_odom_rad", "final heading error, odometry (rad)", "{:.4f}", "", None),
-    ("ate_rmse_slam_m", "ATE RMSE, SLAM (m)", "{:.4f}", "", None),
-    ("ate_rmse_odom_m", "ATE RMSE, odometry (m)", "{:.4f}", "", None),
-    ("landmark_rmse_m", "landmark RMSE (m)", "{:.4f}", "", None),
-    ("nees_pose_mean", "pose NEES, mean (3 dof)", "{:.2f}", "", None),
-    ("nees_pose_within_95_fraction", "pose NEES inside the 95% band", "{:.3f}", ">= 0.9", lambda v: v >= 0.9),
-    ("sim_seconds", "simulated time (s)", "{:.1f}", "", None),
-    ("wall_seconds", "wall time (s)", "{:.1f}", "<= sim / 2", None),
-)  # fmt: skip
 
 
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
@@ -90,32 +73,6 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     maps.add_argument("--route-radius", type=float, default=None,
                       help="the figure eight's loop radius (m) instead of the driver's 0.75")  # fmt: skip
     return parser.parse_args(argv)
-
-
-def results_table(metrics: RunMetrics) -> str:
-    """A markdown table of the run's figures and targets (✓/✗ where a target applies)."""
-    values = metrics.as_dict()
-    rows = ["| metric | value | target | |", "|---|---:|---|---|"]
-    for key, label, fmt, target, check in TARGETS:
-        value = values[key]
-        if key == "wall_seconds":
-            ok = value <= 0.5 * values["sim_seconds"]
-        else:
-            ok = check(value) if check is not None else None
-        mark = "" if ok is None else ("✓" if ok else "✗")
-        rows.append(f"| {label} | {fmt.format(value)} | {target} | {mark} |")
-    mapped_ok = values["landmarks_in_range_unmapped"] == 0 and values["landmarks_duplicate"] == 0
-    rows.append(
-        f"| landmarks: true / came in range / mapped | {values['landmarks_true']} / "
-        f"{values['landmarks_in_range']} / {values['landmarks_mapped']} | every one in range mapped once | "
-        f"{'✓' if mapped_ok else '✗'} |"
-    )
-    rows.append(
-        f"| landmarks: in range but unmapped / duplicates / spurious | "
-        f"{values['landmarks_in_range_unmapped']} / {values['landmarks_duplicate']} / "
-        f"{values['landmarks_spurious']} | 0 / 0 / 0 | |"
-    )
-    return "\n".join(rows)
 
 
 def report(result: DemoResult, options: DemoOptions) -> str:

@@ -28,7 +28,6 @@ the simulation has stopped, before the nodes go.
 
 from __future__ import annotations
 
-import json
 import sys
 import time
 from collections.abc import Callable
@@ -51,28 +50,35 @@ from nusim.nusim_node import NusimNode
 from nuslam.slam_node import MOTION_SOURCES
 from nuturtle_control.odometry import OdometryNode
 from nuturtle_control.turtle_control import TurtleControlNode
+from nuturtle_eval.metrics import RunMetrics, odom_in_world
+from nuturtle_eval.run_evaluation import (
+    ProgressBar,
+    RunRecord,
+    evaluate_and_plot,
+    sensor_range_m,
+    slam_snapshot,
+    write_metrics,
+)
 from nuturtle_ros_common.conversions import planar_covariance_6x6, pose_from_transform
 from nuturtle_ros_common.node_main import spin_once_guarded
 from nuturtle_ros_common.ros_files import load_ros_parameters, share_file
+from nuturtle_tools.foxglove_relay import FoxgloveRelay, StaticTransform, slam_view_transforms
+from nuturtle_tools.monitor import RunMonitor
+from nuturtle_tools.params import params_file, to_parameters
+from nuturtle_tools.player import spin_until, wait_until
+from nuturtle_tools.recorder import BagWriter, TeeSink, TopicRecorder
+from nuturtle_tools.relay_config import RelayConfig
 from turtlelib import MODES, Transform2D, TwistNoise, normalize_angle
 from turtlelib.validation import finite_real, integer, one_of, positive, store
 
-from . import plots
 from .driver import FigureEightDriver
-from .foxglove_relay import FoxgloveRelay, StaticTransform, slam_view_transforms
-from .metrics import RunData, RunMetrics, evaluate_run, odom_in_world
-from .monitor import RunMonitor
-from .params import matched_wheel_noise, params_file, to_parameters
-from .recorder import BagWriter, TeeSink, TopicRecorder
-from .relay_config import RelayConfig
+from .slip_noise import matched_wheel_noise
 
 ASSOCIATIONS = ("known", "unknown")
 # Wall time for slam to take the initialpose, and for its ~/save_map service to appear and answer (s)
 SLAM_SERVICE_TIMEOUT_S = 10.0
 # The recording: a rosbag2 bag directory in the output folder
 BAG_NAME = "run"
-# Landmarks closer than this to a true cylinder count as that cylinder (m)
-LANDMARK_GATE_M = 0.2
 # Wall time to wait for the recorder to subscribe to every topic before the simulation starts (s)
 DISCOVERY_TIMEOUT_S = 10.0
 # Wall time to let the last messages arrive after the simulation stops (s)
@@ -263,15 +269,6 @@ def _slam_nodes(system: DemoSystem, options: DemoOptions, context: Context, sim_
     return landmarks, slam
 
 
-def _spin_until(executor: SingleThreadedExecutor, predicate, timeout_s: float) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        executor.spin_once(timeout_sec=0.05)
-    return predicate()
-
-
 def relocalize(executor: SingleThreadedExecutor, system: DemoSystem, options: DemoOptions) -> None:
     """Give slam nusim's true start pose through a real `initialpose` message (frame ``map_id``,
     covariance ``diag(initial_pose_std^2)``) from a publisher node in the run's context; return once
@@ -292,7 +289,7 @@ def relocalize(executor: SingleThreadedExecutor, system: DemoSystem, options: De
                 publisher.get_subscription_count() >= len(subscribers)
             )
 
-        if not _spin_until(executor, matched, SLAM_SERVICE_TIMEOUT_S):
+        if not spin_until(executor, node.get_logger(), matched, SLAM_SERVICE_TIMEOUT_S):
             raise RuntimeError(f"slam did not subscribe to {topic} within {SLAM_SERVICE_TIMEOUT_S} s")
         msg = PoseWithCovarianceStamped()
         msg.header.frame_id = system.slam.node_config.map_id
@@ -309,7 +306,7 @@ def relocalize(executor: SingleThreadedExecutor, system: DemoSystem, options: De
                 and abs(normalize_angle(T.theta - T_start.theta)) < 1e-9
             )
 
-        if not _spin_until(executor, taken, SLAM_SERVICE_TIMEOUT_S):
+        if not spin_until(executor, node.get_logger(), taken, SLAM_SERVICE_TIMEOUT_S):
             raise RuntimeError(
                 f"slam did not take the initialpose {T_start} within {SLAM_SERVICE_TIMEOUT_S} s"
             )
@@ -326,25 +323,16 @@ def call_save_map(executor: SingleThreadedExecutor, system: DemoSystem) -> tuple
     try:
         name = f"{system.slam.get_fully_qualified_name()}/save_map"
         client = node.create_client(Trigger, name)
-        if not _spin_until(executor, client.service_is_ready, SLAM_SERVICE_TIMEOUT_S):
+        if not spin_until(executor, node.get_logger(), client.service_is_ready, SLAM_SERVICE_TIMEOUT_S):
             raise RuntimeError(f"{name} did not appear within {SLAM_SERVICE_TIMEOUT_S} s")
         future = client.call_async(Trigger.Request())
-        if not _spin_until(executor, future.done, SLAM_SERVICE_TIMEOUT_S):
+        if not spin_until(executor, node.get_logger(), future.done, SLAM_SERVICE_TIMEOUT_S):
             raise RuntimeError(f"{name} did not answer within {SLAM_SERVICE_TIMEOUT_S} s")
         response = future.result()
         return bool(response.success), str(response.message)
     finally:
         executor.remove_node(node)
         node.destroy_node()
-
-
-def _progress_bar(options: DemoOptions):
-    from tqdm import tqdm
-
-    return tqdm(
-        total=round(options.duration_s, 1), unit="sim s", file=sys.stderr, disable=not options.progress,
-        bar_format="{l_bar}{bar}| {n:.1f}/{total:.1f} sim s [{elapsed}<{remaining}{postfix}]",
-    )  # fmt: skip
 
 
 # on_progress(system, sim_time_s) of run_demo
@@ -377,7 +365,8 @@ def run_demo(options: DemoOptions, on_progress: ProgressCallback | None = None) 
         def subscribed() -> bool:
             return set(REQUIRED_TOPICS) <= set(system.recorder.recorded_topics)
 
-        if not _spin_until(executor, subscribed, DISCOVERY_TIMEOUT_S):
+        logger = system.nusim.get_logger()
+        if not spin_until(executor, logger, subscribed, DISCOVERY_TIMEOUT_S):
             missing = sorted(set(REQUIRED_TOPICS) - set(system.recorder.recorded_topics))
             raise RuntimeError(f"the recorder did not discover {missing} within {DISCOVERY_TIMEOUT_S} s")
         if options.mode == "localization":
@@ -385,31 +374,32 @@ def run_demo(options: DemoOptions, on_progress: ProgressCallback | None = None) 
         executor.add_node(system.nusim)
         wall_start = time.monotonic()
         reported_step = system.nusim.step_count
-        with _progress_bar(options) as progress:
+        with ProgressBar(options.duration_s, "sim", options.progress) as progress:
             try:
                 while system.sim_time_s < options.duration_s:
-                    spin_once_guarded(executor, system.nusim.get_logger(), timeout_sec=0.1)
+                    spin_once_guarded(executor, logger, timeout_sec=0.1)
                     if on_progress is not None and system.nusim.step_count != reported_step:
                         reported_step = system.nusim.step_count
                         on_progress(system, system.sim_time_s)
-                    now_s = min(system.sim_time_s, options.duration_s)
-                    if now_s - progress.n >= 0.5 or now_s >= options.duration_s:
-                        wall_s = time.monotonic() - wall_start
-                        progress.set_postfix_str(f"{now_s / max(wall_s, 1e-9):.1f}x real time", refresh=False)
-                        progress.update(round(now_s - progress.n, 1))
+                    progress.advance(system.sim_time_s)
             except KeyboardInterrupt:
                 interrupted = True
         wall_seconds = time.monotonic() - wall_start
         sim_seconds = system.sim_time_s
         executor.remove_node(system.nusim)
         system.driver.stop()
-        _spin_until(executor, lambda: False, DRAIN_S)
+        wait_until(executor, logger, time.monotonic() + DRAIN_S)
         saved_map = call_save_map(executor, system) if options.save_map else None
         writer.close()
         # the pace of this run is not part of the world: reusing the file runs nusim at real time
         config = params_file(system.nodes, replace={"nusim": {"realtime_factor": 1.0}})
         (out_dir / "config.yaml").write_text(config, encoding="utf-8")
-        metrics = _evaluate_and_plot(system, options, out_dir, sim_seconds, wall_seconds)
+        metrics = evaluate_and_plot(
+            out_dir, _run_record(system, options), sim_seconds=sim_seconds, wall_seconds=wall_seconds
+        )
+        if metrics is None:
+            raise RuntimeError("the run published no odometry or SLAM pose to evaluate")
+        write_metrics(out_dir, metrics.as_dict())
         return DemoResult(
             metrics,
             out_dir,
@@ -428,70 +418,27 @@ def run_demo(options: DemoOptions, on_progress: ProgressCallback | None = None) 
         rclpy.try_shutdown(context=context)
 
 
-def _evaluate_and_plot(
-    system: DemoSystem, options: DemoOptions, out_dir: Path, sim_seconds: float, wall_seconds: float
-) -> RunMetrics:
+def _run_record(system: DemoSystem, options: DemoOptions) -> RunRecord:
+    """What the run produced, in ``nusim/world`` (module docstring), for
+    :func:`nuturtle_eval.run_evaluation.evaluate_and_plot`."""
     simulation = system.nusim.simulation
-    T_world_start = simulation.config.arena.T_world_start
-    truth = system.monitor.truth()
-    odom = odom_in_world(system.monitor.odom(), T_world_start)
-    slam = system.monitor.slam()
-    slam_covariances = system.monitor.slam_covariances()
-    snapshot = slam_snapshot(system.slam)
-    data = RunData(
-        truth=truth,
-        odom=odom,
-        slam=slam,
-        slam_covariances=slam_covariances,
-        mapped_xy=snapshot.landmarks_xy,
-        true_xy=simulation.circles[:, :2],
-        sensor_range_m=_sensor_range_m(system, options),
-        gate_m=LANDMARK_GATE_M,
-    )
-    metrics = evaluate_run(data, sim_seconds=sim_seconds, wall_seconds=wall_seconds)
-    (out_dir / "metrics.json").write_text(json.dumps(metrics.as_dict(), indent=2) + "\n", encoding="utf-8")
     arena = simulation.config.arena
-    plots.plot_trajectory(
-        out_dir / "trajectory.png", truth, odom, slam, simulation.circles, snapshot.landmarks_xy,
-        snapshot.landmark_covariances, (arena.arena_x_length, arena.arena_y_length),
-    )  # fmt: skip
-    plots.plot_slam_errors(out_dir / "errors.png", slam, slam_covariances, truth)
-    plots.plot_covariance(out_dir / "covariance.png", snapshot.covariance)
-    return metrics
-
-
-@dataclass(frozen=True)
-class SlamSnapshot:
-    """The filter's final state: ``covariance`` (N, N) of ``[x, y, theta, m_0x, m_0y, ...]``,
-    ``landmarks_xy`` (n, 2) and their ``landmark_covariances`` (n, 2, 2)."""
-
-    covariance: np.ndarray
-    landmarks_xy: np.ndarray
-    landmark_covariances: np.ndarray
-
-
-def slam_snapshot(slam_node: Any) -> SlamSnapshot:
-    """Read the final state straight from the in-process slam node's filter."""
-    ekf = slam_node.slam
-    return SlamSnapshot(
-        covariance=np.array(ekf.covariance),
-        landmarks_xy=np.array(ekf.landmarks).reshape(-1, 2),
-        landmark_covariances=np.array(ekf.landmark_covariances).reshape(-1, 2, 2),
-    )
-
-
-def _sensor_range_m(system: DemoSystem, options: DemoOptions) -> float | np.ndarray:
-    """How close each cylinder must come to count as seen (m): the fake sensor's range (known association),
-    or (unknown) the farthest distance at which the LiDAR puts ``min_points`` beams on it, within SLAM's
-    and the LiDAR's range. A cylinder of radius r at distance d spans about 2 r / d rad, so it is hit by
-    about 2 r / (d angle_increment) beams::
-
-        d_max = min(max_range, range_max, 2 r / (min_points angle_increment))
-    """
-    simulation = system.nusim.simulation
-    if options.association == "known":
-        return simulation.config.noise.max_range
     lidar = simulation.config.lidar
-    radius_m = simulation.circles[:, 2]
-    detectable_m = 2.0 * radius_m / (system.landmarks.config.min_points * lidar.angle_increment)
-    return np.minimum(detectable_m, min(float(system.slam.config.max_range), lidar.range_max))
+    return RunRecord(
+        truth=system.monitor.truth(),
+        odom=odom_in_world(system.monitor.odom(), arena.T_world_start),
+        slam=system.monitor.slam(),
+        slam_covariances=system.monitor.slam_covariances(),
+        snapshot=slam_snapshot(system.slam),
+        circles=simulation.circles,
+        sensor_range_m=sensor_range_m(
+            options.association,
+            fake_sensor_range_m=simulation.config.noise.max_range,
+            slam_range_m=float(system.slam.config.max_range),
+            radii_m=simulation.circles[:, 2],
+            min_points=system.landmarks.config.min_points,
+            angle_increment=lidar.angle_increment,
+            lidar_range_m=lidar.range_max,
+        ),
+        arena_xy_m=(arena.arena_x_length, arena.arena_y_length),
+    )

@@ -1,4 +1,4 @@
-"""An independent subscriber process for tests/demo/test_demo_processes.py.
+"""An independent subscriber process for tests/nuturtle_demo/test_demo_processes.py.
 
 Usage: python flow_probe.py TIMEOUT_S MIN_MESSAGES
 Subscribes to scan (sensor-data QoS), joint_states, odom and slam/odom like any ROS 2 tool would, waits

@@ -13,6 +13,7 @@ import sys
 
 import pytest
 import yaml
+
 from bag_reading import read_bag
 
 DURATION_S = 40.0

@@ -1,4 +1,4 @@
-"""nuturtle_demo.params: parameter files in and out, and SLAM's wheel noise matched to nusim's slip by Monte
+"""nuturtle_tools.params: parameter files in and out, and SLAM's wheel noise matched to nusim's slip by Monte
 Carlo on the simulator itself."""
 
 import math
@@ -10,10 +10,11 @@ from rclpy.context import Context
 from rclpy.node import Node
 
 from nusim.simulation import NoiseConfig, Simulation, SimulationConfig
-from nuturtle_demo.params import matched_wheel_noise, params_file, to_parameters
 from nuturtle_demo.run import default_world
+from nuturtle_demo.slip_noise import matched_wheel_noise
 from nuturtle_description.robot_params import burger_params
 from nuturtle_ros_common.ros_files import load_ros_parameters
+from nuturtle_tools.params import params_file, to_parameters
 
 
 def test_demo_world_loads_flat():

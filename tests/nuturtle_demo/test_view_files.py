@@ -1,4 +1,4 @@
-"""The committed view files: the Foxglove layout (the output of nuturtle_demo.foxglove_layout), RViz2's
+"""The committed view files: the Foxglove layout (the output of nuturtle_tools.foxglove_layout), RViz2's
 nuslam/rviz/slam.rviz, and the `rviz` launch argument that opens it (text and AST checks: `launch` is not
 installable here)."""
 
@@ -15,11 +15,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from nuslam.launch_nodes import rviz_arguments
-from nuturtle_demo.foxglove_layout import build_layout, committed_layout_path, layout_json, main
 from nuturtle_demo.run import REQUIRED_TOPICS
+from nuturtle_tools.foxglove_layout import build_layout, committed_layout_path, layout_json, main
 
 ROOT = Path(__file__).resolve().parents[2]
-LAYOUT_FILE = ROOT / "nuturtle_demo" / "config" / "foxglove_layout.json"
+LAYOUT_FILE = ROOT / "nuturtle_tools" / "config" / "foxglove_layout.json"
 RVIZ_FILE = ROOT / "nuslam" / "rviz" / "slam.rviz"
 LAYOUT_TEXT = layout_json(build_layout())
 # the topics of a demo run's bag, the demo monitor's SLAM error and the transforms

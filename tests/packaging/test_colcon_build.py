@@ -36,9 +36,13 @@ SITE_PACKAGES = Path("lib", f"python{sys.version_info.major}.{sys.version_info.m
 # How long a node must keep running after start-up to count as started (s)
 NODE_ALIVE_S = 4.0
 # Executables that are command-line tools, not nodes: run with these arguments, must exit 0
-TOOLS = {("nuturtle_demo", "demo"): ["--help"], ("nuturtle_demo", "replay"): ["--help"]}
+TOOLS = {
+    ("nuturtle_demo", "demo"): ["--help"],
+    ("nuturtle_tools", "replay"): ["--help"],
+    ("nuturtle_eval", "datasets"): ["--help"],
+}
 # Arguments a node needs beside the others: the relay on any free port, not one a running demo may hold
-NODE_ARGUMENTS = {("nuturtle_demo", "foxglove_relay"): ["-p", "port:=0"]}
+NODE_ARGUMENTS = {("nuturtle_tools", "foxglove_relay"): ["-p", "port:=0"]}
 
 PROBE = """
 import json, os
@@ -128,7 +132,7 @@ def test_ament_index_finds_every_package_and_executable(install: Path) -> None:
     for package, folder, name in (
         ("nuturtle_description", "config", "diff_params.yaml"),
         ("nuslam", "rviz", "slam.rviz"),
-        ("nuturtle_demo", "config", "foxglove_layout.json"),
+        ("nuturtle_tools", "config", "foxglove_layout.json"),
     ):
         assert name in os.listdir(install / package / "share" / package / folder), (package, name)
 

@@ -1,6 +1,7 @@
 """Package boundaries: every import and launch reference declared in package.xml, no stale workspace
-dependency, no cycle, turtlelib free of ROS, launch files that name real files and executables, console
-scripts that resolve, and the package picture in docs/architecture.md equal to the package.xml files."""
+dependency, no cycle, turtlelib and nuturtle_eval free of ROS, launch files that name real files and
+executables, console scripts that resolve, and the package picture in docs/architecture.md equal to the
+package.xml files."""
 
 from __future__ import annotations
 
@@ -25,15 +26,17 @@ from workspace import (
 PACKAGES = sorted(packages())
 
 
-def test_the_workspace_has_the_seven_packages():
+def test_the_workspace_has_the_nine_packages():
     assert PACKAGES == sorted(
         [
             "turtlelib",
+            "nuturtle_eval",
             "nuturtle_ros_common",
             "nuturtle_description",
             "nusim",
             "nuturtle_control",
             "nuslam",
+            "nuturtle_tools",
             "nuturtle_demo",
         ]
     )
@@ -69,10 +72,31 @@ def test_turtlelib_imports_numpy_scipy_and_the_standard_library_only():
     assert package.exec_depends == {"python3-numpy", "python3-scipy"}
 
 
+def test_nuturtle_eval_declares_exactly_what_it_imports_and_no_ros_package():
+    package = packages()["nuturtle_eval"]
+    keys = used_dependencies(package)
+    assert keys == package.exec_depends
+    assert keys <= {
+        "turtlelib",
+        "python3-numpy",
+        "python3-scipy",
+        "python3-yaml",
+        "python3-matplotlib",
+        "python3-tqdm",
+    }
+
+
+def test_the_evaluation_depends_on_turtlelib_only_and_nothing_but_the_demo_and_the_tools_on_it():
+    graph = workspace_graph()
+    assert graph["nuturtle_eval"] == ["turtlelib"]
+    users = {name for name, depends in graph.items() if "nuturtle_eval" in depends}
+    assert users <= {"nuturtle_tools", "nuturtle_demo"}, users
+
+
 def test_the_simulator_and_the_robot_side_do_not_depend_on_each_other():
     graph = workspace_graph()
     assert set(graph["nusim"]) <= {"turtlelib", "nuturtle_ros_common", "nuturtle_description"}
-    for robot_side in ("nuturtle_control", "nuslam"):
+    for robot_side in ("nuturtle_control", "nuslam", "nuturtle_tools"):
         assert "nusim" not in graph[robot_side] and "nuturtle_demo" not in graph[robot_side]
     assert set(graph["nuturtle_description"]) <= {"turtlelib", "nuturtle_ros_common"}
 

@@ -1,0 +1,190 @@
+"""``python -m nuturtle_eval.datasets``: EKF SLAM on real datasets, and noise calibration from ground truth.
+
+::
+
+    python -m nuturtle_eval.datasets mrclam --data DIR --robot K [--association known|unknown] [--out DIR]
+    python -m nuturtle_eval.datasets victoria --data DIR [--out DIR]
+    python -m nuturtle_eval.datasets calibrate --data DIR --robot K [--out FILE]
+
+``mrclam`` / ``victoria`` write ``metrics.json``, ``trajectory.png``, ``errors.png``, ``nees.png`` and the
+parameters used (``params.yaml``) into ``--out``; ``--params FILE`` replaces the defaults (e.g. with what
+``calibrate`` wrote). See docs/real_data.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from .experiment import ASSOCIATIONS, Experiment, ExperimentResult, run_experiment
+
+# the calibrate command's default window (docs/real_data.md: chosen on MRCLAM robot 1)
+WINDOW_S = 10.0
+
+if TYPE_CHECKING:
+    from .evaluation import Evaluation
+    from .setups import DatasetParams
+
+
+def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(
+        prog="python -m nuturtle_eval.datasets",
+        description="EKF SLAM on the MRCLAM and Victoria Park datasets.",
+    )
+    commands = parser.add_subparsers(dest="command", required=True)
+    mrclam = commands.add_parser("mrclam", help="one robot of a UTIAS MRCLAM dataset")
+    mrclam.add_argument("--data", required=True, type=Path, help="an MRCLAM_DatasetN directory")
+    mrclam.add_argument("--robot", required=True, type=int, choices=range(1, 6), help="robot 1..5")
+    mrclam.add_argument("--association", choices=ASSOCIATIONS, default="known")
+    victoria = commands.add_parser("victoria", help="the Victoria Park run (tree detections, GPS)")
+    victoria.add_argument("--data", required=True, type=Path, help="the victoria_park directory")
+    for command in (mrclam, victoria):
+        command.add_argument(
+            "--out", type=Path, default=None, help="output directory (default: results/NAME)"
+        )
+        command.add_argument("--params", type=Path, default=None, help="YAML with noise: and slam: overrides")
+        command.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
+        command.add_argument("--no-plots", dest="plots", action="store_false", help="metrics.json only")
+    calibrate = commands.add_parser(
+        "calibrate", help="fit MRCLAM motion and measurement noise to its Vicon truth"
+    )
+    calibrate.add_argument("--data", required=True, type=Path, help="an MRCLAM_DatasetN directory")
+    calibrate.add_argument("--robot", required=True, type=int, choices=range(1, 6), help="robot 1..5")
+    calibrate.add_argument(
+        "--window",
+        type=float,
+        default=WINDOW_S,
+        help=f"window length of the motion and command fits (s, default {WINDOW_S:g})",
+    )
+    calibrate.add_argument("--out", type=Path, default=None, help="params YAML (default: stdout)")
+    calibrate.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
+    return parser.parse_args(argv)
+
+
+def _progress(total: int, enabled: bool, label: str):
+    from tqdm import tqdm
+
+    return tqdm(total=total, unit="samples", desc=label, file=sys.stderr, disable=not enabled, leave=False)
+
+
+def _json_value(value):
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {key: _json_value(item) for key, item in value.items()}
+    if isinstance(value, list):
+        return [_json_value(item) for item in value]
+    return value
+
+
+def _write_run(
+    args: argparse.Namespace,
+    experiment: Experiment,
+    evaluate: Callable[[Experiment, ExperimentResult], Evaluation],
+    params: DatasetParams,
+) -> dict:
+    """Run ``experiment`` with a progress bar, evaluate it and write the outputs into ``args.out``."""
+    import yaml
+
+    from .figures import plot_errors, plot_nees, plot_trajectory
+
+    with _progress(len(experiment.motion_t_ns), args.progress, experiment.name) as bar:
+        result = run_experiment(experiment, bar.update)
+    evaluation = evaluate(experiment, result)
+    metrics = {"run": experiment.name, **evaluation.metrics}
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "metrics.json").write_text(
+        json.dumps(_json_value(metrics), indent=2) + "\n", encoding="utf-8"
+    )
+    (args.out / "params.yaml").write_text(yaml.safe_dump(params.as_dict(), sort_keys=False), encoding="utf-8")
+    if args.plots:
+        plot_trajectory(args.out / "trajectory.png", evaluation, experiment.name)
+        plot_errors(args.out / "errors.png", evaluation)
+        plot_nees(args.out / "nees.png", evaluation)
+    return metrics
+
+
+def summary(metrics: dict) -> str:
+    keys = (
+        "ate_rmse_m",
+        "ate_rmse_aligned_m",
+        "landmark_rmse_m",
+        "landmark_rmse_aligned_m",
+        "landmarks_true",
+        "landmarks_mapped",
+        "landmarks_mapped_once",
+        "landmarks_spurious",
+        "landmarks_merged",
+        "nees_pose_mean",
+        "nees_pose_within_95_fraction",
+        "cpu_seconds",
+        "update_ms_median",
+        "update_ms_p99",
+    )
+    lines = [metrics["run"]]
+    for key in keys:
+        value = metrics.get(key)
+        lines.append(f"  {key:32s} {value:.4g}" if isinstance(value, float) else f"  {key:32s} {value}")
+    return "\n".join(lines)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = parse_args(argv)
+    from .setups import VICTORIA_PARAMS, load_params, mrclam_experiment, mrclam_params, victoria_experiment
+
+    try:
+        if args.command == "calibrate":
+            return _calibrate(args)
+        if args.command == "mrclam":
+            from .evaluation import evaluate_mrclam
+            from .mrclam import load_mrclam
+
+            recording = load_mrclam(args.data, args.robot)
+            params = load_params(mrclam_params(args.association), args.params)
+            experiment = mrclam_experiment(recording, params, args.association)
+            args.out = args.out or Path("results") / f"mrclam_robot{args.robot}_{args.association}"
+            metrics = _write_run(args, experiment, lambda e, r: evaluate_mrclam(e, r, recording), params)
+        else:
+            from .evaluation import evaluate_victoria
+            from .victoria import load_victoria
+
+            recording = load_victoria(args.data)
+            params = load_params(VICTORIA_PARAMS, args.params)
+            experiment = victoria_experiment(recording, params)
+            args.out = args.out or Path("results") / "victoria_park"
+            metrics = _write_run(args, experiment, lambda e, r: evaluate_victoria(e, r, recording), params)
+    except ValueError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    print(summary(metrics))
+    print(f"results in {args.out}")
+    return 0
+
+
+def _calibrate(args: argparse.Namespace) -> int:
+    import yaml
+
+    from .calibration import calibrate_mrclam
+    from .mrclam import load_mrclam
+
+    recording = load_mrclam(args.data, args.robot)
+    with _progress(len(recording.odometry_t_ns), args.progress, "calibrating") as bar:
+        fit = calibrate_mrclam(recording, args.window, bar.update)
+    text = yaml.safe_dump(fit.params_dict(), sort_keys=False)
+    print(fit.report(), file=sys.stderr)
+    if args.out is None:
+        print(text, end="")
+    else:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(text, encoding="utf-8")
+        print(f"parameters in {args.out}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,211 @@
+"""What a demo run and a bag replay both do at the end, without ROS: the metrics of the run against the
+ground truth, its figures and metrics.json, the results table they print, and the progress bar of their
+loop.
+
+Both hand over a :class:`RunRecord`: the pose series their monitor heard (in the truth's frame), the final
+state of the in-process slam node's filter (:func:`slam_snapshot`), the true cylinders and how close each
+must come to count as seen (:func:`sensor_range_m`). docs/demo.md describes the metrics, docs/replay.md
+what a replay without ground truth still writes.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from . import plots
+from .metrics import PoseSeries, RunData, RunMetrics, evaluate_run
+
+# Landmarks closer than this to a true cylinder count as that cylinder (m)
+LANDMARK_GATE_M = 0.2
+METRICS_FILE = "metrics.json"
+
+# (metrics.json key, label, format, target text, check) of the printed table
+TARGETS = (
+    ("final_position_error_slam_m", "final position error, SLAM (m)", "{:.4f}", "<= 0.02",
+     lambda v: v <= 0.02),
+    ("final_heading_error_slam_rad", "final heading error, SLAM (rad)", "{:.4f}", "<= 0.02",
+     lambda v: v <= 0.02),
+    ("final_position_error_odom_m", "final position error, odometry (m)", "{:.4f}", ">= 0.2",
+     lambda v: v >= 0.2),
+    ("final_heading_error_odom_rad", "final heading error, odometry (rad)", "{:.4f}", "", None),
+    ("ate_rmse_slam_m", "ATE RMSE, SLAM (m)", "{:.4f}", "", None),
+    ("ate_rmse_odom_m", "ATE RMSE, odometry (m)", "{:.4f}", "", None),
+    ("landmark_rmse_m", "landmark RMSE (m)", "{:.4f}", "", None),
+    ("nees_pose_mean", "pose NEES, mean (3 dof)", "{:.2f}", "", None),
+    ("nees_pose_within_95_fraction", "pose NEES inside the 95% band", "{:.3f}", ">= 0.9", lambda v: v >= 0.9),
+    ("sim_seconds", "simulated time (s)", "{:.1f}", "", None),
+    ("wall_seconds", "wall time (s)", "{:.1f}", "<= sim / 2", None),
+)  # fmt: skip
+
+
+@dataclass(frozen=True)
+class SlamSnapshot:
+    """The filter's final state: ``covariance`` (N, N) of ``[x, y, theta, m_0x, m_0y, ...]``,
+    ``landmarks_xy`` (n, 2) and their ``landmark_covariances`` (n, 2, 2)."""
+
+    covariance: np.ndarray
+    landmarks_xy: np.ndarray
+    landmark_covariances: np.ndarray
+
+
+def slam_snapshot(slam_node: Any) -> SlamSnapshot:
+    """Read the final state straight from the in-process slam node's filter (its ``slam`` attribute)."""
+    ekf = slam_node.slam
+    return SlamSnapshot(
+        covariance=np.array(ekf.covariance),
+        landmarks_xy=np.array(ekf.landmarks).reshape(-1, 2),
+        landmark_covariances=np.array(ekf.landmark_covariances).reshape(-1, 2, 2),
+    )
+
+
+def sensor_range_m(
+    association: str,
+    fake_sensor_range_m: float,
+    slam_range_m: float,
+    radii_m: NDArray[np.float64],
+    min_points: int,
+    angle_increment: float | None,
+    lidar_range_m: float | None,
+) -> float | NDArray[np.float64]:
+    """How close each cylinder (radii (M,)) must come to count as seen (m): the fake sensor's range (known
+    association), or (unknown) the farthest distance at which the LiDAR puts the detector's ``min_points``
+    beams on it, within SLAM's and the LiDAR's range. A cylinder of radius r at distance d spans about
+    2 r / d rad, so it is hit by about 2 r / (d angle_increment) beams::
+
+        d_max = min(lidar_range_m, slam_range_m, 2 r / (min_points angle_increment))
+
+    Without a scan to take the LiDAR's ``angle_increment`` and ``lidar_range_m`` from (None), or without
+    cylinders: SLAM's range."""
+    if association == "known":
+        return fake_sensor_range_m
+    radii_m = np.asarray(radii_m, dtype=np.float64).reshape(-1)
+    if angle_increment is None or lidar_range_m is None or not radii_m.size:
+        return slam_range_m
+    detectable_m = 2.0 * radii_m / (min_points * angle_increment)
+    return np.minimum(detectable_m, min(slam_range_m, lidar_range_m))
+
+
+@dataclass(frozen=True)
+class RunRecord:
+    """What a run or a replay produced, in the truth's frame: the ``truth`` (None without ground truth),
+    ``odom`` (None or empty without odometry) and ``slam`` pose series, ``slam_covariances`` (K, 3, 3) of
+    the SLAM poses, the filter's final ``snapshot``, the true cylinders ``circles`` (M, 3) of rows
+    ``[x, y, r]``, ``sensor_range_m`` (:func:`sensor_range_m`) and ``arena_xy_m`` the arena's size, whose
+    walls the trajectory figure draws (None: no walls, the axes fit the data)."""
+
+    truth: PoseSeries | None
+    odom: PoseSeries | None
+    slam: PoseSeries
+    slam_covariances: NDArray[np.float64]
+    snapshot: SlamSnapshot
+    circles: NDArray[np.float64]
+    sensor_range_m: float | NDArray[np.float64]
+    arena_xy_m: tuple[float, float] | None = None
+
+
+def evaluate_and_plot(
+    out_dir: Path, record: RunRecord, sim_seconds: float, wall_seconds: float
+) -> RunMetrics | None:
+    """Write the figures of ``record`` into ``out_dir`` and return its metrics: ``trajectory.png`` (once
+    SLAM published a pose) and ``covariance.png``; with the truth, odometry and SLAM poses also the metrics
+    (:func:`metrics.evaluate_run`, landmarks paired within ``LANDMARK_GATE_M``) and ``errors.png``, else
+    None. ValueError from evaluate_run (``errors.png`` is then not written)."""
+    odom = record.odom if record.odom is not None and len(record.odom) else None
+    snapshot = record.snapshot
+    if len(record.slam):
+        plots.plot_trajectory(
+            out_dir / "trajectory.png", record.truth, odom, record.slam, record.circles,
+            snapshot.landmarks_xy, snapshot.landmark_covariances, record.arena_xy_m,
+        )  # fmt: skip
+    plots.plot_covariance(out_dir / "covariance.png", snapshot.covariance)
+    if record.truth is None or odom is None or not len(record.slam):
+        return None
+    data = RunData(
+        truth=record.truth,
+        odom=odom,
+        slam=record.slam,
+        slam_covariances=record.slam_covariances,
+        mapped_xy=snapshot.landmarks_xy,
+        true_xy=np.asarray(record.circles, dtype=np.float64).reshape(-1, 3)[:, :2],
+        sensor_range_m=record.sensor_range_m,
+        gate_m=LANDMARK_GATE_M,
+    )
+    metrics = evaluate_run(data, sim_seconds=sim_seconds, wall_seconds=wall_seconds)
+    plots.plot_slam_errors(out_dir / "errors.png", record.slam, record.slam_covariances, record.truth)
+    return metrics
+
+
+def write_metrics(out_dir: Path, values: Mapping[str, Any]) -> Path:
+    """``out_dir/metrics.json``: ``values`` as indented JSON; its path."""
+    path = out_dir / METRICS_FILE
+    path.write_text(json.dumps(values, indent=2) + "\n", encoding="utf-8")
+    return path
+
+
+def results_table(metrics: RunMetrics) -> str:
+    """A markdown table of the run's figures and targets (✓/✗ where a target applies)."""
+    values = metrics.as_dict()
+    rows = ["| metric | value | target | |", "|---|---:|---|---|"]
+    for key, label, fmt, target, check in TARGETS:
+        value = values[key]
+        if key == "wall_seconds":
+            ok = value <= 0.5 * values["sim_seconds"]
+        else:
+            ok = check(value) if check is not None else None
+        mark = "" if ok is None else ("✓" if ok else "✗")
+        rows.append(f"| {label} | {fmt.format(value)} | {target} | {mark} |")
+    mapped_ok = values["landmarks_in_range_unmapped"] == 0 and values["landmarks_duplicate"] == 0
+    rows.append(
+        f"| landmarks: true / came in range / mapped | {values['landmarks_true']} / "
+        f"{values['landmarks_in_range']} / {values['landmarks_mapped']} | every one in range mapped once | "
+        f"{'✓' if mapped_ok else '✗'} |"
+    )
+    rows.append(
+        f"| landmarks: in range but unmapped / duplicates / spurious | "
+        f"{values['landmarks_in_range_unmapped']} / {values['landmarks_duplicate']} / "
+        f"{values['landmarks_spurious']} | 0 / 0 / 0 | |"
+    )
+    return "\n".join(rows)
+
+
+class ProgressBar:
+    """A progress bar on stderr over ``total_s`` seconds of the run's ``clock`` (``sim``, ``bag``), with the
+    pace in times real time since it was made (tqdm, imported here: only a run needs it); hidden unless
+    ``enabled``. A context manager: leaving it closes the bar."""
+
+    def __init__(self, total_s: float, clock: str, enabled: bool) -> None:
+        from tqdm import tqdm
+
+        self.total_s = round(total_s, 1)
+        self._bar = tqdm(
+            total=self.total_s, unit=f"{clock} s", file=sys.stderr, disable=not enabled,
+            bar_format="{l_bar}{bar}| {n:.1f}/{total:.1f} " + clock + " s [{elapsed}<{remaining}{postfix}]",
+        )  # fmt: skip
+        self._wall_start = time.monotonic()
+
+    def __enter__(self) -> ProgressBar:
+        return self
+
+    def __exit__(
+        self, kind: type[BaseException] | None, error: BaseException | None, traceback: TracebackType | None
+    ) -> None:
+        self._bar.close()
+
+    def advance(self, now_s: float) -> None:
+        """Show that the run's clock reached ``now_s`` (s since its start, clamped to ``total_s``): redrawn
+        every 0.5 s of it and at the end."""
+        now_s = min(now_s, self.total_s)
+        if now_s - self._bar.n >= 0.5 or (now_s >= self.total_s > self._bar.n):
+            wall_s = time.monotonic() - self._wall_start
+            self._bar.set_postfix_str(f"{now_s / max(wall_s, 1e-9):.1f}x real time", refresh=False)
+            self._bar.update(round(now_s - self._bar.n, 1))

@@ -1,0 +1,148 @@
+"""Command line of the bag replay: ``python -m nuturtle_tools.replay BAG [options]`` (``nuturtle-replay``,
+``./dev.sh replay``).
+
+Plays a rosbag2 recording (a bag directory of MCAP or sqlite3 storage, or a single .mcap file such as the
+demo's ``run/run.mcap``) with /clock into the real `landmarks` and `slam` nodes, as fast as they keep up
+(no message dropped) or at ``--rate``, and writes ``slam/`` (the SLAM outputs, a rosbag2 MCAP bag),
+``trajectory.png``, ``map.json``, ``covariance.png``, ``config.yaml`` and ``metrics.json`` (with ground
+truth in the bag: ``errors.png`` and the demo's accuracy metrics) into ``--out`` (docs/replay.md).
+``--play-only`` runs only the player, for nodes of your own. Exit code 2 for an unreadable bag, a missing
+topic or a bad option.
+
+The heavy modules (rclpy, the nodes, matplotlib) are imported only once the arguments are good.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from .relay_config import add_foxglove_argument, parse_endpoint
+
+DEFAULT_TOPICS = {
+    "scan": "/scan",
+    "joint_states": "/joint_states",
+    "odom": "/odom",
+    "truth": "/nusim/ground_truth",
+    "fake_sensor": "/fake_sensor",
+}
+
+
+def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(
+        prog="python -m nuturtle_tools.replay",
+        description="Replay a rosbag2 recording (MCAP or sqlite3 bag directory, or a single .mcap) with "
+        "/clock into the landmarks and slam nodes: SLAM outputs, trajectory, map and metrics.",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    parser.add_argument("bag", type=Path, help="bag directory (metadata.yaml) or a single .mcap / .db3 file")
+    parser.add_argument("--out", type=Path, default=Path("out/replay"),
+                        help="output folder (its files and its bag slam/ are replaced)")  # fmt: skip
+    parser.add_argument("--params", type=Path, default=None,
+                        help="ROS params YAML; its slam and landmarks sections (and /**) go to those nodes "
+                        "(default: the demo's config.yaml next to a demo recording, if there)")  # fmt: skip
+    parser.add_argument("--association", choices=("known", "unknown"), default=None,
+                        help="SLAM data association (default: the params file's, else unknown): LiDAR "
+                        "landmarks from the scan, or landmark ids from the fake sensor topic")  # fmt: skip
+    parser.add_argument("--motion-source", choices=("joint_states", "odom"), default=None,
+                        help="slam's motion_source parameter "
+                        "(default: the params file's, else the node's)")  # fmt: skip
+    for role, option in (
+        ("scan", "--scan-topic"), ("joint_states", "--joint-states-topic"), ("odom", "--odom-topic"),
+        ("truth", "--truth-topic"), ("fake_sensor", "--fake-sensor-topic"),
+    ):  # fmt: skip
+        played = "nusim/ground_truth (metrics only)" if role == "truth" else role
+        parser.add_argument(option, default=DEFAULT_TOPICS[role], dest=f"{role}_topic",
+                            help=f"bag topic played as {played}")  # fmt: skip
+    parser.add_argument("--rate", type=float, default=None,
+                        help="play at RATE x real time (log time against the wall clock); 0 = as fast as "
+                        "the nodes keep up, nothing dropped (default; 1.0 with --play-only)")  # fmt: skip
+    parser.add_argument("--play-only", action="store_true",
+                        help="only the player and /clock, for your own nodes "
+                        "(no landmarks or slam in this process)")  # fmt: skip
+    parser.add_argument("--wait-for-subscribers", type=float, default=5.0, metavar="S",
+                        help="with --play-only: wait up to S wall seconds for a subscriber on every played "
+                        "topic before playing")  # fmt: skip
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    add_foxglove_argument(parser, "--rate 1")
+    return parser.parse_args(argv)
+
+
+def summary(result: Any) -> str:
+    """The printed report: the demo's results table when there is ground truth, then the counts."""
+    metrics = result.metrics
+    lines = [f"replayed {metrics['bag']} ({metrics['storage']}), association {metrics['association']}"]
+    if result.interrupted:
+        lines.append("interrupted: the outputs cover what was played so far")
+    if result.accuracy:
+        from nuturtle_eval.metrics import RunMetrics
+        from nuturtle_eval.run_evaluation import results_table
+
+        fields = RunMetrics.__dataclass_fields__
+        values = {key: metrics[key] for key in fields}
+        values["nees_pose_band_95"] = tuple(values["nees_pose_band_95"])
+        lines += ["", results_table(RunMetrics(**values)), ""]
+    rows = ["| count | value |", "|---|---:|"]
+    for topic, count in metrics["messages_played"].items():
+        rows.append(f"| messages played, {topic} | {count} |")
+    for key in ("observation_arrays_received", "observation_arrays_applied", "observation_arrays_skipped",
+                "observation_arrays_pending"):  # fmt: skip
+        if key in metrics:
+            rows.append(f"| {key.replace('_', ' ')} ({metrics['observation_topic']}) | {metrics[key]} |")
+    rows.append(f"| replay wall time (s) / bag time (s) | {metrics['replay_wall_seconds']:.1f} / "
+                f"{metrics['bag_seconds']:.1f} |")  # fmt: skip
+    lines += rows
+    if "observation_arrays_applied" in metrics:
+        lines.append(f"outputs in {result.out_dir}/: metrics.json trajectory.png map.json covariance.png "
+                     f"{'errors.png ' if result.accuracy else ''}slam/ config.yaml")  # fmt: skip
+    else:
+        lines.append(f"outputs in {result.out_dir}/: metrics.json")
+    return "\n".join(lines)
+
+
+def recording_params(bag: Path) -> Path | None:
+    """The demo's config.yaml beside its recording (``OUT/config.yaml`` for the bag ``OUT/run/`` or its file
+    ``OUT/run/run.mcap``): the parameters the live run used, so a replay repeats it. None elsewhere."""
+    bag_dir = bag if bag.is_dir() else bag.parent
+    candidate = bag_dir.parent / "config.yaml"
+    return candidate if candidate.is_file() else None
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = parse_args(argv)
+    from .bag_source import BagError, BagSource
+
+    try:
+        BagSource(args.bag)  # checks the path before anything heavy is imported
+        from .replay_run import ReplayOptions, run_replay
+
+        params = args.params if args.params is not None else recording_params(args.bag)
+        if params is not None and args.params is None:
+            print(f"parameters of the recorded run: {params} (--params to choose others)", file=sys.stderr)
+        foxglove = None if args.foxglove is None else parse_endpoint(args.foxglove)
+        options = ReplayOptions(
+            bag=args.bag,
+            out_dir=args.out,
+            params=params,
+            association=args.association,
+            motion_source=args.motion_source,
+            topics={role: getattr(args, f"{role}_topic") for role in DEFAULT_TOPICS},
+            rate=args.rate,
+            play_only=args.play_only,
+            wait_for_subscribers_s=args.wait_for_subscribers,
+            progress=not args.no_progress,
+            foxglove=foxglove,
+        )
+        result = run_replay(options)
+    except (BagError, ValueError, OSError) as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    print(summary(result))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

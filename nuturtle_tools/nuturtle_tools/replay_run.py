@@ -1,0 +1,578 @@
+"""One replay: a rosbag2 recording played into the real `landmarks` and `slam` nodes, in one process on one
+SingleThreadedExecutor, then metrics and figures (the command line is replay.py; docs/replay.md).
+
+The system::
+
+    bag --BagSource--> bag_player --/clock, scan, joint_states, odom, nusim/ground_truth-->
+        landmarks --landmarks--> slam --slam/odom, slam/path, slam/map-->
+        recorder (every topic but the played ones -> slam/ bag), demo_monitor (truth, odom, slam/odom)
+        with ``foxglove``, a Foxglove WebSocket: the played messages from the player, the rest from the
+        recorder's subscriptions (with ``play_only``, a tap on the player node)
+
+Every node but the player runs on simulation time from the played /clock (each message's log time, sent
+just before the message). The messages are played a log-time step at a time: /clock, then the messages of
+that log time (at most one per topic; a second one of a topic starts a new step), then the executor runs
+until no callback is ready (``player.run_until_idle``), so a scan's landmarks reach slam before the next
+step goes out: as fast as the nodes go (default) or paced at ``rate`` x real time, and no message is
+dropped either way (no queue ever holds more than one played message). Within a step each node hears /clock
+first (its time source subscribed first), and slam hears the step's joint_states before the landmarks the
+step's scan gives, as in the live run.
+
+Ground truth (``truth_topic``, nav_msgs/Odometry, default ``/nusim/ground_truth``) is played on
+``nusim/ground_truth``, which only the monitor hears. When the bag has it, SLAM starts at the truth's pose
+at the first joint_states stamp (so ``map`` = the truth's frame), odometry is placed in that frame by its
+first sample (``T_world_odom = T_world_body(t0) T_odom_body(t0)^-1``), and the demo's accuracy metrics are
+computed; the true cylinders come from the params file's ``nusim`` section (``obstacles.x/y/r``) or else the
+bag's ``/nusim/obstacles`` markers. Without it SLAM starts at the params' ``x0, y0, theta0``.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import rclpy
+import yaml
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from rclpy.serialization import deserialize_message
+from rclpy.signals import SignalHandlerOptions
+
+from nuturtle_eval.metrics import PoseSeries, odom_in_world
+from nuturtle_eval.run_evaluation import (
+    ProgressBar,
+    RunRecord,
+    evaluate_and_plot,
+    sensor_range_m,
+    slam_snapshot,
+    write_metrics,
+)
+from nuturtle_ros_common.conversions import stamp_nanoseconds, transform_from_pose
+from nuturtle_ros_common.ros_files import flatten
+from turtlelib import Transform2D
+from turtlelib.slam_map import save_map
+from turtlelib.timebase import NS_PER_S
+
+from .bag_source import BagError, BagSource, BagTopic
+from .foxglove_relay import FoxgloveRelay, slam_view_transforms
+from .monitor import RunMonitor
+from .params import params_file, to_parameters
+from .player import (
+    BagPlayer,
+    Pacer,
+    PlayedTopic,
+    played_qos,
+    run_until_idle,
+    spin_until,
+    wait_for_acks,
+    wait_until,
+)
+from .recorder import BagWriter, TeeSink, TopicRecorder, TopicTap, absolute, message_class
+from .relay_config import RelayConfig
+
+# The SLAM outputs: a rosbag2 bag directory in the output folder (slam/metadata.yaml + slam/slam.mcap)
+BAG_NAME = "slam"
+TRUTH_PLAYED_AS = "nusim/ground_truth"
+OBSTACLES_TOPIC = "/nusim/obstacles"
+# Wall time to wait for every subscription to match the player and the recorder to subscribe (s)
+DISCOVERY_TIMEOUT_S = 10.0
+# Wall time a reliable publication may wait for acknowledgements in --play-only mode (s)
+ACK_TIMEOUT_S = 5.0
+# (role, played name, expected type); the sensor role mirrors the recorded QoS
+ROLES = {
+    "scan": ("scan", "sensor_msgs/msg/LaserScan"),
+    "joint_states": ("joint_states", "sensor_msgs/msg/JointState"),
+    "odom": ("odom", "nav_msgs/msg/Odometry"),
+    "truth": (TRUTH_PLAYED_AS, "nav_msgs/msg/Odometry"),
+    "fake_sensor": ("fake_sensor", "visualization_msgs/msg/MarkerArray"),
+}
+SENSOR_ROLES = ("scan",)
+
+
+@dataclass(frozen=True)
+class ReplayOptions:
+    """What to replay (docs/replay.md): the recording ``bag`` (a bag directory or a single .mcap/.db3);
+    ``out_dir``; ``params`` a ROS params file whose ``slam`` and ``landmarks`` sections (and ``/**``) go to
+    those nodes; ``association`` / ``motion_source`` override it (None: the file's, or the node's default);
+    ``topics`` the bag topic of each role (``scan``, ``joint_states``, ``odom``, ``truth``,
+    ``fake_sensor``); ``rate`` > 0 paces at that many times real time, 0 plays as fast as the nodes go
+    (None: 0, or 1.0 with ``play_only``); ``play_only`` runs only the player, which first waits up to
+    ``wait_for_subscribers_s`` (wall) for a subscriber on every played topic; ``progress`` a bar on
+    stderr; ``foxglove`` (host, port) serves every topic live on a Foxglove WebSocket there (docs/live.md;
+    with ``rate`` 1 it plays at robot speed)."""
+
+    bag: Path
+    out_dir: Path = Path("out/replay")
+    params: Path | None = None
+    association: str | None = None
+    motion_source: str | None = None
+    topics: Mapping[str, str] = field(
+        default_factory=lambda: {
+            "scan": "/scan",
+            "joint_states": "/joint_states",
+            "odom": "/odom",
+            "truth": "/nusim/ground_truth",
+            "fake_sensor": "/fake_sensor",
+        }
+    )
+    rate: float | None = None
+    play_only: bool = False
+    wait_for_subscribers_s: float = 5.0
+    progress: bool = True
+    foxglove: tuple[str, int] | None = None
+
+    def __post_init__(self) -> None:
+        if self.foxglove is not None:
+            host, port = self.foxglove
+            endpoint = RelayConfig(host=host, port=port)
+            object.__setattr__(self, "foxglove", (endpoint.host, endpoint.port))
+        if self.association not in (None, "known", "unknown"):
+            raise ValueError(f"association must be known or unknown, got {self.association!r}")
+        if self.motion_source not in (None, "joint_states", "odom"):
+            raise ValueError(f"motion_source must be joint_states or odom, got {self.motion_source!r}")
+        if self.rate is not None and not (math.isfinite(self.rate) and self.rate >= 0.0):
+            raise ValueError(f"rate must be >= 0 (0: as fast as possible), got {self.rate!r}")
+        if self.params is not None and not Path(self.params).is_file():
+            raise ValueError(f"params file {self.params} does not exist")
+        unknown = sorted(set(self.topics) - set(ROLES))
+        if unknown:
+            raise ValueError(f"unknown topic roles {unknown}; known: {sorted(ROLES)}")
+
+    @property
+    def pace(self) -> float:
+        """The rate in use: > 0 paced, 0 as fast as possible."""
+        if self.rate is not None:
+            return float(self.rate)
+        return 1.0 if self.play_only else 0.0
+
+    def bag_topic(self, role: str) -> str:
+        return absolute(self.topics.get(role, ""))
+
+
+@dataclass(frozen=True)
+class ReplayResult:
+    """``metrics`` (metrics.json), ``out_dir``, ``accuracy`` whether the accuracy metrics are in it,
+    ``interrupted`` (Ctrl-C)."""
+
+    metrics: dict[str, Any]
+    out_dir: Path
+    accuracy: bool
+    interrupted: bool
+
+
+def node_parameters_from_file(path: Path | None, node: str) -> dict[str, Any]:
+    """The parameters of ``node`` in a ROS params file by their dotted names: the ``/**`` entry, then the
+    node's own (``node`` or ``/node``), later ones winning; {} without a file. ValueError for a file that is
+    no params file."""
+    if path is None:
+        return {}
+    try:
+        document = yaml.safe_load(Path(path).read_text(encoding="utf-8")) or {}
+    except (OSError, yaml.YAMLError) as error:
+        raise ValueError(f"cannot read params file {path}: {error}") from error
+    if not isinstance(document, dict):
+        raise ValueError(f"{path} is not a ROS params file (a mapping of node names)")
+    values: dict[str, Any] = {}
+    for key in ("/**", node, f"/{node}"):
+        entry = document.get(key)
+        if isinstance(entry, dict) and isinstance(entry.get("ros__parameters"), dict):
+            values.update(flatten(entry["ros__parameters"]))
+    return values
+
+
+# --- reading what the replay needs before it starts --------------------------------------------------------
+
+
+@dataclass
+class BagFacts:
+    """Read from the bag before playing: ``truth`` (None without ground truth), the first joint_states
+    stamp (ns), the true cylinders ``[x, y, r]`` of /nusim/obstacles (or None), the first scan's
+    ``angle_increment`` and ``range_max``."""
+
+    truth: PoseSeries | None = None
+    first_joint_states_ns: int | None = None
+    obstacles: np.ndarray | None = None
+    angle_increment: float | None = None
+    range_max: float | None = None
+
+
+def _odometry_row(msg: Any) -> list[float]:
+    T = transform_from_pose(msg.pose.pose)
+    return [stamp_nanoseconds(msg.header.stamp) * 1e-9, T.x, T.y, T.theta]
+
+
+def pose_series(rows: list[list[float]]) -> PoseSeries:
+    """Rows ``[t, x, y, theta]`` as a series; a row not later than the previous one replaces it (as the
+    monitor does)."""
+    kept: list[list[float]] = []
+    for row in rows:
+        if kept and row[0] <= kept[-1][0]:
+            kept[-1] = row
+        else:
+            kept.append(row)
+    table = np.asarray(kept, dtype=np.float64).reshape(-1, 4)
+    return PoseSeries(table[:, 0], table[:, 1:])
+
+
+def read_facts(source: BagSource, topics: dict[str, BagTopic]) -> BagFacts:
+    """One pass over the ground truth, the first joint_states and scan, and the obstacles."""
+    facts = BagFacts()
+    wanted = {topics[role].name: role for role in ("truth", "joint_states", "scan") if role in topics}
+    if OBSTACLES_TOPIC in source.topics:
+        wanted[OBSTACLES_TOPIC] = "obstacles"
+    truth_rows: list[list[float]] = []
+    for message in source.messages(wanted):
+        role = wanted[message.topic]
+        if role == "truth":
+            truth_rows.append(
+                _odometry_row(deserialize_message(message.data, message_class(message.type_name)))
+            )
+        elif role == "joint_states" and facts.first_joint_states_ns is None:
+            msg = deserialize_message(message.data, message_class(message.type_name))
+            facts.first_joint_states_ns = stamp_nanoseconds(msg.header.stamp)
+        elif role == "scan" and facts.angle_increment is None:
+            msg = deserialize_message(message.data, message_class(message.type_name))
+            facts.angle_increment, facts.range_max = float(msg.angle_increment), float(msg.range_max)
+        elif role == "obstacles" and facts.obstacles is None:
+            msg = deserialize_message(message.data, message_class(message.type_name))
+            cylinders = [
+                [m.pose.position.x, m.pose.position.y, 0.5 * m.scale.x]
+                for m in msg.markers
+                if m.type == m.CYLINDER and m.action == m.ADD
+            ]
+            facts.obstacles = np.asarray(cylinders, dtype=np.float64).reshape(-1, 3)
+    if truth_rows:
+        facts.truth = pose_series(truth_rows)
+    return facts
+
+
+def truth_pose_at(truth: PoseSeries, t_ns: int | None) -> Transform2D:
+    """The truth at ``t_ns`` (clamped to its span; its first pose without a time)."""
+    t_s = truth.t_s[0] if t_ns is None else float(np.clip(t_ns * 1e-9, truth.t_s[0], truth.t_s[-1]))
+    return Transform2D(*truth.interpolate(np.array([t_s]))[0])
+
+
+def odom_in_frame(odom: PoseSeries, T_world_body0: Transform2D) -> PoseSeries:
+    """Odometry placed in the world by its first sample: :func:`metrics.odom_in_world` with
+    ``T_world_odom = T_world_body0 T_odom_body(0)^-1``."""
+    if len(odom) == 0:
+        return odom
+    return odom_in_world(odom, T_world_body0 @ Transform2D(*odom.poses[0]).inverse())
+
+
+# --- the run -----------------------------------------------------------------------------------------------
+
+
+def resolve_topics(source: BagSource, options: ReplayOptions, association: str) -> dict[str, BagTopic]:
+    """The bag topic of each role that is played (BagError when a needed one is missing or of another
+    type)."""
+    needed = {"joint_states", "scan" if association == "unknown" else "fake_sensor"}
+    optional = {"odom", "truth", "scan"} - needed
+    resolved: dict[str, BagTopic] = {}
+    for role in sorted(needed | optional):
+        name = options.bag_topic(role)
+        topic = source.topics.get(name)
+        if topic is None:
+            if role in needed:
+                option = "--" + role.replace("_", "-") + "-topic"
+                raise BagError(
+                    f"{source.path} has no topic {name} for {role} "
+                    f"(topics: {', '.join(sorted(source.topics))}; choose another with {option})"
+                )
+            continue
+        expected = ROLES[role][1]
+        if topic.type_name != expected:
+            raise BagError(f"{source.path}: {name} is {topic.type_name}, but {role} must be {expected}")
+        resolved[role] = topic
+    return resolved
+
+
+def played_topics(topics: dict[str, BagTopic]) -> list[PlayedTopic]:
+    return [
+        PlayedTopic(topic.name, ROLES[role][0], topic.type_name, played_qos(topic, role in SENSOR_ROLES))
+        for role, topic in topics.items()
+    ]
+
+
+class Replay:
+    """The nodes and state of one replay (module docstring)."""
+
+    def __init__(self, options: ReplayOptions, source: BagSource) -> None:
+        self.options = options
+        self.source = source
+        slam_file = node_parameters_from_file(options.params, "slam")
+        self.association = options.association or str(slam_file.get("association", "unknown"))
+        self.topics = resolve_topics(source, options, self.association)
+        self.facts = read_facts(source, self.topics) if not options.play_only else BagFacts()
+        self.slam_values = dict(slam_file)
+        self.slam_values["association"] = self.association
+        if options.motion_source is not None:
+            self.slam_values["motion_source"] = options.motion_source
+        self.landmarks_values = node_parameters_from_file(options.params, "landmarks")
+        if self.facts.truth is not None:
+            T0 = truth_pose_at(self.facts.truth, self.facts.first_joint_states_ns)
+            self.slam_values.update(x0=T0.x, y0=T0.y, theta0=T0.theta)
+        self.nusim_values = node_parameters_from_file(options.params, "nusim")
+        for values in (self.slam_values, self.landmarks_values):
+            values["use_sim_time"] = True
+
+    def run(self) -> ReplayResult:
+        out_dir = Path(self.options.out_dir)
+        out_dir.mkdir(parents=True, exist_ok=True)
+        context = Context()
+        rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+        executor = SingleThreadedExecutor(context=context)
+        nodes: list[Any] = []
+        writer = None
+        try:
+            self.player = BagPlayer(played_topics(self.topics), context=context)
+            nodes.append(self.player)
+            self.relay = None
+            if not self.options.play_only:
+                writer = BagWriter(out_dir / BAG_NAME, overwrite=True)
+                nodes.extend(self._build_nodes(context, writer))
+            elif self.options.foxglove is not None:
+                self.relay = self._relay()
+                # what the user's nodes publish: every topic but the played ones
+                self._relay_tap = TopicTap(
+                    self.player, self.relay, exclude=self._played_names(), purpose="relaying"
+                )
+            if self.relay is not None:
+                self.player.relay_to(self.relay)
+            for node in nodes:
+                executor.add_node(node)
+            self.logger = self.player.get_logger()
+            if self.options.play_only:
+                self._wait_for_subscribers(executor)
+            else:
+                self._wait_for_matching(executor)
+            wall_start = time.monotonic()
+            interrupted = self._play(executor)
+            wall_seconds = time.monotonic() - wall_start
+            run_until_idle(executor, self.logger)
+            if writer is not None:
+                writer.close()
+            return self._finish(out_dir, wall_seconds, interrupted)
+        finally:
+            if writer is not None:
+                writer.close()
+            if self.relay is not None:
+                self.relay.close()
+            for node in nodes:
+                node.destroy_node()
+            executor.shutdown()
+            rclpy.try_shutdown(context=context)
+
+    def _build_nodes(self, context: Context, writer: BagWriter) -> list[Any]:
+        from nuslam.landmarks_node import LandmarksNode
+        from nuslam.slam_node import SlamNode
+
+        sim_time = [Parameter("use_sim_time", value=True)]
+        self.writer = writer
+        self.landmarks = LandmarksNode(
+            context=context, parameter_overrides=to_parameters(self.landmarks_values)
+        )
+        self.slam = SlamNode(context=context, parameter_overrides=to_parameters(self.slam_values))
+        self.relay = None if self.options.foxglove is None else self._relay()
+        # one subscription per topic for the bag and the relay
+        sink = writer if self.relay is None else TeeSink(writer, self.relay)
+        self.recorder = TopicRecorder(
+            sink, exclude=self._played_names(), context=context, parameter_overrides=sim_time
+        )
+        self.monitor = RunMonitor(context=context, parameter_overrides=sim_time)
+        return [self.landmarks, self.slam, self.recorder, self.monitor]
+
+    def _played_names(self) -> list[str]:
+        return [absolute(ROLES[role][0]) for role in self.topics] + ["/clock"]
+
+    def _relay(self) -> FoxgloveRelay:
+        """The Foxglove relay; without /tf it is given slam's pose and sensor mount (none with
+        ``play_only``: no slam here). OSError when it cannot bind."""
+        host, port = self.options.foxglove
+        transforms = {} if self.options.play_only else slam_view_transforms(self.slam)
+        relay = FoxgloveRelay(host, port, name="nuturtle_tools.replay", **transforms)
+        print(f"Foxglove WebSocket on {relay.url} (Foxglove: Open connection)", file=sys.stderr)
+        return relay
+
+    def _wait_for_matching(self, executor: SingleThreadedExecutor) -> None:
+        """Until every played topic has its in-process subscribers and the recorder hears slam's outputs."""
+        expected = {"scan": 1, "joint_states": 1, "odom": 2, TRUTH_PLAYED_AS: 1, "/clock": 4}
+        if self.association == "known":
+            expected["fake_sensor"] = 1
+        required = {"/slam/odom", "/slam/path", "/slam/map"} | (
+            {"/landmarks"} if self.association == "unknown" else set()
+        )
+
+        def ready() -> bool:
+            counts = self.player.subscription_counts()
+            matched = all(counts.get(name, n) >= n for name, n in expected.items())
+            observers = self.association == "known" or self.player.count_subscribers("/landmarks") >= 2
+            return matched and observers and required <= set(self.recorder.recorded_topics)
+
+        if not spin_until(executor, self.logger, ready, DISCOVERY_TIMEOUT_S):
+            raise RuntimeError(
+                f"the replay's nodes did not match within {DISCOVERY_TIMEOUT_S} s: player "
+                f"{self.player.subscription_counts()}, recorder {sorted(self.recorder.recorded_topics)}"
+            )
+
+    def _wait_for_subscribers(self, executor: SingleThreadedExecutor) -> None:
+        """--play-only: until every played topic has a subscriber or ``wait_for_subscribers_s`` passed
+        (messages published before a subscriber matches are lost to it)."""
+
+        def matched() -> bool:
+            return all(
+                count > 0 for name, count in self.player.subscription_counts().items() if name != "/clock"
+            )
+
+        if not spin_until(executor, self.logger, matched, self.options.wait_for_subscribers_s):
+            unmatched = sorted(n for n, c in self.player.subscription_counts().items() if c == 0)
+            self.logger.info(f"playing although nothing subscribes to {unmatched} yet")
+
+    def _play(self, executor: SingleThreadedExecutor) -> bool:
+        """Every played message in log-time order; True when Ctrl-C ended it early."""
+        pace = self.options.pace
+        pacer = Pacer(pace) if pace > 0.0 else None
+        in_process = not self.options.play_only
+        reliable = {id(p) for p in self.player.reliable_publishers()}
+        start_ns = self.source.start_ns
+        total_s = (self.source.end_ns - start_ns) * 1e-9
+        with ProgressBar(total_s, "bag", self.options.progress) as progress:
+            try:
+                # the topics published since the executor last ran until idle, all of one log time
+                step: set[str] = set()
+                for message in self.source.messages(self.player.topics):
+                    if step and (message.log_time_ns != self.player.clock_ns or message.topic in step):
+                        run_until_idle(executor, self.logger)
+                        step.clear()
+                    if pacer is not None:
+                        wait_until(executor, self.logger, pacer.deadline_s(message.log_time_ns))
+                    self.player.publish_clock(message.log_time_ns)
+                    self.player.publish_message(message)
+                    if in_process:
+                        step.add(message.topic)
+                    elif pacer is None:
+                        publisher = self.player.publishers_by_topic[message.topic]
+                        if id(publisher) in reliable:
+                            wait_for_acks([publisher], ACK_TIMEOUT_S)
+                    progress.advance((message.log_time_ns - start_ns) * 1e-9)
+                if in_process:
+                    run_until_idle(executor, self.logger)
+                progress.advance(total_s)
+            except KeyboardInterrupt:
+                return True
+        if self.options.play_only:
+            wait_for_acks(self.player.reliable_publishers(), ACK_TIMEOUT_S)
+        return False
+
+    # --- outputs -----------------------------------------------------------------------------------------
+
+    def _counts(self) -> dict[str, Any]:
+        played = dict(self.player.played)
+        scan = self.topics.get("scan")
+        values: dict[str, Any] = {
+            "bag": str(self.source.path),
+            "storage": self.source.storage,
+            "association": self.association,
+            "messages_played": played,
+            "scans_played": played.get(scan.name, 0) if scan is not None else 0,
+            "bag_seconds": (self.source.end_ns - self.source.start_ns) / NS_PER_S,
+        }
+        if not self.options.play_only:
+            observations = self.slam.observation_counts
+            values.update(
+                {
+                    "observation_topic": "landmarks" if self.association == "unknown" else "fake_sensor",
+                    "observation_arrays_received": observations["received"],
+                    "observation_arrays_applied": observations["applied"],
+                    "observation_arrays_skipped": observations["skipped"],
+                    "observation_arrays_pending": observations["pending"],
+                    "slam_outputs_recorded": self.writer.message_counts,
+                }
+            )
+        return values
+
+    def _finish(self, out_dir: Path, wall_seconds: float, interrupted: bool) -> ReplayResult:
+        values = self._counts()
+        values["replay_wall_seconds"] = wall_seconds
+        values["interrupted"] = interrupted
+        accuracy = False
+        if not self.options.play_only:
+            (out_dir / "config.yaml").write_text(params_file([self.landmarks, self.slam]), encoding="utf-8")
+            self._write_map(out_dir)
+            bag_seconds = (self.source.end_ns - self.source.start_ns) / NS_PER_S
+            try:
+                metrics = evaluate_and_plot(
+                    out_dir, self._run_record(), sim_seconds=bag_seconds, wall_seconds=wall_seconds
+                )
+            except ValueError as error:
+                self.logger.warning(f"no accuracy metrics: {error}")
+                metrics = None
+            accuracy = metrics is not None
+            values = {**(metrics.as_dict() if metrics is not None else {}), **values}
+        write_metrics(out_dir, values)
+        return ReplayResult(values, out_dir, accuracy, interrupted)
+
+    def _true_circles(self) -> np.ndarray:
+        obstacles = {k: self.nusim_values.get(f"obstacles.{k}") for k in ("x", "y", "r")}
+        if all(isinstance(v, list) for v in obstacles.values()):
+            return np.column_stack([obstacles["x"], obstacles["y"], obstacles["r"]]).astype(np.float64)
+        if self.facts.obstacles is not None:
+            return self.facts.obstacles
+        return np.zeros((0, 3))
+
+    def _run_record(self) -> RunRecord:
+        """What the replay produced, in the truth's frame (module docstring), for
+        :func:`nuturtle_eval.run_evaluation.evaluate_and_plot`."""
+        truth = self.facts.truth
+        T_start = Transform2D(
+            float(self.slam_values.get("x0", 0.0)),
+            float(self.slam_values.get("y0", 0.0)),
+            float(self.slam_values.get("theta0", 0.0)),
+        )
+        odom_raw = self.monitor.odom()
+        T_world_body0 = T_start
+        if truth is not None and len(odom_raw):
+            T_world_body0 = truth_pose_at(truth, round(odom_raw.t_s[0] * 1e9))
+        circles = self._true_circles() if truth is not None else np.zeros((0, 3))
+        slam_range_m = float(self.slam.config.max_range)
+        return RunRecord(
+            truth=truth,
+            odom=odom_in_frame(odom_raw, T_world_body0),
+            slam=self.monitor.slam(),
+            slam_covariances=self.monitor.slam_covariances(),
+            snapshot=slam_snapshot(self.slam),
+            circles=circles,
+            sensor_range_m=sensor_range_m(
+                self.association,
+                fake_sensor_range_m=float(self.nusim_values.get("max_range", slam_range_m)),
+                slam_range_m=slam_range_m,
+                radii_m=circles[:, 2],
+                min_points=self.landmarks.config.min_points,
+                angle_increment=self.facts.angle_increment,
+                lidar_range_m=self.facts.range_max,
+            ),
+        )
+
+    def _write_map(self, out_dir: Path) -> None:
+        """map.json: the final map in the slam node's own map file format (:mod:`turtlelib.slam_map`: ids,
+        centres, joint covariance, the node's parameters), so slam can load it (``map_file``)."""
+        slam = self.slam
+        stamp_ns = slam.timeline.filter_time_ns or 0
+        save_map(
+            out_dir / "map.json",
+            slam.slam.landmark_map(slam.node_config.map_id, stamp_ns, slam.map_parameters()),
+        )
+
+
+def run_replay(options: ReplayOptions) -> ReplayResult:
+    """Replay ``options.bag`` (module docstring) and write every output into ``options.out_dir``.
+    BagError for an unreadable bag or a missing topic, ValueError for a bad params file."""
+    with BagSource(options.bag) as source:
+        return Replay(options, source).run()
