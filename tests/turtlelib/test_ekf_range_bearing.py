@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+from finite_differences import central_jacobian, wrapping
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -25,21 +26,6 @@ offsets = st.builds(
     lambda r, a: np.array([r * math.cos(a), r * math.sin(a)]), st.floats(0.2, 4.0), st.floats(-PI, PI)
 )
 observations = st.builds(lambda r, b: np.array([r, b]), st.floats(0.1, 4.0), st.floats(-PI, PI))
-
-
-def central_difference(f, at, wrap_second=False, h=1e-6):
-    """Columns d f / d at_i; with ``wrap_second`` the bearing row's differences are wrapped (atan2 may
-    jump by 2 pi between the two evaluations)."""
-    columns = []
-    for i in range(len(at)):
-        plus, minus = at.copy(), at.copy()
-        plus[i] += h
-        minus[i] -= h
-        delta = f(plus) - f(minus)
-        if wrap_second:
-            delta[1] = math.remainder(delta[1], 2.0 * PI)
-        columns.append(delta / (2.0 * h))
-    return np.column_stack(columns)
 
 
 def sensor_position(pose, sensor):
@@ -77,8 +63,8 @@ def test_observation_jacobians_match_finite_differences(pose, sensor, offset):
     def h_of_landmark(m):
         return predict_observations(pose, m[None], sensor)[0][0]
 
-    numeric_robot = central_difference(h_of_pose, pose, wrap_second=True)
-    numeric_landmark = central_difference(h_of_landmark, landmark, wrap_second=True)
+    numeric_robot = central_jacobian(h_of_pose, pose, wrapping(1))
+    numeric_landmark = central_jacobian(h_of_landmark, landmark, wrapping(1))
     np.testing.assert_allclose(H_robot[0], numeric_robot, rtol=0.0, atol=1e-6)
     np.testing.assert_allclose(H_landmark[0], numeric_landmark, rtol=0.0, atol=1e-6)
 
@@ -122,8 +108,8 @@ def test_inverse_model_jacobians_match_finite_differences(pose, sensor, z):
     def g_of_z(obs):
         return landmarks_from_observations(pose, obs[None], sensor)[0][0]
 
-    np.testing.assert_allclose(G_robot[0], central_difference(g_of_pose, pose), rtol=0.0, atol=1e-6)
-    np.testing.assert_allclose(G_z[0], central_difference(g_of_z, z), rtol=0.0, atol=1e-6)
+    np.testing.assert_allclose(G_robot[0], central_jacobian(g_of_pose, pose), rtol=0.0, atol=1e-6)
+    np.testing.assert_allclose(G_z[0], central_jacobian(g_of_z, z), rtol=0.0, atol=1e-6)
 
 
 # --- residual ----------------------------------------------------------------------------------------------

@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+from finite_differences import central_jacobian, wrapping
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -145,24 +146,17 @@ def test_step_converges_to_euler_integration():
 # --- Jacobians ---------------------------------------------------------------------------------------------
 
 
-def numeric_jacobians(drive, pose, dphi_left, dphi_right, h=1e-6):
-    """Central differences of q' = step(q, dphi) in q = [x, y, theta] and dphi = [left, right]."""
+def numeric_jacobians(drive, pose, dphi_left, dphi_right):
+    """Central differences of q' = step(q, dphi) in q = [x, y, theta] and dphi = [left, right], the heading
+    difference unwrapped."""
 
     def q_new(q, wheels):
         return drive.step(Transform2D(*q), *wheels).as_array()
 
-    def difference(f, at, i):
-        plus, minus = at.copy(), at.copy()
-        plus[i] += h
-        minus[i] -= h
-        delta = f(plus) - f(minus)
-        delta[2] = math.remainder(delta[2], math.tau)  # the heading difference, unwrapped
-        return delta / (2.0 * h)
-
     q = pose.as_array()
     wheels = np.array([dphi_left, dphi_right])
-    G_pose = np.column_stack([difference(lambda v: q_new(v, wheels), q, i) for i in range(3)])
-    G_wheels = np.column_stack([difference(lambda v: q_new(q, v), wheels, i) for i in range(2)])
+    G_pose = central_jacobian(lambda v: q_new(v, wheels), q, wrapping(2))
+    G_wheels = central_jacobian(lambda v: q_new(q, v), wheels, wrapping(2))
     return G_pose, G_wheels
 
 

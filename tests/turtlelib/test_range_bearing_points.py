@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+from finite_differences import central_jacobian, wrapping
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -20,17 +21,9 @@ def z_of(p):
     return np.array([math.hypot(p[0], p[1]), math.atan2(p[1], p[0])])
 
 
-def numeric_jacobian(p, h=1e-6):
+def numeric_jacobian(p):
     """Central differences of z(p), the bearing difference wrapped (atan2 jumps by 2 pi across -x)."""
-    columns = []
-    for i in range(2):
-        plus, minus = p.copy(), p.copy()
-        plus[i] += h
-        minus[i] -= h
-        delta = z_of(plus) - z_of(minus)
-        delta[1] = math.remainder(delta[1], 2.0 * PI)
-        columns.append(delta / (2.0 * h))
-    return np.column_stack(columns)
+    return central_jacobian(z_of, p, wrapping(1))
 
 
 # --- hand cases --------------------------------------------------------------------------------------------
