@@ -13,8 +13,8 @@ Pipeline (all in the sensor frame; m, rad)
    they have no return or a longer range than the cluster's end; the cylinder's outline (a ray from the
    sensor tangent to it) then lies between that beam and the cluster's end beam.
 5. Circle fit, all candidates in one batched pass: the hyper fit
-   (:func:`turtlelib.circle_fit.hyper_fit_sets`), then one Gauss-Newton step of the LiDAR likelihood
-   (:func:`turtlelib.circle_fit.range_sensor_step`): range noise ``beam_range_std`` along each beam plus
+   (:func:`turtlelib.circle_fit.fit_circles`), then one Gauss-Newton step of the LiDAR likelihood
+   (:func:`turtlelib.circle_fit.refine_for_range_sensor`): range noise ``beam_range_std`` along each beam plus
    the silhouette rays, each known to a uniform error over one beam step (lateral standard deviation
    ``rho_end * angle_increment / sqrt(12)``). With 1 cm noise and a handful of points per cylinder the
    silhouette fixes the radius far better than the ranges do.
@@ -47,7 +47,7 @@ from functools import partial
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .circle_fit import hyper_fit_sets, range_sensor_step, rms_residual
+from .circle_fit import fit_circles, refine_for_range_sensor
 from .validation import finite_real, in_range, integer, non_negative, positive, store
 
 # A scan is a full turn when the angular gap from its last beam back to its first is at most this many
@@ -62,6 +62,8 @@ _LARGEST_RANGE = float(np.finfo(np.float64).max)
 # _ScanGeometry.bisectors.
 _BEFORE_AFTER = np.array([-1, 1])
 _BEFORE_AFTER_SIDE = np.array([0, 1])
+# Floor on a silhouette edge's standard deviation: at a subnormal range rho * increment / sqrt(12) underflows
+_SMALLEST_EDGE_STD = float(np.finfo(np.float64).tiny)
 
 
 @dataclass(frozen=True)
@@ -226,15 +228,15 @@ class _ScanGeometry:
 
     ``bisectors[b]`` holds the unit rays halfway between beam ``b`` and the beam before it, and between
     ``b`` and the beam after it (neighbours wrap around the scan; a ray degenerates to beam ``b``'s own
-    direction where the two beams are opposite). ``edge_inv_width`` is ``sqrt(12) / increment``: a ray
+    direction where the two beams are opposite). ``edge_std_per_m`` is ``increment / sqrt(12)``: a ray
     known to lie uniformly within one beam step at range ``rho`` has lateral standard deviation
-    ``rho / edge_inv_width``.
+    ``rho edge_std_per_m``.
     """
 
     directions: NDArray[np.float64]  # (B, 2) unit vectors [cos(phi), sin(phi)]
     bisectors: NDArray[np.float64]  # (B, 2, 2): [beam, before/after, xy]
     full_turn: bool
-    edge_inv_width: float
+    edge_std_per_m: float
 
     @classmethod
     def from_angles(cls, angles_rad: NDArray[np.float64]) -> _ScanGeometry:
@@ -244,8 +246,7 @@ class _ScanGeometry:
         norms = np.hypot(sums[:, :, 0], sums[:, :, 1])[:, :, None]
         bisectors = np.where(norms > 1e-12, sums / np.maximum(norms, 1e-12), directions[:, None, :])
         increment = abs(float(angles_rad[1] - angles_rad[0])) if angles_rad.shape[0] > 1 else 0.0
-        edge_inv_width = math.sqrt(12.0) / increment if increment > 0.0 else 0.0
-        return cls(directions, bisectors, _is_full_turn(angles_rad), edge_inv_width)
+        return cls(directions, bisectors, _is_full_turn(angles_rad), increment / math.sqrt(12.0))
 
 
 def _valid_beams(range_m: NDArray[np.float64], range_min: float, range_max: float) -> NDArray[np.bool_]:
@@ -429,9 +430,9 @@ class LandmarkDetector:
             return self._detections(np.empty((0, 2)), np.empty(0), nothing, np.empty(0), nothing)
         n = sizes[candidate]
         p = clusters.p_sensor[candidate.repeat(sizes)]
-        starts = np.zeros(n.shape[0], dtype=np.intp)
-        np.cumsum(n[:-1], out=starts[1:])
-        ends = starts + n - 1
+        offsets = np.zeros(n.shape[0] + 1, dtype=np.intp)
+        np.cumsum(n, out=offsets[1:])
+        starts, ends = offsets[:-1], offsets[1:] - 1
         end_beam = np.empty((n.shape[0], 2), dtype=np.intp)
         end_beam[:, 0] = clusters.beam_index[first_all[candidate]]
         end_beam[:, 1] = clusters.beam_index[last_all[candidate]]
@@ -439,28 +440,18 @@ class LandmarkDetector:
         # 4. silhouette: neighbour beams (K, 2) and whether each saw past its cluster
         neighbour, saw_past = _neighbour_beams(end_beam, range_m, valid, geometry)
         # the outline ray runs halfway between the end beam and the neighbour, known to within one
-        # beam step: 1 / sigma = sqrt(12) / (rho_end * increment), 0 where no beam saw past
+        # beam step: sigma = rho_end * increment / sqrt(12), inf where no beam saw past
         edge = geometry.bisectors[end_beam, _BEFORE_AFTER_SIDE]
-        edge_inv_std = np.where(saw_past, geometry.edge_inv_width / range_m[end_beam], 0.0)
+        edge_std = np.maximum(range_m[end_beam] * geometry.edge_std_per_m, _SMALLEST_EDGE_STD)
+        edge_std[~saw_past] = np.inf
 
-        # 5. hyper fit, then one Gauss-Newton step of the LiDAR likelihood (from a dummy start where
-        # the hyper fit found a line; those clusters are rejected below)
-        centre, radius = hyper_fit_sets(p, starts, n)
-        is_circle = radius < np.inf
-        rho = np.hypot(p[:, 0], p[:, 1])
-        centre, radius = range_sensor_step(
-            p,
-            rho,
-            starts,
-            n,
-            np.where(is_circle[:, None], centre, 0.0),
-            np.where(is_circle, radius, 1.0),
-            cfg.beam_range_std,
-            cfg.min_cos_incidence,
-            edge,
-            edge_inv_std,
+        # 5. hyper fit, then one Gauss-Newton step of the LiDAR likelihood (where the hyper fit found a
+        # line the fit has no circle, and the cluster is rejected below)
+        fits = refine_for_range_sensor(
+            p, offsets, fit_circles(p, offsets), cfg.beam_range_std, cfg.min_cos_incidence, edge, edge_std
         )
-        residual = rms_residual(p, starts, n, centre, radius)
+        centre, radius, residual, is_circle = fits.centre, fits.radius, fits.residual, fits.is_circle
+        rho = np.hypot(p[:, 0], p[:, 1])
 
         # 6. tests
         # |c| > mean_i |p_i|
