@@ -12,6 +12,7 @@ from numpy.typing import NDArray
 
 from turtlelib import Transform2D, Twist2D
 from turtlelib.timebase import NS_PER_S
+from turtlelib.validation import covariance
 
 # A quaternion whose norm differs from 1 by more than this is refused: not a rotation someone meant (a
 # zero, a sum of two, a corrupt message); a typed one such as (0, 0, 0.7, 0.7) is within it
@@ -82,17 +83,9 @@ def covariance_from_6x6(values) -> NDArray[np.float64]:
 
 def positive_definite_pose_covariance(values) -> NDArray[np.float64]:
     """The (x, y, yaw) block of a ROS 6x6 covariance, checked finite, symmetric and positive definite
-    (ValueError otherwise: a pose estimate must say how uncertain it is, and a zero variance would claim
-    certainty)."""
-    P = covariance_from_6x6(values)
-    if not np.all(np.isfinite(P)):
-        raise ValueError("its covariance is not finite")
-    scale = float(np.abs(P).max())
-    if not np.allclose(P, P.T, rtol=0.0, atol=1e-9 * scale):
-        raise ValueError("its (x, y, yaw) covariance is not symmetric")
-    if not scale > 0.0 or np.linalg.eigvalsh(0.5 * (P + P.T)).min() <= 1e-12 * scale:
-        raise ValueError(f"its (x, y, yaw) covariance is not positive definite: {P.round(9).tolist()}")
-    return 0.5 * (P + P.T)
+    (:func:`turtlelib.validation.covariance`; ValueError otherwise: a pose estimate must say how uncertain it
+    is, and a zero variance would claim certainty)."""
+    return covariance("its (x, y, yaw) covariance", covariance_from_6x6(values), (3, 3), definite=True)
 
 
 def odometry_message(

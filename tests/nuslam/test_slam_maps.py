@@ -146,11 +146,11 @@ def test_initialpose_relocalizes_against_the_loaded_map(ros, tmp_path):
 @pytest.mark.parametrize(
     ("covariance", "frame_id", "reason"),
     [
-        (np.diag([0.01, 0.01, 0.0]), "map", "not positive definite"),
-        (np.diag([0.01, -0.01, 0.01]), "map", "not positive definite"),
-        (np.zeros((3, 3)), "map", "not positive definite"),
-        (np.array([[0.01, 0.02, 0.0], [0.0, 0.01, 0.0], [0.0, 0.0, 0.01]]), "map", "not symmetric"),
-        (np.diag([0.01, math.nan, 0.01]), "map", "not finite"),
+        (np.diag([0.01, 0.01, 0.0]), "map", "must be positive definite"),
+        (np.diag([0.01, -0.01, 0.01]), "map", "must be positive definite"),
+        (np.zeros((3, 3)), "map", "must be positive definite"),
+        (np.array([[0.01, 0.02, 0.0], [0.0, 0.01, 0.0], [0.0, 0.0, 0.01]]), "map", "must be symmetric"),
+        (np.diag([0.01, math.nan, 0.01]), "map", "must be finite"),
         (np.diag([0.01, 0.01, 0.01]), "odom", "not the map frame"),
     ],
 )

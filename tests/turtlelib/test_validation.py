@@ -14,7 +14,21 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from turtlelib.validation import finite_real, in_range, integer, names, non_negative, one_of, positive, store
+from turtlelib.validation import (
+    EIGENVALUE_RTOL,
+    SYMMETRY_RTOL,
+    covariance,
+    finite_array,
+    finite_real,
+    in_range,
+    integer,
+    landmark_ids,
+    names,
+    non_negative,
+    one_of,
+    positive,
+    store,
+)
 
 # not a real number, or one without a finite float (10**400 is beyond the float range)
 NOT_NUMBERS = [math.nan, math.inf, -math.inf, 10**400, True, False, "1.0", "x", None, [1.0], 1j, np.ones(1)]
@@ -271,3 +285,210 @@ def test_store_stores_what_the_check_returns(gain, count):
     store(config, ("gain", "count"), finite_real)
     assert (config.gain, config.count) == (gain, float(count))
     assert type(config.gain) is float and type(config.count) is float
+
+
+# --- finite_array ------------------------------------------------------------------------------------------
+
+
+def test_finite_array_returns_a_float64_copy_of_the_shape():
+    source = np.array([[1, 2], [3, 4]])
+    array = finite_array("xy", source, (2, 2))
+    assert array.dtype == np.float64 and array.flags.c_contiguous
+    source[0, 0] = 9
+    assert array[0, 0] == 1.0
+    assert finite_array("xy", [], (0, 2)).shape == (0, 2)
+
+
+@pytest.mark.parametrize(
+    "value, message",
+    [
+        ([[1.0, 2.0]], r"^xy must have shape \(2, 2\), got \(1, 2\)$"),
+        ([[1.0, math.inf], [0.0, 0.0]], r"^xy must be finite, got 1 non-finite$"),
+        ([[True, False], [False, True]], "xy must be a .* array of real numbers, got dtype bool"),
+        ([["a", "b"], ["c", "d"]], "xy must be a .* array of real numbers"),
+        ([[1.0], [1.0, 2.0]], "xy must be a .* array of numbers"),
+    ],
+)
+def test_finite_array_refuses_what_is_not_finite_reals_of_the_shape(value, message):
+    with pytest.raises(ValueError, match=message):
+        finite_array("xy", value, (2, 2))
+
+
+# --- landmark_ids ------------------------------------------------------------------------------------------
+
+
+@given(st.lists(st.integers(0, 2**63 - 1), unique=True, max_size=20))
+def test_landmark_ids_accept_distinct_non_negative_integers_in_their_order(ids):
+    for given_ids in (ids, np.array(ids, dtype=np.int64), np.array(ids, dtype=object)):
+        result = landmark_ids("ids", given_ids)
+        assert result.dtype == np.int64 and result.shape == (len(ids),)
+        assert result.tolist() == ids
+
+
+@pytest.mark.parametrize("empty", [[], np.zeros(0), np.zeros((0, 2), dtype=int), np.array([], dtype=object)])
+def test_no_landmark_ids_is_an_empty_int64_array(empty):
+    result = landmark_ids("ids", empty)
+    assert result.dtype == np.int64 and result.shape == (0,)
+
+
+@given(st.lists(st.integers(0, 2**63 - 1), min_size=1, max_size=10), st.data())
+def test_landmark_ids_refuse_a_repeated_id(ids, data):
+    repeated = data.draw(st.sampled_from(ids))
+    position = data.draw(st.integers(0, len(ids)))
+    with pytest.raises(ValueError, match=rf"^landmark ids must be distinct, got duplicates .*\b{repeated}\b"):
+        landmark_ids("landmark ids", [*ids[:position], repeated, *ids[position:]])
+
+
+@pytest.mark.parametrize(
+    "ids, message",
+    [
+        ([[0, 1]], r"must be a 1-D array, got shape \(1, 2\)"),
+        ([0.0, 1.0], "must be integers, got float64"),
+        (np.array([True, False]), "must be integers, got bool"),
+        (np.array([1, True], dtype=object), r"must be integers, got \[1, True\]"),
+        (np.array([1, 2.0], dtype=object), "must be integers"),
+        (["1", "2"], "must be integers"),
+        ([3, -1, -7], r"must be >= 0, got \[-1, -7\]"),
+        (np.array([0, 2**63], dtype=object), r"must be < 2\^63, got \[9223372036854775808\]"),
+        (np.array([5, 2**64 - 1], dtype=np.uint64), r"must be < 2\^63"),
+        ([4, 1, 4, 1, 2], r"must be distinct, got duplicates \[1, 4\]"),
+    ],
+)
+def test_landmark_ids_refuse_what_are_not_distinct_ids(ids, message):
+    with pytest.raises(ValueError, match=rf"^ids {message}"):
+        landmark_ids("ids", ids)
+
+
+# --- covariance --------------------------------------------------------------------------------------------
+
+ROTATION = np.array([[0.6, -0.8], [0.8, 0.6]])
+
+
+def rotated(eigenvalues) -> np.ndarray:
+    """``R diag(eigenvalues) R^T``, exactly symmetric."""
+    P = ROTATION @ np.diag(eigenvalues) @ ROTATION.T
+    return 0.5 * (P + P.T)
+
+
+@given(
+    st.sampled_from([1e-300, 1e-12, 1e-3, 1.0, 1e6, 1e300]),
+    st.sampled_from([-10.0, -2.0, -0.5, 0.0, 0.5, 2.0, 10.0]),
+    st.integers(1, 4),
+    st.booleans(),
+)
+def test_definiteness_is_judged_relative_to_the_largest_entry(scale, ratio, d, stacked):
+    # diag(scale, ..., ratio * EIGENVALUE_RTOL * scale): the smallest eigenvalue in units of the bound
+    P = (
+        np.diag([scale] * (d - 1) + [ratio * EIGENVALUE_RTOL * scale])
+        if d > 1
+        else np.array([[scale * ratio]])
+    )
+    largest = np.abs(P).max()
+    smallest = P.diagonal().min()
+    given_P, shape = (P[None], (1, d, d)) if stacked else (P, (d, d))
+    for definite, accepted in ((False, smallest >= -EIGENVALUE_RTOL * largest),
+                               (True, smallest > EIGENVALUE_RTOL * largest)):  # fmt: skip
+        if accepted:
+            np.testing.assert_array_equal(covariance("P", given_P, shape, definite=definite), given_P)
+        else:
+            kind = "positive definite" if definite else "positive semi-definite"
+            with pytest.raises(ValueError, match=rf"^P(\[0\])? must be {kind}: smallest eigenvalue"):
+                covariance("P", given_P, shape, definite=definite)
+
+
+@pytest.mark.parametrize(
+    "smallest, psd, pd",
+    [
+        (-2e-9, False, False),
+        (-0.5e-9, True, False),
+        (0.0, True, False),
+        (0.5e-9, True, False),
+        (2e-9, True, True),
+    ],
+)
+def test_definiteness_of_a_rotated_matrix_to_1e_9_of_its_largest_entry(smallest, psd, pd):
+    # eigenvalues 1 and smallest * max|P|; the largest entry is 0.64 + 0.36 * smallest ~ 0.64
+    P = rotated([1.0, 0.0])
+    P = rotated([1.0, smallest * np.abs(P).max()])
+    for stacked in (False, True):
+        given_P, shape = (P[None], (1, 2, 2)) if stacked else (P, (2, 2))
+        for definite, accepted in ((False, psd), (True, pd)):
+            if accepted:
+                covariance("P", given_P, shape, definite=definite)
+            else:
+                with pytest.raises(ValueError):
+                    covariance("P", given_P, shape, definite=definite)
+
+
+@pytest.mark.parametrize("asymmetry, valid", [(0.5, True), (2.0, False)])
+def test_symmetry_is_judged_to_SYMMETRY_RTOL_of_the_largest_entry_and_restored_exactly(asymmetry, valid):
+    # largest entry 4; P_01 - P_10 = asymmetry * SYMMETRY_RTOL * 4
+    P = np.array([[4.0, 0.5, 0.0], [0.5 + asymmetry * SYMMETRY_RTOL * 4.0, 2.0, 0.1], [0.0, 0.1, 1.0]])
+    if not valid:
+        with pytest.raises(
+            ValueError, match=r"^P must be symmetric: max \|P - P\^T\| = 8e-09 > 1e-09 \* max"
+        ):
+            covariance("P", P, (3, 3), definite=True)
+        return
+    result = covariance("P", P, (3, 3), definite=True)
+    np.testing.assert_array_equal(result, result.T)
+    assert result[0, 1] == 0.5 * P[0, 1] + 0.5 * P[1, 0]
+    # entries equal to their transpose are kept bit for bit
+    np.testing.assert_array_equal(
+        result[[0, 1, 1, 2, 2, 2], [0, 1, 2, 0, 1, 2]], P[[0, 1, 1, 2, 2, 2], [0, 1, 2, 0, 1, 2]]
+    )
+
+
+@given(st.integers(0, 2**32 - 1), st.integers(1, 5), st.integers(0, 5), st.sampled_from([1e-100, 1.0, 1e100]))
+def test_any_gram_matrix_is_a_covariance_and_comes_back_exactly_symmetric(seed, d, rank, scale):
+    # A A^T is positive semi-definite; computed in floating point it is symmetric only to rounding
+    rng = np.random.default_rng(seed)
+    A = rng.normal(0.0, 1.0, (d, rank)) * scale
+    P = A @ A.T + rng.normal(0.0, 1e-12, (d, d)) * np.abs(A @ A.T).max()
+    for value, shape in ((P, (d, d)), (np.stack([P, np.eye(d)]), (2, d, d))):
+        result = covariance("P", value, shape, definite=False)
+        swapped = np.swapaxes(value, -1, -2)
+        np.testing.assert_array_equal(result, np.swapaxes(result, -1, -2))
+        # each entry moves halfway to its transpose (to rounding), no further
+        moved = np.abs(result - value)
+        assert np.all(moved <= 0.5 * np.abs(value - swapped) + 4 * np.finfo(float).eps * np.abs(value))
+
+
+def test_a_stack_names_the_first_matrix_that_breaks_the_rule():
+    R = np.stack([np.eye(2), np.diag([1.0, 0.0]), np.diag([1.0, -1.0])])
+    with pytest.raises(ValueError, match=r"^R\[1\] must be positive definite: smallest eigenvalue 0 <= "):
+        covariance("R", R, (3, 2, 2), definite=True)
+    with pytest.raises(
+        ValueError, match=r"^R\[2\] must be positive semi-definite: smallest eigenvalue -1 < "
+    ):
+        covariance("R", R, (3, 2, 2), definite=False)
+    grid = np.broadcast_to(np.eye(2), (2, 3, 2, 2)).copy()
+    grid[1, 2, 0, 1] = 0.5
+    with pytest.raises(ValueError, match=r"^S\[1, 2\] must be symmetric"):
+        covariance("S", grid, (2, 3, 2, 2), definite=True)
+
+
+def test_a_zero_matrix_is_positive_semi_definite_but_not_definite():
+    np.testing.assert_array_equal(covariance("P", np.zeros((3, 3)), (3, 3), definite=False), np.zeros((3, 3)))
+    with pytest.raises(ValueError, match=r"^P must be positive definite: smallest eigenvalue 0 <= .* = 0$"):
+        covariance("P", np.zeros((3, 3)), (3, 3), definite=True)
+
+
+def test_empty_covariances_are_accepted():
+    assert covariance("P", [], (0, 0), definite=True).shape == (0, 0)
+    assert covariance("R", np.zeros((0, 2, 2)), (0, 2, 2), definite=True).shape == (0, 2, 2)
+
+
+@pytest.mark.parametrize(
+    "value, shape, message",
+    [
+        (np.eye(3), (2, 2), r"^P must have shape \(2, 2\), got \(3, 3\)$"),
+        (np.diag([1.0, math.nan]), (2, 2), r"^P must be finite, got 1 non-finite$"),
+        (np.eye(2, dtype=bool), (2, 2), "^P must be a .* array of real numbers, got dtype bool$"),
+        (np.eye(2), (2, 3), r"^P: a covariance's shape ends in \(d, d\), got \(2, 3\)$"),
+        (np.ones(2), (2,), r"^P: a covariance's shape ends in \(d, d\), got \(2,\)$"),
+    ],
+)
+def test_covariance_refuses_bad_shapes_and_values(value, shape, message):
+    with pytest.raises(ValueError, match=message):
+        covariance("P", value, shape, definite=False)

@@ -17,7 +17,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.special import chdtri
 
-# P with smallest / largest eigenvalue at or below this is singular (no NEES); below minus this, indefinite
+from .validation import covariance as checked_covariance
+
+# P with smallest / largest eigenvalue at or below this is singular: no NEES (not an error)
 SINGULAR_EIGENVALUE_RTOL = 1e-12
 
 
@@ -26,23 +28,21 @@ def nees(error: ArrayLike, covariance: ArrayLike, atol: float = 0.0) -> float | 
 
     Solved through a Cholesky factor, never inverted. NaN where ``P`` is singular: its smallest eigenvalue
     at most ``SINGULAR_EIGENVALUE_RTOL`` times its largest, or at most ``atol`` (in the units of ``P``: a
-    floor below which a variance counts as zero). ValueError unless every ``P`` is finite, symmetric and
-    positive semi-definite (to the relative tolerance), and the shapes agree.
+    floor below which a variance counts as zero). ValueError unless the shapes agree, ``e`` is finite and
+    every ``P`` a covariance (finite, symmetric, positive semi-definite:
+    :func:`turtlelib.validation.covariance`).
     """
     e = np.asarray(error, dtype=np.float64)
     P = np.asarray(covariance, dtype=np.float64)
     if e.ndim < 1 or P.shape[-2:] != (e.shape[-1], e.shape[-1]):
         raise ValueError(f"error (..., d) and covariance (..., d, d) disagree: {e.shape}, {P.shape}")
-    if not (np.all(np.isfinite(e)) and np.all(np.isfinite(P))):
-        raise ValueError("error and covariance must be finite")
-    if not np.allclose(P, np.swapaxes(P, -1, -2), rtol=1e-9, atol=0.0):
-        raise ValueError("covariance must be symmetric")
+    if not np.all(np.isfinite(e)):
+        raise ValueError("error must be finite")
+    P = checked_covariance("covariance", P, P.shape, definite=False)
     e, P = np.broadcast_arrays(e[..., None], P)
     e = e[..., 0]
     eigenvalues = np.linalg.eigvalsh(P)
     scale = np.maximum(np.abs(eigenvalues).max(axis=-1), np.finfo(float).tiny)
-    if np.any(eigenvalues[..., 0] < -SINGULAR_EIGENVALUE_RTOL * scale):
-        raise ValueError("covariance must be positive semi-definite (no negative variance)")
     definite = eigenvalues[..., 0] > np.maximum(SINGULAR_EIGENVALUE_RTOL * scale, atol)
     result = np.full(definite.shape, np.nan)
     if np.any(definite):

@@ -42,7 +42,8 @@ Field by field:
   written by :func:`save_map` from :meth:`EkfSlam.landmark_map`, but any order is valid).
 * ``covariance`` (array of ``2n`` arrays of ``2n`` numbers, m^2): the joint covariance of
   ``[x_0, y_0, x_1, y_1, ...]`` in the order of ``landmarks``; symmetric (to 1e-9 of its largest entry)
-  and positive semi-definite (smallest eigenvalue >= -1e-9 times its largest entry). ``[]`` for ``n = 0``.
+  and positive semi-definite (smallest eigenvalue >= -1e-9 times its largest entry), the rule of
+  :func:`turtlelib.validation.covariance`. ``[]`` for ``n = 0``.
 * ``parameters`` (object): the parameters that made the map (e.g. the SLAM node's), for the record; each
   value a boolean, an integer, a finite number or a string. ``{}`` if none.
 
@@ -67,15 +68,12 @@ from numbers import Integral, Real
 from pathlib import Path
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
-from scipy.linalg.lapack import dpotrf
+from numpy.typing import NDArray
 
-from .validation import integer, names
+from .validation import covariance, finite_array, integer, landmark_ids, names
 
 MAP_FORMAT = "nuturtle_slam_map"
 MAP_FORMAT_VERSION = 1
-SYMMETRY_RTOL = 1e-9  # |P - P^T| <= SYMMETRY_RTOL * max|P|
-PSD_RTOL = 1e-9  # smallest eigenvalue >= -PSD_RTOL * max|P|
 _KEYS = ("format", "version", "frame_id", "stamp_ns", "landmarks", "covariance", "parameters")
 _LANDMARK_KEYS = ("id", "x", "y")
 _NEW_FILE_MODE = 0o644  # of a map file that did not exist before (an existing file keeps its mode)
@@ -105,11 +103,11 @@ class LandmarkMap:
     def __post_init__(self) -> None:
         names("string", frame_id=self.frame_id)
         object.__setattr__(self, "stamp_ns", integer("stamp_ns", self.stamp_ns, minimum=0))
-        ids = _landmark_ids(self.ids)
+        ids = landmark_ids("ids", self.ids)
         n = len(ids)
-        xy = _finite_array("xy", self.xy, (n, 2))
-        covariance = _covariance(self.covariance, 2 * n)
-        for name, array in (("ids", ids), ("xy", xy), ("covariance", covariance)):
+        xy = finite_array("xy", self.xy, (n, 2))
+        P = covariance("covariance", self.covariance, (2 * n, 2 * n), definite=False)
+        for name, array in (("ids", ids), ("xy", xy), ("covariance", P)):
             array.flags.writeable = False
             object.__setattr__(self, name, array)
         object.__setattr__(self, "parameters", _parameters(self.parameters))
@@ -237,10 +235,10 @@ def _from_document(document: object) -> LandmarkMap:
         for key in _LANDMARK_KEYS:
             if not _is_number(landmark[key]):
                 raise ValueError(f"landmarks[{index}].{key} must be a number, got {landmark[key]!r}")
-    covariance = document["covariance"]
-    if not (isinstance(covariance, list) and all(isinstance(row, list) for row in covariance)):
+    rows = document["covariance"]
+    if not (isinstance(rows, list) and all(isinstance(row, list) for row in rows)):
         raise ValueError("covariance must be a JSON array of arrays (its rows)")
-    if not all(_is_number(value) for row in covariance for value in row):
+    if not all(_is_number(value) for row in rows for value in row):
         raise ValueError("covariance must hold numbers only")
     if not isinstance(document["parameters"], dict):
         raise ValueError(f"parameters must be a JSON object, got {_json_type(document['parameters'])}")
@@ -250,7 +248,7 @@ def _from_document(document: object) -> LandmarkMap:
         stamp_ns=document["stamp_ns"],
         ids=np.array([landmark["id"] for landmark in landmarks], dtype=object).reshape(n),
         xy=[[landmark["x"], landmark["y"]] for landmark in landmarks],
-        covariance=covariance,
+        covariance=rows,
         parameters=document["parameters"],
     )
 
@@ -275,79 +273,6 @@ def _json_type(value: object) -> str:
 
 def _refuse_constant(constant: str) -> float:
     raise ValueError(f"non-finite number {constant} (map files hold finite numbers only)")
-
-
-def _landmark_ids(ids: ArrayLike) -> NDArray[np.int64]:
-    """``ids`` as (n,) int64: ValueError unless integers (not booleans) >= 0, distinct."""
-    array = np.asarray(ids)
-    if array.size == 0:
-        return np.zeros(0, dtype=np.int64)
-    if array.ndim != 1:
-        raise ValueError(f"ids must be a 1-D array, got shape {array.shape}")
-    if array.dtype == object:  # Python ints of any size (from a file)
-        if not all(isinstance(value, Integral) and not isinstance(value, bool) for value in array):
-            raise ValueError(f"ids must be integers, got {array.tolist()!r}")
-    elif not np.issubdtype(array.dtype, np.integer):
-        raise ValueError(f"ids must be integers, got {array.dtype} {array.tolist()!r}")
-    values = array.tolist()
-    if any(value < 0 for value in values):
-        raise ValueError(f"ids must be >= 0, got {[value for value in values if value < 0]}")
-    if any(value > np.iinfo(np.int64).max for value in values):
-        raise ValueError(f"ids must be < 2^63, got {[value for value in values if value >= 2**63]}")
-    array = np.array(values, dtype=np.int64)
-    unique, counts = np.unique(array, return_counts=True)
-    if np.any(counts > 1):
-        raise ValueError(f"ids must be distinct, got duplicates {unique[counts > 1].tolist()}")
-    return array
-
-
-def _finite_array(name: str, value: ArrayLike, shape: tuple[int, ...]) -> NDArray[np.float64]:
-    """``value`` as a C-contiguous float64 copy of ``shape``: ValueError unless real numbers (not
-    booleans), finite, of that shape (an empty array for a shape with no elements)."""
-    try:
-        array = np.array(value)
-    except ValueError as error:  # ragged nested lists
-        raise ValueError(f"{name} must be a {shape} array of numbers: {error}") from None
-    if array.size == 0 and math.prod(shape) == 0:
-        return np.zeros(shape)
-    if array.dtype == bool or not (np.issubdtype(array.dtype, np.integer) or array.dtype.kind == "f"):
-        raise ValueError(f"{name} must be a {shape} array of real numbers, got dtype {array.dtype}")
-    if array.shape != shape:
-        raise ValueError(f"{name} must have shape {shape}, got {array.shape}")
-    array = np.array(array, dtype=np.float64, order="C")
-    if not np.isfinite(array).all():
-        raise ValueError(f"{name} must be finite, got {np.count_nonzero(~np.isfinite(array))} non-finite")
-    return array
-
-
-def _covariance(value: ArrayLike, dim: int) -> NDArray[np.float64]:
-    """A (dim, dim) finite, symmetric, positive semi-definite covariance, made exactly symmetric."""
-    P = _finite_array("covariance", value, (dim, dim))
-    if dim == 0:
-        return P
-    scale = float(np.abs(P).max())
-    asymmetry = float(np.abs(P - P.T).max())
-    if asymmetry > SYMMETRY_RTOL * scale:
-        raise ValueError(
-            f"covariance must be symmetric: max |P - P^T| = {asymmetry:.3g} > {SYMMETRY_RTOL} * max |P| "
-            f"= {SYMMETRY_RTOL * scale:.3g}"
-        )
-    # mean of P_ij and P_ji where they differ (both halves, so no overflow); equal entries stay bit for bit
-    P = np.where(P == P.T, P, 0.5 * P + 0.5 * P.T)
-    # smallest eigenvalue >= -PSD_RTOL * scale  <=>  P + PSD_RTOL * scale * I is positive semi-definite:
-    # a Cholesky factorisation of the shifted P (a quarter of the time of the eigenvalues) accepts it, and
-    # only when that fails are the eigenvalues computed (to refuse, or to accept a boundary case)
-    shifted = P + PSD_RTOL * scale * np.eye(dim)
-    _, info = dpotrf(shifted, lower=1, clean=0, overwrite_a=1)
-    if info == 0:
-        return np.ascontiguousarray(P)
-    smallest = float(np.linalg.eigvalsh(P)[0])
-    if smallest < -PSD_RTOL * scale:
-        raise ValueError(
-            f"covariance must be positive semi-definite: smallest eigenvalue {smallest:.3g} < "
-            f"-{PSD_RTOL} * max |P| = {-PSD_RTOL * scale:.3g}"
-        )
-    return np.ascontiguousarray(P)
 
 
 def _parameters(parameters: object) -> dict[str, Parameter]:
