@@ -167,6 +167,7 @@ from dataclasses import dataclass, field
 from enum import IntEnum
 from functools import partial
 from numbers import Integral
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -191,7 +192,8 @@ from .motion_models import BatchMotionModel, MotionModel
 from .slam_map import LandmarkMap
 from .slam_state import ROBOT_DIM, SlamState
 from .timebase import NS_PER_S
-from .validation import finite_real, in_range, integer, non_negative, one_of, positive, store
+from .validation import covariance, finite_real, in_range, integer, non_negative, one_of, positive, store
+from .validation import landmark_ids as validated_landmark_ids
 
 MODES = ("mapping", "localization")
 
@@ -379,6 +381,15 @@ class Association:
         return {status.name.lower(): int(tally[status]) for status in ObservationStatus}
 
 
+class CheckedObservations(NamedTuple):
+    """One update's observations as :meth:`EkfSlam.checked_observations` validated them: ``z`` (K, 2), ``R``
+    (K, 2, 2), ``ids`` (K,) for known association or None."""
+
+    z: NDArray[np.float64]
+    R: NDArray[np.float64]
+    ids: NDArray[np.int64] | None
+
+
 class EkfSlam:
     """EKF SLAM (see the module docstring for the maths): the filter itself, with its models and policies
     passed in.
@@ -509,10 +520,9 @@ class EkfSlam:
         (default from the measurement model); ``measurement`` the model of this update (default: the
         filter's).
         """
-        model = self._measurement if measurement is None else measurement
-        z, R, landmark_ids = self.checked_observations(z, R, ids, measurement=model)
-        self._enter_mode("known")
-        return self._update(self._policies["known"], model, z, R, landmark_ids, stamp_ns=0)
+        return self.update(
+            self.checked_observations(z, R, ids, measurement), stamp_ns=0, measurement=measurement
+        )
 
     def update_unknown(
         self,
@@ -530,22 +540,23 @@ class EkfSlam:
         model of this update (default: the filter's). In localization an observation that would start a
         landmark is UNMAPPED instead.
         """
-        stamp_ns = integer("stamp_ns", stamp_ns)
-        model = self._measurement if measurement is None else measurement
-        z, R, _ = self.checked_observations(z, R, measurement=model)
-        self._enter_mode("unknown")
-        return self._update(self._policies["unknown"], model, z, R, None, stamp_ns)
+        checked = self.checked_observations(z, R, measurement=measurement)
+        return self.update(checked, stamp_ns=stamp_ns, measurement=measurement)
 
-    def _update(
-        self,
-        policy: AssociationPolicy,
-        model: MeasurementModel,
-        z: NDArray[np.float64],
-        R: NDArray[np.float64],
-        ids: NDArray[np.int64] | None,
-        stamp_ns: int,
+    def update(
+        self, observations: CheckedObservations, *, stamp_ns: int, measurement: MeasurementModel | None = None
     ) -> Association:
-        """One update: the policy's plan, its fusion, the landmarks it starts, the ones it drops."""
+        """:meth:`update_known` (``observations.ids`` given) or :meth:`update_unknown` (None) with
+        observations that :meth:`checked_observations` validated for ``measurement`` (default: the filter's
+        model), as it gave them: not validated again (for callers that queue observations). ValueError for
+        anything else, or an association mode the filter does not run in."""
+        if not isinstance(observations, CheckedObservations):
+            raise ValueError("update takes what checked_observations gives (validated observations)")
+        stamp_ns = integer("stamp_ns", stamp_ns)
+        z, R, ids = observations
+        self._enter_mode("unknown" if ids is None else "known")
+        model = self._measurement if measurement is None else measurement
+        policy = self._policies["unknown" if ids is None else "known"]
         view = self.view(model)
         plan = policy.plan(view, z, R, ids)
         status, landmark_ids = plan.status, plan.landmark_ids
@@ -703,7 +714,7 @@ class EkfSlam:
             raise ValueError(f"T_map_body must be a Transform2D, got {type(T_map_body).__name__}")
         if pose_covariance is None:
             return T_map_body.as_array(), self._config.initial_pose_covariance()
-        return T_map_body.as_array(), _pose_covariance(pose_covariance)
+        return T_map_body.as_array(), covariance("pose covariance", pose_covariance, (3, 3), definite=False)
 
     # --- estimates ---------------------------------------------------------------------------------------
 
@@ -791,19 +802,19 @@ class EkfSlam:
         R: ArrayLike | None = None,
         ids: ArrayLike | None = None,
         measurement: MeasurementModel | None = None,
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64] | None]:
-        """What the updates take, validated: ``z`` (K, 2) finite and taken by the measurement model
-        (``measurement``, default the filter's; range > 0 for range-bearing), ``R`` (K, 2, 2) symmetric
-        positive definite (default from the model) and, if given, ``ids`` (K,) distinct integers >= 0.
-        Observations with ``ids`` are for :meth:`update_known`, without for :meth:`update_unknown`: they
-        must fit the filter's association mode.
+    ) -> CheckedObservations:
+        """What the updates take, validated (for :meth:`update`): ``z`` (K, 2) finite and taken by the
+        measurement model (``measurement``, default the filter's; range > 0 for range-bearing), ``R``
+        (K, 2, 2) symmetric positive definite (default from the model) and, if given, ``ids`` (K,) distinct
+        integers >= 0. Observations with ``ids`` are for :meth:`update_known`, without for
+        :meth:`update_unknown`: they must fit the filter's association mode.
 
         ValueError otherwise. For callers that queue observations and must refuse bad ones at once.
         """
         mode = "unknown" if ids is None else "known"
         if self._association not in (None, mode):
             raise ValueError(f"this filter runs with {self._association} association; reset() to switch")
-        landmark_ids = None if ids is None else _landmark_ids(ids)
+        landmark_ids = None if ids is None else validated_landmark_ids("landmark ids", ids)
         model = self._measurement if measurement is None else measurement
         z, R = _observations(model, z, R)
         if len(z) > self._config.max_observations:
@@ -813,7 +824,7 @@ class EkfSlam:
             )
         if landmark_ids is not None and len(landmark_ids) != len(z):
             raise ValueError(f"{len(landmark_ids)} ids for {len(z)} observations")
-        return z, R, landmark_ids
+        return CheckedObservations(z, R, landmark_ids)
 
     def _enter_mode(self, mode: str) -> None:
         if self._association not in (None, mode):
@@ -841,18 +852,7 @@ def _observations(
     model.check(z)
     if R is None:
         return z, model.noise(z)
-    R = np.array(R, dtype=np.float64)
-    if R.shape != (len(z), 2, 2):
-        raise ValueError(f"R must have shape ({len(z)}, 2, 2), got {R.shape}")
-    if not np.isfinite(R).all():
-        raise ValueError("R must be finite")
-    scale = np.abs(R).max(initial=0.0)
-    if np.any(np.abs(R[:, 0, 1] - R[:, 1, 0]) > 1e-12 * scale):
-        raise ValueError("R must be symmetric")
-    det = R[:, 0, 0] * R[:, 1, 1] - R[:, 0, 1] * R[:, 1, 0]
-    if not ((R[:, 0, 0] > 0.0).all() and (R[:, 1, 1] > 0.0).all() and (det > 0.0).all()):
-        raise ValueError("R must be positive definite (positive variances)")
-    return z, R
+    return z, covariance("R", R, (len(z), 2, 2), definite=True)
 
 
 def _finite_step(
@@ -880,30 +880,3 @@ def _composed_steps(
         poses[k] = q_k
         T_map_body = Transform2D(*q_k)
     return poses, G, Q
-
-
-def _landmark_ids(ids: ArrayLike) -> NDArray[np.int64]:
-    """Validated landmark ids: (K,) distinct integers >= 0."""
-    array = np.asarray(ids)
-    if array.size == 0:
-        return np.zeros(0, dtype=np.int64)
-    if array.ndim != 1 or not np.issubdtype(array.dtype, np.integer):
-        raise ValueError(f"landmark ids must be a 1-D integer array, got {array.dtype} {array.shape}")
-    if np.any(array < 0):
-        raise ValueError("landmark ids must be >= 0")
-    if len(set(array.tolist())) != len(array):
-        raise ValueError("landmark ids must be distinct within one update")
-    return array.astype(np.int64)
-
-
-def _pose_covariance(covariance: ArrayLike) -> NDArray[np.float64]:
-    """A validated (3, 3) finite, symmetric, positive semi-definite pose covariance."""
-    P = np.array(covariance, dtype=np.float64)
-    if P.shape != (3, 3) or not np.all(np.isfinite(P)):
-        raise ValueError(f"pose covariance must be a finite (3, 3) array, got shape {P.shape}")
-    scale = np.abs(P).max()
-    if not np.allclose(P, P.T, rtol=0.0, atol=1e-12 * scale):
-        raise ValueError("pose covariance must be symmetric")
-    if np.linalg.eigvalsh(P).min() < -1e-12 * scale:
-        raise ValueError("pose covariance must be positive semi-definite (no negative variances)")
-    return 0.5 * (P + P.T)

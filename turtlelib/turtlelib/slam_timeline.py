@@ -39,7 +39,7 @@ from functools import partial
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .ekf_slam import Association, EkfSlam
+from .ekf_slam import Association, CheckedObservations, EkfSlam
 from .geometry import Transform2D
 from .motion_signals import MotionSignal, Sample, timed_sample
 from .timebase import NS_PER_S
@@ -65,12 +65,10 @@ class TimelineConfig:
 
 @dataclass(frozen=True, eq=False)
 class _Observation:
-    """One scan's observations: validated ``z`` (K, 2), ``R`` (K, 2, 2), ``ids`` (K,) or None (unknown)."""
+    """One scan's observations at ``t_ns``, as the filter validated them."""
 
     t_ns: int
-    z: NDArray[np.float64]
-    R: NDArray[np.float64]
-    ids: NDArray[np.int64] | None
+    observations: CheckedObservations
 
 
 class SlamTimeline:
@@ -153,10 +151,10 @@ class SlamTimeline:
         ``max_pending_observations`` are already waiting (an older one displaces the newest waiting one).
         """
         t_ns = integer("observation stamp (ns)", t_ns)
-        z, R, landmark_ids = self.slam.checked_observations(z, R, ids)
+        checked = self.slam.checked_observations(z, R, ids)
         if self._t_f is None:
             raise ValueError("no motion sample yet: an observation cannot be placed in time")
-        if self._pending and (self._pending[0].ids is None) != (landmark_ids is None):
+        if self._pending and (self._pending[0].observations.ids is None) != (checked.ids is None):
             # the first update fixes the filter's association mode: the waiting ones would be refused
             raise ValueError("observations with and without ids cannot wait together (one association mode)")
         if t_ns < self._t_f:
@@ -170,7 +168,7 @@ class SlamTimeline:
                 f"observation stamped {(t_ns - t_w) * 1e-9:.3f} s after the newest motion sample (more than "
                 f"max_observation_lead = {self.config.max_observation_lead} s): no motion may ever reach it"
             )
-        observation = _Observation(t_ns, z, R, landmark_ids)
+        observation = _Observation(t_ns, checked)
         if t_ns <= t_w:
             return [self._apply(observation)]
         if len(self._pending) >= self.config.max_pending_observations:
@@ -232,11 +230,7 @@ class SlamTimeline:
 
     def _apply(self, observation: _Observation) -> tuple[int, Association]:
         self._advance_to(observation.t_ns)
-        if observation.ids is None:
-            association = self.slam.update_unknown(observation.z, observation.R, stamp_ns=observation.t_ns)
-        else:
-            association = self.slam.update_known(observation.ids, observation.z, observation.R)
-        return observation.t_ns, association
+        return observation.t_ns, self.slam.update(observation.observations, stamp_ns=observation.t_ns)
 
     def _advance_to(self, t_ns: int) -> None:
         """Predict the filter from ``t_f`` to ``t_ns`` (``t_f <= t_ns <= t_w``) and drop older samples.

@@ -142,18 +142,17 @@ def landmark_ids(name: str, ids: ArrayLike) -> NDArray[np.int64]:
     if array.dtype == object:  # Python ints of any size (from a file)
         if not all(isinstance(value, Integral) and not isinstance(value, bool) for value in array):
             raise ValueError(f"{name} must be integers, got {array.tolist()!r}")
-    elif not np.issubdtype(array.dtype, np.integer):
+    elif array.dtype.kind not in "iu":
         raise ValueError(f"{name} must be integers, got {array.dtype} {array.tolist()!r}")
     values = array.tolist()
-    if any(value < 0 for value in values):
+    if min(values) < 0:
         raise ValueError(f"{name} must be >= 0, got {[value for value in values if value < 0]}")
-    if any(value > np.iinfo(np.int64).max for value in values):
+    if max(values) > np.iinfo(np.int64).max:
         raise ValueError(f"{name} must be < 2^63, got {[value for value in values if value >= 2**63]}")
-    result = np.array(values, dtype=np.int64)
-    unique, counts = np.unique(result, return_counts=True)
-    if np.any(counts > 1):
+    if len(set(values)) != len(values):
+        unique, counts = np.unique(values, return_counts=True)
         raise ValueError(f"{name} must be distinct, got duplicates {unique[counts > 1].tolist()}")
-    return result
+    return np.array(values, dtype=np.int64)
 
 
 def covariance(name: str, value: ArrayLike, shape: tuple[int, ...], *, definite: bool) -> NDArray[np.float64]:
@@ -180,15 +179,22 @@ def covariance(name: str, value: ArrayLike, shape: tuple[int, ...], *, definite:
     # mean of P_ij and P_ji where they differ (both halves, so no overflow); equal entries stay bit for bit
     P = np.where(P == P_t, P, 0.5 * P + 0.5 * P_t)
     bound = EIGENVALUE_RTOL * scale
-    if P.ndim == 2:
-        # lambda_min > -bound (> bound)  <=>  P + bound I (P - bound I) is positive definite: a Cholesky
-        # factorisation (a quarter of the time of the eigenvalues) accepts it; the eigenvalues decide the rest
-        _, info = dpotrf(
-            P + (-bound if definite else bound) * np.eye(len(P)), lower=1, clean=0, overwrite_a=1
-        )
-        if info == 0:
-            return P
-    smallest = np.linalg.eigvalsh(P)[..., 0]
+    if shape[-1] == 2:
+        # 2x2: lambda_min = (a + c) / 2 - sqrt(((a - c) / 2)^2 + b^2) in closed form, a whole stack at once
+        # (its rounding, about eps max|P|, is far below the bound)
+        a, b, c = P[..., 0, 0], P[..., 0, 1], P[..., 1, 1]
+        smallest = (0.5 * a + 0.5 * c) - np.hypot(0.5 * a - 0.5 * c, b)
+    else:
+        if P.ndim == 2:
+            # lambda_min > -bound (> bound)  <=>  P + bound I (P - bound I) is positive definite: a Cholesky
+            # factorisation (a quarter of the time of the eigenvalues) accepts it; the eigenvalues decide
+            # the rest
+            _, info = dpotrf(
+                P + (-bound if definite else bound) * np.eye(len(P)), lower=1, clean=0, overwrite_a=1
+            )
+            if info == 0:
+                return P
+        smallest = np.linalg.eigvalsh(P)[..., 0]
     if definite:
         rule = f"positive definite: smallest eigenvalue {{}} <= {EIGENVALUE_RTOL} * max |P| = {{}}"
         _refuse(name, ~(smallest > bound), rule, smallest, bound)
