@@ -200,3 +200,22 @@ def test_checked_observations_rejects_the_other_association_mode(mode):
     slam.checked_observations(GOOD_Z, ids=[0, 1] if mode == "known" else None)
     slam.reset()
     slam.checked_observations(GOOD_Z, ids=None if mode == "known" else [0, 1])
+
+
+@pytest.mark.parametrize("mode", ["known", "unknown"])
+def test_update_takes_checked_observations_only_and_is_the_update_they_were_checked_for(mode):
+    ids = [0, 1] if mode == "known" else None
+    via_update, direct = filter_with_map(Transform2D(), mode=mode), filter_with_map(Transform2D(), mode=mode)
+    checked = via_update.checked_observations(GOOD_Z, GOOD_R, ids)
+    before = snapshot(via_update)
+    # the arrays themselves, unchecked, are refused
+    with pytest.raises(ValueError, match="checked_observations"):
+        via_update.update(tuple(checked), stamp_ns=1)
+    assert_same(before, snapshot(via_update))
+    result = via_update.update(checked, stamp_ns=1)
+    if mode == "known":
+        expected = direct.update_known(ids, GOOD_Z, GOOD_R)
+    else:
+        expected = direct.update_unknown(GOOD_Z, GOOD_R, stamp_ns=1)
+    np.testing.assert_array_equal(result.status, expected.status)
+    assert_same(snapshot(direct), snapshot(via_update))
