@@ -22,6 +22,7 @@ A new matcher is one class with :meth:`Matcher.match` and one entry in :data:`MA
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import NamedTuple, Protocol
 
@@ -89,16 +90,6 @@ class SlamView:
         """``(z_hat (k, 2), H_robot (k, 2, 3), H_landmark (k, 2, 2))`` of landmark ``slots`` (k,)."""
         return self._linearization.observe(self._state, self.model, slots)
 
-    def innovations(
-        self, slots: NDArray[np.int64], z: NDArray[np.float64], R: NDArray[np.float64]
-    ) -> tuple[NDArray[np.float64], ...]:
-        """Observations ``z`` (k, 2) of ``slots`` (k,), one each: innovations ``nu`` (k, 2),
-        ``D2 = nu^T S^-1 nu`` (k,) with ``S = H P H^T + R`` of each one alone, ``H_robot``, ``H_landmark``."""
-        z_hat, H_robot, H_landmark = self.observe(slots)
-        nu = self.model.residual(z, z_hat)
-        d2, _ = mahalanobis_2d(nu, self._predicted_covariances(H_robot, H_landmark, slots) + R)
-        return nu, d2, H_robot, H_landmark
-
     def gate(self, z: NDArray[np.float64], R: NDArray[np.float64], slots: NDArray[np.int64]) -> Gating:
         """Every observation ``z`` (K, 2) against every landmark of ``slots`` (k,), O(K k)."""
         z_hat, H_robot, H_landmark = self.observe(slots)
@@ -159,7 +150,8 @@ class Plan(NamedTuple):
     ``REJECTED`` and -1); the fusion: observations ``rows`` (m,) of landmark ``slots`` (m,) with innovations
     ``nu`` (m, 2) and Jacobians ``H_robot`` (m, 2, 3), ``H_landmark`` (m, 2, 2); ``births`` (b,) the
     observations that no landmark explains, in order, with their ids ``birth_ids`` (b,) (None: the next
-    free ids as they start) and ``birth_confirmed`` whether they start confirmed.
+    free ids as they start) and ``birth_confirmed`` whether they start confirmed; ``gate``: the fusion
+    rejects a matched observation whose own ``D2 = nu^T S^-1 nu`` is not below it (inf: none).
     """
 
     status: NDArray[np.int8]
@@ -172,6 +164,7 @@ class Plan(NamedTuple):
     births: NDArray[np.int64]
     birth_ids: NDArray[np.int64] | None
     birth_confirmed: bool
+    gate: float = math.inf
 
 
 class Matcher(Protocol):
@@ -284,25 +277,23 @@ class KnownIds:
         else:
             rows, births = seen_before.nonzero()[0], (usable & (slots < 0)).nonzero()[0]
             slots, z, R = slots[rows], z[rows], R[rows]
-        # D2 = nu^T S^-1 nu of each observation against its landmark; fuse those inside the gate
-        nu, d2, H_robot, H_landmark = view.innovations(slots, z, R)
-        inside = d2 < self._gate
-        if not inside.all():
-            rows, slots, nu, H_robot, H_landmark = (a[inside] for a in (rows, slots, nu, H_robot, H_landmark))
+        z_hat, H_robot, H_landmark = view.observe(slots)
         status, landmark_ids = _empty_plan(len(ids))
         status[rows] = MATCHED
         landmark_ids[rows] = ids[rows]
+        # the fusion refuses an observation whose D2 = nu^T S^-1 nu against its landmark is beyond the gate
         return Plan(
             status,
             landmark_ids,
             rows,
             slots,
-            nu,
+            view.model.residual(z, z_hat),
             H_robot,
             H_landmark,
             births,
             ids[births],
             birth_confirmed=True,
+            gate=self._gate,
         )
 
     def sighted(self, tracks: LandmarkTracks, slots: NDArray[np.int64]) -> NDArray[np.int64]:

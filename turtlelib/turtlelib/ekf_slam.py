@@ -561,8 +561,8 @@ class EkfSlam:
         plan = policy.plan(view, z, R, ids)
         status, landmark_ids = plan.status, plan.landmark_ids
         # one stacked update with the matched observations, then the new landmarks from the updated pose
-        nis = self._fuse(model, plan, R[plan.rows])
-        confirmed_ids = [policy.sighted(self._state.tracks, plan.slots)]
+        nis, fused = self._fuse(model, plan, R[plan.rows])
+        confirmed_ids = [policy.sighted(self._state.tracks, fused)]
         births = plan.births
         if self._localization:
             status[births] = UNMAPPED
@@ -587,27 +587,37 @@ class EkfSlam:
             np.concatenate(confirmed_ids),
             np.sort(np.array(dropped_ids, dtype=np.int64)),
             nis,
-            2 * len(plan.slots),
+            2 * len(fused),
         )
 
-    def _fuse(self, model: MeasurementModel, plan: Plan, R: NDArray[np.float64]) -> float:
-        """The plan's observations (noise ``R`` (m, 2, 2)) in one stacked update; returns the joint NIS.
+    def _fuse(
+        self, model: MeasurementModel, plan: Plan, R: NDArray[np.float64]
+    ) -> tuple[float, NDArray[np.int64]]:
+        """The plan's observations (noise ``R`` (m, 2, 2)) in one stacked update; returns the joint NIS and
+        the slots fused. Observations beyond the plan's gate are rejected (their status and id in the plan)
+        and the others fused.
 
         With correlated errors each one's ``R`` is scaled by ``(1 + rho) / (1 - rho)`` for the sensor's
-        distance from its landmark's last view (module docstring)."""
-        slots = plan.slots
+        distance from its landmark's last view (module docstring); the gate takes ``R`` itself."""
+        slots, H_robot, H_landmark, nu, rows = plan.slots, plan.H_robot, plan.H_landmark, plan.nu, plan.rows
         if len(slots) == 0:
-            return 0.0
-        if self._independent_noise:
-            nis = self._state.correct(slots, plan.H_robot, plan.H_landmark, plan.nu, R, self._localization)
-        else:
+            return 0.0, slots
+        R_fused = R
+        if not self._independent_noise:
             sensor_xy = model.sensor_xy(self._state.mean)
             moved_m = np.linalg.norm(sensor_xy - self._state.tracks.last_view_xy[slots], axis=1)
-            R = R * self._config.fusion_scale(moved_m)[:, None, None]
-            nis = self._state.correct(slots, plan.H_robot, plan.H_landmark, plan.nu, R, self._localization)
+            R_fused = R * self._config.fusion_scale(moved_m)[:, None, None]
+        correct = partial(self._state.correct, consider_landmarks=self._localization)
+        nis, outside = correct(slots, H_robot, H_landmark, nu, R_fused, gate=plan.gate, R_gate=R)
+        if outside.any():
+            plan.status[rows[outside]], plan.landmark_ids[rows[outside]] = REJECTED, -1
+            inside = ~outside
+            slots, H_robot, H_landmark, nu = slots[inside], H_robot[inside], H_landmark[inside], nu[inside]
+            nis, _ = correct(slots, H_robot, H_landmark, nu, R_fused[inside])
+        if not self._independent_noise:
             self._state.tracks.viewed(slots, sensor_xy)
         self._linearization.fused(self._state, slots)
-        return nis
+        return nis, slots
 
     def _add_landmark(
         self,

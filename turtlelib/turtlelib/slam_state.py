@@ -75,6 +75,7 @@ from numpy.typing import NDArray
 from scipy.linalg.blas import dsyrk
 from scipy.linalg.lapack import dpotrf, dtrtrs
 
+from .association import mahalanobis_2d
 from .geometry import normalize_angle
 from .landmark_tracks import LandmarkTracks
 
@@ -259,11 +260,18 @@ class SlamState:
         nu: NDArray[np.float64],
         R: NDArray[np.float64],
         consider_landmarks: bool = False,
-    ) -> float:
-        """EKF update with ``k`` observations of distinct ``slots``; returns the joint NIS ``nu^T S^-1 nu``.
+        gate: float = math.inf,
+        R_gate: NDArray[np.float64] | None = None,
+    ) -> tuple[float, NDArray[np.bool_]]:
+        """EKF update with ``k`` observations of distinct ``slots``; returns the joint NIS ``nu^T S^-1 nu``
+        and ``outside`` (k,), the observations beyond ``gate``.
 
         ``H_robot`` (k, 2, 3), ``H_landmark`` (k, 2, 2), innovations ``nu`` (k, 2) (already wrapped) and
-        noise ``R`` (k, 2, 2). With ``S = L L^T`` (Cholesky) and ``W = L^-1 H P`` (m, N)::
+        noise ``R`` (k, 2, 2). With a finite ``gate``, each observation alone must have
+        ``D2_i = nu_i^T S_i^-1 nu_i < gate``, ``S_i = H_i P H_i^T + R_gate_i`` (default ``R``; the diagonal
+        blocks of the stacked ``H P H^T``): if one does not, nothing changes and the NIS is 0.
+
+        With ``S = L L^T`` (Cholesky) and ``W = L^-1 H P`` (m, N)::
 
             x <- x + K nu = x + W^T (L^-1 nu)
             P <- P - K S K^T = P - W^T W
@@ -297,8 +305,9 @@ class SlamState:
         ``P_rr`` takes its upper triangle into its lower one.
         """
         dim, k = self.dim, len(slots)
+        outside = np.zeros(k, dtype=bool)
         if k == 0:
-            return 0.0
+            return 0.0, outside
         self._apply_pending()
         m = LANDMARK_DIM * k
         # the full update's dsyrk spans the storage's capacity (step 1); the consider update only dim
@@ -308,11 +317,18 @@ class SlamState:
         rhs = np.zeros((m, width + 1), order="F")
         np.matmul(H, self._rows(cols), out=rhs[:, :dim])
         rhs[:, width] = nu.reshape(m)
-        # S = H P H^T + R
+        # S = H P H^T + R; S is C-contiguous, so its (k, 2, k, 2) reshape is a view
         S = rhs[:, cols] @ H.T
         diagonal = np.arange(k)
-        # S is C-contiguous, so its (k, 2, k, 2) reshape is a view: add R_i to the diagonal block i
-        S.reshape(k, LANDMARK_DIM, k, LANDMARK_DIM)[diagonal, :, diagonal, :] += R
+        blocks = S.reshape(k, LANDMARK_DIM, k, LANDMARK_DIM)
+        if gate < math.inf:
+            # D2_i = nu_i^T S_i^-1 nu_i, S_i = (H P H^T)_ii + R_gate_i
+            d2, _ = mahalanobis_2d(nu, blocks[diagonal, :, diagonal, :] + (R if R_gate is None else R_gate))
+            outside = ~(d2 < gate)
+            if outside.any():
+                return 0.0, outside
+        # add R_i to the diagonal block i
+        blocks[diagonal, :, diagonal, :] += R
         L, info = dpotrf(S, lower=1, clean=1, overwrite_a=1)
         if info != 0:
             raise np.linalg.LinAlgError("the innovation covariance S is not positive definite")
@@ -322,7 +338,7 @@ class SlamState:
         W = W_pad[:, :dim]
         if consider_landmarks:
             self._consider_update(W, w)
-            return float(w @ w)
+            return float(w @ w), outside
         if self._invariant:
             # x <- exp(W^T w) x on SE_(n+1)(2)
             self._retract(W.T @ w)
@@ -334,7 +350,7 @@ class SlamState:
         self._rank_update(W_pad, -1.0)
         # the robot block is kept whole: its upper triangle into its lower one
         self._fill_robot_block()
-        return float(w @ w)
+        return float(w @ w), outside
 
     def _retract(self, xi: NDArray[np.float64]) -> None:
         """``x <- exp(xi) x`` (N,) on SE_(n+1)(2): ``theta += phi`` and every point (the pose's position and
