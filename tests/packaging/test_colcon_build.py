@@ -169,33 +169,69 @@ def start_executable(install: Path, package: str, executable: str, workdir: Path
     )  # fmt: skip
 
 
-def run_executables(install: Path, package: str, executables: list[str], workdir: Path) -> None:
-    """Start every executable of ``package`` from ``install`` at once: a tool must exit 0, a node must
-    still be running after NODE_ALIVE_S and stop cleanly on SIGINT; none may print a traceback."""
-    processes = {name: start_executable(install, package, name, workdir) for name in executables}
+def isolated_run(
+    install: Path, workspace: Path, work: Path, processes: dict[tuple[str, str], subprocess.Popen]
+) -> dict[str, list[str]]:
+    """Every package's checks from ``install``, all started at once (independent processes): colcon's list
+    of what ``--packages-up-to`` builds, the workspace's import packages its isolated environment can import
+    (as JSON lines), and each executable, started into ``processes``: a tool must exit 0, a node must still
+    be running NODE_ALIVE_S after the probes ended and stop cleanly on SIGINT; none may print a traceback.
+    Returns per package its two probe outputs and then the failures of its executables."""
+    probe = work / "importable.py"
+    probe.write_text(IMPORTABLE)
+    probes = {}
+    for package in PACKAGES:
+        listed = subprocess.Popen(
+            [str(COLCON), "list", "--base-paths", "src", "--packages-up-to", package, "--names-only"],
+            cwd=workspace, text=True, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+        )  # fmt: skip
+        found = subprocess.Popen(
+            hidden_editable(probe, *PACKAGES), cwd=work, env=isolated_environment(install, package),
+            text=True, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+        )  # fmt: skip
+        probes[package] = (listed, found)
+        for name in sorted(console_scripts(packages()[package])):
+            processes[package, name] = start_executable(install, package, name, work)
+    results = {
+        package: [" ".join(listed.communicate(timeout=120)[0].split()), found.communicate(timeout=120)[0]]
+        for package, (listed, found) in probes.items()
+    }
+    outputs = {}
+    for (package, name), process in processes.items():
+        if (package, name) in TOOLS:
+            outputs[package, name] = process.communicate(timeout=120)[0]
+            if process.returncode != 0:
+                results[package].append(
+                    f"{name} exited {process.returncode}:\n{outputs[package, name][-3000:]}"
+                )
+    # the nodes started with the probes: NODE_ALIVE_S more after those, however loaded the machine
+    nodes = {key: process for key, process in processes.items() if key not in TOOLS}
+    time.sleep(NODE_ALIVE_S)
+    running = {key: process for key, process in nodes.items() if process.poll() is None}
+    for process in running.values():
+        process.send_signal(signal.SIGINT)
+    for (package, name), process in nodes.items():
+        outputs[package, name] = process.communicate(timeout=30)[0]
+        if (package, name) not in running:
+            results[package].append(f"{name} stopped:\n{outputs[package, name][-3000:]}")
+        elif process.returncode != 0:
+            results[package].append(
+                f"{name} exited {process.returncode} on SIGINT:\n{outputs[package, name][-3000:]}"
+            )
+    for (package, name), output in outputs.items():
+        if "Traceback" in output:
+            results[package].append(f"{name} printed a traceback:\n{output[-3000:]}")
+    return results
+
+
+@pytest.fixture(scope="module")
+def isolated_runs(
+    workspace: Path, install: Path, tmp_path_factory: pytest.TempPathFactory
+) -> dict[str, list[str]]:
+    """:func:`isolated_run` of every package; no process outlives it."""
+    processes: dict[tuple[str, str], subprocess.Popen] = {}
     try:
-        outputs = {}
-        for name, process in processes.items():
-            if (package, name) in TOOLS:
-                outputs[name], _ = process.communicate(timeout=120)
-                assert process.returncode == 0, outputs[name][-3000:]
-        deadline = time.monotonic() + NODE_ALIVE_S
-        nodes = {name: process for name, process in processes.items() if (package, name) not in TOOLS}
-        while (
-            nodes
-            and time.monotonic() < deadline
-            and all(process.poll() is None for process in nodes.values())
-        ):
-            time.sleep(0.1)
-        for name, process in nodes.items():
-            assert process.poll() is None, f"{package} {name} stopped:\n{process.communicate()[0][-3000:]}"
-        for process in nodes.values():
-            process.send_signal(signal.SIGINT)
-        for name, process in nodes.items():
-            outputs[name], _ = process.communicate(timeout=30)
-            assert process.returncode == 0, outputs[name][-3000:]
-        for name, output in outputs.items():
-            assert "Traceback" not in output, f"{package} {name}:\n{output[-3000:]}"
+        return isolated_run(install, workspace, tmp_path_factory.mktemp("isolated"), processes)
     finally:
         for process in processes.values():
             if process.poll() is None:
@@ -205,23 +241,12 @@ def run_executables(install: Path, package: str, executables: list[str], workdir
 
 @pytest.mark.parametrize("package", PACKAGES)
 def test_each_package_runs_its_executables_with_only_its_dependencies(
-    workspace: Path, install: Path, package: str, tmp_path: Path
+    isolated_runs: dict[str, list[str]], package: str
 ) -> None:
-    needed = dependency_closure(package)
+    needed = sorted(dependency_closure(package))
+    listed, importable, *failures = isolated_runs[package]
     # colcon's own reading of the package.xml files: what `colcon build --packages-up-to` would build
-    listed = subprocess.run(
-        [str(COLCON), "list", "--base-paths", "src", "--packages-up-to", package, "--names-only"],
-        cwd=workspace, capture_output=True, text=True, timeout=120,
-    )  # fmt: skip
-    assert listed.returncode == 0, listed.stderr[-3000:]
-    assert sorted(listed.stdout.split()) == sorted(needed)
+    assert sorted(listed.split()) == needed, listed
     # the isolation holds: of the workspace, exactly the closure is importable
-    probe = tmp_path / "importable.py"
-    probe.write_text(IMPORTABLE)
-    found = subprocess.run(
-        hidden_editable(probe, *PACKAGES), cwd=tmp_path, env=isolated_environment(install, package),
-        capture_output=True, text=True, timeout=120,
-    )  # fmt: skip
-    assert found.returncode == 0, found.stderr[-3000:]
-    assert json.loads(found.stdout.strip().splitlines()[-1]) == sorted(needed)
-    run_executables(install, package, sorted(console_scripts(packages()[package])), tmp_path)
+    assert json.loads(importable.strip().splitlines()[-1]) == needed, importable[-3000:]
+    assert failures == [], "\n".join(failures)
