@@ -584,8 +584,8 @@ class EkfSlam:
         return Association(
             status,
             landmark_ids,
-            np.concatenate(confirmed_ids),
-            np.sort(np.array(dropped_ids, dtype=np.int64)),
+            np.concatenate(confirmed_ids) if len(confirmed_ids) > 1 else confirmed_ids[0],
+            np.sort(np.array(dropped_ids, dtype=np.int64)) if dropped_ids else np.zeros(0, dtype=np.int64),
             nis,
             2 * len(fused),
         )
@@ -607,13 +607,13 @@ class EkfSlam:
             sensor_xy = model.sensor_xy(self._state.mean)
             moved_m = np.linalg.norm(sensor_xy - self._state.tracks.last_view_xy[slots], axis=1)
             R_fused = R * self._config.fusion_scale(moved_m)[:, None, None]
-        correct = partial(self._state.correct, consider_landmarks=self._localization)
-        nis, outside = correct(slots, H_robot, H_landmark, nu, R_fused, gate=plan.gate, R_gate=R)
+        consider = self._localization
+        nis, outside = self._state.correct(slots, H_robot, H_landmark, nu, R_fused, consider, plan.gate, R)
         if outside.any():
             plan.status[rows[outside]], plan.landmark_ids[rows[outside]] = REJECTED, -1
             inside = ~outside
             slots, H_robot, H_landmark, nu = slots[inside], H_robot[inside], H_landmark[inside], nu[inside]
-            nis, _ = correct(slots, H_robot, H_landmark, nu, R_fused[inside])
+            nis, _ = self._state.correct(slots, H_robot, H_landmark, nu, R_fused[inside], consider)
         if not self._independent_noise:
             self._state.tracks.viewed(slots, sensor_xy)
         self._linearization.fused(self._state, slots)

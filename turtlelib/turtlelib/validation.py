@@ -25,6 +25,7 @@ from scipy.linalg.lapack import dpotrf
 
 T = TypeVar("T")
 _FLOATS = (float, np.float64)
+_INT64_MAX = 2**63 - 1
 # |P_ij - P_ji| <= SYMMETRY_RTOL max|P|: rounding in a covariance computed by a filter, or written to a file
 SYMMETRY_RTOL = 1e-9
 # positive semi-definite: lambda_min >= -EIGENVALUE_RTOL max|P|; positive definite: lambda_min > that bound
@@ -147,7 +148,7 @@ def landmark_ids(name: str, ids: ArrayLike) -> NDArray[np.int64]:
     values = array.tolist()
     if min(values) < 0:
         raise ValueError(f"{name} must be >= 0, got {[value for value in values if value < 0]}")
-    if max(values) > np.iinfo(np.int64).max:
+    if max(values) > _INT64_MAX:
         raise ValueError(f"{name} must be < 2^63, got {[value for value in values if value >= 2**63]}")
     if len(set(values)) != len(values):
         unique, counts = np.unique(values, return_counts=True)
