@@ -67,8 +67,12 @@ shift || true
 case "$cmd" in
   run) setup; exec "$py" -P -m nuturtle_demo "$@" ;;
   test)
+    if [ $# -gt 0 ]; then setup; exec "$py" -P -m pytest "$@"; fi
+    # the ROS-free venv installs while the main one does (two pip processes on two cores)
+    setup_venv "$root/.venv-core" "core-test" &
+    core_setup=$!
     setup
-    if [ $# -gt 0 ]; then exec "$py" -P -m pytest "$@"; fi
+    wait "$core_setup"
     lint
     core_tests
     echo "[dev.sh] the suite in .venv, tests/turtlelib left out (it ran in .venv-core)"
