@@ -716,6 +716,8 @@ def test_the_filter_s_sensor_mount_is_the_robot_s_lidar_mount(ros):
     ]
     node = ros.add(SlamNode(context=ros.context, parameter_overrides=overrides))
     assert node.config.T_body_sensor == Transform2D(0.1, -0.05, math.pi)
+    # the filter's measurement model observes from there
+    assert node.slam.measurement.T_body_sensor == Transform2D(0.1, -0.05, math.pi)
 
 
 def test_turning_wheels_without_observations_warn_that_slam_only_dead_reckons(ros):

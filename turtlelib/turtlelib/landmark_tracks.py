@@ -30,9 +30,6 @@ class LandmarkTracks:
         self.next_id = 0
         self._slot_of: dict[int, int] = {}
 
-    def __len__(self) -> int:
-        return self._n
-
     @property
     def ids(self) -> NDArray[np.int64]:
         """Landmark id of every slot (n,), a view."""
