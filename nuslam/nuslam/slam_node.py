@@ -331,10 +331,10 @@ class SlamNode(Node):
             V_body = self.odometry.step(t_s, *sample)
             T_map_body, P_pose = self.timeline.latest_pose()
         except (ValueError, np.linalg.LinAlgError) as error:
-            # an increment the kinematics cannot take (a turn rate that overflows): the timeline may hold
-            # the sample already and would fail on it again at every later sample, so start afresh from it
-            self._warnings.warn(source, f"{source} skipped: {error}; taking it as the new reference")
-            self._restart(t_ns, sample)
+            # a motion the filter's model refuses (a step turning the body by more than 1000 rad, ...):
+            # add_motion changed nothing, so the samples after it drive on from the last good one (the
+            # odometry refuses only what the filter refuses: non-finite steps)
+            self._warnings.warn(source, f"{source} skipped: {error}")
             return
         self._check_observations_arrive(t_ns, sample)
         self._publish_pose(stamp_from_nanoseconds(t_ns), V_body, T_map_body, P_pose)

@@ -530,6 +530,38 @@ def test_finite_angles_whose_increment_overflows_are_refused_and_forgotten(ros, 
     assert "joint_states refused" in warnings[0] and "value 0 moved 1e+308" in warnings[0]
 
 
+def test_a_sample_the_filter_refuses_is_skipped_with_a_warning_and_changes_nothing(ros):
+    """With the gate opened wide (speed_margin 1e4: up to ~3e4 rad in 0.5 s) wheels 12000 rad apart reach the
+    filter, whose motion model refuses the step to its new time (half the interval: the body would turn by
+    0.033 / 0.16 * 6000 = 1237 rad > 1000 rad): one throttled warning, the state as it was, and the next
+    samples drive on from the last good one."""
+    rig = Rig(ros, association="known", observation_timeout=100.0, speed_margin=1e4)
+    dt_ns = S // 2
+    rig.wheels(S, (0.0, 0.0))
+    rig.wheels(S + dt_ns, (0.0, 0.0))
+    node = rig.node
+
+    def state():
+        timeline = node.timeline
+        times = (timeline.filter_time_ns, timeline.latest_time_ns, timeline.pending_count)
+        return node.slam.state.copy(), node.slam.covariance.copy(), times, len(rig.odoms)
+
+    before = state()
+    for k in (2, 3):
+        rig.joint_states.publish(joint_state(S + k * dt_ns, (6000.0, -6000.0)))
+    warnings = rig.warnings(at_least=1)
+    after = state()
+    np.testing.assert_array_equal(after[0], before[0])
+    np.testing.assert_array_equal(after[1], before[1])
+    assert after[2:] == before[2:], "no sample kept, no odom"
+    assert len(warnings) == 1, "two refused samples, one throttled warning"
+    assert "joint_states skipped" in warnings[0] and "is not a motion" in warnings[0], warnings
+    dphi = 0.01 / R_WHEEL
+    odom = rig.wheels(S + 4 * dt_ns, (dphi, dphi))
+    assert close_pose(odom, Transform2D(0.01, 0.0, 0.0), 1e-12), pose_of(odom)
+    assert node.timeline.latest_time_ns == S + 4 * dt_ns
+
+
 def observation_case(kind: str, frame_id: str) -> tuple[MarkerArray, str]:
     """A bad observation array (stamps in the node's time, filter at 1.75 s) and part of its warning."""
     good = relative(T_BODY_SENSOR if frame_id == "base_scan" else Transform2D())

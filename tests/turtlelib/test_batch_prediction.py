@@ -234,8 +234,9 @@ def test_the_timeline_batches_its_intervals_and_keeps_the_track():
         eager.take_track()
 
 
-def test_a_refused_sample_stops_the_held_filter_right_before_it():
-    # held inputs: the sample at t[5] (a steering beyond 90 degrees) is the input of the interval after it
+def test_a_refused_held_sample_is_refused_when_it_arrives_and_forgotten():
+    # held inputs: the sample at t[5] (a steering beyond 90 degrees) would be the input of the interval
+    # after it, so it is refused on arrival, and the held filter drives on from the sample before it
     t = [k * 25 * MS for k in range(10)]
     samples = [(2.0, 0.1)] * 10
     samples[5] = (2.0, 1.6)
@@ -244,12 +245,15 @@ def test_a_refused_sample_stops_the_held_filter_right_before_it():
     )
     reference = mapped(TRUCK, "oc")
     for k in range(9):
-        held.add_motion(t[k], samples[k])
-    for k in range(5):
+        if k == 5:
+            with pytest.raises(ValueError, match="steering"):
+                held.add_motion(t[k], samples[k])
+        else:
+            held.add_motion(t[k], samples[k])
+    for k in [0, 1, 2, 3, 4, 4, 6, 7]:  # from t[4] to t[6]: the steering of t[4], held
         reference.predict((*samples[k], 25 * MS))
-    with pytest.raises(ValueError, match="steering"):
-        held.add_observations(t[8], np.zeros((0, 2)), ids=np.zeros(0, dtype=int))
-    assert held.filter_time_ns == t[5]
+    assert held.add_observations(t[8], np.zeros((0, 2)), ids=np.zeros(0, dtype=int))[0][0] == t[8]
+    assert held.filter_time_ns == t[8]
     np.testing.assert_allclose(held.slam.state, reference.state, rtol=0.0, atol=1e-12)
     stamps, _ = held.take_track()
-    assert stamps.tolist() == t[1:6]
+    assert stamps.tolist() == [*t[1:5], *t[6:9]]

@@ -519,6 +519,35 @@ def test_time_going_backwards_is_refused_and_changes_nothing():
     assert_unchanged(before, snapshot(timeline))
 
 
+@pytest.mark.parametrize(
+    "delay, waiting",
+    [(0.0, 0), (0.05, 0), (0.05, 2), (0.3, 2)],
+    ids=["filter-reaches-it", "filter-lags", "releases-observations", "filter-far-behind"],
+)
+def test_a_motion_sample_the_model_refuses_changes_nothing(delay, waiting):
+    # finite wheel angles whose increment the kinematics refuses (dphi_right - dphi_left overflows to -inf),
+    # whether the filter would reach the new interval in this call or only later, and with observations
+    # waiting that the sample would release
+    timeline, twin = started_timeline(delay=delay), started_timeline(delay=delay)
+    t_w = timeline.latest_time_ns
+    for k in range(1, waiting + 1):
+        for t in (timeline, twin):
+            t.add_observations(t_w + 10 * k * MS, GOOD_Z, ids=[0, 1])
+    before = snapshot(timeline)
+    with pytest.raises(ValueError):
+        timeline.add_motion(t_w + 50 * MS, (1e308, -1e308))
+    assert_unchanged(before, snapshot(timeline))
+    # and it is forgotten: the next samples drive on from the last good one, as in a twin that never saw it
+    for sample in [(t_w + 60 * MS, 2.0, 2.1), (t_w + 400 * MS, 4.0, 4.5)]:
+        assert [t for t, _ in add(timeline, sample)] == [t for t, _ in add(twin, sample)]
+        assert_same_filter(timeline.slam, twin.slam)
+        times = (timeline.filter_time_ns, timeline.latest_time_ns, timeline.pending_count)
+        assert times == (twin.filter_time_ns, twin.latest_time_ns, twin.pending_count)
+        (pose, P), (twin_pose, twin_P) = timeline.latest_pose(), twin.latest_pose()
+        np.testing.assert_allclose(pose.as_array(), twin_pose.as_array(), rtol=0.0, atol=MEAN_ATOL)
+        np.testing.assert_allclose(P, twin_P, rtol=0.0, atol=1e-9 * np.abs(twin_P).max())
+
+
 def test_restart_first_brings_the_filter_to_the_newest_sample():
     # the filter runs max_observation_delay behind; a clock jump must not lose that last stretch of motion
     samples = straight_samples(8)

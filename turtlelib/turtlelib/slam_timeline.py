@@ -16,7 +16,11 @@ Times are integer nanoseconds.
   stamps, ``max_observation_delay``) does not matter.
 * When a motion sample arrives, every waiting observation with ``t_o <= t_w`` is applied in stamp order,
   each after bringing the filter to ``t_o``; then the filter is brought to ``t_w - max_observation_delay``
-  (observations may arrive up to that late).
+  (observations may arrive up to that late). First the motion model must take the motion from the previous
+  sample to this one, in the pieces the filter will be predicted by, and the motion the sample starts (a
+  held rate is the input of the interval after its sample), held as long as the interval before it: a
+  sample whose motion the model refuses (a corrupt reading) is refused and changes nothing, so the samples
+  after it continue from the one before.
 * An observation with ``t_o <= t_w`` is applied at once (filter brought to ``t_o``); one newer than every
   motion sample waits for the samples that reach it; one older than ``t_f`` came too late and is refused
   (ValueError): applying it at a later pose would be wrong.
@@ -119,21 +123,39 @@ class SlamTimeline:
     def add_motion(self, t_ns: int, sample: ArrayLike) -> list[tuple[int, Association]]:
         """A motion sample: the signal's value ``sample`` at ``t_ns``. The first only starts the timeline.
 
-        ValueError (nothing changed) for non-finite values, a sample of another length than the first, or a
-        time earlier than the newest sample.
+        ValueError (nothing changed) for non-finite values, a sample of another length than the first, a
+        time earlier than the newest sample, or a motion the filter's motion model refuses (checked from the
+        filter's pose): the one from the newest sample to this one, split as the predictions will split it
+        (at the stamps of the observations it releases and at ``t_ns - max_observation_delay``), or the one
+        this sample starts, held as long as that interval (at least 1 ns).
         """
         t_ns, sample = self._checked_sample(t_ns, sample)
         t_w = self.latest_time_ns
-        if t_w is not None and t_ns < t_w:
-            raise ValueError(f"time went backwards: motion sample at {t_ns} ns after one at {t_w} ns")
-        self._times.append(t_ns)
-        self._samples.append(sample)
-        if self._t_f is None:
+        if t_w is None:
+            self._times, self._samples = [t_ns], [sample]
             self._t_f, self._s_f = t_ns, sample
             return []
-        applied = []
-        while self._pending and self._pending[0].t_ns <= t_ns:
-            applied.append(self._apply(self._pending.pop(0)))
+        if t_ns < t_w:
+            raise ValueError(f"time went backwards: motion sample at {t_ns} ns after one at {t_w} ns")
+        # the pieces of the new interval: to each released observation's stamp (all after t_w), to the
+        # filter's new time if that is later, to the new sample; then the motion the sample starts
+        released = [o.t_ns for o in self._pending if o.t_ns <= t_ns]
+        stops = released.copy()
+        if t_ns - self._delay_ns > (released[-1] if released else t_w):
+            stops.append(t_ns - self._delay_ns)
+        stops.append(t_ns)
+        s_w = self._samples[-1]
+        self._times.append(t_ns)
+        self._samples.append(sample)
+        started = self.signal.input(sample, sample, max(t_ns - t_w, 1))
+        try:
+            self.slam.propagated_pose_along(
+                [*self._inputs_through(t_w, s_w, stops), *([] if started is None else [started])]
+            )
+        except ValueError:
+            del self._times[-1], self._samples[-1]
+            raise
+        applied = [self._apply(self._pending.pop(0)) for _ in released]
         if t_ns - self._delay_ns > self._t_f:
             self._advance_to(t_ns - self._delay_ns)
         return applied
@@ -212,14 +234,7 @@ class SlamTimeline:
         ValueError before the first motion sample."""
         if self._t_f is None:
             raise ValueError("no motion sample yet")
-        inputs = []
-        t_from, s_from = self._t_f, self._s_f
-        for k in range(bisect.bisect_right(self._times, self._t_f), len(self._times)):
-            u = self.signal.input(s_from, self._samples[k], self._times[k] - t_from)
-            if u is not None:
-                inputs.append(u)
-            t_from, s_from = self._times[k], self._samples[k]
-        return self.slam.propagated_pose_along(inputs)
+        return self.slam.propagated_pose_along(self._inputs_through(self._t_f, self._s_f, [self._times[-1]]))
 
     # --- helpers -----------------------------------------------------------------------------------------
 
@@ -232,6 +247,29 @@ class SlamTimeline:
         self._advance_to(observation.t_ns)
         return observation.t_ns, self.slam.update(observation.observations, stamp_ns=observation.t_ns)
 
+    def _ends(self, t_from: int, t_to: int) -> list[tuple[int, Sample]]:
+        """The ends of the pieces from ``t_from`` to ``t_to`` (``t_from <= t_to <= t_w``): every sample in
+        ``(t_from, t_to]``, then the signal's value at ``t_to``."""
+        first = bisect.bisect_right(self._times, t_from)
+        last = bisect.bisect_right(self._times, t_to)
+        ends = [(self._times[k], self._samples[k]) for k in range(first, last)]
+        ends.append((t_to, self._sample_at(t_to)))
+        return ends
+
+    def _inputs_through(self, t_from: int, s_from: Sample, stops: list[int]) -> list[tuple]:
+        """The motion-model inputs from the value ``s_from`` at ``t_from`` through the times ``stops``
+        (ascending, from ``t_from`` on), one per piece between the samples and the stops (none for a piece
+        without motion), as :meth:`_advance_to` predicts them."""
+        inputs = []
+        t_prev, s_prev = t_from, s_from
+        for stop_from, t_stop in zip([t_from, *stops], stops, strict=False):
+            for t_to, s_to in self._ends(stop_from, t_stop):
+                u = self.signal.input(s_prev, s_to, t_to - t_prev)
+                if u is not None:
+                    inputs.append(u)
+                t_prev, s_prev = t_to, s_to
+        return inputs
+
     def _advance_to(self, t_ns: int) -> None:
         """Predict the filter from ``t_f`` to ``t_ns`` (``t_f <= t_ns <= t_w``) and drop older samples.
 
@@ -240,10 +278,7 @@ class SlamTimeline:
         handed to the filter together (:meth:`EkfSlam.predict_along`); if it refuses them, one by one, so
         that the filter stops right before the refused input.
         """
-        first = bisect.bisect_right(self._times, self._t_f)
-        last = bisect.bisect_right(self._times, t_ns)
-        ends = [(self._times[k], self._samples[k]) for k in range(first, last)]
-        ends.append((t_ns, self._sample_at(t_ns)))
+        ends = self._ends(self._t_f, t_ns)
         stamps, inputs, moves = [], [], []
         t_from, s_from = self._t_f, self._s_f
         for t_to, s_to in ends:
