@@ -338,3 +338,24 @@ def test_odometry_poses_split_along_one_arc():
     np.testing.assert_allclose(whole.as_array(), Transform2D(*s1).as_array(), atol=1e-12)
     assert signal.input(s0, s0, 0) is None
     assert signal.input(s0, s0, 10) == (0.0, 0.0, 0.0, 10)
+
+
+# input values from ordinary to absurd: zero, small, large, a turn far beyond any step, non-finite
+WILD = st.sampled_from([0.0, 0.3, -1.2, 1.5, 1e3, -4e4, 1e9, 1e300, math.inf, -math.inf, math.nan])
+WILD_DT = st.sampled_from([0, 1, S, 10**6 * S, 10**15 * S, -1, 2.5])
+
+
+@pytest.mark.parametrize(("model", "u"), CASES, ids=IDS)
+@settings(max_examples=150, deadline=None)
+@given(values=st.lists(WILD, min_size=4, max_size=4), dt_ns=WILD_DT, theta=st.sampled_from([0.0, 2.0, -3.0]))
+def test_check_refuses_exactly_what_step_refuses(model, u, values, dt_ns, theta):
+    # check(u) is step's refusal without the step, from any pose: the timeline checks a sample with it
+    # before it changes anything
+    wild = (*values[: len(u) - 1], dt_ns) if isinstance(u[-1], int) else tuple(values[: len(u)])
+    try:
+        model.step(Transform2D(1.0, -2.0, theta), wild)
+    except ValueError:
+        with pytest.raises(ValueError):
+            model.check(wild)
+    else:
+        model.check(wild)

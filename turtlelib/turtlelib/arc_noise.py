@@ -209,8 +209,7 @@ def arc_covariance(
 
     ValueError for a step that turns the body by more than ``MAX_STEP_TURN_RAD``.
     """
-    if not abs(omega) <= MAX_STEP_TURN_RAD:
-        _refuse_turn(omega)
+    check_turn(omega)
     Q_xx, Q_xy, Q_xt, Q_yy, Q_yt, Q_tt = _arc_covariance_entries(
         _Floats, theta_rad, omega, vx, vy, var_vx, cov_vx_omega, var_omega, var_vy
     )
@@ -245,6 +244,12 @@ def arc_covariances(
     Q[:, 0, 2] = Q[:, 2, 0] = Q_xt
     Q[:, 1, 2] = Q[:, 2, 1] = Q_yt
     return Q
+
+
+def check_turn(omega: float) -> None:
+    """ValueError unless ``|omega| <= MAX_STEP_TURN_RAD`` (rad): the turn of one step that is a motion."""
+    if not abs(omega) <= MAX_STEP_TURN_RAD:
+        _refuse_turn(omega)
 
 
 def _refuse_turn(omega: float) -> None:

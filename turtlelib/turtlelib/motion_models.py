@@ -7,7 +7,9 @@ step and returns::
 
     q' = f(q, u),   G = df/dq (3, 3),   Q (3, 3) the covariance the step adds (map frame)
 
-as ``step(T_map_body, u) -> (q', G, Q)``. The filter knows nothing else about the robot.
+as ``step(T_map_body, u) -> (q', G, Q)``, and ``check(u)`` raises the ValueError ``step`` would raise for
+``u`` from any pose, without computing the step (for callers that must refuse an input before changing
+anything). The filter knows nothing else about the robot.
 
 Every model here moves the body along the exact arc of a constant body displacement twist
 ``xi = [omega, vx, vy]`` (rad, m, m) over the step, ``T' = T exp([xi])``, so with ``[dx, dy] = p' - p``::
@@ -44,7 +46,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import NDArray
 
-from .arc_noise import Floats, arc_covariance, arc_covariances
+from .arc_noise import Floats, arc_covariance, arc_covariances, check_turn
 from .geometry import Transform2D, Twist2D, integrate_twist, integrate_twists, normalize_angles
 from .kinematics import DiffDrive
 from .timebase import NS_PER_S
@@ -60,9 +62,11 @@ Steps = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
 
 
 class MotionModel(Protocol):
-    """``step(T_map_body, u) -> (q' (3,), G (3, 3), Q (3, 3))`` (module docstring)."""
+    """``step(T_map_body, u) -> (q' (3,), G (3, 3), Q (3, 3))`` and ``check(u)`` (module docstring)."""
 
     def step(self, T_map_body: Transform2D, u: tuple) -> Step: ...
+
+    def check(self, u: tuple) -> None: ...
 
 
 @runtime_checkable
@@ -116,6 +120,10 @@ class DiffDriveMotion:
 
     def __post_init__(self) -> None:
         store(self, ("wheel_noise",), non_negative)
+
+    def check(self, u: tuple) -> None:
+        dphi_left, dphi_right = u
+        check_turn(self.drive.body_twist(dphi_left, dphi_right).omega)
 
     def step(self, T_map_body: Transform2D, u: tuple) -> Step:
         dphi_left, dphi_right = u
@@ -281,6 +289,10 @@ class OdometryMotion:
 
     noise: TwistNoise
 
+    def check(self, u: tuple) -> None:
+        # the turn of log(T_prev_next) lies in (-pi, pi]
+        _unpack(u, ("dx_m", "dy_m", "dtheta_rad", "dt_ns"))
+
     def step(self, T_map_body: Transform2D, u: tuple) -> Step:
         dx_m, dy_m, dtheta_rad, dt_ns = _unpack(u, ("dx_m", "dy_m", "dtheta_rad", "dt_ns"))
         T_delta = Transform2D(dx_m, dy_m, dtheta_rad)
@@ -294,11 +306,20 @@ class UnicycleMotion:
 
     noise: TwistNoise
 
+    def check(self, u: tuple) -> None:
+        check_turn(self._arc(u)[0])
+
     def step(self, T_map_body: Transform2D, u: tuple) -> Step:
+        turn_rad, travel_m, dt_ns = self._arc(u)
+        xi = Twist2D(turn_rad, travel_m, 0.0)
+        return _twist_step(T_map_body, integrate_twist(xi), xi, dt_ns, self.noise)
+
+    @staticmethod
+    def _arc(u: tuple) -> tuple[float, float, int]:
+        """``(omega dt, v dt, dt_ns)`` of a validated input: the step's twist ``xi = [omega dt, v dt, 0]``."""
         v_mps, omega_rad_s, dt_ns = _unpack(u, ("v_mps", "omega_rad_s", "dt_ns"))
         dt_s = dt_ns / NS_PER_S
-        xi = Twist2D(omega_rad_s * dt_s, v_mps * dt_s, 0.0)
-        return _twist_step(T_map_body, integrate_twist(xi), xi, dt_ns, self.noise)
+        return omega_rad_s * dt_s, v_mps * dt_s, dt_ns
 
     def steps(self, T_map_body: Transform2D, inputs: Sequence[tuple]) -> Steps:
         """:meth:`step` of consecutive inputs as one composite step (:class:`BatchMotionModel`)."""
@@ -330,12 +351,20 @@ class AckermannMotion:
         store(self, ("wheelbase_m",), positive)
         store(self, ("encoder_y_m",), finite_real)
 
+    def check(self, u: tuple) -> None:
+        check_turn(self._step_arc(u)[0])
+
     def step(self, T_map_body: Transform2D, u: tuple) -> Step:
+        turn_rad, travel_m, dt_ns = self._step_arc(u)
+        # xi = [v_c tan(alpha) / L dt, v_c dt, 0]
+        xi = Twist2D(turn_rad, travel_m, 0.0)
+        return _twist_step(T_map_body, integrate_twist(xi), xi, dt_ns, self.noise)
+
+    def _step_arc(self, u: tuple) -> tuple[float, float, int]:
+        """``(turn, travel, dt_ns)`` of a validated input, the turn and travel of :meth:`_arc`."""
         speed_mps, steering_rad, dt_ns = _unpack(u, ("speed_mps", "steering_rad", "dt_ns"))
         curvature, travel_m = self._arc(np.array([speed_mps]), np.array([steering_rad]), np.array([dt_ns]))
-        # xi = [v_c tan(alpha) / L dt, v_c dt, 0]
-        xi = Twist2D(float(curvature[0] * travel_m[0]), float(travel_m[0]), 0.0)
-        return _twist_step(T_map_body, integrate_twist(xi), xi, dt_ns, self.noise)
+        return float(curvature[0] * travel_m[0]), float(travel_m[0]), dt_ns
 
     def steps(self, T_map_body: Transform2D, inputs: Sequence[tuple]) -> Steps:
         """:meth:`step` of consecutive inputs as one composite step (:class:`BatchMotionModel`)."""

@@ -124,10 +124,11 @@ class SlamTimeline:
         """A motion sample: the signal's value ``sample`` at ``t_ns``. The first only starts the timeline.
 
         ValueError (nothing changed) for non-finite values, a sample of another length than the first, a
-        time earlier than the newest sample, or a motion the filter's motion model refuses (checked from the
-        filter's pose): the one from the newest sample to this one, split as the predictions will split it
-        (at the stamps of the observations it releases and at ``t_ns - max_observation_delay``), or the one
-        this sample starts, held as long as that interval (at least 1 ns).
+        time earlier than the newest sample, or a motion the filter's motion model refuses (its ``check``):
+        the one from the newest sample to this one, or the one this sample starts, held as long as that
+        interval (at least 1 ns). The predictions take pieces of these motions (split at observation stamps),
+        each a part of a motion the model took: a shorter arc at the same rates, or between two values it
+        took.
         """
         t_ns, sample = self._checked_sample(t_ns, sample)
         t_w = self.latest_time_ns
@@ -137,24 +138,18 @@ class SlamTimeline:
             return []
         if t_ns < t_w:
             raise ValueError(f"time went backwards: motion sample at {t_ns} ns after one at {t_w} ns")
-        # the pieces of the new interval: to each released observation's stamp (all after t_w), to the
-        # filter's new time if that is later, to the new sample; then the motion the sample starts
-        released = [o.t_ns for o in self._pending if o.t_ns <= t_ns]
-        stops = released.copy()
-        if t_ns - self._delay_ns > (released[-1] if released else t_w):
-            stops.append(t_ns - self._delay_ns)
-        stops.append(t_ns)
+        # the motion up to the sample and the one it starts (held as long as the interval before it): the
+        # predictions take pieces of these, which a model that takes the whole takes too
         s_w = self._samples[-1]
+        for u in (
+            self.signal.input(s_w, sample, t_ns - t_w),
+            self.signal.input(sample, sample, max(t_ns - t_w, 1)),
+        ):
+            if u is not None:
+                self.slam.motion.check(u)
+        released = [o.t_ns for o in self._pending if o.t_ns <= t_ns]
         self._times.append(t_ns)
         self._samples.append(sample)
-        started = self.signal.input(sample, sample, max(t_ns - t_w, 1))
-        try:
-            self.slam.propagated_pose_along(
-                [*self._inputs_through(t_w, s_w, stops), *([] if started is None else [started])]
-            )
-        except ValueError:
-            del self._times[-1], self._samples[-1]
-            raise
         applied = [self._apply(self._pending.pop(0)) for _ in released]
         if t_ns - self._delay_ns > self._t_f:
             self._advance_to(t_ns - self._delay_ns)
