@@ -548,6 +548,25 @@ def test_a_motion_sample_the_model_refuses_changes_nothing(delay, waiting):
         np.testing.assert_allclose(P, twin_P, rtol=0.0, atol=1e-9 * np.abs(twin_P).max())
 
 
+def test_without_the_motion_check_a_refused_sample_is_taken_until_a_prediction_refuses_it():
+    # check_motion=False (offline runs that end on the first error): the timeline takes the sample while the
+    # filter lags behind it, and the prediction that reaches it raises
+    timeline = SlamTimeline(mapped_filter(), WheelAngles(), TimelineConfig(max_observation_delay=0.3))
+    unchecked = SlamTimeline(
+        mapped_filter(), WheelAngles(), TimelineConfig(max_observation_delay=0.3), check_motion=False
+    )
+    for sample in straight_samples(5):
+        add(timeline, sample)
+        add(unchecked, sample)
+    t_w = timeline.latest_time_ns
+    with pytest.raises(ValueError):
+        timeline.add_motion(t_w + 50 * MS, (1e308, -1e308))
+    assert unchecked.add_motion(t_w + 50 * MS, (1e308, -1e308)) == []
+    assert unchecked.latest_time_ns == t_w + 50 * MS
+    with pytest.raises(ValueError):
+        unchecked.add_motion(t_w + 400 * MS, (1e308, -1e308))
+
+
 def test_restart_first_brings_the_filter_to_the_newest_sample():
     # the filter runs max_observation_delay behind; a clock jump must not lose that last stretch of motion
     samples = straight_samples(8)

@@ -307,19 +307,18 @@ class UnicycleMotion:
     noise: TwistNoise
 
     def check(self, u: tuple) -> None:
-        check_turn(self._arc(u)[0])
+        check_turn(self._twist(u)[0].omega)
 
     def step(self, T_map_body: Transform2D, u: tuple) -> Step:
-        turn_rad, travel_m, dt_ns = self._arc(u)
-        xi = Twist2D(turn_rad, travel_m, 0.0)
+        xi, dt_ns = self._twist(u)
         return _twist_step(T_map_body, integrate_twist(xi), xi, dt_ns, self.noise)
 
     @staticmethod
-    def _arc(u: tuple) -> tuple[float, float, int]:
-        """``(omega dt, v dt, dt_ns)`` of a validated input: the step's twist ``xi = [omega dt, v dt, 0]``."""
+    def _twist(u: tuple) -> tuple[Twist2D, int]:
+        """``(xi = [omega dt, v dt, 0], dt_ns)`` of a validated input (ValueError for a non-finite ``xi``)."""
         v_mps, omega_rad_s, dt_ns = _unpack(u, ("v_mps", "omega_rad_s", "dt_ns"))
         dt_s = dt_ns / NS_PER_S
-        return omega_rad_s * dt_s, v_mps * dt_s, dt_ns
+        return Twist2D(omega_rad_s * dt_s, v_mps * dt_s, 0.0), dt_ns
 
     def steps(self, T_map_body: Transform2D, inputs: Sequence[tuple]) -> Steps:
         """:meth:`step` of consecutive inputs as one composite step (:class:`BatchMotionModel`)."""
@@ -352,19 +351,18 @@ class AckermannMotion:
         store(self, ("encoder_y_m",), finite_real)
 
     def check(self, u: tuple) -> None:
-        check_turn(self._step_arc(u)[0])
+        check_turn(self._twist(u)[0].omega)
 
     def step(self, T_map_body: Transform2D, u: tuple) -> Step:
-        turn_rad, travel_m, dt_ns = self._step_arc(u)
-        # xi = [v_c tan(alpha) / L dt, v_c dt, 0]
-        xi = Twist2D(turn_rad, travel_m, 0.0)
+        xi, dt_ns = self._twist(u)
         return _twist_step(T_map_body, integrate_twist(xi), xi, dt_ns, self.noise)
 
-    def _step_arc(self, u: tuple) -> tuple[float, float, int]:
-        """``(turn, travel, dt_ns)`` of a validated input, the turn and travel of :meth:`_arc`."""
+    def _twist(self, u: tuple) -> tuple[Twist2D, int]:
+        """``(xi, dt_ns)`` of a validated input: ``xi = [v_c tan(alpha) / L dt, v_c dt, 0]`` (ValueError for
+        a non-finite one); :meth:`_arc` on floats."""
         speed_mps, steering_rad, dt_ns = _unpack(u, ("speed_mps", "steering_rad", "dt_ns"))
-        curvature, travel_m = self._arc(np.array([speed_mps]), np.array([steering_rad]), np.array([dt_ns]))
-        return float(curvature[0] * travel_m[0]), float(travel_m[0]), dt_ns
+        curvature, travel_m = self._arc(speed_mps, steering_rad, dt_ns)
+        return Twist2D(curvature * travel_m, travel_m, 0.0), dt_ns
 
     def steps(self, T_map_body: Transform2D, inputs: Sequence[tuple]) -> Steps:
         """:meth:`step` of consecutive inputs as one composite step (:class:`BatchMotionModel`)."""
@@ -373,24 +371,23 @@ class AckermannMotion:
         xi = np.column_stack([curvature * travel_m, travel_m, np.zeros(len(travel_m))])
         return _twist_steps(T_map_body, xi, dt_ns, self.noise)
 
-    def _arc(
-        self, speed_mps: NDArray[np.float64], steering_rad: NDArray[np.float64], dt_ns: NDArray[np.int64]
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """The curvature ``tan(alpha) / L`` (1/m) and the axle centre's travel ``v_c dt`` (m) of each step;
-        ValueError for a steering the class docstring refuses."""
-        beyond = ~(np.abs(steering_rad) < MAX_STEERING_RAD)
-        if beyond.any():
+    def _arc(self, speed_mps: Floats, steering_rad: Floats, dt_ns: Floats) -> tuple[Floats, Floats]:
+        """The curvature ``tan(alpha) / L`` (1/m) and the axle centre's travel ``v_c dt`` (m) of each step
+        (finite floats, or arrays (n,) of them); ValueError for a steering the class docstring refuses."""
+        # |alpha| < MAX_STEERING_RAD, and 1 - tan(alpha) y_e / L > 0 (the turn centre not at the encoder)
+        beyond = np.abs(steering_rad) >= MAX_STEERING_RAD
+        if np.any(beyond):
             raise ValueError(
-                f"steering angle {float(steering_rad[beyond][0])!r} rad is beyond "
+                f"steering angle {float(np.extract(beyond, steering_rad)[0])!r} rad is beyond "
                 f"+-{MAX_STEERING_RAD:.4f} rad"
             )
         curvature = np.tan(steering_rad) / self.wheelbase_m
         # v_c = v_e / (1 - tan(alpha) y_e / L)
         scale = 1.0 - curvature * self.encoder_y_m
-        about_encoder = ~(scale > 0.0)
-        if about_encoder.any():
+        about_encoder = scale <= 0.0
+        if np.any(about_encoder):
             raise ValueError(
-                f"steering angle {float(steering_rad[about_encoder][0])!r} rad turns the car about its "
-                "encoder wheel"
+                f"steering angle {float(np.extract(about_encoder, steering_rad)[0])!r} rad turns the car "
+                "about its encoder wheel"
             )
         return curvature, speed_mps / scale * (dt_ns / NS_PER_S)

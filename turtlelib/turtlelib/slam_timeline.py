@@ -81,7 +81,11 @@ class SlamTimeline:
 
     ``add_motion`` and ``add_observations`` return the observations applied by the call as ``(t_o_ns,
     Association)`` pairs, oldest first. With ``keep_track`` the timeline also keeps the filter's pose
-    after every prediction, for :meth:`take_track` (offline runs: it grows until taken).
+    after every prediction, for :meth:`take_track` (offline runs: it grows until taken). With
+    ``check_motion`` (default) a motion sample the filter's model refuses is refused before anything changes
+    (:meth:`add_motion`); without, the check's cost per sample (a few microseconds, about 10 % of an
+    offline run) is saved, and a refused sample leaves the filter where the refusal stopped it: for runs
+    that end on the first error (recorded data).
     """
 
     def __init__(
@@ -91,9 +95,11 @@ class SlamTimeline:
         config: TimelineConfig | None = None,
         *,
         keep_track: bool = False,
+        check_motion: bool = True,
     ) -> None:
         self.slam = slam
         self.signal = signal
+        self._check_motion = check_motion
         self.config = TimelineConfig() if config is None else config
         self._delay_ns = round(self.config.max_observation_delay * NS_PER_S)
         self._lead_ns = round(self.config.max_observation_lead * NS_PER_S)
@@ -124,7 +130,7 @@ class SlamTimeline:
         """A motion sample: the signal's value ``sample`` at ``t_ns``. The first only starts the timeline.
 
         ValueError (nothing changed) for non-finite values, a sample of another length than the first, a
-        time earlier than the newest sample, or a motion the filter's motion model refuses (its ``check``):
+        time earlier than the newest sample, or (``check_motion``) a motion the filter's model refuses:
         the one from the newest sample to this one, or the one this sample starts, held as long as that
         interval (at least 1 ns). The predictions take pieces of these motions (split at observation stamps),
         each a part of a motion the model took: a shorter arc at the same rates, or between two values it
@@ -138,15 +144,8 @@ class SlamTimeline:
             return []
         if t_ns < t_w:
             raise ValueError(f"time went backwards: motion sample at {t_ns} ns after one at {t_w} ns")
-        # the motion up to the sample and the one it starts (held as long as the interval before it): the
-        # predictions take pieces of these, which a model that takes the whole takes too
-        s_w = self._samples[-1]
-        for u in (
-            self.signal.input(s_w, sample, t_ns - t_w),
-            self.signal.input(sample, sample, max(t_ns - t_w, 1)),
-        ):
-            if u is not None:
-                self.slam.motion.check(u)
+        if self._check_motion:
+            self._check(t_w, self._samples[-1], t_ns, sample)
         released = [o.t_ns for o in self._pending if o.t_ns <= t_ns]
         self._times.append(t_ns)
         self._samples.append(sample)
@@ -232,6 +231,17 @@ class SlamTimeline:
         return self.slam.propagated_pose_along(self._inputs_through(self._t_f, self._s_f, [self._times[-1]]))
 
     # --- helpers -----------------------------------------------------------------------------------------
+
+    def _check(self, t_w: int, s_w: Sample, t_ns: int, sample: Sample) -> None:
+        """ValueError if the motion model refuses the motion from ``(t_w, s_w)`` to ``(t_ns, sample)`` or the
+        one ``sample`` starts, held as long as that interval: the predictions take pieces of these, which a
+        model that takes the whole takes too."""
+        for u in (
+            self.signal.input(s_w, sample, t_ns - t_w),
+            self.signal.input(sample, sample, max(t_ns - t_w, 1)),
+        ):
+            if u is not None:
+                self.slam.motion.check(u)
 
     def _checked_sample(self, t_ns: object, sample: ArrayLike) -> tuple[int, Sample]:
         """``(t_ns, sample)`` validated (:func:`~turtlelib.motion_signals.timed_sample`), as many values as

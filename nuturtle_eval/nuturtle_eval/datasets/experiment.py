@@ -124,7 +124,8 @@ def run_experiment(experiment: Experiment, progress: Callable[[int], None] | Non
     # and the filter may hold all motion until the next scan: the samples between two scans are then
     # predicted as one batch (SlamTimeline, EkfSlam.predict_along)
     hold = TimelineConfig(max_observation_delay=(int(t_motion[-1]) - int(t_motion[0])) / NS_PER_S)
-    timeline = SlamTimeline(slam, experiment.signal, hold, keep_track=True)
+    # recorded data: a refused sample ends the run, so the timeline need not check samples ahead
+    timeline = SlamTimeline(slam, experiment.signal, hold, keep_track=True, check_motion=False)
     scans = experiment.scans
     # scans before the first motion sample cannot be placed in time; the others go after the motion
     # samples of their stamp
