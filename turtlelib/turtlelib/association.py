@@ -31,6 +31,11 @@ def chi2_gate(prob: float, dof: int | NDArray[np.int64]) -> float | NDArray[np.f
     return chdtri(dof, 1.0 - prob)
 
 
+def gate_2d(prob: float) -> float:
+    """``chi2_2^-1(prob)``, the gate of one 2-vector's ``D2``; infinite for ``prob = 1`` (no gate)."""
+    return float(chi2_gate(prob, 2)) if prob < 1.0 else math.inf
+
+
 def mahalanobis_2d(
     nu: NDArray[np.float64], S: NDArray[np.float64]
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

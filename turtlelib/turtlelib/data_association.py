@@ -30,7 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .association import (
-    chi2_gate,
+    gate_2d,
     joint_compatibility,
     mahalanobis_2d,
     mahalanobis_lower_bound,
@@ -247,7 +247,8 @@ class AssociationPolicy(Protocol):
         ...
 
 
-_NO_ROWS = np.zeros(0, dtype=np.int64)  # read-only by convention: an empty index
+_NO_ROWS = np.zeros(0, dtype=np.int64)  # an empty index, shared: read-only
+_NO_ROWS.flags.writeable = False
 
 
 def _empty_plan(count: int) -> tuple[NDArray[np.int8], NDArray[np.int64]]:
@@ -260,7 +261,7 @@ class KnownIds:
     tentative = False
 
     def __init__(self, gate_known: float) -> None:
-        self._gate = float(chi2_gate(gate_known, 2)) if gate_known < 1.0 else np.inf
+        self._gate = gate_2d(gate_known)
 
     def plan(
         self, view: SlamView, z: NDArray[np.float64], R: NDArray[np.float64], ids: NDArray[np.int64] | None
@@ -319,8 +320,8 @@ class GatedTracks:
         self, matcher: Matcher, gate_associate: float, gate_new: float, confirm_count: int, timeout_ns: int
     ) -> None:
         self._matcher = matcher
-        self._gate_associate = float(chi2_gate(gate_associate, 2))
-        self._gate_new = float(chi2_gate(gate_new, 2))
+        self._gate_associate = gate_2d(gate_associate)
+        self._gate_new = gate_2d(gate_new)
         self._confirm_count, self._timeout_ns = confirm_count, timeout_ns
 
     def plan(

@@ -554,9 +554,10 @@ class EkfSlam:
             raise ValueError("update takes what checked_observations gives (validated observations)")
         stamp_ns = integer("stamp_ns", stamp_ns)
         z, R, ids = observations
-        self._enter_mode("unknown" if ids is None else "known")
+        mode = "unknown" if ids is None else "known"
+        self._enter_mode(mode)
         model = self._measurement if measurement is None else measurement
-        policy = self._policies["unknown" if ids is None else "known"]
+        policy = self._policies[mode]
         view = self.view(model)
         plan = policy.plan(view, z, R, ids)
         status, landmark_ids = plan.status, plan.landmark_ids
@@ -821,9 +822,7 @@ class EkfSlam:
 
         ValueError otherwise. For callers that queue observations and must refuse bad ones at once.
         """
-        mode = "unknown" if ids is None else "known"
-        if self._association not in (None, mode):
-            raise ValueError(f"this filter runs with {self._association} association; reset() to switch")
+        self._check_mode("unknown" if ids is None else "known")
         landmark_ids = None if ids is None else validated_landmark_ids("landmark ids", ids)
         model = self._measurement if measurement is None else measurement
         z, R = _observations(model, z, R)
@@ -836,9 +835,13 @@ class EkfSlam:
             raise ValueError(f"{len(landmark_ids)} ids for {len(z)} observations")
         return CheckedObservations(z, R, landmark_ids)
 
-    def _enter_mode(self, mode: str) -> None:
+    def _check_mode(self, mode: str) -> None:
+        """ValueError unless the filter may run with ``mode`` association (the first update fixes it)."""
         if self._association not in (None, mode):
             raise ValueError(f"this filter runs with {self._association} association; reset() to switch")
+
+    def _enter_mode(self, mode: str) -> None:
+        self._check_mode(mode)
         self._association = mode
 
     def _confirmed_indices(self) -> NDArray[np.int64]:

@@ -26,7 +26,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from .association import chi2_gate, mahalanobis_2d
+from .association import gate_2d, mahalanobis_2d
 from .measurement_models import MeasurementModel
 from .slam_state import HEADING, ROBOT_DIM, J, SlamState
 
@@ -117,7 +117,7 @@ class _FirstEstimateJacobians(Standard):
     COLUMN = "first_xy"
 
     def __init__(self, relinearize_gate: float = 1.0) -> None:
-        self._relinearize = float(chi2_gate(relinearize_gate, 2)) if relinearize_gate < 1.0 else np.inf
+        self._relinearize = gate_2d(relinearize_gate)
         self._pose_prior = np.zeros(ROBOT_DIM)
 
     def start(self, state: SlamState) -> None:

@@ -122,11 +122,6 @@ class SlamState:
         return self._n
 
     @property
-    def invariant(self) -> bool:
-        """Whether ``P`` is stored in the right-invariant coordinates."""
-        return self._invariant
-
-    @property
     def tracks(self) -> LandmarkTracks:
         """The records of the landmark slots (row ``i`` is slot ``i``); this state appends and removes
         their rows."""
@@ -433,10 +428,10 @@ class SlamState:
         landmark_ids: NDArray[np.int64] | None = None,
     ) -> NDArray[np.int64]:
         """Add ``k`` confirmed landmarks ``landmark_ids`` (k,) (distinct, none held; default the next ``k``
-        free ids) at ``xy`` (k, 2) with
-        joint covariance ``covariance`` (2k, 2k) (symmetric), independent of the pose and the landmarks
-        already held (zero cross-covariance); returns their slots (k,). ``P <- blockdiag(P, covariance)``,
-        one reallocation at most (invariant: in standard coordinates, O(N^2))."""
+        free ids) at ``xy`` (k, 2) with joint covariance ``covariance`` (2k, 2k) (symmetric), independent
+        of the pose and the landmarks already held (zero cross-covariance); returns their slots (k,).
+        ``P <- blockdiag(P, covariance)``, one reallocation at most (invariant: in standard coordinates,
+        O(N^2))."""
         if self._invariant:
             self._change_storage_coordinates(to_standard=True)
         k = len(xy)

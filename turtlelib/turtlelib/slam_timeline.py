@@ -16,11 +16,11 @@ Times are integer nanoseconds.
   stamps, ``max_observation_delay``) does not matter.
 * When a motion sample arrives, every waiting observation with ``t_o <= t_w`` is applied in stamp order,
   each after bringing the filter to ``t_o``; then the filter is brought to ``t_w - max_observation_delay``
-  (observations may arrive up to that late). First the motion model must take the motion from the previous
-  sample to this one, in the pieces the filter will be predicted by, and the motion the sample starts (a
-  held rate is the input of the interval after its sample), held as long as the interval before it: a
-  sample whose motion the model refuses (a corrupt reading) is refused and changes nothing, so the samples
-  after it continue from the one before.
+  (observations may arrive up to that late). First (``check_motion``) the motion model must take the
+  motion from the previous sample to this one and the motion the sample starts (a held rate is the input
+  of the interval after its sample), held as long as the interval before it (its ``check``): a sample
+  whose motion the model refuses (a corrupt reading) is refused and changes nothing, so the samples after
+  it continue from the one before.
 * An observation with ``t_o <= t_w`` is applied at once (filter brought to ``t_o``); one newer than every
   motion sample waits for the samples that reach it; one older than ``t_f`` came too late and is refused
   (ValueError): applying it at a later pose would be wrong.
@@ -228,7 +228,14 @@ class SlamTimeline:
         ValueError before the first motion sample."""
         if self._t_f is None:
             raise ValueError("no motion sample yet")
-        return self.slam.propagated_pose_along(self._inputs_through(self._t_f, self._s_f, [self._times[-1]]))
+        inputs = []
+        t_from, s_from = self._t_f, self._s_f
+        for k in range(bisect.bisect_right(self._times, self._t_f), len(self._times)):
+            u = self.signal.input(s_from, self._samples[k], self._times[k] - t_from)
+            if u is not None:
+                inputs.append(u)
+            t_from, s_from = self._times[k], self._samples[k]
+        return self.slam.propagated_pose_along(inputs)
 
     # --- helpers -----------------------------------------------------------------------------------------
 
@@ -252,29 +259,6 @@ class SlamTimeline:
         self._advance_to(observation.t_ns)
         return observation.t_ns, self.slam.update(observation.observations, stamp_ns=observation.t_ns)
 
-    def _ends(self, t_from: int, t_to: int) -> list[tuple[int, Sample]]:
-        """The ends of the pieces from ``t_from`` to ``t_to`` (``t_from <= t_to <= t_w``): every sample in
-        ``(t_from, t_to]``, then the signal's value at ``t_to``."""
-        first = bisect.bisect_right(self._times, t_from)
-        last = bisect.bisect_right(self._times, t_to)
-        ends = [(self._times[k], self._samples[k]) for k in range(first, last)]
-        ends.append((t_to, self._sample_at(t_to)))
-        return ends
-
-    def _inputs_through(self, t_from: int, s_from: Sample, stops: list[int]) -> list[tuple]:
-        """The motion-model inputs from the value ``s_from`` at ``t_from`` through the times ``stops``
-        (ascending, from ``t_from`` on), one per piece between the samples and the stops (none for a piece
-        without motion), as :meth:`_advance_to` predicts them."""
-        inputs = []
-        t_prev, s_prev = t_from, s_from
-        for stop_from, t_stop in zip([t_from, *stops], stops, strict=False):
-            for t_to, s_to in self._ends(stop_from, t_stop):
-                u = self.signal.input(s_prev, s_to, t_to - t_prev)
-                if u is not None:
-                    inputs.append(u)
-                t_prev, s_prev = t_to, s_to
-        return inputs
-
     def _advance_to(self, t_ns: int) -> None:
         """Predict the filter from ``t_f`` to ``t_ns`` (``t_f <= t_ns <= t_w``) and drop older samples.
 
@@ -283,7 +267,10 @@ class SlamTimeline:
         handed to the filter together (:meth:`EkfSlam.predict_along`); if it refuses them, one by one, so
         that the filter stops right before the refused input.
         """
-        ends = self._ends(self._t_f, t_ns)
+        first = bisect.bisect_right(self._times, self._t_f)
+        last = bisect.bisect_right(self._times, t_ns)
+        ends = [(self._times[k], self._samples[k]) for k in range(first, last)]
+        ends.append((t_ns, self._sample_at(t_ns)))
         stamps, inputs, moves = [], [], []
         t_from, s_from = self._t_f, self._s_f
         for t_to, s_to in ends:
