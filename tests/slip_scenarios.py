@@ -9,7 +9,8 @@ The robot (the Burger in nusim's default world) drives a circle of ``radius_m`` 
 * ``"bump"``: the robot turns to face the nearest cylinder, drives into it and keeps pushing, wheels
   spinning, for ``push_s`` seconds, then drives back and turns back onto its circle;
 
-and the circle resumes for ``after_s`` seconds. Joint states at 20 Hz, scans at 5 Hz, physics at 100 Hz.
+or ``"none"``; and the circle resumes for ``after_s`` seconds. Joint states at 20 Hz, scans at 5 Hz,
+physics at 100 Hz.
 """
 
 from __future__ import annotations
@@ -142,7 +143,7 @@ def run_scenario(
         loop.sim.traction = 1.0
     elif event == "bump":
         _drive_into_nearest_cylinder(loop, push_s)
-    else:
+    elif event != "none":
         raise ValueError(f"unknown event {event!r}")
     event_end_s = loop.t_ns * 1e-9
     loop.run_for(after_s, SPEED_M_S, w_circle)
