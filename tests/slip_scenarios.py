@@ -40,8 +40,8 @@ TURN_RAD_S = 1.0
 class ScenarioResult:
     """Errors of the filter against the truth: ``final_error_m`` / ``final_heading_rad`` at the end,
     ``event_end_s`` when the event ended, ``errors`` (t_s, position error m) after every scan, the
-    landmarks mapped and the ``spurious`` ones (no cylinder within 0.15 m), and the slip status levels seen
-    (``levels``, in order, de-duplicated)."""
+    landmarks mapped and the ``spurious`` ones (no cylinder within 0.15 m), and the slip status ``levels`` and
+    ``messages`` seen (in order, each without repeats)."""
 
     final_error_m: float
     final_heading_rad: float
@@ -105,6 +105,7 @@ class _Loop:
             status = self.recovery.status
             if not self.levels or self.levels[-1] != status.level:
                 self.levels.append(status.level)
+            if not self.messages or self.messages[-1] != status.message:
                 self.messages.append(status.message)
 
     def error(self) -> tuple[float, float]:

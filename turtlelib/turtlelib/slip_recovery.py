@@ -237,6 +237,38 @@ def align_to_map(
     )
 
 
+def _align_known(
+    ids: NDArray[np.int64],
+    landmark_ids: NDArray[np.int64],
+    p_body: NDArray[np.float64],
+    landmarks: NDArray[np.float64],
+    T_prior: Transform2D,
+    max_offset_m: float,
+    max_turn_rad: float,
+    radius_m: float,
+    variance_m2: float,
+) -> tuple[int, Alignment | None]:
+    """Known association: the detections the prior explains (each within ``radius_m`` of its own landmark
+    ``ids`` (K,) among ``landmark_ids`` (M,)), and the rigid fit of all mapped pairs if within the search and
+    explaining two of them (:func:`align_to_map` for its arguments)."""
+    column = {int(landmark_id): j for j, landmark_id in enumerate(landmark_ids)}
+    pairs = np.array([(k, column[int(i)]) for k, i in enumerate(ids) if int(i) in column], dtype=np.int64)
+    if len(pairs) < 2:
+        return 0, None
+
+    def inside(T: Transform2D) -> NDArray[np.bool_]:
+        return np.linalg.norm(T @ p_body[pairs[:, 0]] - landmarks[pairs[:, 1]], axis=1) < radius_m
+
+    n_prior = int(inside(T_prior).sum())
+    T_fit, covariance = _rigid_fit(p_body[pairs[:, 0]], landmarks[pairs[:, 1]], variance_m2)
+    turn = abs(normalize_angle(T_fit.theta - T_prior.theta))
+    offset = float(np.linalg.norm(T_fit.translation - T_prior.translation))
+    fitted = pairs[inside(T_fit)]
+    if turn > max_turn_rad or offset > max_offset_m or len(fitted) < 2:
+        return n_prior, None
+    return n_prior, Alignment(T_fit, covariance, fitted)
+
+
 @dataclass(frozen=True)
 class SlipEvent:
     """One relocalization: at ``stamp_ns``, the correction ``T_hat^-1 T*`` (body frame of the filter's
@@ -268,10 +300,10 @@ class SlipStatus:
 
 
 class SlipRecovery:
-    """Updates an :class:`EkfSlam` with one scan's observations (unknown association) as
-    :meth:`EkfSlam.update` does, unless the scan contradicts the motion (module docstring): then it is held,
-    and the filter relocalized once ``slip_confirm_scans`` agree. Known association and a recovery switched
-    off update as :meth:`EkfSlam.update` does."""
+    """Updates an :class:`EkfSlam` with one scan's observations as :meth:`EkfSlam.update` does, unless the
+    scan contradicts the motion (module docstring): then it is held, and the filter relocalized once
+    ``slip_confirm_scans`` agree. With known association the pairs are the ids' (the alignment is their
+    least-squares fit). Switched off (``slip_recovery`` false) it is :meth:`EkfSlam.update`."""
 
     def __init__(self, config: SlipRecoveryConfig | None = None) -> None:
         self.config = SlipRecoveryConfig() if config is None else config
@@ -288,7 +320,7 @@ class SlipRecovery:
     def update(self, slam: EkfSlam, observations: CheckedObservations, *, stamp_ns: int) -> Association:
         """Fuse, hold or relocalize then fuse one scan taken at ``stamp_ns`` (ns) (class docstring)."""
         self._now_ns = stamp_ns
-        if not self.config.slip_recovery or observations.ids is not None:
+        if not self.config.slip_recovery:
             return slam.update(observations, stamp_ns=stamp_ns)
         if self._T_good is None:
             self._T_good = slam.pose
@@ -325,29 +357,27 @@ class SlipRecovery:
     def _contradiction(self, slam: EkfSlam, observations: CheckedObservations) -> Alignment | None:
         """The alignment ``T*`` if this scan contradicts the motion (module docstring), else None."""
         config = self.config
-        z, R, _ = observations
+        z, R, ids = observations
         model = slam.measurement
         usable = model.usable(z)
-        if usable.sum() < config.slip_min_matches:
-            return None
-        landmarks = slam.landmarks
-        if len(landmarks) < 2:
+        if usable.sum() < config.slip_min_matches or len(slam.landmark_ids) < 2:
             return None
         # the detections in the body frame and their position covariance G_z R G_z^T
         p_body, _, G_z = model.inverse(np.zeros(3), z[usable])
+        position_cov = np.einsum("kij,kjl,kml->kim", G_z, R[usable], G_z)
+        landmark_var = float(np.trace(slam.landmark_covariances, axis1=1, axis2=2).mean()) / 2.0
+        variance = float(np.trace(position_cov, axis1=1, axis2=2).mean()) / 2.0 + landmark_var
         T_hat = slam.pose
-        radius = config.slip_match_radius
-        n_hat = len(explained(T_hat, p_body, landmarks, radius))
-        if len(p_body) - n_hat < 2:
-            return None
         T_good = self._T_good if self._T_good is not None else T_hat
         max_turn = abs(normalize_angle(T_hat.theta - T_good.theta)) + config.slip_margin_rad
         travel = float(np.linalg.norm(T_hat.translation - T_good.translation))
         max_offset = travel * (1.0 + max_turn) + config.slip_margin_m
-        position_cov = np.einsum("kij,kjl,kml->kim", G_z, R[usable], G_z)
-        landmark_var = float(np.trace(slam.landmark_covariances, axis1=1, axis2=2).mean()) / 2.0
-        variance = float(np.trace(position_cov, axis1=1, axis2=2).mean()) / 2.0 + landmark_var
-        alignment = align_to_map(p_body, landmarks, T_hat, max_offset, max_turn, radius, variance)
+        search = (p_body, slam.landmarks, T_hat, max_offset, max_turn, config.slip_match_radius, variance)
+        if ids is None:
+            n_hat = len(explained(T_hat, p_body, slam.landmarks, config.slip_match_radius))
+            alignment = align_to_map(*search) if len(p_body) - n_hat >= 2 else None
+        else:
+            n_hat, alignment = _align_known(ids[usable], slam.landmark_ids, *search)
         if alignment is None or len(alignment.pairs) < max(config.slip_min_matches, n_hat + 2):
             return None
         d = alignment.T_map_body.as_array() - T_hat.as_array()
