@@ -46,15 +46,16 @@ the next by no more than the wheels reported between them, plus ``2 match_radius
 fit's covariance and no correlation with the map (:meth:`EkfSlam.reset` with ``keep_map``), and that scan
 is fused from there. An agreeing scan ends the episode.
 
-Report (:attr:`SlipRecovery.status`): ``ok``; ``warn`` while scans are held and for ``report_s`` after a
-correction, naming the cause (a stall or a correction that runs back along the reported motion: "bump or
-stall"; a heading the wheels invented: "wheel slip"); ``error`` when corrections follow each other (three
-within ``report_s``): the wheels keep slipping or the robot is stuck.
+Report (:attr:`SlipRecovery.status`): ``ok``; ``warn`` while scans are held and for ``report_s`` after an
+event (corrections of one cause at most ``EVENT_GAP_S`` apart), naming the cause (a correction that takes
+back travel: "bump or stall"; one that takes back a heading the wheels invented: "wheel slip"); ``error``
+while an event has lasted ``MAX_EPISODE_S`` or when ``REPEATS_FOR_ERROR`` events come within ``report_s``:
+the robot is stuck or the wheels keep slipping.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from enum import Enum
 from functools import partial
 
@@ -73,9 +74,12 @@ from .validation import integer, non_negative, positive, store
 SIGNIFICANT_D2 = float(chi2.ppf(0.999, 3))
 # consecutive held alignments differ by no more than the reported motion, plus 2 match radii and this (rad)
 AGREEMENT_SLACK_RAD = 0.1
-# longest run of held scans (s) before the filter takes scans again unconfirmed
+# longest run of held scans (s) before the filter takes scans again unconfirmed; an event lasting this long is
+# an error (the robot is stuck, or the wheels keep slipping)
 MAX_EPISODE_S = 2.0
-# corrections within report_s that make the status an error (the wheels keep slipping: stuck)
+# corrections at most this far apart (s) are one event
+EVENT_GAP_S = 0.5
+# events within report_s that make the status an error (the wheels keep slipping)
 REPEATS_FOR_ERROR = 3
 
 
@@ -156,12 +160,19 @@ class StallDetector:
 
 @dataclass(frozen=True)
 class SlipEvent:
-    """One correction: at ``stamp_ns``, ``T_hat^-1 T_new`` (in the body frame of the filter's pose before it)
-    and its cause (``"wheel slip"`` or ``"bump or stall"``)."""
+    """Corrections of one cause on scans at most ``EVENT_GAP_S`` apart, from ``start_ns`` to ``stamp_ns``:
+    their ``scans``, the ``correction`` they add up to (``T_hat^-1 T_new`` of each, composed in order, in the
+    body frame) and their ``cause`` (``"wheel slip"`` or ``"bump or stall"``)."""
 
+    start_ns: int
     stamp_ns: int
+    scans: int
     correction: Transform2D
     cause: str
+
+    def then(self, stamp_ns: int, correction: Transform2D) -> SlipEvent:
+        """This event continued by a correction at ``stamp_ns``."""
+        return replace(self, stamp_ns=stamp_ns, scans=self.scans + 1, correction=self.correction @ correction)
 
 
 class _Evidence(Enum):
@@ -357,28 +368,36 @@ class SlipRecovery:
         slam.reset(T_new, covariance, keep_map=True)
         self._stall.rebase(T_new, p_body)
         self._T_good = T_new
-        self._status.events.append(SlipEvent(stamp_ns, correction, cause))
+        events = self._status.events
+        if events and events[-1].cause == cause and stamp_ns - events[-1].stamp_ns <= EVENT_GAP_S * NS_PER_S:
+            events[-1] = events[-1].then(stamp_ns, correction)
+        else:
+            events.append(SlipEvent(stamp_ns, stamp_ns, 1, correction, cause))
 
     def _report(self) -> None:
-        """The status at ``_now_ns``: recent corrections and a held scan."""
+        """The status at ``_now_ns``: recent events (an error when one lasts ``MAX_EPISODE_S`` or
+        ``REPEATS_FOR_ERROR`` come within ``report_s``), held scans."""
         status, config = self._status, self.config
         since = self._now_ns - round(config.slip_report_s * NS_PER_S)
         recent = [event for event in status.events if event.stamp_ns >= since]
         del status.events[: len(status.events) - len(recent)]
-        if len(recent) >= REPEATS_FOR_ERROR:
+        last = recent[-1] if recent else None
+        if last is not None and (
+            len(recent) >= REPEATS_FOR_ERROR or last.stamp_ns - last.start_ns >= MAX_EPISODE_S * NS_PER_S
+        ):
             status.level = "error"
-            causes = sorted({event.cause for event in recent})
+            span_s = (last.stamp_ns - recent[0].start_ns) / NS_PER_S
+            causes = ", ".join(sorted({event.cause for event in recent}))
             status.message = (
-                f"{len(recent)} corrections in {config.slip_report_s:g} s ({', '.join(causes)}): the "
-                "wheels keep reporting motion the LiDAR does not see (slipping, or the robot is stuck)"
+                f"{causes}: the wheels keep reporting motion the LiDAR does not see ({len(recent)} events, "
+                f"{sum(event.scans for event in recent)} corrections in {span_s:.1f} s): slipping, or stuck"
             )
-        elif recent:
-            event = recent[-1]
-            c = event.correction
+        elif last is not None:
+            c = last.correction
             status.level = "warn"
             status.message = (
-                f"{event.cause}: the wheels reported motion the LiDAR did not see; pose corrected by "
-                f"{np.hypot(c.x, c.y):.3f} m, {c.theta:+.3f} rad"
+                f"{last.cause}: the wheels reported motion the LiDAR did not see; pose corrected by "
+                f"{np.hypot(c.x, c.y):.3f} m, {c.theta:+.3f} rad over {last.scans} scans"
             )
         elif self._episode is not None:
             status.level = "warn"
