@@ -332,3 +332,44 @@ def test_diagnostics_are_an_error_when_no_scan_arrives(ros):
     assert set(statuses) == {"landmarks: scan", "landmarks: detector"}
     assert "nothing yet on scan" in statuses["landmarks: scan"].message
     assert statuses["landmarks: detector"].level == DiagnosticStatus.OK
+
+
+def test_diagnostics_tell_refused_scans_from_missing_ones_and_say_why(ros):
+    # scans arrive (the scan status is OK) but are refused: the detector status is an ERROR naming the
+    # reason while every scan is refused, a WARN while some are used
+    rig = Rig(ros)
+    helper = ros.node("landmarks_refusal_helper")
+    arrays: list[DiagnosticArray] = []
+    subscription = helper.create_subscription(DiagnosticArray, "/diagnostics", arrays.append, 10)
+    assert ros.spin_until(lambda: matched(subscription), 5.0)
+    good = scan_message(T0_NS, scan_ranges())
+    bad = scan_message(T0_NS, scan_ranges(), angle_increment=2 * LDS01.angle_increment)
+
+    def publish_until(scans: list[LaserScan], level: bytes) -> dict[str, DiagnosticStatus]:
+        """Publish ``scans`` in turn at 20 Hz until the detector status has ``level``; the statuses."""
+        for k in range(80):
+            rig.scan.publish(scans[k % len(scans)])
+            if ros.spin_until(lambda: any(a for a in arrays if detector_level(a) == level), 0.05):
+                break
+        (last,) = [a for a in arrays if detector_level(a) == level][-1:]
+        arrays.clear()
+        return {s.name: s for s in last.status}
+
+    refused = publish_until([bad], DiagnosticStatus.ERROR)
+    detector = refused["landmarks: detector"]
+    assert refused["landmarks: scan"].level == DiagnosticStatus.OK, "scans arrive"
+    assert "scans refused" in detector.message and "contradicts itself" in detector.message
+    values = {pair.key: pair.value for pair in detector.values}
+    assert values["scans_used"] == "0" and int(values["scans_refused"]) > 0
+    assert "contradicts itself" in values["last_refusal"]
+    mixed = publish_until([good, bad], DiagnosticStatus.WARN)["landmarks: detector"]
+    assert "scans refused" in mixed.message
+    assert int({pair.key: pair.value for pair in mixed.values}["scans_used"]) > 0
+    warnings = rig.warnings(at_least=1)
+    assert len(warnings) == 1, "throttled"
+    assert "scan skipped" in warnings[0] and "contradicts itself" in warnings[0]
+
+
+def detector_level(array: DiagnosticArray) -> bytes | None:
+    levels = [s.level for s in array.status if s.name == "landmarks: detector"]
+    return levels[0] if levels else None
