@@ -152,7 +152,8 @@ class NusimNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("nusim", **kwargs)
         self.timing = declare_dataclass(self, NusimTiming)
-        self.lidar_model = declare_dataclass(self, LidarChoice).model
+        lidar_choice = declare_dataclass(self, LidarChoice)
+        self.lidar_model = lidar_choice.model
         config = SimulationConfig(
             arena=declare_dataclass(self, ArenaConfig),
             obstacles=declare_dataclass(self, Obstacles, prefix="obstacles."),
@@ -167,6 +168,13 @@ class NusimNode(Node):
         self.trail: PathTrail[PoseStamped] = PathTrail(declare_dataclass(self, PathTrailConfig))
         self.simulation = Simulation(config)
         self.step_count = 0
+        lidar = config.lidar
+        spin = f", spin spread {lidar.spin_spread:g}" if lidar.spin_spread else ""
+        self.get_logger().info(
+            f"LiDAR {lidar_choice.lidar_model}: {lidar.samples} beams of {lidar.angle_increment:.5f} rad "
+            f"from {lidar.angle_min:g} rad, {lidar.range_min:g}-{lidar.range_max:g} m, no return "
+            f"{lidar.no_return}{spin}"
+        )
 
         self._clock_publisher = self.create_publisher(ClockMsg, "/clock", 10)
         self._joint_states_publisher = self.create_publisher(JointState, "joint_states", 10)
