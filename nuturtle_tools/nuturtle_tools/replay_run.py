@@ -52,6 +52,7 @@ from nuturtle_eval.run_evaluation import (
     evaluate_and_plot,
     sensor_range_m,
     slam_snapshot,
+    slip_counts,
     write_metrics,
 )
 from nuturtle_ros_common.conversions import stamp_nanoseconds, transform_from_pose
@@ -494,6 +495,7 @@ class Replay:
                     "observation_arrays_skipped": observations["skipped"],
                     "observation_arrays_pending": observations["pending"],
                     "slam_outputs_recorded": self.writer.message_counts,
+                    **slip_counts(self.slam),
                 }
             )
         return values
