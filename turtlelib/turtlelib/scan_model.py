@@ -116,15 +116,15 @@ class LidarConfig:
         if self.spin_spread == 0.0:
             return self
         u, v = rng.uniform(-self.spin_spread, self.spin_spread), rng.uniform(0.0, 1.0)
-        # points at angle_min + (v + k) d while (v + k) d < 2 pi: ceil(2 pi / d - v) of them, all but the last
-        # in the scan
+        # points at angle_min + (v + k) d while (v + k) d < 2 pi: ceil(2 pi / d - v) of them (at least 2, as
+        # d < 3 pi / 4), all but the last in the scan
         spacing = self.angle_increment * (1.0 + u)
         points = math.ceil(2.0 * math.pi / spacing - v)
         return dataclasses.replace(
             self,
             angle_min=self.angle_min + v * spacing,
             angle_increment=spacing,
-            samples=max(1, points - 1),
+            samples=points - 1,
             spin_spread=0.0,
         )
 
