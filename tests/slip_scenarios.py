@@ -96,7 +96,7 @@ class _Loop:
             self.timeline.add_motion(self.t_ns, tuple(self.sim.wheel_angles_rad))
         if self.steps % SCAN_EVERY == 0:
             detections = self.detector.detect(
-                self.sim.scan(),
+                self.sim.scan().range_m,
                 self.lidar.angle_min,
                 self.lidar.angle_increment,
                 self.lidar.range_min,
