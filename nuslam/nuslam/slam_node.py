@@ -61,11 +61,11 @@ Parameters
     linearization, confirm_count, tentative_timeout, min_range, max_range, max_landmarks, max_observations,
     initial_*_std, jcbb_max_nodes),
     `turtlelib.TimelineConfig`
-    (max_observation_delay, max_observation_lead, max_pending_observations), `RobotParams` (the Burger's by
-    default), `WheelJoints`, `PathTrailConfig`, `turtlelib.SampleGateConfig` (speed_margin,
-    max_sample_gap, max_bridged_gap, restart_samples). Defaults in config/slam.yaml. The filter's sensor
-    mount (`SlamConfig.sensor_x/y/theta`) is the robot's `lidar_x`, `lidar_y`, `lidar_yaw`. Invalid values
-    stop the node at start-up with a message.
+    (max_observation_delay, max_observation_lead, max_pending_observations), `model`, then `RobotParams`
+    (that model's constants by default), `WheelJoints`, `PathTrailConfig`, `turtlelib.SampleGateConfig`
+    (speed_margin, max_sample_gap, max_bridged_gap, restart_samples). Defaults in config/slam.yaml. The
+    filter's sensor mount (`SlamConfig.sensor_x/y/theta`) is the robot's `lidar_x`, `lidar_y`, `lidar_yaw`.
+    Invalid values stop the node at start-up with a message.
 
 Observations that arrive before the first motion sample are dropped quietly (start-up order). Bad input
 never stops the node and never changes the estimate: invalid or implausible joint_states
@@ -98,7 +98,7 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
-from nuturtle_description.robot_params import RobotParams, burger_params
+from nuturtle_description.robot_declaration import declare_robot
 from nuturtle_ros_common.conversions import (
     odometry_message,
     positive_definite_pose_covariance,
@@ -155,7 +155,7 @@ ODOM_BUFFER_SAMPLES = 200
 STALE_S = 2.0
 # Drawn confidence region of a mapped landmark (standard deviations)
 ELLIPSE_SIGMA = 2.0
-# The default wheel slip (sqrt(rad)); the default odom_* twist noise is this slip on the Burger's twist
+# The default wheel slip (sqrt(rad)); the default odom_* twist noise is this slip on the model's twist
 WHEEL_NOISE = 0.05
 # REP 2003 map QoS: reliable, transient local (the last map reaches late subscribers), keep last 1
 MAP_QOS = QoSProfile(
@@ -218,7 +218,7 @@ class SlamNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("slam", **kwargs)
         self.node_config = declare_dataclass(self, SlamNodeConfig)
-        robot = declare_dataclass(self, RobotParams, overrides=vars(burger_params()))
+        robot = declare_robot(self)
         # the sensor mount is the robot's: written once, in its description
         T_body_scan = robot.T_body_scan
         sensor_mount = {
