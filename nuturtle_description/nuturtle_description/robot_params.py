@@ -13,11 +13,10 @@ mount all read the LiDAR mount from here. No rclpy here: launch files and comman
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import math
 import os
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from functools import partial
 from pathlib import Path
 
@@ -110,11 +109,11 @@ def model_params(model: str) -> RobotParams:
     models = _models()
     one_of("model", model, tuple(models))
     values = models[model]
-    fields = {field.name for field in dataclasses.fields(RobotParams)}
-    if set(values) != fields:
+    names = {field.name for field in fields(RobotParams)}
+    if set(values) != names:
         raise ValueError(
-            f"{models_path()}: {model} must give exactly {sorted(fields)}; missing "
-            f"{sorted(fields - set(values))}, unknown {sorted(set(values) - fields)}"
+            f"{models_path()}: {model} must give exactly {sorted(names)}; missing "
+            f"{sorted(names - set(values))}, unknown {sorted(set(values) - names)}"
         )
     return RobotParams(**values)
 

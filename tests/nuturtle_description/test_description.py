@@ -205,12 +205,16 @@ def test_each_model_s_constants_are_the_family_s():
         assert getattr(burger, name) == pytest.approx(value, rel=1e-8)
 
 
-def test_models_yaml_gives_every_model_every_constant():
-    import yaml
+def test_a_model_without_every_constant_is_refused_rather_than_given_the_burger_s(tmp_path, monkeypatch):
+    from nuturtle_description import robot_params
 
-    fields = set(RobotParams.__dataclass_fields__)
-    for model, values in yaml.safe_load(models_path().read_text()).items():
-        assert set(values) == fields, model
+    lines = models_path().read_text().splitlines()
+    models = tmp_path / "models.yaml"
+    models.write_text("\n".join(line for line in lines if not line.startswith("  lidar_z: 0.132")) + "\n")
+    monkeypatch.setattr(robot_params, "models_path", lambda: models)
+    assert model_params("burger").lidar_z == 0.182  # the other models still load
+    with pytest.raises(ValueError, match=r"models.yaml: waffle must give exactly .*; missing \['lidar_z'\]"):
+        model_params("waffle")
 
 
 @pytest.mark.parametrize(
