@@ -1,4 +1,4 @@
-"""`nusim`: a simulated TurtleBot3 Burger in an arena of cylinders, publishing what the real robot does.
+"""`nusim`: a simulated TurtleBot3 (any model) in an arena of cylinders, publishing what the real robot does.
 
 A thin ROS wrapper over `nusim.simulation.Simulation` (models in that module's docstring).
 
@@ -29,10 +29,10 @@ Parameters
     `NusimTiming` (rate, realtime_factor, joint_states_rate, scan_rate, fake_sensor_rate), `ArenaConfig`
     (x0, y0, theta0, arena_x_length, arena_y_length), `Obstacles` (obstacles.x, obstacles.y, obstacles.r),
     `NoiseConfig` (input_noise, slip_fraction, basic_sensor_variance, max_range, seed), `LidarChoice`
-    (lidar_model), `LidarConfig` (lidar.*, defaults from lidar_model), `RobotParams` (the Burger's
-    constants by default), `WheelJoints` (wheel_left, wheel_right), `CommandTimeoutConfig`
-    (cmd_timeout), `PathTrailConfig` (path_*). The defaults are the default world
-    of config/basic_world.yaml. Invalid values stop the node at start-up with a message (exit code 1).
+    (lidar_model), `LidarConfig` (lidar.*, defaults from lidar_model), `model`, then `RobotParams` (that
+    model's constants by default), `WheelJoints` (wheel_left, wheel_right), `CommandTimeoutConfig`
+    (cmd_timeout), `PathTrailConfig` (path_*). The defaults are the default world of
+    config/basic_world.yaml. Invalid values stop the node at start-up with a message (exit code 1).
 
 Time: a wall-clock (steady) timer ticks at `rate * realtime_factor` Hz and each tick advances simulation
 time by `1 / rate` s, so the node needs no `use_sim_time` itself; every other node runs on its /clock.
@@ -56,7 +56,7 @@ from sensor_msgs.msg import JointState, LaserScan
 from std_srvs.srv import Empty
 from visualization_msgs.msg import Marker, MarkerArray
 
-from nuturtle_description.robot_params import RobotParams, burger_params
+from nuturtle_description.robot_declaration import declare_robot
 from nuturtle_ros_common.command_timeout import CommandTimeoutConfig, CommandWatchdog
 from nuturtle_ros_common.conversions import (
     odometry_message,
@@ -157,7 +157,7 @@ class NusimNode(Node):
         config = SimulationConfig(
             arena=declare_dataclass(self, ArenaConfig),
             obstacles=declare_dataclass(self, Obstacles, prefix="obstacles."),
-            robot=declare_dataclass(self, RobotParams, overrides=vars(burger_params())),
+            robot=declare_robot(self),
             noise=declare_dataclass(self, NoiseConfig),
             lidar=declare_dataclass(
                 self, LidarConfig, prefix="lidar.", overrides=vars(self.lidar_model.sensor)

@@ -27,7 +27,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from nusim.nusim_node import NusimNode, NusimTiming
 from nusim.simulation import ArenaConfig, NoiseConfig, Obstacles, default_lidar
-from nuturtle_description.robot_params import burger_params, diff_params_path
+from nuturtle_description.robot_params import burger_params
 from nuturtle_ros_common.conversions import pose_from_transform, stamp_seconds, yaw_from_quaternion
 from nuturtle_ros_common.ros_files import load_ros_yaml
 from turtlelib import DiffDrive, Transform2D
@@ -36,7 +36,7 @@ pytestmark = pytest.mark.ros
 
 BASIC_WORLD = Path(__file__).resolve().parents[2] / "nusim" / "config" / "basic_world.yaml"
 BURGER = DiffDrive(0.033, 0.16)
-MCU_PER_RAD_S = burger_params().motor_cmd_per_rad_sec  # 41.6666667 in diff_params.yaml
+MCU_PER_RAD_S = burger_params().motor_cmd_per_rad_sec  # 41.6666667 in models.yaml
 HALF_TICK_RAD = 0.5 * 2.0 * math.pi / 4096.0
 QUIET = {"input_noise": 0.0, "slip_fraction": 0.0, "basic_sensor_variance": 0.0}
 EXACT_LIDAR = {"lidar.noise": 0.0, "lidar.resolution": 0.0}
@@ -389,8 +389,6 @@ def test_executable_runs_the_world_file_and_publishes_until_interrupted(ros, tmp
             "-m",
             "nusim.nusim_node",
             "--ros-args",
-            "--params-file",
-            str(diff_params_path()),
             "--params-file",
             str(BASIC_WORLD),
             "-p",
