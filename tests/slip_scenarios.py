@@ -1,11 +1,14 @@
 """Closed-loop slip and bump scenarios in nusim's simulation, without ROS: the world, the LiDAR, the
 landmark detector and EKF SLAM on its timeline, as the nodes chain them.
 
-The robot (the Burger in nusim's default world) drives a circle of ``radius_m`` about (0, radius_m), mapping
-(or localizing in the true map) for ``event_s`` seconds. Then one event:
+The robot (a TurtleBot3 model, the Burger by default, in nusim's default world) drives a circle of
+``radius_m`` about (0, radius_m), mapping (or localizing in the true map) for ``event_s`` seconds.
+Then one event:
 
-* ``"phantom_turn"``: the floor loses its grip (``Simulation.traction = 0``) while the robot is commanded to
+* ``"phantom_turn"``: the floor loses its grip (``Simulation.traction`` 0) while the robot is commanded to
   turn in place until its wheels report ``turn_rad`` of turn; the body does not move;
+* ``"wheel_slip"``: while the circle goes on, the left wheel spins on a slick patch (its traction 0) until
+  the wheels have reported ``turn_rad`` more turn than the body made;
 * ``"bump"``: the robot turns to face the nearest cylinder, drives into it and keeps pushing, wheels
   spinning, for ``push_s`` seconds, then drives back and turns back onto its circle;
 
@@ -16,11 +19,12 @@ physics at 100 Hz.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from nusim.simulation import Simulation, SimulationConfig, default_lidar
+from nusim.simulation import NoiseConfig, Simulation, SimulationConfig, default_lidar
+from nuturtle_description.robot_params import model_params
 from turtlelib import EkfSlam, LandmarkDetector, SlamConfig, SlamTimeline, Twist2D
 from turtlelib.detection import DetectorConfig
 from turtlelib.motion_models import DiffDriveMotion
@@ -40,9 +44,9 @@ TURN_RAD_S = 1.0
 class ScenarioResult:
     """Errors of the filter against the truth: ``final_error_m`` / ``final_heading_rad`` at the end,
     ``event_end_s`` when the event ended, ``errors`` (t_s, position error m) after every scan, the
-    landmarks mapped and the ``spurious`` ones (no cylinder within 0.15 m), the scans ``held`` and the times
-    ``relocalized`` by the recovery, and its status ``levels`` and ``messages`` seen (in order, each without
-    repeats)."""
+    landmarks mapped and the ``spurious`` ones (no cylinder within 0.15 m), the recovery's scans ``held``,
+    relocalizations (``relocalized``) and ``stalls`` (scans), and its status ``levels`` and ``messages`` seen
+    (in order, each without repeats)."""
 
     final_error_m: float
     final_heading_rad: float
@@ -51,15 +55,17 @@ class ScenarioResult:
     spurious: int
     held: int
     relocalized: int
+    stalls: int
     errors: list[tuple[float, float]] = field(default_factory=list)
     levels: list[str] = field(default_factory=list)
     messages: list[str] = field(default_factory=list)
 
 
 class _Loop:
-    def __init__(self, mode: str, recovery: SlipRecoveryConfig, seed: int) -> None:
-        sim_config = SimulationConfig(lidar=default_lidar())
-        sim_config = SimulationConfig(**{**vars(sim_config), "noise": type(sim_config.noise)(seed=seed)})
+    def __init__(self, mode: str, recovery: SlipRecoveryConfig, seed: int, model: str) -> None:
+        sim_config = SimulationConfig(
+            robot=model_params(model), noise=NoiseConfig(seed=seed), lidar=default_lidar()
+        )
         self.sim = Simulation(sim_config)
         robot = sim_config.robot
         T_body_scan = robot.T_body_scan
@@ -74,7 +80,8 @@ class _Loop:
                 "map", 0, np.arange(len(circles)), circles[:, :2], 1e-6 * np.eye(2 * len(circles))
             )
             self.slam.load_map(true_map, self.sim.T_world_body)
-        self.recovery = SlipRecovery(recovery)
+        # the heading a wheel that loses its grip invents per metre: this robot's
+        self.recovery = SlipRecovery(replace(recovery, slip_turn_per_m=2.0 / robot.track_width))
         self.timeline = SlamTimeline(self.slam, WheelAngles(), recovery=self.recovery)
         self.detector = LandmarkDetector(DetectorConfig())
         self.lidar = sim_config.lidar
@@ -124,6 +131,20 @@ class _Loop:
         for _ in range(round(seconds / PHYSICS_DT_S)):
             self.step()
 
+    def follow_circle(self, seconds: float, radius_m: float) -> None:
+        """Drive counter-clockwise along the circle of ``radius_m`` about (0, radius_m), steering on the true
+        pose every joint_states period (the test's driver: back onto the circle after an event)."""
+        for k in range(round(seconds / PHYSICS_DT_S)):
+            if k % JOINT_EVERY == 0:
+                truth = self.sim.T_world_body
+                # heading of the circle's tangent, turned inwards by the radial error e: psi_t + atan(2 e)
+                phi = math.atan2(truth.y - radius_m, truth.x)
+                error_m = math.hypot(truth.x, truth.y - radius_m) - radius_m
+                heading = phi + 0.5 * math.pi + math.atan(2.0 * error_m)
+                turn = math.remainder(heading - truth.theta, math.tau)
+                self.command(SPEED_M_S, SPEED_M_S / radius_m + max(-TURN_RAD_S, min(TURN_RAD_S, 2.0 * turn)))
+            self.step()
+
 
 def run_scenario(
     event: str,
@@ -131,26 +152,36 @@ def run_scenario(
     *,
     recovery: SlipRecoveryConfig | None = None,
     seed: int = 0,
+    model: str = "burger",
     radius_m: float = 0.75,
     event_s: float = 25.0,
     turn_rad: float = 0.75,
     push_s: float = 4.0,
     after_s: float = 20.0,
 ) -> ScenarioResult:
-    """One scenario (module docstring); ``recovery`` None: the default :class:`SlipRecoveryConfig`."""
-    loop = _Loop(mode, SlipRecoveryConfig() if recovery is None else recovery, seed)
+    """One scenario (module docstring) for the TurtleBot3 ``model``; ``recovery`` None: the default
+    :class:`SlipRecoveryConfig`."""
+    loop = _Loop(mode, SlipRecoveryConfig() if recovery is None else recovery, seed, model)
     w_circle = SPEED_M_S / radius_m
-    loop.run_for(event_s, SPEED_M_S, w_circle)
+    loop.follow_circle(event_s, radius_m)
     if event == "phantom_turn":
-        loop.sim.traction = 0.0
+        loop.sim.traction = np.zeros(2)
         loop.run_for(turn_rad / TURN_RAD_S, 0.0, TURN_RAD_S)
-        loop.sim.traction = 1.0
+        loop.sim.traction = np.ones(2)
+    elif event == "wheel_slip":
+        # the left wheel spins on a slick patch: the wheels report turn_rad more turn than the body makes
+        w_left, _ = loop.drive.wheel_speeds(Twist2D(w_circle, SPEED_M_S, 0.0))
+        loop.sim.traction = np.array([0.0, 1.0])
+        loop.run_for(
+            turn_rad * loop.drive.track_width / (loop.drive.wheel_radius * w_left), SPEED_M_S, w_circle
+        )
+        loop.sim.traction = np.ones(2)
     elif event == "bump":
         _drive_into_nearest_cylinder(loop, push_s)
     elif event != "none":
         raise ValueError(f"unknown event {event!r}")
     event_end_s = loop.t_ns * 1e-9
-    loop.run_for(after_s, SPEED_M_S, w_circle)
+    loop.follow_circle(after_s, radius_m)
     final_m, final_rad = loop.error()
     landmarks = loop.slam.landmarks
     circles = loop.sim.circles[:, :2]
@@ -163,6 +194,7 @@ def run_scenario(
         int((nearest > 0.15).sum()),
         loop.recovery.status.held,
         loop.recovery.status.relocalized,
+        loop.recovery.status.stalls,
         loop.result_errors,
         loop.levels,
         loop.messages,

@@ -237,7 +237,9 @@ class SlamNode(Node):
         }
         self.config = declare_dataclass(self, SlamConfig, fixed=sensor_mount)
         timeline_config = declare_dataclass(self, TimelineConfig)
-        self.recovery = SlipRecovery(declare_dataclass(self, SlipRecoveryConfig))
+        # the heading a wheel that loses its grip invents per metre: the robot's
+        lost_wheel = {"slip_turn_per_m": 2.0 / robot.track_width}
+        self.recovery = SlipRecovery(declare_dataclass(self, SlipRecoveryConfig, fixed=lost_wheel))
         self.joints = declare_dataclass(self, WheelJoints)
         self.trail: PathTrail[PoseStamped] = PathTrail(declare_dataclass(self, PathTrailConfig))
         drive = robot.diff_drive()

@@ -12,13 +12,15 @@ detections ``p_k`` (body frame) before it reaches the filter.
 Stall (:class:`StallDetector`): the wheels turn, the body stands still
 --------------------------------------------------------------------
 Against a reference scan (the last one whose detections moved as the wheels said, pose ``T_ref``): with
-``M = T_ref^-1 T_hat`` the motion the filter's pose ``T_hat`` says the body made since, each detection
+``M = T_ref^-1 T_hat`` the motion the wheels say the body made since (``T_ref`` follows the updates'
+corrections of the filter's pose ``T_hat``, so ``M`` is the predictions' motion only), each detection
 ``p_k`` and its nearest reference detection ``q_k``, the body stood still while the wheels moved it when::
 
     |p_k - q_k| <= stall_tolerance   and   |M^-1 q_k - q_k| > 2 stall_tolerance    for every k
 
-(no detection moved, and the motion would have moved each by more than twice as much). Then the filter goes
-back to ``T_ref`` (:meth:`EkfSlam.reset` with ``keep_map``, its covariance kept), and stays there while the
+(no detection moved, and the motion would have moved each by more than twice as much), with two detections
+at least (one standing still is also what circling around it looks like). Then the filter goes back to
+``T_ref`` (:meth:`EkfSlam.reset` with ``keep_map``, its covariance kept), and stays there while the
 stall lasts: a zero-velocity update. Detections that moved as the wheels said (``|p_k - M^-1 q_k| <=
 stall_tolerance``), or a scene with nothing of the reference's, make their scan the reference.
 
@@ -27,11 +29,13 @@ Contradiction: the map puts the body elsewhere
 * ``n(T)``, the detections a pose ``T`` explains (:func:`turtlelib.map_alignment.explained`, within
   ``match_radius`` of a confirmed landmark), and ``T*`` the best rigid alignment of the detections with the
   map (:func:`turtlelib.map_alignment.align_to_map`; known association: the fit of the ids' pairs).
-* Slip and bumps only ever make the wheels report motion the body does not make, so ``T*`` is searched
-  within what the wheels reported since the last scan the map confirmed (``T_good``, two detections
-  matched): a heading within ``|theta_hat - theta_good| + margin_rad`` of ``theta_hat`` and a position within
-  ``|p_hat - p_good| (1 + that heading bound) + margin_m`` of ``p_hat``. A repetitive world (a grid of
-  cylinders) has other alignments further away; these are never candidates while the map confirms the scans.
+* Slip and bumps only ever take motion away from a wheel, so ``T*`` is searched within what the wheels
+  reported since the last scan the map confirmed (``T_good``, two detections matched): with ``d`` the
+  distance from ``p_good`` to ``p_hat``, a heading within ``|theta_hat - theta_good| + turn_per_m d +
+  margin_rad`` of ``theta_hat`` (``turn_per_m``: the heading a lost wheel invents per metre of travel, ``2 /
+  track_width`` for a differential drive whose one wheel spins in place) and a position within ``d (1 +
+  that heading bound) + margin_m`` of ``p_hat``. A repetitive world (a grid of cylinders) has other
+  alignments further away; these are never candidates while the map confirms the scans.
 * A scan *contradicts the motion* when ``T*`` explains at least ``min_matches`` detections and two more than
   ``T_hat``, and lies outside ``T_hat``'s uncertainty: ``d^T (P_rr + Sigma*)^-1 d > chi2_3^-1(0.999)`` for
   ``d = [t* - t_hat, theta* (-) theta_hat]`` (``Sigma*`` the fit's covariance). It *agrees* when all its
@@ -77,6 +81,8 @@ AGREEMENT_SLACK_RAD = 0.1
 # longest run of held scans (s) before the filter takes scans again unconfirmed; an event lasting this long is
 # an error (the robot is stuck, or the wheels keep slipping)
 MAX_EPISODE_S = 2.0
+# a stall reference this old (s) gives way to a scan that pairs with none of its detections
+STALE_REFERENCE_S = 1.0
 # corrections at most this far apart (s) are one event
 EVENT_GAP_S = 0.5
 # events within report_s that make the status an error (the wheels keep slipping)
@@ -90,16 +96,19 @@ class SlipRecoveryConfig:
     ``slip_match_radius`` (m, > 0): how near a mapped landmark a detection must fall to be explained;
     ``slip_confirm_scans`` (int >= 1): scans in a row that must contradict the motion the same way;
     ``slip_margin_m`` (m, >= 0), ``slip_margin_rad`` (rad, >= 0): how far the search reaches beyond the
-    motion reported since the last confirmed scan; ``slip_stall_tolerance`` (m, > 0): how far a detection
+    motion reported since the last confirmed scan; ``slip_turn_per_m`` (rad/m, >= 0): the heading slip can
+    invent per metre of reported travel (the robot's ``2 / track_width``; the Burger's by default);
+    ``slip_stall_tolerance`` (m, > 0): how far a detection
     may move between scans of a robot standing still; ``slip_report_s`` (s, > 0): how long a correction
     stays in the status. Invalid values raise ValueError."""
 
     slip_recovery: bool = True
     slip_min_matches: int = 2
-    slip_match_radius: float = 0.1
+    slip_match_radius: float = 0.06
     slip_confirm_scans: int = 2
     slip_margin_m: float = 0.15
     slip_margin_rad: float = 0.15
+    slip_turn_per_m: float = 2.0 / 0.16
     slip_stall_tolerance: float = 0.03
     slip_report_s: float = 5.0
 
@@ -109,7 +118,7 @@ class SlipRecoveryConfig:
         store(self, ("slip_min_matches",), partial(integer, minimum=2))
         store(self, ("slip_confirm_scans",), partial(integer, minimum=1))
         store(self, ("slip_match_radius", "slip_stall_tolerance", "slip_report_s"), positive)
-        store(self, ("slip_margin_m", "slip_margin_rad"), non_negative)
+        store(self, ("slip_margin_m", "slip_margin_rad", "slip_turn_per_m"), non_negative)
 
 
 class StallDetector:
@@ -118,26 +127,33 @@ class StallDetector:
 
     def __init__(self, tolerance_m: float) -> None:
         self.tolerance_m = tolerance_m
-        self._reference: tuple[Transform2D, NDArray[np.float64]] | None = None
+        self._reference: tuple[Transform2D, NDArray[np.float64], int] | None = None
+        # a stall was found and every detection has stood still since
+        self._stalled = False
 
-    def observe(self, T_hat: Transform2D, p_body: NDArray[np.float64]) -> Transform2D | None:
+    def observe(self, T_hat: Transform2D, p_body: NDArray[np.float64], stamp_ns: int) -> Transform2D | None:
         """``T_ref`` if the body stood still since the reference scan while the wheels moved it, else None.
 
         Each detection is paired with the nearest reference detection ``q`` (it stood still) and with the
         nearest ``M^-1 q`` (it moved as the wheels said), within ``tolerance_m``; a pair decides only where
-        the motion moves ``q`` by more than twice that. Every detection standing still: a stall. Some moving
-        as the wheels said and none standing still, or none paired at all (another scene): this scan becomes
-        the reference. Anything else (too little motion yet, noise) keeps the reference."""
+        the motion moves ``q`` by more than twice that. Every detection of two or more standing still: a
+        stall (one detection standing still is also what driving around it looks like), which lasts while
+        every detection stands still where the wheels moved it by half the tolerance or more. Some moving
+        as the wheels said and none standing still: this scan (at ``stamp_ns``) becomes the reference, as
+        does one with no pair at all once the reference is ``STALE_REFERENCE_S`` old (another scene; before
+        that, a scan that pairs with nothing may be one taken while the wheels slip). Anything else (too
+        little motion yet, noise) keeps the reference."""
         if len(p_body) == 0:
             return None
         if self._reference is None:
-            self._reference = (T_hat, p_body)
+            self._reference = (T_hat, p_body, stamp_ns)
             return None
-        T_ref, q = self._reference
+        T_ref, q, ref_ns = self._reference
         tolerance = self.tolerance_m
         # M^-1 q: the reference detections seen from where the wheels put the body
         predicted = (T_hat.inverse() @ T_ref) @ q
-        decides = np.linalg.norm(predicted - q, axis=1) > 2.0 * tolerance
+        shift = np.linalg.norm(predicted - q, axis=1)
+        decides, budges = shift > 2.0 * tolerance, shift > 0.5 * tolerance
         still = np.linalg.norm(p_body[:, None, :] - q[None, :, :], axis=2)
         moving = np.linalg.norm(p_body[:, None, :] - predicted[None, :, :], axis=2)
         near_still, near_moving = still.argmin(axis=1), moving.argmin(axis=1)
@@ -146,16 +162,29 @@ class StallDetector:
         paired_moving = moving[rows, near_moving] <= tolerance
         stood = paired_still & decides[near_still]
         moved = paired_moving & decides[near_moving]
-        if stood.all():
+        # two points fix the body: one that stands still is also what circling around it looks like
+        if (stood.all() and len(p_body) >= 2) or (
+            self._stalled and (paired_still & budges[near_still]).all()
+        ):
+            self._stalled = True
             return T_ref
-        if (moved.any() and not stood.any()) or not (paired_still | paired_moving).any():
-            self._reference = (T_hat, p_body)
+        self._stalled = False
+        stale = stamp_ns - ref_ns > STALE_REFERENCE_S * NS_PER_S
+        if (moved.any() and not stood.any()) or (stale and not (paired_still | paired_moving).any()):
+            self._reference = (T_hat, p_body, stamp_ns)
         return None
 
-    def rebase(self, T_hat: Transform2D, p_body: NDArray[np.float64] | None) -> None:
-        """The reference is this pose and its detections (None: no reference): after a pose set from
-        outside, or corrected."""
-        self._reference = None if p_body is None or len(p_body) == 0 else (T_hat, p_body)
+    def correct(self, C_map: Transform2D) -> None:
+        """The filter's pose was corrected by ``T' = C_map T`` (an update): so is the reference's."""
+        if self._reference is not None:
+            T_ref, q, ref_ns = self._reference
+            self._reference = (C_map @ T_ref, q, ref_ns)
+
+    def rebase(self, T_hat: Transform2D, p_body: NDArray[np.float64] | None, stamp_ns: int = 0) -> None:
+        """The reference is this pose and its detections at ``stamp_ns`` (None: no reference): after a pose
+        set from outside, or relocalized."""
+        self._reference = None if p_body is None or len(p_body) == 0 else (T_hat, p_body, stamp_ns)
+        self._stalled = False
 
 
 @dataclass(frozen=True)
@@ -241,10 +270,10 @@ class SlipRecovery:
         usable = slam.measurement.usable(z)
         # the detections in the body frame and their position covariance G_z R G_z^T
         p_body, _, G_z = slam.measurement.inverse(np.zeros(3), z[usable])
-        T_ref = self._stall.observe(slam.pose, p_body)
+        T_ref = self._stall.observe(slam.pose, p_body, stamp_ns)
         if T_ref is not None:
             self._status.stalls += 1
-            self._correct(slam, T_ref, slam.pose_covariance, p_body, stamp_ns)
+            self._correct(slam, T_ref, slam.pose_covariance, stamp_ns)
             self._episode = None
         else:
             position_cov = np.einsum("kij,kjl,kml->kim", G_z, R[usable], G_z)
@@ -256,7 +285,10 @@ class SlipRecovery:
                 return Association(
                     np.full(count, REJECTED, dtype=np.int8), np.full(count, -1, dtype=np.int64)
                 )
+        T_before = slam.pose
         association = slam.update(observations, stamp_ns=stamp_ns)
+        # the reference moves with the update's correction: only the wheels' motion is compared
+        self._stall.correct(slam.pose @ T_before.inverse())
         if association.counts["matched"] >= 2:
             self._T_good = slam.pose
         self._report()
@@ -290,7 +322,8 @@ class SlipRecovery:
         if episode.contradictions < self.config.slip_confirm_scans:
             return True
         self._status.relocalized += 1
-        self._correct(slam, evidence.T_map_body, evidence.covariance, p_body, stamp_ns)
+        self._correct(slam, evidence.T_map_body, evidence.covariance, stamp_ns)
+        self._stall.rebase(evidence.T_map_body, p_body, stamp_ns)
         self._episode = None
         return False
 
@@ -314,8 +347,12 @@ class SlipRecovery:
             if len(p_body) - n_hat < 2:
                 return _Evidence.AGREES
         T_good = self._T_good if self._T_good is not None else T_hat
-        max_turn = abs(normalize_angle(T_hat.theta - T_good.theta)) + config.slip_margin_rad
         travel = float(np.linalg.norm(T_hat.translation - T_good.translation))
+        max_turn = (
+            abs(normalize_angle(T_hat.theta - T_good.theta))
+            + config.slip_turn_per_m * travel
+            + config.slip_margin_rad
+        )
         max_offset = travel * (1.0 + max_turn) + config.slip_margin_m
         landmark_var = float(np.trace(slam.landmark_covariances, axis1=1, axis2=2).mean()) / 2.0
         variance = float(np.trace(position_cov, axis1=1, axis2=2).mean()) / 2.0 + landmark_var
@@ -350,23 +387,16 @@ class SlipRecovery:
         )
 
     def _correct(
-        self,
-        slam: EkfSlam,
-        T_new: Transform2D,
-        covariance: NDArray[np.float64],
-        p_body: NDArray[np.float64],
-        stamp_ns: int,
+        self, slam: EkfSlam, T_new: Transform2D, covariance: NDArray[np.float64], stamp_ns: int
     ) -> None:
-        """The filter's pose becomes ``T_new`` with ``covariance`` (3, 3), independent of the map, and the
-        stall reference this pose and the scan's detections ``p_body``; the event recorded with its cause: a
-        heading the wheels invented is wheel slip, a correction that takes back travel (runs against the
-        motion reported since the last confirmed scan) a bump or stall."""
+        """The filter's pose becomes ``T_new`` with ``covariance`` (3, 3), independent of the map; the event
+        recorded with its cause: a heading the wheels invented is wheel slip, a correction that takes back
+        travel (runs against the motion reported since the last confirmed scan) a bump or stall."""
         correction = slam.pose.inverse() @ T_new
         motion = (self._T_good or slam.pose).inverse() @ slam.pose
         takes_back_travel = float(correction.translation @ motion.translation) < 0.0
         cause = "bump or stall" if takes_back_travel and abs(correction.theta) < 0.1 else "wheel slip"
         slam.reset(T_new, covariance, keep_map=True)
-        self._stall.rebase(T_new, p_body)
         self._T_good = T_new
         events = self._status.events
         if events and events[-1].cause == cause and stamp_ns - events[-1].stamp_ns <= EVENT_GAP_S * NS_PER_S:
