@@ -100,6 +100,11 @@ class LandmarksNode(Node):
         self._cylinders = 0
         DiagnosticsPublisher(self, self._statuses)
 
+    @property
+    def scan_counts(self) -> dict[str, int]:
+        """Scans so far (read-only): ``received`` on `scan`, ``refused`` (skipped with a warning)."""
+        return {"received": self._scans.count, "refused": self._refused}
+
     def _statuses(self, now_ns: int) -> list:
         """The scan input, and the detector: WARN when scans were refused since the last report."""
         refused_now, self._refused_reported = self._refused - self._refused_reported, self._refused

@@ -71,10 +71,38 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
+def no_landmarks_hint(metrics: dict[str, Any]) -> str | None:
+    """Why slam got no landmarks from the LiDAR, from the counts of ``metrics`` (metrics.json): no scan in
+    the bag, none reaching the landmarks node, every one refused by it, or no cylinder found in them.
+    None when some landmarks arrived, or the observations are the fake sensor's."""
+    if metrics.get("observation_topic") != "landmarks" or metrics["map_landmarks"] > 0:
+        return None
+    played = metrics["scans_played"]
+    received = metrics.get("scans_received_by_landmarks", 0)
+    refused = metrics.get("scans_refused_by_landmarks", 0)
+    if played == 0:
+        return "no landmarks: the bag's scan topic has no messages"
+    if received == 0:
+        return f"no landmarks: none of the {played} scans played reached the landmarks node"
+    if refused == received:
+        return (
+            f"no landmarks: the landmarks node refused all {refused} scans it received (its warnings say "
+            "why, e.g. a LiDAR layout it does not take; /diagnostics `landmarks: detector` counts them)"
+        )
+    return (
+        f"no landmarks: the landmarks node took {received - refused} of {received} scans but slam mapped "
+        "no cylinder (none of the detector's sizes in range? see landmarks/clusters in slam/)"
+    )
+
+
 def summary(result: Any) -> str:
-    """The printed report: the demo's results table when there is ground truth, then the counts."""
+    """The printed report: the results table when there is ground truth (with the demo's targets for a
+    nusim recording only), then the counts, the notes and why there are no landmarks if so."""
     metrics = result.metrics
-    lines = [f"replayed {metrics['bag']} ({metrics['storage']}), association {metrics['association']}"]
+    lines = [
+        f"replayed {metrics['bag']} ({metrics['storage']}), association {metrics['association']}, "
+        f"motion from {metrics['motion_source']}"
+    ]
     if result.interrupted:
         lines.append("interrupted: the outputs cover what was played so far")
     if result.accuracy:
@@ -84,10 +112,15 @@ def summary(result: Any) -> str:
         fields = RunMetrics.__dataclass_fields__
         values = {key: metrics[key] for key in fields}
         values["nees_pose_band_95"] = tuple(values["nees_pose_band_95"])
-        lines += ["", results_table(RunMetrics(**values)), ""]
+        lines += ["", results_table(RunMetrics(**values), targets=metrics["nusim_recording"]), ""]
+        if not metrics["nusim_recording"]:
+            lines.append("(not a nusim recording: the demo's targets do not apply)")
     rows = ["| count | value |", "|---|---:|"]
     for topic, count in metrics["messages_played"].items():
         rows.append(f"| messages played, {topic} | {count} |")
+    for key in ("scans_received_by_landmarks", "scans_refused_by_landmarks"):
+        if key in metrics:
+            rows.append(f"| {key.replace('_', ' ')} | {metrics[key]} |")
     for key in ("observation_arrays_received", "observation_arrays_applied", "observation_arrays_skipped",
                 "observation_arrays_pending"):  # fmt: skip
         if key in metrics:
@@ -95,6 +128,10 @@ def summary(result: Any) -> str:
     rows.append(f"| replay wall time (s) / bag time (s) | {metrics['replay_wall_seconds']:.1f} / "
                 f"{metrics['bag_seconds']:.1f} |")  # fmt: skip
     lines += rows
+    lines += [f"note: {note}" for note in metrics["notes"]]
+    hint = no_landmarks_hint(metrics)
+    if hint is not None:
+        lines.append(hint)
     if "observation_arrays_applied" in metrics:
         lines.append(f"outputs in {result.out_dir}/: metrics.json trajectory.png map.json covariance.png "
                      f"{'errors.png ' if result.accuracy else ''}slam/ config.yaml")  # fmt: skip
