@@ -10,7 +10,8 @@ Publishes (stamped with the scan's stamp, in the scan's frame)
         scan, cylinders green and rejected clusters grey (for tuning the thresholds).
     `/diagnostics` (diagnostic_msgs/DiagnosticArray, 1 Hz): `landmarks: scan` (rate; ERROR after
         `STALE_S` without a scan) and `landmarks: detector` (time per scan, cylinders in the last scan,
-        scans refused; WARN when scans were refused since the last report).
+        scans used and refused since start-up, the last refusal's reason; WARN when scans were refused
+        since the last report, ERROR when every scan since then was: scans arrive but none is used).
 Parameters
     Every field of `turtlelib.DetectorConfig` (cluster_threshold, min_points, min_radius, max_radius, ...),
     under the same names. Invalid values stop the node at start-up with a message.
@@ -34,6 +35,7 @@ from sensor_msgs.msg import LaserScan
 from visualization_msgs.msg import Marker, MarkerArray
 
 from nuturtle_ros_common.diagnostics import (
+    ERROR,
     OK,
     WARN,
     DiagnosticsPublisher,
@@ -96,7 +98,9 @@ class LandmarksNode(Node):
         self.create_subscription(LaserScan, "scan", self._on_scan, qos_profile_sensor_data)
         self._scans = InputMonitor("scan", self.get_clock().now().nanoseconds, STALE_S)
         self._detect_time = DurationMonitor()
+        self._used = self._used_reported = 0
         self._refused = self._refused_reported = 0
+        self._last_refusal = "none"
         self._cylinders = 0
         DiagnosticsPublisher(self, self._statuses)
 
@@ -106,14 +110,25 @@ class LandmarksNode(Node):
         return {"received": self._scans.count, "refused": self._refused}
 
     def _statuses(self, now_ns: int) -> list:
-        """The scan input, and the detector: WARN when scans were refused since the last report."""
+        """The scan input, and the detector: WARN when scans were refused since the last report, ERROR
+        when every one since then was (with the last reason)."""
         refused_now, self._refused_reported = self._refused - self._refused_reported, self._refused
-        values = {"cylinders_last_scan": self._cylinders, "scans_refused": self._refused}
+        used_now, self._used_reported = self._used - self._used_reported, self._used
+        values = {
+            "cylinders_last_scan": self._cylinders,
+            "scans_used": self._used,
+            "scans_refused": self._refused,
+            "last_refusal": self._last_refusal,
+        }
         values.update(self._detect_time.values("detection"))
-        message = f"{self._cylinders} cylinders in the last scan"
+        level, message = OK, f"{self._cylinders} cylinders in the last scan"
         if refused_now:
-            message += f"; {refused_now} scans refused in the last {DiagnosticsPublisher.PERIOD_S:g} s"
-        detector = status("landmarks: detector", "landmarks", WARN if refused_now else OK, message, values)
+            level = WARN if used_now else ERROR
+            message = (
+                f"{refused_now} of {refused_now + used_now} scans refused in the last "
+                f"{DiagnosticsPublisher.PERIOD_S:g} s ({self._last_refusal}); {message}"
+            )
+        detector = status("landmarks: detector", "landmarks", level, message, values)
         return [self._scans.status("landmarks", now_ns), detector]
 
     def _on_scan(self, msg: LaserScan) -> None:
@@ -130,7 +145,9 @@ class LandmarksNode(Node):
         except ValueError as error:
             self.get_logger().warning(f"scan skipped: {error}", throttle_duration_sec=WARN_THROTTLE_S)
             self._refused += 1
+            self._last_refusal = str(error)
             return
+        self._used += 1
         self._detect_time.add(1e3 * (time.perf_counter() - start))
         self._cylinders = len(detections.radius)
         self._landmarks_publisher.publish(landmark_markers(detections, msg))

@@ -2,19 +2,25 @@
 
 Scans are LDS-01 scans (360 beams of 1 deg, 0.12-3.5 m, frame base_scan) ray cast by
 `turtlelib.simulate_scan` with 1 cm noise and 1 cm resolution (seeded), of two cylinders at known places
-inside a square arena, everything given in the sensor frame.
+inside a square arena, everything given in the sensor frame; and Gazebo's scans as recorded by a third
+party (data/tb3_gazebo_burger_2s, the first 2 s of the shared recording: data/README.md), decoded by
+rclpy from the recorded bytes, against the world's cylinders seen from the recording's true /odom.
 """
 
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from nav_msgs.msg import Odometry
 from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data
+from rclpy.serialization import deserialize_message
 from ros_test_messages import node_inputs_matched, scan_message, stamp_ns
+from rosbags.rosbag2 import Reader
 from sensor_msgs.msg import LaserScan
 from visualization_msgs.msg import Marker, MarkerArray
 
@@ -33,6 +39,13 @@ GREEN = (0.1, 0.8, 0.2, 1.0)
 CENTRE_TOL_M = 0.015
 RADIUS_TOL_M = 0.01
 T0_NS = 1_700_000_000_123_456_789  # an epoch-sized stamp with every nanosecond digit used
+# The first 2 s of a TurtleBot3 Burger in Gazebo's turtlebot3_world (data/README.md): nine cylinders of
+# radius 0.15 m at x, y in {-1.1, 0, 1.1} (world frame, m); /odom is the true pose of base_footprint, and
+# base_scan sits 0.032 m behind it
+GAZEBO_EXCERPT = Path(__file__).parent / "data" / "tb3_gazebo_burger_2s"
+TB3_WORLD_CYLINDERS = np.array([(x, y) for x in (-1.1, 0.0, 1.1) for y in (-1.1, 0.0, 1.1)])
+TB3_WORLD_RADIUS_M = 0.15
+T_FOOTPRINT_SCAN = Transform2D(-0.032, 0.0, 0.0)
 
 
 def scan_ranges(circles=CYLINDERS, walls=WALLS, seed: int = 7) -> np.ndarray:
@@ -126,6 +139,55 @@ def test_a_scan_in_another_frame_keeps_its_frame_and_each_scan_gets_its_own_arra
     assert second.markers[0].action == Marker.DELETEALL, "clears the first scan's two cylinders"
 
 
+def gazebo_recording() -> tuple[list[LaserScan], list[tuple[int, Transform2D]]]:
+    """The excerpt's scans (rclpy messages of the recorded bytes) and true poses ``(stamp_ns,
+    T_world_footprint)`` from /odom."""
+    scans, poses = [], []
+    with Reader(GAZEBO_EXCERPT) as reader:
+        for connection, _, data in reader.messages():
+            if connection.topic == "/scan":
+                scans.append(deserialize_message(data, LaserScan))
+            elif connection.topic == "/odom":
+                odom = deserialize_message(data, Odometry)
+                q, p = odom.pose.pose.orientation, odom.pose.pose.position
+                poses.append((stamp_ns(odom.header.stamp), Transform2D(p.x, p.y, 2 * math.atan2(q.z, q.w))))
+    return scans, poses
+
+
+def test_gazebo_scans_of_a_third_party_recording_are_used_and_show_its_cylinders(ros):
+    # issue 30: every scan of the stock Gazebo LiDAR (360 beams from 0 to 6.28 rad, the last repeating the
+    # first) was refused as "more than one turn"; now the last beam is dropped and the scan used
+    scans, poses = gazebo_recording()
+    assert len(scans) == 10 and len(poses) == 55
+    rig = Rig(ros)
+    errors_m, radii_m = [], []
+    for scan in scans:
+        assert (len(scan.ranges), scan.angle_min, scan.angle_max) == (360, 0.0, pytest.approx(6.28))
+        t_ns = stamp_ns(scan.header.stamp)
+        array = rig.send(scan)
+        assert_header(array, t_ns)
+        # the true pose nearest the scan (/odom at 30 Hz): its timing error moves far points by up to 2 cm
+        _, T_world_footprint = min(poses, key=lambda pose: abs(pose[0] - t_ns))
+        T_world_scan = T_world_footprint @ T_FOOTPRINT_SCAN
+        found = cylinders_of(array)
+        p_world = T_world_scan @ np.array([(m.pose.position.x, m.pose.position.y) for m in found])
+        distance = np.hypot(*(p_world[:, None, :] - TB3_WORLD_CYLINDERS[None]).transpose(2, 0, 1))
+        nearest = distance.argmin(axis=1)
+        assert len(found) >= 5, "five or six cylinders in range in these 2 s"
+        assert len(set(nearest.tolist())) == len(found), "each cylinder once"
+        # a detection is spurious unless its centre lies inside a cylinder
+        assert distance.min(axis=1).max() < TB3_WORLD_RADIUS_M, "no spurious cylinder"
+        errors_m.extend(distance.min(axis=1))
+        radii_m.extend(0.5 * marker.scale.x for marker in found)
+        # every point of the first 359 beams drawn once: beam 359 (at 6.28 rad) is dropped
+        (clusters,) = [c for c in rig.clusters if stamp_ns(c.markers[0].header.stamp) == t_ns]
+        ranges = np.asarray(scan.ranges[:359])
+        assert sum(len(m.points) for m in clusters.markers[1:]) == np.count_nonzero(np.isfinite(ranges))
+    assert np.median(errors_m) < 0.02, "centres within 2 cm (the pose's timing included)"
+    assert np.median(radii_m) == pytest.approx(TB3_WORLD_RADIUS_M, abs=0.01)
+    assert rig.warnings() == []
+
+
 @pytest.mark.parametrize(
     "ranges",
     [
@@ -182,9 +244,10 @@ BAD_SCANS = {
     "no beams": ({"ranges": []}, "non-empty"),
     # layouts that contradict themselves (the issue: 85 of 85 detections were phantoms)
     "angle_increment negated": ({"angle_increment": -LDS01.angle_increment}, "contradicts itself"),
-    "angle_increment doubled": ({"angle_increment": 2 * LDS01.angle_increment}, "more than one turn"),
+    "angle_increment doubled": ({"angle_increment": 2 * LDS01.angle_increment}, "contradicts itself"),
     "angle_min 1e10": ({"angle_min": 1e10}, "more than a turn from 0"),
-    "720 ranges for 360 beams": ({"ranges": [1.0] * 720}, "more than one turn"),
+    "720 ranges for 360 beams": ({"ranges": [1.0] * 720}, "contradicts itself"),
+    "angle_max halved": ({"angle_max": math.pi}, "contradicts itself"),
     "intensities for half the beams": ({"intensities": [1.0] * 180}, "180 intensities for 360 ranges"),
 }
 
@@ -269,3 +332,44 @@ def test_diagnostics_are_an_error_when_no_scan_arrives(ros):
     assert set(statuses) == {"landmarks: scan", "landmarks: detector"}
     assert "nothing yet on scan" in statuses["landmarks: scan"].message
     assert statuses["landmarks: detector"].level == DiagnosticStatus.OK
+
+
+def test_diagnostics_tell_refused_scans_from_missing_ones_and_say_why(ros):
+    # scans arrive (the scan status is OK) but are refused: the detector status is an ERROR naming the
+    # reason while every scan is refused, a WARN while some are used
+    rig = Rig(ros)
+    helper = ros.node("landmarks_refusal_helper")
+    arrays: list[DiagnosticArray] = []
+    subscription = helper.create_subscription(DiagnosticArray, "/diagnostics", arrays.append, 10)
+    assert ros.spin_until(lambda: matched(subscription), 5.0)
+    good = scan_message(T0_NS, scan_ranges())
+    bad = scan_message(T0_NS, scan_ranges(), angle_increment=2 * LDS01.angle_increment)
+
+    def publish_until(scans: list[LaserScan], level: bytes) -> dict[str, DiagnosticStatus]:
+        """Publish ``scans`` in turn at 20 Hz until the detector status has ``level``; the statuses."""
+        for k in range(80):
+            rig.scan.publish(scans[k % len(scans)])
+            if ros.spin_until(lambda: any(a for a in arrays if detector_level(a) == level), 0.05):
+                break
+        (last,) = [a for a in arrays if detector_level(a) == level][-1:]
+        arrays.clear()
+        return {s.name: s for s in last.status}
+
+    refused = publish_until([bad], DiagnosticStatus.ERROR)
+    detector = refused["landmarks: detector"]
+    assert refused["landmarks: scan"].level == DiagnosticStatus.OK, "scans arrive"
+    assert "scans refused" in detector.message and "contradicts itself" in detector.message
+    values = {pair.key: pair.value for pair in detector.values}
+    assert values["scans_used"] == "0" and int(values["scans_refused"]) > 0
+    assert "contradicts itself" in values["last_refusal"]
+    mixed = publish_until([good, bad], DiagnosticStatus.WARN)["landmarks: detector"]
+    assert "scans refused" in mixed.message
+    assert int({pair.key: pair.value for pair in mixed.values}["scans_used"]) > 0
+    warnings = rig.warnings(at_least=1)
+    assert len(warnings) == 1, "throttled"
+    assert "scan skipped" in warnings[0] and "contradicts itself" in warnings[0]
+
+
+def detector_level(array: DiagnosticArray) -> bytes | None:
+    levels = [s.level for s in array.status if s.name == "landmarks: detector"]
+    return levels[0] if levels else None

@@ -18,6 +18,7 @@ from turtlelib import (
     LidarConfig,
     Transform2D,
     arena_walls,
+    cast_beams,
     cluster_scan,
     simulate_scan,
 )
@@ -242,6 +243,25 @@ def test_detects_a_cylinder_across_the_seam_once():
     detections = detect(ranges, lidar, EXACT)
     assert len(detections) == 1
     np.testing.assert_allclose(detections.p_sensor[0], [1.5, 0.0], rtol=0.0, atol=1e-6)
+
+
+def test_beams_beyond_one_turn_are_dropped():
+    # Gazebo's layout (360 beams of 6.28 / 359 rad from 0, as the shared recording carries it): beam 359 lies
+    # 0.0032 rad short of a turn and repeats beam 0. A cylinder straddles the seam; whatever beam 359 reads
+    # (here a phantom 0.3 m return that would split the cylinder's cluster), the detections are those of the
+    # first 359 beams.
+    angle_increment = 0.01749303564429283
+    angles = angle_increment * np.arange(360)
+    ranges, _ = cast_beams(Transform2D(), angles, [[1.5, 0.0, 0.1]], arena_walls(6.0, 6.0))
+    phantom = ranges.copy()
+    phantom[-1] = 0.3
+    detector = LandmarkDetector(EXACT)
+    expected = detector.detect(ranges[:359], 0.0, angle_increment, 0.12, 3.5)
+    for scan in (ranges, phantom):
+        detections = detector.detect(scan, 0.0, angle_increment, 0.12, 3.5)
+        assert len(detections) == 1
+        np.testing.assert_array_equal(detections.p_sensor, expected.p_sensor)
+        np.testing.assert_allclose(detections.p_sensor[0], [1.5, 0.0], rtol=0.0, atol=1e-6)
 
 
 def test_a_reversed_scan_gives_the_same_detections():

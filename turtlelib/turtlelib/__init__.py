@@ -5,7 +5,15 @@ No ROS import, ever: the ROS nodes in nusim, nuturtle_control and nuslam are thi
 
 from .circle_fit import Circle, CircleFits, fit_circle, fit_circles, refine_for_range_sensor
 from .consistency import chi2_bounds, nees, nis
-from .detection import Clusters, Detections, DetectorConfig, LandmarkDetector, check_scan_layout, cluster_scan
+from .detection import (
+    Clusters,
+    Detections,
+    DetectorConfig,
+    LandmarkDetector,
+    beams_in_one_turn,
+    check_scan_layout,
+    cluster_scan,
+)
 from .ekf_slam import MODES, Association, EkfSlam, ObservationStatus, SlamConfig
 from .geometry import Transform2D, Twist2D, integrate_twist, normalize_angle, normalize_angles
 from .kinematics import DiffDrive
@@ -33,6 +41,7 @@ __all__ = [
     "LidarConfig",
     "arena_walls",
     "cast_beams",
+    "beams_in_one_turn",
     "check_scan_layout",
     "cluster_scan",
     "fit_circle",

@@ -2,8 +2,10 @@
 
 Pipeline (all in the sensor frame; m, rad)
 ------------------------------------------
-1. Points: beam ``b`` with a valid range ``rho_b`` (finite, ``> 0`` and inside ``[range_min,
-   range_max]``) gives ``p_b = rho_b [cos(phi_b), sin(phi_b)]``; other beams are dropped.
+1. Points: beam ``b`` at ``phi_b = angle_min + b angle_increment`` within the first full turn
+   (:func:`beams_in_one_turn`) with a valid range ``rho_b`` (finite, ``> 0`` and inside ``[range_min,
+   range_max]``: 0.0, NaN and inf mean no return) gives ``p_b = rho_b [cos(phi_b), sin(phi_b)]``; other
+   beams are dropped.
 2. Clustering: consecutive valid points ``p_i, p_{i+1}`` belong to the same cluster when
    ``|p_{i+1} - p_i| < cluster_threshold``. When the scan covers a full turn the point sequence is
    cyclic: the last and the first cluster are merged if the gap across the seam is under the threshold.
@@ -292,16 +294,33 @@ def _checked_ranges(ranges: ArrayLike) -> NDArray[np.float64]:
     return range_m
 
 
+def beams_in_one_turn(samples: int, angle_increment: float) -> int:
+    """How many of a scan's ``samples`` beams the detector uses: the first beams up to one full turn.
+
+    Beam ``b`` lies ``b |angle_increment|`` (rad) past the first; it is kept while ``(b + 1/2)
+    |angle_increment| < 2 pi``. A later beam points within half a step of the first beam, one turn on (or
+    further round), so it repeats a direction already scanned: Gazebo's LiDAR spans 0 to 6.28 rad in 360
+    beams of 6.28/359 rad, and its last beam, 0.0032 rad short of a turn, repeats the first (359 kept).
+    LDS-01 (360 beams of 2 pi / 360) and LDS-02 layouts keep every beam. At least one beam is kept.
+    ``angle_increment`` must be finite and non-zero.
+    """
+    step = abs(angle_increment)
+    if (samples - 0.5) * step < math.tau:
+        return samples
+    return max(1, math.ceil(math.tau / step - 0.5))
+
+
 def check_scan_layout(samples: int, angle_min: float, angle_max: float, angle_increment: float) -> None:
     """ValueError unless a scan's layout agrees with itself (sensor_msgs/LaserScan's fields).
 
     Beam ``b`` is at ``angle_min + b angle_increment`` (rad); the last, ``angle_min + (samples - 1)
     angle_increment``, must be ``angle_max`` to within one increment (drivers differ: the LDS-01's gives
-    ``angle_max = 2 pi`` for 360 beams of 1 degree, one increment past its last beam) plus
-    ``LAYOUT_SLACK_RAD`` for float32 rounding; the angles finite, the increment non-zero, both ends within
-    one turn of zero, and the beams no more than one turn (``samples |angle_increment| <= 2 pi``, plus the
-    slack). A scan that disagrees (a negated or doubled increment, twice the ranges) would put every beam in
-    the wrong direction.
+    ``angle_max = 2 pi`` for 360 beams of 1 degree, one increment past its last beam; the LDS-02's last
+    beam lies up to one increment before ``angle_max``) plus ``LAYOUT_SLACK_RAD`` for float32 rounding;
+    the angles finite, the increment non-zero and both ends within one turn of zero. A scan that disagrees
+    (a negated or doubled increment, twice the ranges) would put every beam in the wrong direction.
+    Beams beyond one full turn (Gazebo's last beam repeats its first) do not make a layout wrong: the
+    detector drops them (:func:`beams_in_one_turn`).
     """
     values = (angle_min, angle_max, angle_increment)
     if not all(math.isfinite(v) for v in values) or angle_increment == 0.0:
@@ -310,8 +329,6 @@ def check_scan_layout(samples: int, angle_min: float, angle_max: float, angle_in
         raise ValueError("a scan needs a non-empty ranges array")
     if max(abs(angle_min), abs(angle_max)) > 2.0 * math.pi + LAYOUT_SLACK_RAD:
         raise ValueError(f"angle_min {angle_min} or angle_max {angle_max} is more than a turn from 0")
-    if samples * abs(angle_increment) > 2.0 * math.pi + LAYOUT_SLACK_RAD:
-        raise ValueError(f"{samples} beams of {angle_increment} rad are more than one turn")
     last = angle_min + (samples - 1) * angle_increment
     if abs(last - angle_max) > abs(angle_increment) + LAYOUT_SLACK_RAD:
         raise ValueError(
@@ -374,7 +391,8 @@ class LandmarkDetector:
     ) -> Detections:
         """Cylinders in a scan of ``ranges`` (B,) (m) on beams ``angle_min + b * angle_increment`` (rad).
 
-        Beams that are 0.0, NaN, inf or outside ``[range_min, range_max]`` are ignored. ValueError for
+        Beams that are 0.0, NaN, inf or outside ``[range_min, range_max]`` are ignored, and so are beams
+        beyond one full turn (:func:`beams_in_one_turn`: Gazebo's last beam repeats its first). ValueError for
         an empty or non-1-D ``ranges``, a non-finite or zero ``angle_increment``, a non-finite
         ``angle_min``, or ``range_min >= range_max``.
         """
@@ -391,7 +409,13 @@ class LandmarkDetector:
         """As :meth:`detect`, also returning every cluster of the scan (for a debug topic)."""
         range_m = _checked_ranges(ranges)
         range_min, range_max = _checked_limits(range_min, range_max)
-        geometry = self._scan_geometry(range_m.shape[0], float(angle_min), float(angle_increment))
+        angle_min, angle_increment = float(angle_min), float(angle_increment)
+        if not (math.isfinite(angle_min) and math.isfinite(angle_increment) and angle_increment != 0.0):
+            raise ValueError(
+                f"need finite angle_min and angle_increment != 0, got {angle_min}, {angle_increment}"
+            )
+        range_m = range_m[: beams_in_one_turn(range_m.shape[0], angle_increment)]
+        geometry = self._scan_geometry(range_m.shape[0], angle_min, angle_increment)
         valid = _valid_beams(range_m, range_min, range_max)
         clusters = _cluster(range_m, valid, geometry, self.config.cluster_threshold)
         return self._classify(clusters, range_m, valid, geometry), clusters
@@ -400,10 +424,6 @@ class LandmarkDetector:
         key = (samples, angle_min, angle_increment)
         if self._layout is not None and self._layout[0] == key:
             return self._layout[1]
-        if not (math.isfinite(angle_min) and math.isfinite(angle_increment) and angle_increment != 0.0):
-            raise ValueError(
-                f"need finite angle_min and angle_increment != 0, got {angle_min}, {angle_increment}"
-            )
         angles_rad = angle_min + angle_increment * np.arange(samples, dtype=np.float64)
         geometry = _ScanGeometry.from_angles(angles_rad)
         self._layout = (key, geometry)
