@@ -130,15 +130,17 @@ def evaluate_and_plot(
     plots.plot_covariance(out_dir / "covariance.png", snapshot.covariance)
     if record.truth is None or odom is None or not len(record.slam):
         return None
+    circles = np.asarray(record.circles, dtype=np.float64).reshape(-1, 3)
     data = RunData(
         truth=record.truth,
         odom=odom,
         slam=record.slam,
         slam_covariances=record.slam_covariances,
         mapped_xy=snapshot.landmarks_xy,
-        true_xy=np.asarray(record.circles, dtype=np.float64).reshape(-1, 3)[:, :2],
+        true_xy=circles[:, :2],
         sensor_range_m=record.sensor_range_m,
         gate_m=LANDMARK_GATE_M,
+        true_radii_m=circles[:, 2],
     )
     metrics = evaluate_run(data, sim_seconds=sim_seconds, wall_seconds=wall_seconds)
     plots.plot_slam_errors(out_dir / "errors.png", record.slam, record.slam_covariances, record.truth)

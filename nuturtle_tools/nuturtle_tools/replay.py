@@ -86,8 +86,8 @@ def no_landmarks_hint(metrics: dict[str, Any]) -> str | None:
         return f"no landmarks: none of the {played} scans played reached the landmarks node"
     if refused == received:
         return (
-            f"no landmarks: the landmarks node refused all {refused} scans it received (its warnings say "
-            "why, e.g. a LiDAR layout it does not take; /diagnostics `landmarks: detector` counts them)"
+            f"no landmarks: the landmarks node refused all {refused} scans it received, the last because: "
+            f"{metrics.get('last_scan_refusal', 'unknown')} (/diagnostics `landmarks: detector` counts them)"
         )
     return (
         f"no landmarks: the landmarks node took {received - refused} of {received} scans but slam mapped "

@@ -546,6 +546,7 @@ class Replay:
                 scans = self.landmarks.scan_counts
                 values["scans_received_by_landmarks"] = scans["received"]
                 values["scans_refused_by_landmarks"] = scans["refused"]
+                values["last_scan_refusal"] = self.landmarks.last_refusal
         return values
 
     def _finish(self, out_dir: Path, wall_seconds: float, interrupted: bool) -> ReplayResult:

@@ -164,7 +164,8 @@ def test_scans_the_landmarks_node_refuses_are_named_as_the_reason_for_no_landmar
     assert scans >= 15
     assert metrics["scans_received_by_landmarks"] == metrics["scans_refused_by_landmarks"] == scans
     assert metrics["map_landmarks"] == 0
-    assert f"the landmarks node refused all {scans} scans" in stdout
+    assert f"the landmarks node refused all {scans} scans it received, the last because: " in stdout
+    assert "angle_max" in metrics["last_scan_refusal"]
 
 
 def _counts(played, received, refused, mapped=0, topic="landmarks"):
