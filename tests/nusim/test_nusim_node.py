@@ -230,14 +230,14 @@ def test_obstacles_and_walls_are_latched_red_markers_in_the_world_frame(ros):
     assert len(walls[0].markers) == 4
     for marker in obstacles[0].markers + walls[0].markers:
         assert (marker.color.r, marker.color.g, marker.color.b) == (1.0, 0.0, 0.0)
-    # the walls' inner faces are the arena's bounds
-    inner = sorted(
-        abs(m.pose.position.x) - m.scale.x / 2
-        if m.scale.x < m.scale.y
-        else abs(m.pose.position.y) - m.scale.y / 2
-        for m in walls[0].markers
-    )
-    assert inner == pytest.approx([1.5, 1.5, 2.0, 2.0])
+    # the walls' inner faces are the arena's bounds: each wall turned by yaw along its face, whose normal
+    # (-sin yaw, cos yaw) is scale.y / 2 nearer the centre than the marker's
+    inner = []
+    for m in walls[0].markers:
+        yaw = yaw_from_quaternion(m.pose.orientation)
+        normal_m = -math.sin(yaw) * m.pose.position.x + math.cos(yaw) * m.pose.position.y
+        inner.append(abs(normal_m) - m.scale.y / 2)
+    assert sorted(inner) == pytest.approx([1.5, 1.5, 2.0, 2.0])
 
 
 def test_collision_stops_the_true_robot_while_the_encoders_keep_counting(ros):
