@@ -100,8 +100,9 @@ class RunRecord:
     """What a run or a replay produced, in the truth's frame: the ``truth`` (None without ground truth),
     ``odom`` (None or empty without odometry) and ``slam`` pose series, ``slam_covariances`` (K, 3, 3) of
     the SLAM poses, the filter's final ``snapshot``, the true cylinders ``circles`` (M, 3) of rows
-    ``[x, y, r]``, ``sensor_range_m`` (:func:`sensor_range_m`) and ``arena_xy_m`` the arena's size, whose
-    walls the trajectory figure draws (None: no walls, the axes fit the data)."""
+    ``[x, y, r]``, ``sensor_range_m`` (:func:`sensor_range_m`) and ``walls`` (K, 4) the arena's wall
+    segments ``[x0, y0, x1, y1]``, which the trajectory figure draws (None: no walls, the axes fit the
+    data)."""
 
     truth: PoseSeries | None
     odom: PoseSeries | None
@@ -110,7 +111,7 @@ class RunRecord:
     snapshot: SlamSnapshot
     circles: NDArray[np.float64]
     sensor_range_m: float | NDArray[np.float64]
-    arena_xy_m: tuple[float, float] | None = None
+    walls: NDArray[np.float64] | None = None
 
 
 def evaluate_and_plot(
@@ -125,7 +126,7 @@ def evaluate_and_plot(
     if len(record.slam):
         plots.plot_trajectory(
             out_dir / "trajectory.png", record.truth, odom, record.slam, record.circles,
-            snapshot.landmarks_xy, snapshot.landmark_covariances, record.arena_xy_m,
+            snapshot.landmarks_xy, snapshot.landmark_covariances, record.walls,
         )  # fmt: skip
     plots.plot_covariance(out_dir / "covariance.png", snapshot.covariance)
     if record.truth is None or odom is None or not len(record.slam):
