@@ -19,9 +19,11 @@ Motors (per wheel ``i`` in (left, right), per physics step of ``dt`` s)
   ``w_i'' = w_i' + n_i``, ``n_i ~ N(0, input_noise^2)`` drawn each step;
 * the encoder counts the noisy commanded rotation ``phi_i += w_i'' dt`` and reads
   ``ticks_i = round(phi_i * encoder_ticks_per_rad)``;
-* slip: the wheel's contact with the floor moves ``dphi_i = w_i'' dt (1 + s_i)``,
+* slip: the wheel's contact with the floor moves ``dphi_i = traction w_i'' dt (1 + s_i)``,
   ``s_i ~ U(-slip_fraction, slip_fraction)``, and the body follows the exact diff-drive arc
-  ``T' = T @ exp([F dphi])`` (``turtlelib.DiffDrive.step``).
+  ``T' = T @ exp([F dphi])`` (``turtlelib.DiffDrive.step``). ``traction`` is 1 on a normal floor; a slip
+  event (wheels spinning on a slick patch, or lifted) is ``traction`` 0 for a while: the encoders count
+  motion the body does not make.
 
 Collisions (stop at contact)
 ----------------------------
@@ -365,6 +367,8 @@ class Simulation:
         self._encoder_rad = np.zeros(2)
         self.wheel_speed_rad_s = np.zeros(2)
         self.V_body = np.zeros(3)
+        # the floor's grip, in [0, 1]: 1 normally, 0 during a slip event (module docstring)
+        self.traction = 1.0
 
     # --- motors ------------------------------------------------------------------------------------------
 
@@ -401,9 +405,9 @@ class Simulation:
         # phi += w'' dt  (what the encoders count)
         self._encoder_rad = self._encoder_rad + w_noisy * dt_s
         self.wheel_speed_rad_s = w_noisy
-        # dphi = w'' dt (1 + s),  s ~ U(-slip, slip)
+        # dphi = traction w'' dt (1 + s),  s ~ U(-slip, slip)
         slip = self._slip_rng.uniform(-noise.slip_fraction, noise.slip_fraction, size=2)
-        dphi = w_noisy * dt_s * (1.0 + slip)
+        dphi = self.traction * w_noisy * dt_s * (1.0 + slip)
         T_start = self.T_world_body
         # T' = T @ exp([F dphi])
         T_end = self.drive.step(T_start, dphi[0], dphi[1])

@@ -43,7 +43,10 @@ Publishes
         topic>` (rates; ERROR after `STALE_S` of the node's clock without a message), `slam: filter`
         (mode, landmarks mapped and tentative, observations fused, rejected and (localization) unmapped,
         time per applied scan; WARN when
-        observations were rejected or skipped since the last report).
+        observations were rejected or skipped since the last report), `slam: motion vs LiDAR`
+        (`turtlelib.slip_recovery`: WARN naming the cause while scans contradict the wheels' motion (slip,
+        bump) and for `slip_report_s` after each relocalization against the map, ERROR when they keep
+        coming; scans held and relocalizations so far).
     `/tf` `map_id` -> `odom_id` where tf2_msgs is installed: ``T_map_odom = T_map_body T_odom_body^-1``
         at each pose's stamp, with ``T_odom_body`` the transform the odometry source broadcasts (read from
         its `odom` topic, interpolated between its samples), so that composing the two transforms on /tf
@@ -61,7 +64,9 @@ Parameters
     linearization, confirm_count, tentative_timeout, min_range, max_range, max_landmarks, max_observations,
     initial_*_std, jcbb_max_nodes),
     `turtlelib.TimelineConfig`
-    (max_observation_delay, max_observation_lead, max_pending_observations), `RobotParams` (the Burger's by
+    (max_observation_delay, max_observation_lead, max_pending_observations),
+    `turtlelib.slip_recovery.SlipRecoveryConfig` (slip_recovery, slip_min_matches, slip_match_radius,
+    slip_confirm_scans, slip_margin_m, slip_margin_rad, slip_report_s), `RobotParams` (the Burger's by
     default), `WheelJoints`, `PathTrailConfig`, `turtlelib.SampleGateConfig` (speed_margin,
     max_sample_gap, max_bridged_gap, restart_samples). Defaults in config/slam.yaml. The filter's sensor
     mount (`SlamConfig.sensor_x/y/theta`) is the robot's `lidar_x`, `lidar_y`, `lidar_yaw`. Invalid values
@@ -108,6 +113,7 @@ from nuturtle_ros_common.conversions import (
     transform_stamped,
 )
 from nuturtle_ros_common.diagnostics import (
+    ERROR,
     OK,
     WARN,
     DiagnosticsPublisher,
@@ -142,6 +148,7 @@ from turtlelib.pose_twist import PoseTwist
 from turtlelib.range_bearing import observations_from_points
 from turtlelib.sample_gate import GateResult, Verdict
 from turtlelib.slam_map import LandmarkMap, load_map, save_map
+from turtlelib.slip_recovery import SlipRecovery, SlipRecoveryConfig
 from turtlelib.validation import finite_real, names, non_negative, one_of, positive, store
 from turtlelib.wheel_odometry import WheelOdometry
 
@@ -157,6 +164,8 @@ STALE_S = 2.0
 ELLIPSE_SIGMA = 2.0
 # The default wheel slip (sqrt(rad)); the default odom_* twist noise is this slip on the Burger's twist
 WHEEL_NOISE = 0.05
+# SlipStatus.level -> diagnostic level
+SLIP_LEVELS = {"ok": OK, "warn": WARN, "error": ERROR}
 # REP 2003 map QoS: reliable, transient local (the last map reaches late subscribers), keep last 1
 MAP_QOS = QoSProfile(
     depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
@@ -228,6 +237,7 @@ class SlamNode(Node):
         }
         self.config = declare_dataclass(self, SlamConfig, fixed=sensor_mount)
         timeline_config = declare_dataclass(self, TimelineConfig)
+        self.recovery = SlipRecovery(declare_dataclass(self, SlipRecoveryConfig))
         self.joints = declare_dataclass(self, WheelJoints)
         self.trail: PathTrail[PoseStamped] = PathTrail(declare_dataclass(self, PathTrailConfig))
         drive = robot.diff_drive()
@@ -246,7 +256,7 @@ class SlamNode(Node):
         self._start_map = self._load_start_map()
         if self._start_map is not None:
             self.slam.load_map(self._start_map, self.node_config.T_map_body0)
-        self.timeline = SlamTimeline(self.slam, signal, timeline_config)
+        self.timeline = SlamTimeline(self.slam, signal, timeline_config, recovery=self.recovery)
         # T_sensor_frame for the frames observations may come in
         T_body_sensor = self.config.T_body_sensor
         self._T_sensor_from = {
@@ -283,7 +293,7 @@ class SlamNode(Node):
         self._observation_input = InputMonitor(self._observation_topic, started_ns, STALE_S)
         self._update_time = DurationMonitor()
         self._counts = {"fused": 0, "rejected": 0, "unmapped": 0, "skipped": 0, "arrays_applied": 0}
-        self._skipped_reported = self._rejected_reported = 0
+        self._skipped_reported = self._rejected_reported = self._relocalized_reported = 0
         DiagnosticsPublisher(self, self._statuses)
         if self.node_config.association == "known":
             self.create_subscription(MarkerArray, "fake_sensor", self._on_fake_sensor, 10)
@@ -422,6 +432,7 @@ class SlamNode(Node):
                 )
             T_map_body = transform_from_pose(msg.pose.pose)
             self.slam.reset(T_map_body, positive_definite_pose_covariance(msg.pose.covariance), keep_map=True)
+            self.recovery.forget(T_map_body)
         except ValueError as error:
             self._warnings.warn("initialpose", f"initialpose skipped: {error}")
             return
@@ -452,6 +463,7 @@ class SlamNode(Node):
             self.slam.reset(T_map_body0)
         else:
             self.slam.load_map(self._start_map, T_map_body0)
+        self.recovery.forget(T_map_body0)
         count = 0 if self._start_map is None else self._start_map.n_landmarks
         response.success, response.message = True, f"reset to the start pose with {count} landmarks"
         self.get_logger().info(response.message)
@@ -508,6 +520,10 @@ class SlamNode(Node):
                     f"the map holds max_landmarks = {self.config.max_landmarks} landmarks: "
                     "new ones are not added",
                 )
+        slip = self.recovery.status
+        if slip.relocalized > self._relocalized_reported:
+            self._relocalized_reported = slip.relocalized
+            self._warnings.warn("slip", slip.message)
 
     def _statuses(self, now_ns: int) -> list:
         """The inputs, and the filter: WARN when observations were rejected or skipped since the last
@@ -529,10 +545,13 @@ class SlamNode(Node):
             "observation_arrays_skipped": self._counts["skipped"],
             **self._update_time.values("scan_update"),
         }
+        slip = self.recovery.status
+        slip_values = {"scans_held": slip.held, "relocalizations": slip.relocalized}
         return [
             self._motion_input.status("slam", now_ns),
             self._observation_input.status("slam", now_ns),
             status("slam: filter", "slam", WARN if skipped or rejected else OK, message, values),
+            status("slam: motion vs LiDAR", "slam", SLIP_LEVELS[slip.level], slip.message, slip_values),
         ]
 
     def _check_observations_arrive(self, t_ns: int, sample: tuple[float, ...]) -> None:

@@ -57,6 +57,7 @@ from nuturtle_eval.run_evaluation import (
     evaluate_and_plot,
     sensor_range_m,
     slam_snapshot,
+    slip_counts,
     write_metrics,
 )
 from nuturtle_ros_common.conversions import planar_covariance_6x6, pose_from_transform
@@ -404,7 +405,7 @@ def run_demo(options: DemoOptions, on_progress: ProgressCallback | None = None) 
         )
         if metrics is None:
             raise RuntimeError("the run published no odometry or SLAM pose to evaluate")
-        write_metrics(out_dir, metrics.as_dict())
+        write_metrics(out_dir, {**metrics.as_dict(), **slip_counts(system.slam)})
         return DemoResult(
             metrics,
             out_dir,

@@ -68,6 +68,13 @@ def slam_snapshot(slam_node: Any) -> SlamSnapshot:
     )
 
 
+def slip_counts(slam_node: Any) -> dict[str, int]:
+    """The in-process slam node's slip recovery totals (its ``recovery`` attribute): scans held because they
+    contradicted the motion, and relocalizations against the map."""
+    status = slam_node.recovery.status
+    return {"slam_scans_held": status.held, "slam_relocalizations": status.relocalized}
+
+
 def sensor_range_m(
     association: str,
     fake_sensor_range_m: float,

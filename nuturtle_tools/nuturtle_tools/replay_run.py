@@ -60,6 +60,7 @@ from nuturtle_eval.run_evaluation import (
     evaluate_and_plot,
     sensor_range_m,
     slam_snapshot,
+    slip_counts,
     write_metrics,
 )
 from nuturtle_ros_common.conversions import stamp_nanoseconds, transform_from_pose
@@ -540,6 +541,7 @@ class Replay:
                     "observation_arrays_pending": observations["pending"],
                     "map_landmarks": len(self.slam.slam.landmark_ids),
                     "slam_outputs_recorded": self.writer.message_counts,
+                    **slip_counts(self.slam),
                 }
             )
             if self.association == "unknown":

@@ -853,8 +853,9 @@ def test_diagnostics_report_the_inputs_and_an_error_when_observations_stop(ros):
 
     drive(1.5, observe=True)
     statuses = latest()
-    assert set(statuses) == {"slam: joint_states", "slam: landmarks", "slam: filter"}
+    assert set(statuses) == {"slam: joint_states", "slam: landmarks", "slam: filter", "slam: motion vs LiDAR"}
     assert statuses["slam: joint_states"].level == DiagnosticStatus.OK
+    assert statuses["slam: motion vs LiDAR"].level == DiagnosticStatus.OK
     assert statuses["slam: landmarks"].level == DiagnosticStatus.OK
     values = {pair.key: pair.value for pair in statuses["slam: filter"].values}
     assert int(values["observations_fused"]) > 0 and "landmarks_mapped" in values
@@ -863,6 +864,40 @@ def test_diagnostics_report_the_inputs_and_an_error_when_observations_stop(ros):
     assert statuses["slam: joint_states"].level == DiagnosticStatus.OK
     assert statuses["slam: landmarks"].level == DiagnosticStatus.ERROR
     assert "nothing on landmarks for" in statuses["slam: landmarks"].message
+
+
+def test_a_phantom_turn_is_reported_and_undone_against_the_map(ros):
+    """The wheels report 0.75 rad of turn in place that the body does not make (a slip event); the LiDAR
+    keeps seeing the landmarks from the true pose. slam says so in /diagnostics, names the cause, and ends at
+    the true pose with the map it had (no landmark beside the true ones)."""
+    rig = Rig(ros, observation_timeout=100.0)
+    arrays: list[DiagnosticArray] = []
+    subscription = rig.helper.create_subscription(DiagnosticArray, "/diagnostics", arrays.append, 10)
+    assert ros.spin_until(lambda: matched(subscription), 5.0)
+    # left and right wheel angles of a 0.75 rad turn in place: -+ 0.75 (track / 2) / r
+    turn_wheel = 0.75 * 0.5 * DRIVE.track_width / R_WHEEL
+    levels: list[tuple[int, str]] = []
+
+    def run(seconds: float, phi_at) -> None:
+        for k in range(1, round(seconds * 10) + 1):
+            run.t_ns += S // 10
+            rig.joint_states.publish(joint_state(run.t_ns, phi_at(k / round(seconds * 10))))
+            if k % 2 == 0:  # scans at 5 Hz, always from the true pose (at rest at the origin)
+                rig.observations.publish(cylinder_array("base_scan", run.t_ns, relative(T_BODY_SENSOR)))
+            ros.spin_for(0.1)
+            if arrays:
+                motion = {s.name: s for s in arrays[-1].status}["slam: motion vs LiDAR"]
+                levels.append((motion.level, motion.message))
+
+    run.t_ns = S
+    run(3.0, lambda f: (0.0, 0.0))  # three landmarks mapped at rest
+    run(1.0, lambda f: (-turn_wheel * f, turn_wheel * f))  # the phantom turn, over a second
+    run(2.0, lambda f: (-turn_wheel, turn_wheel))
+    x, y, yaw = pose_of(rig.odoms[-1])
+    assert math.hypot(x, y) < 0.01 and abs(yaw) < 0.01
+    assert set(mapped(rig.maps[-1])) == set(range(len(LANDMARKS)))
+    reports = [message for level, message in levels if level == DiagnosticStatus.WARN]
+    assert any(message.startswith("wheel slip") for message in reports), levels
 
 
 def test_observations_before_the_first_joint_states_are_dropped_without_a_warning(ros):

@@ -46,6 +46,7 @@ from numpy.typing import ArrayLike, NDArray
 from .ekf_slam import Association, CheckedObservations, EkfSlam
 from .geometry import Transform2D
 from .motion_signals import MotionSignal, Sample, timed_sample
+from .slip_recovery import SlipRecovery
 from .timebase import NS_PER_S
 from .validation import integer, non_negative, positive, store
 
@@ -85,7 +86,9 @@ class SlamTimeline:
     ``check_motion`` (default) a motion sample the filter's model refuses is refused before anything changes
     (:meth:`add_motion`); without, the check's cost per sample (a few microseconds, about 10 % of an
     offline run) is saved, and a refused sample leaves the filter where the refusal stopped it: for runs
-    that end on the first error (recorded data).
+    that end on the first error (recorded data). With ``recovery`` the scans go through it
+    (:class:`turtlelib.slip_recovery.SlipRecovery`: motion the LiDAR contradicts is detected and the filter
+    relocalized against its map) instead of straight to the filter.
     """
 
     def __init__(
@@ -96,8 +99,10 @@ class SlamTimeline:
         *,
         keep_track: bool = False,
         check_motion: bool = True,
+        recovery: SlipRecovery | None = None,
     ) -> None:
         self.slam = slam
+        self.recovery = recovery
         self.signal = signal
         self._check_motion = check_motion
         self.config = TimelineConfig() if config is None else config
@@ -257,7 +262,11 @@ class SlamTimeline:
 
     def _apply(self, observation: _Observation) -> tuple[int, Association]:
         self._advance_to(observation.t_ns)
-        return observation.t_ns, self.slam.update(observation.observations, stamp_ns=observation.t_ns)
+        if self.recovery is None:
+            return observation.t_ns, self.slam.update(observation.observations, stamp_ns=observation.t_ns)
+        return observation.t_ns, self.recovery.update(
+            self.slam, observation.observations, stamp_ns=observation.t_ns
+        )
 
     def _advance_to(self, t_ns: int) -> None:
         """Predict the filter from ``t_f`` to ``t_ns`` (``t_f <= t_ns <= t_w``) and drop older samples.
