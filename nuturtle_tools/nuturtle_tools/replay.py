@@ -1,11 +1,11 @@
 """Command line of the bag replay: ``python -m nuturtle_tools.replay BAG [options]`` (``nuturtle-replay``,
 ``./dev.sh replay``).
 
-Plays a rosbag2 recording (a bag directory of MCAP or sqlite3 storage, or a single .mcap file such as the
-demo's ``run/run.mcap``) with /clock into the real `landmarks` and `slam` nodes, as fast as they keep up
-(no message dropped) or at ``--rate``, and writes ``slam/`` (the SLAM outputs, a rosbag2 MCAP bag),
-``trajectory.png``, ``map.json``, ``covariance.png``, ``config.yaml`` and ``metrics.json`` (with ground
-truth in the bag: ``errors.png`` and the demo's accuracy metrics) into ``--out`` (docs/replay.md).
+Plays a recording (a rosbag2 bag directory of MCAP or sqlite3 storage, a single .mcap file such as the
+demo's ``run/run.mcap``, or a ROS 1 .bag) with /clock into the real `landmarks` and `slam` nodes, as fast
+as they keep up (no message dropped) or at ``--rate``, and writes ``slam/`` (the SLAM outputs, a rosbag2
+MCAP bag), ``trajectory.png``, ``map.json``, ``covariance.png``, ``config.yaml`` and ``metrics.json`` (with
+ground truth in the bag: ``errors.png`` and the accuracy metrics) into ``--out`` (docs/replay.md).
 ``--play-only`` runs only the player, for nodes of your own. Exit code 2 for an unreadable bag, a missing
 topic or a bad option.
 
@@ -34,11 +34,13 @@ DEFAULT_TOPICS = {
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(
         prog="python -m nuturtle_tools.replay",
-        description="Replay a rosbag2 recording (MCAP or sqlite3 bag directory, or a single .mcap) with "
-        "/clock into the landmarks and slam nodes: SLAM outputs, trajectory, map and metrics.",
+        description="Replay a recording (MCAP or sqlite3 bag directory, a single .mcap, or a ROS 1 .bag) "
+        "with /clock into the landmarks and slam nodes: SLAM outputs, trajectory, map and metrics.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
-    parser.add_argument("bag", type=Path, help="bag directory (metadata.yaml) or a single .mcap / .db3 file")
+    parser.add_argument(
+        "bag", type=Path, help="bag directory (metadata.yaml), a single .mcap / .db3 file or a ROS 1 .bag"
+    )
     parser.add_argument("--out", type=Path, default=Path("out/replay"),
                         help="output folder (its files and its bag slam/ are replaced)")  # fmt: skip
     parser.add_argument("--params", type=Path, default=None,
