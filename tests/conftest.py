@@ -17,6 +17,8 @@ os.environ["ROS_DOMAIN_ID"] = str(os.getpid() % 100 + 1)
 _ros_home = tempfile.mkdtemp(prefix="nuturtle-test-ros-")
 os.environ["ROS_HOME"] = _ros_home
 os.environ["ROS_LOG_DIR"] = os.path.join(_ros_home, "log")
+# The robot model comes from the test, never from the shell that runs it (nodes default to $TURTLEBOT3_MODEL)
+os.environ.pop("TURTLEBOT3_MODEL", None)
 
 import importlib.abc  # noqa: E402
 import importlib.util  # noqa: E402

@@ -40,14 +40,17 @@ TURN_RAD_S = 1.0
 class ScenarioResult:
     """Errors of the filter against the truth: ``final_error_m`` / ``final_heading_rad`` at the end,
     ``event_end_s`` when the event ended, ``errors`` (t_s, position error m) after every scan, the
-    landmarks mapped and the ``spurious`` ones (no cylinder within 0.15 m), and the slip status ``levels`` and
-    ``messages`` seen (in order, each without repeats)."""
+    landmarks mapped and the ``spurious`` ones (no cylinder within 0.15 m), the scans ``held`` and the times
+    ``relocalized`` by the recovery, and its status ``levels`` and ``messages`` seen (in order, each without
+    repeats)."""
 
     final_error_m: float
     final_heading_rad: float
     event_end_s: float
     landmarks: int
     spurious: int
+    held: int
+    relocalized: int
     errors: list[tuple[float, float]] = field(default_factory=list)
     levels: list[str] = field(default_factory=list)
     messages: list[str] = field(default_factory=list)
@@ -93,7 +96,7 @@ class _Loop:
             self.timeline.add_motion(self.t_ns, tuple(self.sim.wheel_angles_rad))
         if self.steps % SCAN_EVERY == 0:
             detections = self.detector.detect(
-                self.sim.scan(),
+                self.sim.scan().range_m,
                 self.lidar.angle_min,
                 self.lidar.angle_increment,
                 self.lidar.range_min,
@@ -158,6 +161,8 @@ def run_scenario(
         event_end_s,
         len(landmarks),
         int((nearest > 0.15).sum()),
+        loop.recovery.status.held,
+        loop.recovery.status.relocalized,
         loop.result_errors,
         loop.levels,
         loop.messages,

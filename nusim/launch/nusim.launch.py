@@ -1,10 +1,12 @@
 """Start the simulator (for a full ROS 2 install): nusim in the default world, optionally RViz.
 
 Arguments
+    model:=burger|waffle|waffle_pi   the simulated robot (default: $TURTLEBOT3_MODEL, else burger)
     config_file:=<path>      the world (default: this package's config/basic_world.yaml)
     use_rviz:=true|false     RViz with fixed frame nusim/world, on nusim's /clock (default false)
 
-nusim gets the Burger's constants from nuturtle_description/config/diff_params.yaml, then the world.
+nusim gets the world, then `model`, whose constants (nuturtle_description/config/models.yaml) are its
+robot's defaults.
 """
 
 import os
@@ -16,16 +18,18 @@ from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
+from nuturtle_description.model_argument import model_argument
+
 
 def _share(package, *parts):
     return os.path.join(get_package_share_directory(package), *parts)
 
 
 def generate_launch_description() -> LaunchDescription:
-    diff_params = _share("nuturtle_description", "config", "diff_params.yaml")
     basic_world = _share("nusim", "config", "basic_world.yaml")
     return LaunchDescription(
         [
+            model_argument(),
             DeclareLaunchArgument(
                 "config_file", default_value=basic_world, description="nusim parameter file (the world)"
             ),
@@ -35,7 +39,7 @@ def generate_launch_description() -> LaunchDescription:
             Node(
                 package="nusim",
                 executable="nusim",
-                parameters=[diff_params, LaunchConfiguration("config_file")],
+                parameters=[LaunchConfiguration("config_file"), {"model": LaunchConfiguration("model")}],
                 output="screen",
             ),
             Node(

@@ -1,4 +1,4 @@
-"""`nusim`: a simulated TurtleBot3 Burger in an arena of cylinders, publishing what the real robot does.
+"""`nusim`: a simulated TurtleBot3 (any model) in an arena of cylinders, publishing what the real robot does.
 
 A thin ROS wrapper over `nusim.simulation.Simulation` (models in that module's docstring).
 
@@ -13,7 +13,8 @@ Publishes (all stamped with simulation time)
     `joint_states` (sensor_msgs/JointState, at `joint_states_rate`): encoder wheel angles (rad, quantised
         to ticks) and wheel speeds (rad/s) of `wheel_left`, `wheel_right`.
     `scan` (sensor_msgs/LaserScan, frame `base_scan`, sensor-data QoS like the real LDS-01, at
-        `scan_rate`): every beam is cast from the pose at the stamp, so `time_increment` is 0.
+        `scan_rate`): every beam is cast from the pose at the stamp, so `time_increment` is 0; layout,
+        range limits and no-return value those of `lidar_model` (LDS-01, LDS-02 or Gazebo's).
     `fake_sensor` (visualization_msgs/MarkerArray, frame `base_footprint`, at `fake_sensor_rate`): one
         CYLINDER per landmark within `max_range` (id = obstacle index, noisy centre, diameter as scale,
         ADD) and a DELETE for each landmark out of range.
@@ -28,10 +29,11 @@ Parameters
     `NusimTiming` (rate, realtime_factor, joint_states_rate, scan_rate, fake_sensor_rate), `ArenaConfig`
     (x0, y0, theta0, arena_x_length, arena_y_length), `Walls` (walls.x, walls.y: a polygon of walls instead
     of the rectangle), `Obstacles` (obstacles.x, obstacles.y, obstacles.r),
-    `NoiseConfig` (input_noise, slip_fraction, basic_sensor_variance, max_range, seed), `LidarConfig`
-    (lidar.*), `RobotParams` (the Burger's constants by default), `WheelJoints` (wheel_left, wheel_right),
-    `CommandTimeoutConfig` (cmd_timeout), `PathTrailConfig` (path_*). The defaults are the default world
-    of config/basic_world.yaml. Invalid values stop the node at start-up with a message (exit code 1).
+    `NoiseConfig` (input_noise, slip_fraction, basic_sensor_variance, max_range, seed), `LidarChoice`
+    (lidar_model), `LidarConfig` (lidar.*, defaults from lidar_model), `model`, then `RobotParams` (that
+    model's constants by default), `WheelJoints` (wheel_left, wheel_right), `CommandTimeoutConfig`
+    (cmd_timeout), `PathTrailConfig` (path_*). The defaults are the default world of
+    config/basic_world.yaml. Invalid values stop the node at start-up with a message (exit code 1).
 
 Time: a wall-clock (steady) timer ticks at `rate * realtime_factor` Hz and each tick advances simulation
 time by `1 / rate` s, so the node needs no `use_sim_time` itself; every other node runs on its /clock.
@@ -57,7 +59,7 @@ from sensor_msgs.msg import JointState, LaserScan
 from std_srvs.srv import Empty
 from visualization_msgs.msg import Marker, MarkerArray
 
-from nuturtle_description.robot_params import RobotParams, burger_params
+from nuturtle_description.robot_declaration import declare_robot
 from nuturtle_ros_common.command_timeout import CommandTimeoutConfig, CommandWatchdog
 from nuturtle_ros_common.conversions import (
     odometry_message,
@@ -80,12 +82,12 @@ from turtlelib.validation import positive, store
 
 from .simulation import (
     ArenaConfig,
+    LidarChoice,
     NoiseConfig,
     Obstacles,
     Simulation,
     SimulationConfig,
     Walls,
-    default_lidar,
 )
 
 WORLD_FRAME = "nusim/world"
@@ -155,19 +157,30 @@ class NusimNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("nusim", **kwargs)
         self.timing = declare_dataclass(self, NusimTiming)
+        lidar_choice = declare_dataclass(self, LidarChoice)
+        self.lidar_model = lidar_choice.model
         config = SimulationConfig(
             arena=declare_dataclass(self, ArenaConfig),
             obstacles=declare_dataclass(self, Obstacles, prefix="obstacles."),
             walls=declare_dataclass(self, Walls, prefix="walls."),
-            robot=declare_dataclass(self, RobotParams, overrides=vars(burger_params())),
+            robot=declare_robot(self),
             noise=declare_dataclass(self, NoiseConfig),
-            lidar=declare_dataclass(self, LidarConfig, prefix="lidar.", overrides=vars(default_lidar())),
+            lidar=declare_dataclass(
+                self, LidarConfig, prefix="lidar.", overrides=vars(self.lidar_model.sensor)
+            ),
         )
         self.joints = declare_dataclass(self, WheelJoints)
         self.watchdog = CommandWatchdog(declare_dataclass(self, CommandTimeoutConfig))
         self.trail: PathTrail[PoseStamped] = PathTrail(declare_dataclass(self, PathTrailConfig))
         self.simulation = Simulation(config)
         self.step_count = 0
+        lidar = config.lidar
+        spin = f", spin spread {lidar.spin_spread:g}" if lidar.spin_spread else ""
+        self.get_logger().info(
+            f"LiDAR {lidar_choice.lidar_model}: {lidar.samples} beams of {lidar.angle_increment:.5f} rad "
+            f"from {lidar.angle_min:g} rad, {lidar.range_min:g}-{lidar.range_max:g} m, no return "
+            f"{lidar.no_return}{spin}"
+        )
 
         self._clock_publisher = self.create_publisher(ClockMsg, "/clock", 10)
         self._joint_states_publisher = self.create_publisher(JointState, "joint_states", 10)
@@ -269,16 +282,19 @@ class NusimNode(Node):
             self._path_publisher.publish(Path(header=odom.header, poses=list(self.trail.items)))
 
     def _publish_scan(self, stamp: Time) -> None:
-        lidar = self.simulation.config.lidar
+        scan = self.simulation.scan()
+        lidar, model = scan.layout, self.lidar_model
+        range_min, range_max = model.reported_range_m or (lidar.range_min, lidar.range_max)
+        last_beam = lidar.samples - 1 + model.angle_max_past_last_beam
         msg = LaserScan(
             angle_min=lidar.angle_min,
-            angle_max=lidar.angle_min + (lidar.samples - 1) * lidar.angle_increment,
+            angle_max=lidar.angle_min + last_beam * lidar.angle_increment,
             angle_increment=lidar.angle_increment,
             time_increment=0.0,
             scan_time=1.0 / self.timing.scan_rate,
-            range_min=lidar.range_min,
-            range_max=lidar.range_max,
-            ranges=self.simulation.scan().tolist(),
+            range_min=range_min,
+            range_max=range_max,
+            ranges=scan.range_m.tolist(),
         )
         msg.header.stamp = stamp
         msg.header.frame_id = SCAN_FRAME

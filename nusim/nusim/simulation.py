@@ -38,7 +38,9 @@ passes through anything.
 Sensors
 -------
 * LiDAR: ``turtlelib.scan_model.simulate_scan`` from ``T_world_scan = T_world_body @ T_body_scan``
-  (``T_body_scan``: the robot's ``lidar_x``, ``lidar_y``, ``lidar_yaw``) against the cylinders and the walls.
+  (``T_body_scan``: the robot's ``lidar_x``, ``lidar_y``, ``lidar_yaw``) against the cylinders and the walls,
+  on the scan's beam layout (``LidarConfig.scan_layout``: fixed, or drawn per turn for the LDS-02). The
+  TurtleBot3 LiDARs are in ``LIDAR_MODELS`` (``lidar_model``: ``lds01``, ``lds02``, ``gazebo``).
 * Fake landmark sensor: every cylinder with ``|p_body_j| <= max_range``, where
   ``p_body_j = T_world_body^-1 @ c_j``, reads ``p_body_j + e``, ``e ~ N(0, basic_sensor_variance I_2)``.
 
@@ -60,7 +62,7 @@ from numpy.typing import NDArray
 from nuturtle_description.robot_params import RobotParams
 from turtlelib import DiffDrive, Transform2D
 from turtlelib.scan_model import LidarConfig, arena_walls, polygon_walls, simulate_scan
-from turtlelib.validation import finite_real, in_range, integer, non_negative, positive, store
+from turtlelib.validation import finite_real, in_range, integer, non_negative, one_of, positive, store
 
 # The default world: eight cylinders of the course's radius, 0.75 to 1.85 m from the centre. On any circle
 # of radius 0.5 to 1.0 m through the origin (centre (0, +-radius)) the robot's disc (0.11 m) clears every
@@ -185,6 +187,63 @@ class NoiseConfig:
 def default_lidar() -> LidarConfig:
     """The LDS-01 (360 beams of 1 deg, 0.12 to 3.5 m) with the course's noise and 1 cm resolution."""
     return LidarConfig(noise=0.01, resolution=0.01)
+
+
+@dataclass(frozen=True)
+class LidarModel:
+    """A TurtleBot3 LiDAR as its driver publishes it (notes from ROBOTIS' drivers and turtlebot3_gazebo).
+
+    ``sensor``: the defaults of the ``lidar.*`` parameters (layout, reach, noise, no-return value);
+    ``reported_range_m``: the ``(range_min, range_max)`` the driver writes in each LaserScan (None: the
+    sensor's own); ``angle_max_past_last_beam``: where the driver puts ``angle_max``, in increments past
+    the last beam (0: at it, 1: one past, where the LDS-02's turn ends).
+    """
+
+    sensor: LidarConfig
+    reported_range_m: tuple[float, float] | None = None
+    angle_max_past_last_beam: int = 0
+
+
+# lds01: nusim's LDS-01 (0.0 for no return, 1 cm noise and resolution). lds02 (ld08_driver): 2300 points
+# per second, spin 6 Hz +- 2 % (383 beams of 0.94 deg, 374 to 391 per turn, the first at a random angle),
+# NaN for no return, 1 mm resolution, a reach of 0.16 to 8 m but 0 to 100 m in the message. gazebo
+# (turtlebot3_gazebo): 360 beams from 0 to 6.28 rad (the last repeats the first), inf for no return,
+# 0.12 to 3.5 m, Gaussian noise of 0.01 m.
+LIDAR_MODELS = {
+    "lds01": LidarModel(default_lidar()),
+    "lds02": LidarModel(
+        LidarConfig(
+            range_min=0.16,
+            range_max=8.0,
+            angle_increment=2.0 * math.pi * 6.0 / 2300.0,
+            samples=383,
+            noise=0.01,
+            resolution=0.001,
+            no_return=math.nan,
+            spin_spread=0.02,
+        ),
+        reported_range_m=(0.0, 100.0),
+        angle_max_past_last_beam=1,
+    ),
+    "gazebo": LidarModel(
+        LidarConfig(angle_increment=6.28 / 359, samples=360, noise=0.01, no_return=math.inf)
+    ),
+}
+
+
+@dataclass(frozen=True)
+class LidarChoice:
+    """``lidar_model``: the LiDAR simulated, one of ``LIDAR_MODELS`` (``lds01``, ``lds02``, ``gazebo``);
+    it sets the defaults of the ``lidar.*`` parameters and what each scan message reports."""
+
+    lidar_model: str = "lds01"
+
+    def __post_init__(self) -> None:
+        one_of("lidar_model", self.lidar_model, tuple(LIDAR_MODELS))
+
+    @property
+    def model(self) -> LidarModel:
+        return LIDAR_MODELS[self.lidar_model]
 
 
 @dataclass(frozen=True)
@@ -337,6 +396,14 @@ def _wall_contact_fraction(
 
 
 @dataclass(frozen=True)
+class SimulatedScan:
+    """One scan: its beam ``layout`` and the measured ``range_m`` (m), shape (layout.samples,)."""
+
+    layout: LidarConfig
+    range_m: NDArray[np.float64]
+
+
+@dataclass(frozen=True)
 class LandmarkReadings:
     """The fake sensor's output: ``ids`` (K,) indices of the cylinders within max_range, and ``p_body``
     (K, 2) their noisy centres (m) in base_footprint, row k for cylinder ``ids[k]``."""
@@ -452,10 +519,14 @@ class Simulation:
 
     # --- sensors -----------------------------------------------------------------------------------------
 
-    def scan(self) -> NDArray[np.float64]:
-        """LiDAR ranges (m), shape (lidar.samples,), 0.0 for no return, from the true pose."""
+    def scan(self) -> SimulatedScan:
+        """A LiDAR scan from the true pose: this turn's layout, then the ranges (m; ``no_return`` where
+        nothing is measured)."""
         T_world_scan = self.T_world_body @ self.config.robot.T_body_scan
-        return simulate_scan(T_world_scan, self.circles, self.walls, self.config.lidar, self._lidar_rng)
+        layout = self.config.lidar.scan_layout(self._lidar_rng)
+        return SimulatedScan(
+            layout, simulate_scan(T_world_scan, self.circles, self.walls, layout, self._lidar_rng)
+        )
 
     def sense_landmarks(self) -> LandmarkReadings:
         """The cylinders within max_range of base_footprint and their noisy body-frame centres."""

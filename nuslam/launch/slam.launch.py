@@ -1,6 +1,8 @@
 """EKF SLAM (for a full ROS 2 install): nuturtle_control's start_robot.launch.py plus landmarks and slam.
 
 Arguments
+    model:=burger|waffle|waffle_pi  the robot (default: $TURTLEBOT3_MODEL, else burger): its constants are
+                                  every node's defaults (nuturtle_description/config/models.yaml).
     association:=unknown|known    unknown (default): landmarks found in the LiDAR scan by the `landmarks`
                                   node; known: nusim's fake_sensor (simulator only).
     use_sim_time:=false|true      true against the simulator (every node on nusim's /clock).
@@ -16,9 +18,8 @@ Arguments
     ros2 launch nuslam turtlebot3.launch.py                  # a stock TurtleBot3 (its own odom, TF, cmd_vel)
     ros2 launch nuturtle_demo nusim_slam.launch.py           # the same against the simulator
 
-Every node reads the Burger's constants from nuturtle_description/config/diff_params.yaml and its own
-defaults from config/landmarks.yaml and config/slam.yaml; the launch arguments come last, so they win
-(`nuslam.launch_nodes`).
+Every node reads its own defaults from config/landmarks.yaml and config/slam.yaml and the robot's constants
+from its `model`; the launch arguments come last, so they win (`nuslam.launch_nodes`).
 RViz shows the wheel odometry's path (blue) and SLAM's pose with its covariance, path and map in `map`
 (green), with the scan and the LiDAR landmarks.
 """
@@ -32,6 +33,7 @@ from launch_ros.actions import Node
 
 from nuslam.launch_nodes import SLAM_ARGUMENTS, landmarks_parameters, rviz_arguments, slam_parameters
 from nuturtle_control.launch_nodes import CMD_SOURCES
+from nuturtle_description.model_argument import model_argument
 from nuturtle_ros_common.ros_files import share_file
 
 
@@ -39,11 +41,12 @@ def _slam_nodes(context):
     association = LaunchConfiguration("association").perform(context)
     use_sim_time = LaunchConfiguration("use_sim_time").perform(context) == "true"
     arguments = {name: LaunchConfiguration(name).perform(context) for name in SLAM_ARGUMENTS}
+    model = LaunchConfiguration("model").perform(context)
     nodes = [
         Node(
             package="nuslam",
             executable="slam",
-            parameters=slam_parameters(association, use_sim_time, **arguments),
+            parameters=slam_parameters(association, use_sim_time, model, **arguments),
             output="screen",
         ),
         Node(
@@ -70,6 +73,7 @@ def _slam_nodes(context):
 def generate_launch_description() -> LaunchDescription:
     return LaunchDescription(
         [
+            model_argument(),
             DeclareLaunchArgument("association", default_value="unknown", choices=["unknown", "known"]),
             DeclareLaunchArgument("use_sim_time", default_value="false", choices=["true", "false"]),
             DeclareLaunchArgument("cmd_src", default_value="none", choices=list(CMD_SOURCES)),
@@ -85,6 +89,7 @@ def generate_launch_description() -> LaunchDescription:
                     str(share_file("nuturtle_control", "launch", "start_robot.launch.py"))
                 ),
                 launch_arguments={
+                    "model": LaunchConfiguration("model"),
                     "use_sim_time": LaunchConfiguration("use_sim_time"),
                     "cmd_src": LaunchConfiguration("cmd_src"),
                 }.items(),

@@ -1,4 +1,4 @@
-"""EKF SLAM on a stock TurtleBot3 Burger (for a full ROS 2 install): landmarks and slam only.
+"""EKF SLAM on a stock TurtleBot3 (for a full ROS 2 install): landmarks and slam only.
 
 The robot's own bringup (`ros2 launch turtlebot3_bringup robot.launch.py` on the robot) already runs
 `turtlebot3_node`, which publishes `joint_states`, `odom` and the `odom -> base_footprint` transform and
@@ -7,6 +7,8 @@ So nothing here drives the robot or duplicates its odometry: slam reads `joint_s
 landmarks and broadcasts `map -> odom` against the robot's own `odom` (see docs/robot.md).
 
 Arguments
+    model:=burger|waffle|waffle_pi     the robot (default: $TURTLEBOT3_MODEL, as for the robot's own bringup,
+                                       else burger): its wheels, motors and LiDAR mount
     motion_source:=joint_states|odom   the wheel angles (default) or the robot's odom as slam's motion
     mode:=mapping|localization         SLAM (default), or localization in the map of map_file
     map_file:=PATH                     the map loaded at start-up (if there) and written by slam/save_map
@@ -18,8 +20,8 @@ Arguments
 
 slam uses the LiDAR landmarks (association unknown: a real robot has no fake sensor).
 
-Every node reads the Burger's constants from nuturtle_description/config/diff_params.yaml and its own
-defaults from config/landmarks.yaml and config/slam.yaml (`nuslam.launch_nodes`).
+Every node reads its own defaults from config/landmarks.yaml and config/slam.yaml, and slam the robot's
+constants from its `model` (nuturtle_description/config/models.yaml; `nuslam.launch_nodes`).
 """
 
 from launch import LaunchDescription
@@ -29,15 +31,17 @@ from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
 from nuslam.launch_nodes import SLAM_ARGUMENTS, landmarks_parameters, rviz_arguments, slam_parameters
+from nuturtle_description.model_argument import model_argument
 
 
 def _slam(context):
     arguments = {name: LaunchConfiguration(name).perform(context) for name in SLAM_ARGUMENTS}
+    model = LaunchConfiguration("model").perform(context)
     return [
         Node(
             package="nuslam",
             executable="slam",
-            parameters=slam_parameters("unknown", use_sim_time=False, **arguments),
+            parameters=slam_parameters("unknown", False, model, **arguments),
             output="screen",
         )
     ]
@@ -46,6 +50,7 @@ def _slam(context):
 def generate_launch_description() -> LaunchDescription:
     return LaunchDescription(
         [
+            model_argument(),
             *[
                 DeclareLaunchArgument(
                     name, default_value=default, **({"choices": list(choices)} if choices else {})

@@ -19,7 +19,9 @@ Parameters
 A scan whose layout contradicts itself (`turtlelib.check_scan_layout`: angle_min, angle_max,
 angle_increment and the number of ranges disagree; intensities neither empty nor one per range), or that
 the detector refuses (non-finite layout, range_min >= range_max), is skipped with a throttled warning and
-counted; the node keeps running. Beams outside [range_min, range_max] are never used.
+counted; the node keeps running. Every TurtleBot3 LiDAR's layout is used (LDS-01, LDS-02 with its beam
+count changing from scan to scan, Gazebo's): beams beyond one full turn (Gazebo's last, which repeats its
+first) are dropped, and 0.0, NaN, inf and beams outside [range_min, range_max] are no return.
 """
 
 from __future__ import annotations

@@ -1,8 +1,8 @@
 """The parameter lists of nuslam's launch files, and RViz2's arguments (plain functions: tests call them,
 launch cannot run in CI).
 
-Every list is the robot's constants (nuturtle_description/config/diff_params.yaml), the node's own
-defaults (config/<node>.yaml), then the launch arguments, which win (`launch_parameters.with_arguments`).
+Every list is the node's own defaults (config/<node>.yaml), then the launch arguments, which win
+(`launch_parameters.with_arguments`); slam's robot constants are the defaults of its ``model`` argument.
 """
 
 from __future__ import annotations
@@ -22,14 +22,14 @@ SLAM_ARGUMENTS: dict[str, tuple[str, tuple[str, ...] | None]] = {
 }
 
 
-def slam_parameters(association: str, use_sim_time: bool, **arguments: Any) -> list[str | dict[str, Any]]:
-    """The `slam` node's list: ``association`` (known or unknown), ``use_sim_time`` and any other
-    parameter ``arguments`` given at launch."""
-    files = [
-        share_file("nuturtle_description", "config", "diff_params.yaml"),
-        share_file("nuslam", "config", "slam.yaml"),
-    ]
-    return with_arguments(files, {"association": association, "use_sim_time": use_sim_time, **arguments})
+def slam_parameters(
+    association: str, use_sim_time: bool, model: str, **arguments: Any
+) -> list[str | dict[str, Any]]:
+    """The `slam` node's list: ``association`` (known or unknown), ``use_sim_time``, the robot ``model``
+    and any other parameter ``arguments`` given at launch."""
+    files = [share_file("nuslam", "config", "slam.yaml")]
+    values = {"association": association, "use_sim_time": use_sim_time, "model": model, **arguments}
+    return with_arguments(files, values)
 
 
 def landmarks_parameters(use_sim_time: bool) -> list[str | dict[str, Any]]:

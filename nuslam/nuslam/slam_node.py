@@ -66,11 +66,11 @@ Parameters
     `turtlelib.TimelineConfig`
     (max_observation_delay, max_observation_lead, max_pending_observations),
     `turtlelib.slip_recovery.SlipRecoveryConfig` (slip_recovery, slip_min_matches, slip_match_radius,
-    slip_confirm_scans, slip_margin_m, slip_margin_rad, slip_report_s), `RobotParams` (the Burger's by
-    default), `WheelJoints`, `PathTrailConfig`, `turtlelib.SampleGateConfig` (speed_margin,
-    max_sample_gap, max_bridged_gap, restart_samples). Defaults in config/slam.yaml. The filter's sensor
-    mount (`SlamConfig.sensor_x/y/theta`) is the robot's `lidar_x`, `lidar_y`, `lidar_yaw`. Invalid values
-    stop the node at start-up with a message.
+    slip_confirm_scans, slip_margin_m, slip_margin_rad, slip_stall_tolerance, slip_report_s), `model`, then
+    `RobotParams` (that model's constants by default), `WheelJoints`, `PathTrailConfig`,
+    `turtlelib.SampleGateConfig` (speed_margin, max_sample_gap, max_bridged_gap, restart_samples). Defaults
+    in config/slam.yaml. The filter's sensor mount (`SlamConfig.sensor_x/y/theta`) is the robot's `lidar_x`,
+    `lidar_y`, `lidar_yaw`. Invalid values stop the node at start-up with a message.
 
 Observations that arrive before the first motion sample are dropped quietly (start-up order). Bad input
 never stops the node and never changes the estimate: invalid or implausible joint_states
@@ -103,7 +103,7 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
-from nuturtle_description.robot_params import RobotParams, burger_params
+from nuturtle_description.robot_declaration import declare_robot
 from nuturtle_ros_common.conversions import (
     odometry_message,
     positive_definite_pose_covariance,
@@ -162,7 +162,7 @@ ODOM_BUFFER_SAMPLES = 200
 STALE_S = 2.0
 # Drawn confidence region of a mapped landmark (standard deviations)
 ELLIPSE_SIGMA = 2.0
-# The default wheel slip (sqrt(rad)); the default odom_* twist noise is this slip on the Burger's twist
+# The default wheel slip (sqrt(rad)); the default odom_* twist noise is this slip on the model's twist
 WHEEL_NOISE = 0.05
 # SlipStatus.level -> diagnostic level
 SLIP_LEVELS = {"ok": OK, "warn": WARN, "error": ERROR}
@@ -227,7 +227,7 @@ class SlamNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("slam", **kwargs)
         self.node_config = declare_dataclass(self, SlamNodeConfig)
-        robot = declare_dataclass(self, RobotParams, overrides=vars(burger_params()))
+        robot = declare_robot(self)
         # the sensor mount is the robot's: written once, in its description
         T_body_scan = robot.T_body_scan
         sensor_mount = {

@@ -1,6 +1,8 @@
-"""Drive the Burger (for a full ROS 2 install): turtle_control + odometry and a command source.
+"""Drive a TurtleBot3 (for a full ROS 2 install): turtle_control + odometry and a command source.
 
 Arguments
+    model:=burger|waffle|waffle_pi  the robot (default: $TURTLEBOT3_MODEL, else burger): its constants are
+                                  every node's defaults and robot_state_publisher's URDF.
     use_sim_time:=false|true      true when the robot is simulated (every node on nusim's /clock).
     cmd_src:=none|circle|teleop   none (default): nothing drives until asked (another node, `ros2 topic
                                   pub`, or `ros2 run nuturtle_control circle`); circle: the `circle` node
@@ -8,11 +10,11 @@ Arguments
                                   its own terminal (xterm).
 
 The simulator is not started here (this package installs on the robot without it): the simulated system
-is `ros2 launch nuturtle_demo nusim_slam.launch.py`. Every node gets the Burger's constants from
-nuturtle_description/config/diff_params.yaml and its own defaults from this package's config/<node>.yaml,
-then the launch arguments (last, so they win: `nuturtle_control.launch_nodes`). robot_state_publisher
-publishes the URDF generated from diff_params.yaml: `base_footprint -> base_scan` on /tf_static (the
-LiDAR mount slam uses) and the wheels' TF from joint_states. turtle_control stops the
+is `ros2 launch nuturtle_demo nusim_slam.launch.py`. Every node gets its own defaults from this package's
+config/<node>.yaml, then the launch arguments (last, so they win: `nuturtle_control.launch_nodes`), `model`
+among them: the model's constants (nuturtle_description/config/models.yaml) are the nodes' defaults.
+robot_state_publisher publishes the URDF generated from them: `base_footprint -> base_scan` on /tf_static
+(the LiDAR mount slam uses) and the wheels' TF from joint_states. turtle_control stops the
 wheels `cmd_timeout` (0.5 s) after the last cmd_vel.
 """
 
@@ -28,29 +30,31 @@ from nuturtle_control.launch_nodes import (
     robot_state_publisher_parameters,
     turtle_control_parameters,
 )
+from nuturtle_description.model_argument import model_argument
 
 
 def _nodes(context):
     cmd_src = LaunchConfiguration("cmd_src").perform(context)
     use_sim_time = LaunchConfiguration("use_sim_time").perform(context) == "true"
+    model = LaunchConfiguration("model").perform(context)
     nodes = [
         Node(
             package="nuturtle_control",
             executable="turtle_control",
-            parameters=turtle_control_parameters(use_sim_time),
+            parameters=turtle_control_parameters(use_sim_time, model),
             output="screen",
         ),
         Node(
             package="nuturtle_control",
             executable="odometry",
-            parameters=odometry_parameters(use_sim_time),
+            parameters=odometry_parameters(use_sim_time, model),
             output="screen",
         ),
         # the one owner of base_footprint -> base_scan (and the wheel joints' TF)
         Node(
             package="robot_state_publisher",
             executable="robot_state_publisher",
-            parameters=robot_state_publisher_parameters(use_sim_time),
+            parameters=robot_state_publisher_parameters(use_sim_time, model),
             output="screen",
         ),
     ]
@@ -79,6 +83,7 @@ def _nodes(context):
 def generate_launch_description() -> LaunchDescription:
     return LaunchDescription(
         [
+            model_argument(),
             DeclareLaunchArgument(
                 "use_sim_time",
                 default_value="false",

@@ -1,4 +1,4 @@
-"""`odometry`: wheel odometry of the Burger from `joint_states`.
+"""`odometry`: wheel odometry of a TurtleBot3 from `joint_states`.
 
 Subscribes
     `joint_states` (sensor_msgs/JointState): wheel angles (rad) of joints `wheel_left`, `wheel_right`.
@@ -10,7 +10,7 @@ Publishes
     `~/path` (nav_msgs/Path, frame `odom_id`): the trail, decimated by `PathTrailConfig`.
     `/tf` `odom_id` -> `body_id` where tf2_msgs is installed.
 Parameters
-    `RobotParams` (the Burger's constants by default), `WheelJoints` (wheel_left, wheel_right),
+    `model`, then `RobotParams` (that model's constants by default), `WheelJoints` (wheel_left, wheel_right),
     `OdometryFrames` (body_id, odom_id), `PathTrailConfig` (path_min_step_m, path_min_turn_rad,
     path_max_poses), `turtlelib.SampleGateConfig` (speed_margin, max_sample_gap, max_bridged_gap,
     restart_samples).
@@ -38,7 +38,7 @@ from nav_msgs.msg import Odometry, Path
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
-from nuturtle_description.robot_params import RobotParams, burger_params
+from nuturtle_description.robot_declaration import declare_robot
 from nuturtle_ros_common.conversions import (
     odometry_message,
     stamp_from_nanoseconds,
@@ -75,7 +75,7 @@ class OdometryNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__("odometry", **kwargs)
-        robot = declare_dataclass(self, RobotParams, overrides=vars(burger_params()))
+        robot = declare_robot(self)
         self.joints = declare_dataclass(self, WheelJoints)
         self.frames = declare_dataclass(self, OdometryFrames)
         self._warnings = SourceWarnings(self.get_logger())

@@ -1,4 +1,4 @@
-"""`turtle_control`: body velocity commands to wheel speed commands for the Burger.
+"""`turtle_control`: body velocity commands to wheel speed commands for a TurtleBot3.
 
 Subscribes
     `cmd_vel` (geometry_msgs/Twist): body twist, linear.x (m/s) and angular.z (rad/s).
@@ -6,7 +6,7 @@ Publishes
     `wheel_cmd` (sensor_msgs/JointState): `velocity` = (left, right) wheel speeds in rad/s for joints
         `wheel_left`, `wheel_right`, stamped with the time of the command's arrival.
 Parameters
-    `RobotParams` (the Burger's constants by default), `WheelJoints` (wheel_left, wheel_right),
+    `model`, then `RobotParams` (that model's constants by default), `WheelJoints` (wheel_left, wheel_right),
     `CommandTimeoutConfig` (cmd_timeout).
 
 Model: inverse kinematics ``phi_dot = H(0) V_b`` (``turtlelib.DiffDrive.wheel_speeds``), then
@@ -28,7 +28,7 @@ from geometry_msgs.msg import Twist
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
-from nuturtle_description.robot_params import RobotParams, burger_params
+from nuturtle_description.robot_declaration import declare_robot
 from nuturtle_ros_common.command_timeout import CommandTimeoutConfig, CommandWatchdog
 from nuturtle_ros_common.node_main import run_node
 from nuturtle_ros_common.ros_params import declare_dataclass
@@ -46,7 +46,7 @@ class TurtleControlNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__("turtle_control", **kwargs)
-        self.robot = declare_dataclass(self, RobotParams, overrides=vars(burger_params()))
+        self.robot = declare_robot(self)
         self.joints = declare_dataclass(self, WheelJoints)
         self.watchdog = CommandWatchdog(declare_dataclass(self, CommandTimeoutConfig))
         self.drive = self.robot.diff_drive()

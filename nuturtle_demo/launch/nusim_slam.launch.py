@@ -2,6 +2,8 @@
 its /clock (nuslam's slam.launch.py with use_sim_time:=true).
 
 Arguments
+    model:=burger|waffle|waffle_pi  the simulated robot and every node's (default: $TURTLEBOT3_MODEL, else
+                                  burger).
     association:=unknown|known    unknown (default): LiDAR landmarks; known: nusim's fake_sensor.
     cmd_src:=none|circle|teleop   what drives the robot (see nuturtle_control's start_robot.launch.py); none
                                   (default): nothing until asked, e.g. `ros2 run nuturtle_control circle
@@ -28,6 +30,7 @@ from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
 from nuturtle_demo.launch_nodes import world_to_map_arguments
+from nuturtle_description.model_argument import model_argument
 
 
 def _share(package, *parts):
@@ -49,6 +52,7 @@ def _world_to_map(context):
 def generate_launch_description() -> LaunchDescription:
     return LaunchDescription(
         [
+            model_argument(),
             DeclareLaunchArgument("association", default_value="unknown", choices=["unknown", "known"]),
             # none: the robot stays still until asked, so every node is up (and slam at the true start) first
             DeclareLaunchArgument("cmd_src", default_value="none", choices=["none", "circle", "teleop"]),
@@ -56,12 +60,16 @@ def generate_launch_description() -> LaunchDescription:
             DeclareLaunchArgument("rviz", default_value="false", choices=["true", "false"]),
             IncludeLaunchDescription(
                 PythonLaunchDescriptionSource(_share("nusim", "launch", "nusim.launch.py")),
-                launch_arguments={"config_file": LaunchConfiguration("world")}.items(),
+                launch_arguments={
+                    "config_file": LaunchConfiguration("world"),
+                    "model": LaunchConfiguration("model"),
+                }.items(),
             ),
             OpaqueFunction(function=_world_to_map),
             IncludeLaunchDescription(
                 PythonLaunchDescriptionSource(_share("nuslam", "launch", "slam.launch.py")),
                 launch_arguments={
+                    "model": LaunchConfiguration("model"),
                     "association": LaunchConfiguration("association"),
                     "cmd_src": LaunchConfiguration("cmd_src"),
                     "rviz": LaunchConfiguration("rviz"),

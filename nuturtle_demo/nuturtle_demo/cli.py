@@ -13,6 +13,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from nuturtle_description.robot_params import add_model_argument
 from nuturtle_eval.run_evaluation import results_table
 from nuturtle_tools.relay_config import add_foxglove_argument, parse_endpoint
 
@@ -31,13 +32,14 @@ from .run import (
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(
         prog="python -m nuturtle_demo",
-        description="Headless simulation + EKF SLAM demo of the TurtleBot3 Burger: metrics, plots and a "
+        description="Headless simulation + EKF SLAM demo of a TurtleBot3: metrics, plots and a "
         "rosbag2 (MCAP) recording of every topic.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     parser.add_argument("--association", choices=ASSOCIATIONS, default="unknown",
                         help="SLAM data association: landmark ids from nusim's fake sensor (known) or "
                         "cylinders detected in the LiDAR scan (unknown)")  # fmt: skip
+    add_model_argument(parser)
     parser.add_argument("--world", type=Path, default=default_world(), help="nusim params YAML")
     parser.add_argument("--seed", type=int, default=0, help="seed of every noise stream of the simulator")
     parser.add_argument("--duration", type=float, default=120.0, help="simulation (robot) seconds to run")
@@ -77,7 +79,8 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
 
 def report(result: DemoResult, options: DemoOptions) -> str:
     lines = [
-        f"association {options.association}, seed {options.seed}, world {options.world}",
+        f"model {options.model}, association {options.association}, seed {options.seed}, "
+        f"world {options.world}",
         f"slam: {options.mode}, motion from {options.motion_source}"
         + ("" if options.map_file is None else f", map file {options.map_file}")
         + ("" if options.start is None else f", start {tuple(options.start)}"),
@@ -101,6 +104,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         foxglove = None if args.foxglove is None else parse_endpoint(args.foxglove)
         options = DemoOptions(
             association=args.association,
+            model=args.model,
             world=args.world,
             seed=args.seed,
             duration_s=args.duration,

@@ -35,7 +35,7 @@ Publishes
     `cmd_vel` (geometry_msgs/Twist) at ``rate`` Hz (timer on the node's clock: run it with
     ``use_sim_time`` so the route follows simulation time).
 Parameters
-    `RouteConfig` and `RobotParams` (the Burger's constants by default).
+    `RouteConfig`, `model` and `RobotParams` (that model's constants by default).
 """
 
 from __future__ import annotations
@@ -51,7 +51,8 @@ from nav_msgs.msg import Odometry
 from rclpy.node import Node
 
 from nuturtle_control.circle import twist_message
-from nuturtle_description.robot_params import RobotParams, burger_params
+from nuturtle_description.robot_declaration import declare_robot
+from nuturtle_description.robot_params import RobotParams
 from nuturtle_ros_common.conversions import transform_from_pose
 from nuturtle_ros_common.node_main import run_node
 from nuturtle_ros_common.ros_params import declare_dataclass
@@ -142,7 +143,7 @@ class FigureEightDriver(Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("driver", **kwargs)
         self.config = declare_dataclass(self, RouteConfig)
-        self.robot = declare_dataclass(self, RobotParams, overrides=vars(burger_params()))
+        self.robot = declare_robot(self)
         self.route = FigureEight.for_robot(self.config, self.robot)
         self._publisher = self.create_publisher(Twist, "cmd_vel", 10)
         self._t_start_s: float | None = None

@@ -50,6 +50,7 @@ from nusim.nusim_node import NusimNode
 from nuslam.slam_node import MOTION_SOURCES
 from nuturtle_control.odometry import OdometryNode
 from nuturtle_control.turtle_control import TurtleControlNode
+from nuturtle_description.robot_params import resolve_model
 from nuturtle_eval.metrics import RunMetrics, odom_in_world
 from nuturtle_eval.run_evaluation import (
     ProgressBar,
@@ -98,7 +99,9 @@ def default_world() -> Path:
 
 @dataclass(frozen=True)
 class DemoOptions:
-    """What to run: ``association`` known | unknown; ``world`` a nusim params file; ``seed`` (int >= 0)
+    """What to run: ``model`` the TurtleBot3 every node runs (burger, waffle, waffle_pi; None: the
+    TURTLEBOT3_MODEL environment variable, else burger; the resolved name is stored);
+    ``association`` known | unknown; ``world`` a nusim params file; ``seed`` (int >= 0)
     of every noise stream; ``duration_s`` of simulation time (> 0); ``out_dir`` for the outputs;
     ``realtime`` paces the simulation at real time, otherwise it runs up to ``max_realtime_factor`` (> 0)
     times faster; ``progress`` shows a progress bar on stderr.
@@ -115,6 +118,7 @@ class DemoOptions:
     ``realtime`` it plays at robot speed). ValueError for invalid values."""
 
     association: str = "unknown"
+    model: str | None = None
     world: Path = field(default_factory=default_world)
     seed: int = 0
     duration_s: float = 120.0
@@ -133,6 +137,7 @@ class DemoOptions:
 
     def __post_init__(self) -> None:
         one_of("association", self.association, ASSOCIATIONS)
+        object.__setattr__(self, "model", resolve_model(self.model))
         if self.foxglove is not None:
             host, port = self.foxglove
             endpoint = RelayConfig(host=host, port=port)
@@ -189,8 +194,9 @@ class DemoSystem:
 
     def __init__(self, options: DemoOptions, context: Context, writer: BagWriter) -> None:
         sim_time = [Parameter("use_sim_time", value=True)]
+        robot = sim_time + [Parameter("model", value=options.model)]
         world = load_ros_parameters(Path(options.world))
-        world.update(seed=options.seed, realtime_factor=options.realtime_factor)
+        world.update(seed=options.seed, realtime_factor=options.realtime_factor, model=options.model)
         if options.start is not None:
             world.update(zip(("x0", "y0", "theta0"), options.start, strict=True))
         self.nusim = NusimNode(context=context, parameter_overrides=to_parameters(world))
@@ -200,9 +206,9 @@ class DemoSystem:
             radius_m = fitted_route_radius(self.nusim.simulation.config, RouteConfig().radius)
         route = {"radius": radius_m}
         self.monitor = RunMonitor(context=context, parameter_overrides=sim_time)
-        self.driver = FigureEightDriver(context=context, parameter_overrides=sim_time + to_parameters(route))
-        self.turtle_control = TurtleControlNode(context=context, parameter_overrides=sim_time)
-        self.odometry = OdometryNode(context=context, parameter_overrides=sim_time)
+        self.driver = FigureEightDriver(context=context, parameter_overrides=robot + to_parameters(route))
+        self.turtle_control = TurtleControlNode(context=context, parameter_overrides=robot)
+        self.odometry = OdometryNode(context=context, parameter_overrides=robot)
         self.landmarks, self.slam = _slam_nodes(self, options, context, sim_time)
         self.relay = None if options.foxglove is None else _relay(self, options.foxglove)
         # one subscription per topic for both: a second tap node would slow every executor step
@@ -256,6 +262,7 @@ def _slam_nodes(system: DemoSystem, options: DemoOptions, context: Context, sim_
     )
     T_slam_start = Transform2D() if options.mode == "localization" else T_start
     slam_values = {
+        "model": options.model,
         "association": options.association,
         "x0": T_slam_start.x,
         "y0": T_slam_start.y,

@@ -1,7 +1,8 @@
-"""Show the Burger (for a full ROS 2 install): robot_state_publisher (+ joint_state_publisher, RViz).
+"""Show a TurtleBot3 (for a full ROS 2 install): robot_state_publisher (+ joint_state_publisher, RViz).
 
-Arguments: color (red|green|blue|purple, also the frame prefix `<color>/`), use_jsp (true|false),
-use_rviz (true|false). The URDF is generated from config/diff_params.yaml by nuturtle_description.urdf.
+Arguments: model (burger|waffle|waffle_pi; default $TURTLEBOT3_MODEL, else burger), color
+(red|green|blue|purple, also the frame prefix `<color>/`), use_jsp (true|false), use_rviz (true|false). The
+URDF is generated from the model's constants in config/models.yaml by nuturtle_description.urdf.
 """
 
 from launch import LaunchDescription
@@ -10,19 +11,24 @@ from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
-from nuturtle_description.robot_params import burger_params
-from nuturtle_description.urdf import burger_urdf
+from nuturtle_description.model_argument import model_argument
+from nuturtle_description.robot_params import model_params
+from nuturtle_description.urdf import robot_urdf
 
 
 def _nodes(context):
     color = LaunchConfiguration("color").perform(context)
+    model = LaunchConfiguration("model").perform(context)
     return [
         Node(
             package="robot_state_publisher",
             executable="robot_state_publisher",
             namespace=color,
             parameters=[
-                {"robot_description": burger_urdf(burger_params(), color), "frame_prefix": f"{color}/"}
+                {
+                    "robot_description": robot_urdf(model, model_params(model), color),
+                    "frame_prefix": f"{color}/",
+                }
             ],
         ),
         Node(
@@ -43,6 +49,7 @@ def _nodes(context):
 def generate_launch_description() -> LaunchDescription:
     return LaunchDescription(
         [
+            model_argument(),
             DeclareLaunchArgument(
                 "color", default_value="purple", choices=["red", "green", "blue", "purple"]
             ),

@@ -1,7 +1,7 @@
-"""The TurtleBot3 Burger's URDF, generated from the same constants the nodes use.
+"""A TurtleBot3's URDF (any model), generated from the same constants the nodes use.
 
 One source of truth: the wheel radius, track width, collision radius and LiDAR mount come from `RobotParams`
-(config/diff_params.yaml), so the drawn robot and the kinematics can never disagree. Frames follow
+(a model's in config/models.yaml), so the drawn robot and the kinematics can never disagree. Frames follow
 REP 105 and the stock robot: base_footprint → base_link → {wheel_left_link, wheel_right_link,
 base_scan}; the wheel joints are named `wheel_left_joint` and `wheel_right_joint`.
 
@@ -13,7 +13,9 @@ from __future__ import annotations
 
 from xml.sax.saxutils import quoteattr
 
-from .robot_params import RobotParams
+from turtlelib.validation import one_of
+
+from .robot_params import RobotParams, model_names
 
 COLORS = {
     "red": (0.8, 0.1, 0.1, 1.0),
@@ -22,9 +24,10 @@ COLORS = {
     "purple": (0.55, 0.2, 0.75, 1.0),
 }
 
-# Burger geometry that the kinematics do not use (m), from the stock robot's description.
-BASE_HEIGHT = 0.14
+# Geometry that the kinematics do not use (m), from the stock robots' descriptions. The body, a cylinder of
+# the collision radius, reaches up to the LiDAR's base (at least MIN_BODY_HEIGHT tall).
 WHEEL_WIDTH = 0.018
+MIN_BODY_HEIGHT = 0.01
 # base_link above base_footprint (m)
 BASE_LINK_Z = 0.010
 LIDAR_RADIUS = 0.035
@@ -53,11 +56,14 @@ def _joint(name: str, kind: str, parent: str, child: str, origin: str, axis: str
     )
 
 
-def burger_urdf(params: RobotParams, color: str = "purple") -> str:
-    """URDF text of the Burger drawn in `color` (one of COLORS); ValueError for another colour."""
+def robot_urdf(model: str, params: RobotParams, color: str = "purple") -> str:
+    """URDF text of the TurtleBot3 ``model`` (named ``turtlebot3_<model>_<color>``) with the constants
+    ``params``, drawn in `color` (one of COLORS); ValueError for another model or colour."""
+    one_of("model", model, model_names())
     if not isinstance(color, str) or color not in COLORS:
         raise ValueError(f"color must be one of {sorted(COLORS)}, got {color!r}")
     r, g, b, a = COLORS[color]
+    body_height = max(params.lidar_z - BASE_LINK_Z - LIDAR_HEIGHT / 2.0, MIN_BODY_HEIGHT)
     radius = params.wheel_radius
     half_track = params.track_width / 2.0
     materials = (
@@ -69,8 +75,8 @@ def burger_urdf(params: RobotParams, color: str = "purple") -> str:
         + _cylinder_link(
             "base_link",
             params.collision_radius,
-            BASE_HEIGHT,
-            _origin(z=BASE_HEIGHT / 2.0),
+            body_height,
+            _origin(z=body_height / 2.0),
             color,
         )
         + _cylinder_link("wheel_left_link", radius, WHEEL_WIDTH, _origin(roll=1.5707963267948966), "dark")
@@ -110,5 +116,5 @@ def burger_urdf(params: RobotParams, color: str = "purple") -> str:
     )
     return (
         '<?xml version="1.0"?>\n'
-        f'<robot name="turtlebot3_burger_{color}">\n{materials}{links}{joints}</robot>\n'
+        f'<robot name="turtlebot3_{model}_{color}">\n{materials}{links}{joints}</robot>\n'
     )

@@ -3,7 +3,8 @@
 An Odometry message is read (frames ``odom_id -> body_id``, `conversions.transform_from_pose`: a finite
 position and a unit quaternion; `conversions.stamp_nanoseconds`) into the sample ``(x, y, theta)`` of
 ``T_odom_body`` (m, m, rad), then offered to a `turtlelib.SampleGate` whose rate bound is the robot's:
-with wheel radius ``r``, track ``b`` and maximum wheel speed ``w`` (rad/s, the robot description's)::
+with wheel radius ``r``, track ``b`` and fastest wheel speed ``w`` (rad/s, the robot description's
+``wheel_speed_bound``, which its ``model`` sets)::
 
     |dx|, |dy| <= (1 + speed_margin) r w dt + POSITION_SLACK_M
     |dtheta|   <= (1 + speed_margin) 2 r w / b dt + HEADING_SLACK_RAD
@@ -25,7 +26,7 @@ from turtlelib.sample_gate import GateResult, SampleGate, SampleGateConfig
 
 from .conversions import stamp_nanoseconds, transform_from_pose
 from .throttle import SourceWarnings
-from .wheel_stream import to_apply
+from .wheel_stream import speed_hint, to_apply
 
 # Slack of the rate bound: a pose may be off by this much at either sample (m, rad)
 POSITION_SLACK_M = 1e-3
@@ -36,7 +37,7 @@ class DriveLimits(Protocol):
     """What the rate bound needs of a robot description (``RobotParams`` has it)."""
 
     @property
-    def max_wheel_speed(self) -> float: ...
+    def wheel_speed_bound(self) -> float: ...
 
     @property
     def wheel_radius(self) -> float: ...
@@ -59,12 +60,13 @@ class OdomStream:
         source: str = "odom",
     ) -> None:
         self.frames = (odom_id, body_id)
-        max_speed_mps = robot.wheel_radius * robot.max_wheel_speed
+        max_speed_mps = robot.wheel_radius * robot.wheel_speed_bound
         max_turn_rate = 2.0 * max_speed_mps / robot.track_width
         self.gate = SampleGate(
             config,
             [max_speed_mps, max_speed_mps, max_turn_rate],
             [POSITION_SLACK_M, POSITION_SLACK_M, HEADING_SLACK_RAD],
+            speed_hint(f"{max_speed_mps:.4g} m/s, {max_turn_rate:.4g} rad/s"),
         )
         self._warnings = warnings
         self._source = source

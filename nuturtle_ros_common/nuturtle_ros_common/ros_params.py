@@ -2,7 +2,7 @@
 
 Config dataclasses (turtlelib's and the nodes') name their fields after the ROS parameters, so one
 generic function serves every node: each field becomes parameter `<prefix><field>`, its default is the
-dataclass default (or an override such as the Burger's constants from diff_params.yaml), and the
+dataclass default (or an override such as the robot model's constants from models.yaml), and the
 dataclass's own validation raises `ValueError` for invalid values.
 
 Parameters are a contract: each one is described (`ros2 param describe`) by the part of its dataclass's

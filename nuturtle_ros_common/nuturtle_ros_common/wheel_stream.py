@@ -2,10 +2,11 @@
 
 A JointState is read (`wheel_joints.wheel_values`: names, lengths, finite angles), its stamp checked
 (`conversions.stamp_nanoseconds`), then offered to a `turtlelib.SampleGate` whose rate bound is the
-robot's: each wheel turns at most ``(1 + speed_margin) max_wheel_speed`` (rad/s; the robot description's
-``RobotParams.max_wheel_speed``), with a slack of ``ENCODER_SLACK_TICKS`` encoder ticks. So a
-replayed, future-stamped or corrupt message is refused without moving anything, and a source that really
-restarted (a restarted simulator, a looped recording) is followed after ``restart_samples`` messages.
+robot's: each wheel turns at most ``(1 + speed_margin) wheel_speed_bound`` (rad/s; the robot description's
+``RobotParams.wheel_speed_bound``, which its ``model`` sets), with a slack of ``ENCODER_SLACK_TICKS``
+encoder ticks. So a replayed, future-stamped or corrupt message is refused without moving anything (the
+warning names the parameters that set the bound), and a source that really restarted (a restarted
+simulator, a looped recording) is followed after ``restart_samples`` messages.
 """
 
 from __future__ import annotations
@@ -26,15 +27,24 @@ from .wheel_joints import WheelJoints, wheel_values
 ENCODER_SLACK_TICKS = 2.0
 
 
+def speed_hint(max_rates: str) -> str:
+    """How a sample gate's reason ends when a sample moved too fast: its ``max_rates`` come from the robot's
+    fastest wheel speed, and the parameters that change them."""
+    return (
+        f"max rate {max_rates}, from the robot's fastest wheel speed: a faster robot needs its own `model` "
+        "(or max_linear_speed, max_angular_speed, motor_cmd_max), or a larger speed_margin"
+    )
+
+
 class WheelStream:
-    """The wheel samples of a node's `joint_states` (module docstring): ``max_wheel_speed`` (rad/s) and
+    """The wheel samples of a node's `joint_states` (module docstring): ``wheel_speed_bound`` (rad/s) and
     ``encoder_ticks_per_rad`` set the rate bound; problems are warned (throttled) on ``warnings`` under
     ``source``."""
 
     def __init__(
         self,
         joints: WheelJoints,
-        max_wheel_speed: float,
+        wheel_speed_bound: float,
         encoder_ticks_per_rad: float,
         config: SampleGateConfig,
         warnings: SourceWarnings,
@@ -42,7 +52,8 @@ class WheelStream:
     ) -> None:
         self.joints = joints
         slack_rad = ENCODER_SLACK_TICKS / encoder_ticks_per_rad
-        self.gate = SampleGate(config, [max_wheel_speed] * 2, [slack_rad] * 2)
+        hint = speed_hint(f"{wheel_speed_bound:.4g} rad/s")
+        self.gate = SampleGate(config, [wheel_speed_bound] * 2, [slack_rad] * 2, hint)
         self._warnings = warnings
         self._source = source
 
@@ -75,7 +86,7 @@ class WheelLimits(Protocol):
     """What the rate bound needs of a robot description (``RobotParams`` has it)."""
 
     @property
-    def max_wheel_speed(self) -> float: ...
+    def wheel_speed_bound(self) -> float: ...
 
     @property
     def encoder_ticks_per_rad(self) -> float: ...
@@ -87,4 +98,4 @@ def declare_wheel_stream(
     """The `WheelStream` of ``node``'s joint_states: ``SampleGateConfig`` declared as its ROS parameters,
     the rate bound from ``robot``."""
     config = declare_dataclass(node, SampleGateConfig)
-    return WheelStream(joints, robot.max_wheel_speed, robot.encoder_ticks_per_rad, config, warnings)
+    return WheelStream(joints, robot.wheel_speed_bound, robot.encoder_ticks_per_rad, config, warnings)

@@ -20,6 +20,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from nuturtle_description.robot_params import add_model_argument
+
 from .relay_config import add_foxglove_argument, parse_endpoint
 
 DEFAULT_TOPICS = {
@@ -49,6 +51,7 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--association", choices=("known", "unknown"), default=None,
                         help="SLAM data association (default: the params file's, else unknown): LiDAR "
                         "landmarks from the scan, or landmark ids from the fake sensor topic")  # fmt: skip
+    add_model_argument(parser)
     parser.add_argument("--motion-source", choices=("joint_states", "odom"), default=None,
                         help="slam's motion_source parameter "
                         "(default: the params file's, else the node's)")  # fmt: skip
@@ -168,6 +171,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             params=params,
             association=args.association,
             motion_source=args.motion_source,
+            model=args.model,
             topics={role: getattr(args, f"{role}_topic") for role in DEFAULT_TOPICS},
             rate=args.rate,
             play_only=args.play_only,

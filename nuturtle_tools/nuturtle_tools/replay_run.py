@@ -53,6 +53,7 @@ from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message
 from rclpy.signals import SignalHandlerOptions
 
+from nuturtle_description.robot_params import resolve_model
 from nuturtle_eval.metrics import PoseSeries, odom_in_world
 from nuturtle_eval.run_evaluation import (
     ProgressBar,
@@ -112,6 +113,8 @@ class ReplayOptions:
     """What to replay (docs/replay.md): the recording ``bag`` (a bag directory or a single .mcap/.db3);
     ``out_dir``; ``params`` a ROS params file whose ``slam`` and ``landmarks`` sections (and ``/**``) go to
     those nodes; ``association`` / ``motion_source`` override it (None: the file's, or the node's default);
+    ``model`` slam's robot model (None: the file's, else TURTLEBOT3_MODEL, else burger; robot constants set
+    in the file still win over the model's, as any explicit parameter does);
     ``topics`` the bag topic of each role (``scan``, ``joint_states``, ``odom``, ``truth``,
     ``fake_sensor``); ``rate`` > 0 paces at that many times real time, 0 plays as fast as the nodes go
     (None: 0, or 1.0 with ``play_only``); ``play_only`` runs only the player, which first waits up to
@@ -124,6 +127,7 @@ class ReplayOptions:
     params: Path | None = None
     association: str | None = None
     motion_source: str | None = None
+    model: str | None = None
     topics: Mapping[str, str] = field(
         default_factory=lambda: {
             "scan": "/scan",
@@ -148,6 +152,8 @@ class ReplayOptions:
             raise ValueError(f"association must be known or unknown, got {self.association!r}")
         if self.motion_source not in (None, "joint_states", "odom"):
             raise ValueError(f"motion_source must be joint_states or odom, got {self.motion_source!r}")
+        if self.model is not None:
+            resolve_model(self.model)
         if self.rate is not None and not (math.isfinite(self.rate) and self.rate >= 0.0):
             raise ValueError(f"rate must be >= 0 (0: as fast as possible), got {self.rate!r}")
         if self.params is not None and not Path(self.params).is_file():
@@ -360,6 +366,8 @@ class Replay:
         self.slam_values = dict(slam_file)
         self.slam_values["association"] = self.association
         self.slam_values["motion_source"] = self.motion_source
+        if options.model is not None:
+            self.slam_values["model"] = options.model
         self.landmarks_values = node_parameters_from_file(options.params, "landmarks")
         if self.facts.truth is not None:
             T0 = truth_pose_at(self.facts.truth, self.facts.first_motion_ns)

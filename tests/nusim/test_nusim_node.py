@@ -27,7 +27,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from nusim.nusim_node import NusimNode, NusimTiming
 from nusim.simulation import ArenaConfig, NoiseConfig, Obstacles, default_lidar
-from nuturtle_description.robot_params import burger_params, diff_params_path
+from nuturtle_description.robot_params import burger_params
 from nuturtle_ros_common.conversions import pose_from_transform, stamp_seconds, yaw_from_quaternion
 from nuturtle_ros_common.ros_files import load_ros_yaml
 from turtlelib import DiffDrive, Transform2D
@@ -36,7 +36,7 @@ pytestmark = pytest.mark.ros
 
 BASIC_WORLD = Path(__file__).resolve().parents[2] / "nusim" / "config" / "basic_world.yaml"
 BURGER = DiffDrive(0.033, 0.16)
-MCU_PER_RAD_S = burger_params().motor_cmd_per_rad_sec  # 41.6666667 in diff_params.yaml
+MCU_PER_RAD_S = burger_params().motor_cmd_per_rad_sec  # 41.6666667 in models.yaml
 HALF_TICK_RAD = 0.5 * 2.0 * math.pi / 4096.0
 QUIET = {"input_noise": 0.0, "slip_fraction": 0.0, "basic_sensor_variance": 0.0}
 EXACT_LIDAR = {"lidar.noise": 0.0, "lidar.resolution": 0.0}
@@ -337,6 +337,7 @@ def test_the_default_parameters_are_the_basic_world_yaml():
         **vars(NoiseConfig()),
         **{f"obstacles.{k}": list(v) for k, v in vars(Obstacles()).items()},
         **{f"lidar.{k}": v for k, v in vars(default_lidar()).items()},
+        "lidar_model": "lds01",
         "wheel_left": "wheel_left_joint",
         "wheel_right": "wheel_right_joint",
         "cmd_timeout": 0.5,
@@ -371,6 +372,7 @@ def test_parameters_from_the_world_file_give_the_default_world(ros):
         ({"realtime_factor": -2.0}, "realtime_factor must be finite and > 0"),
         ({"joint_states_rate": 200.0}, r"joint_states_rate \(200.0 Hz\) cannot exceed the physics rate"),
         ({"lidar.samples": 0}, "lidar samples must be >= 1"),
+        ({"lidar_model": "lds03"}, r"lidar_model must be one of \('lds01', 'lds02', 'gazebo'\)"),
         ({"slip_fraction": 1.5}, r"slip_fraction must be in \[0.0, 1.0\)"),
         ({"collision_radius": 0.0}, "collision_radius must be finite and > 0"),
     ],
@@ -387,8 +389,6 @@ def test_executable_runs_the_world_file_and_publishes_until_interrupted(ros, tmp
             "-m",
             "nusim.nusim_node",
             "--ros-args",
-            "--params-file",
-            str(diff_params_path()),
             "--params-file",
             str(BASIC_WORLD),
             "-p",

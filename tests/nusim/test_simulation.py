@@ -16,13 +16,16 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from nusim.simulation import (
+    LIDAR_MODELS,
     ArenaConfig,
+    LidarChoice,
     NoiseConfig,
     Obstacles,
     Simulation,
     SimulationConfig,
     Walls,
     contact_fraction,
+    default_lidar,
     first_collision,
     wall_distances,
 )
@@ -254,7 +257,7 @@ def test_a_scan_in_a_hexagonal_arena_sees_its_walls():
         walls=Walls(*zip(*hexagon, strict=True)),
         lidar=replace(EXACT_LIDAR, range_max=3.5),
     )
-    ranges = sim.scan()
+    ranges = sim.scan().range_m
     assert ranges[90] == pytest.approx(2.54, abs=1e-12)
     assert ranges[270] == pytest.approx(2.54, abs=1e-12)
     assert ranges[0] == pytest.approx(2.933, abs=1e-12)
@@ -342,7 +345,7 @@ def test_scan_is_cast_from_the_robot_s_lidar_mount():
         noise=QUIET,
         lidar=EXACT_LIDAR,
     )
-    ranges = Simulation(config).scan()
+    ranges = Simulation(config).scan().range_m
     # the sensor at (0.1, 0.2) facing +y: beam 0 hits the wall y = 1.5, beam 90 (towards -x) the wall
     # x = -2, beam 270 (towards +x) passes 0.2 m beside the cylinder of radius 0.05 and hits x = 2
     assert ranges[0] == pytest.approx(1.5 - 0.2, abs=1e-12)
@@ -354,7 +357,7 @@ def test_scan_is_cast_from_the_robot_s_lidar_mount():
 def test_scan_at_a_known_pose_matches_the_arena():
     # arena 4 m x 3 m, a cylinder of radius 0.05 m at (1, 0); robot at the origin facing +x
     sim = world(obstacles=((1.0,), (0.0,), (0.05,)))
-    ranges = sim.scan()
+    ranges = sim.scan().range_m
     assert ranges.shape == (360,)
     assert ranges[0] == pytest.approx(1.0 - 0.05 - LIDAR_X, abs=1e-12)  # cylinder dead ahead
     assert ranges[180] == pytest.approx(2.0 + LIDAR_X, abs=1e-12)  # back wall at x = -2
@@ -362,21 +365,57 @@ def test_scan_at_a_known_pose_matches_the_arena():
     assert ranges[270] == pytest.approx(1.5, abs=1e-12)
     # at (1, -1) facing +y: the sensor at (1, -1.032), the cylinder dead ahead, walls x = +-2, y = -1.5
     sim.teleport(Transform2D(1.0, -1.0, math.pi / 2))
-    ranges = sim.scan()
+    ranges = sim.scan().range_m
     assert ranges[0] == pytest.approx(1.0 - LIDAR_X - 0.05, abs=1e-12)
     assert ranges[90] == pytest.approx(3.0, abs=1e-12)
     assert ranges[180] == pytest.approx(1.5 - (1.0 - LIDAR_X), abs=1e-12)
     assert ranges[270] == pytest.approx(1.0, abs=1e-12)
     # beyond range_max 3.5 m nothing returns: corners of a large arena
     far = world(arena=(8.0, 8.0))
-    assert far.scan()[45] == 0.0
+    assert far.scan().range_m[45] == 0.0
 
 
 def test_scan_noise_and_resolution_quantise_ranges():
     sim = world(obstacles=((1.0,), (0.0,), (0.05,)), lidar=LidarConfig(noise=0.01, resolution=0.01))
-    beams = np.array([sim.scan()[0] for _ in range(400)])
+    beams = np.array([sim.scan().range_m[0] for _ in range(400)])
     np.testing.assert_allclose(beams / 0.01, np.round(beams / 0.01), atol=1e-9)
     assert beams.mean() == pytest.approx(0.982, abs=5 * 0.011 / math.sqrt(400))
+
+
+def test_the_default_lidar_model_is_todays_lds01_and_an_unknown_one_names_the_choices():
+    assert LidarChoice().model.sensor == default_lidar()
+    with pytest.raises(ValueError, match=r"lidar_model must be one of \('lds01', 'lds02', 'gazebo'\)"):
+        LidarChoice("lds03")
+
+
+@pytest.mark.parametrize(
+    ("lidar_model", "samples", "no_return", "reach_m"),
+    [
+        ("lds01", {360}, 0.0, 3.5),
+        ("lds02", set(range(374, 392)), math.nan, 8.0),
+        ("gazebo", {360}, math.inf, 3.5),
+    ],
+)
+def test_each_lidar_model_reads_its_no_return_value_beyond_its_reach(
+    lidar_model, samples, no_return, reach_m
+):
+    # from the centre of an arena 20 m long the end walls are out of reach; a cylinder 1.5 m ahead is in
+    # reach, and so are the side walls 3.3 m away (every LiDAR) or 7.9 m away (the LDS-02 only)
+    lidar = replace(LIDAR_MODELS[lidar_model].sensor, noise=0.0)
+    for y_m in (3.3, 7.9):
+        sim = world(obstacles=((1.5,), (0.0,), (0.15,)), arena=(20.0, 2.0 * y_m), lidar=lidar)
+        scan = sim.scan()
+        assert scan.layout.samples in samples and scan.range_m.shape == (scan.layout.samples,)
+        bearing = scan.layout.angle_min + scan.layout.angle_increment * np.arange(scan.layout.samples)
+        ahead = np.argmin(np.abs(np.remainder(bearing + math.pi, 2 * math.pi) - math.pi))
+        left = np.argmin(np.abs(bearing - math.pi / 2))
+        behind = np.argmin(np.abs(bearing - math.pi))
+        assert scan.range_m[ahead] == pytest.approx(1.5 - 0.15 - LIDAR_X, abs=lidar.resolution + 1e-3)
+        np.testing.assert_array_equal(scan.range_m[behind], no_return)
+        if y_m < reach_m:
+            assert scan.range_m[left] == pytest.approx(y_m, abs=0.01)
+        else:
+            np.testing.assert_array_equal(scan.range_m[left], no_return)
 
 
 def test_fake_sensor_reports_only_landmarks_in_range_with_their_ids():
@@ -413,7 +452,7 @@ def trace(seed: int) -> tuple[np.ndarray, ...]:
         sim.command_wheels(left, right)
         poses += [T.as_array() for T in run(sim, 50)]
         ticks.append(sim.encoder_ticks)
-        scans.append(sim.scan())
+        scans.append(sim.scan().range_m)
         landmarks.append(sim.sense_landmarks().p_body)
     return np.array(poses), np.array(ticks), np.array(scans), np.concatenate(landmarks)
 

@@ -6,8 +6,8 @@ cylinders, and the recovery's status named the cause while it lasted."""
 from __future__ import annotations
 
 import pytest
-from slip_scenarios import run_scenario
 
+from slip_scenarios import run_scenario
 from turtlelib.slip_recovery import SlipRecoveryConfig
 
 CAUSES = {"phantom_turn": "wheel slip", "bump": "bump or stall"}

@@ -24,6 +24,7 @@ from rosbags.rosbag2 import Reader
 from sensor_msgs.msg import LaserScan
 from visualization_msgs.msg import Marker, MarkerArray
 
+from nusim.nusim_node import NusimNode
 from nuslam.landmarks_node import LandmarksNode
 from rclpy_harness import matched, record_rosout, warnings_of
 from turtlelib import DetectorConfig, LidarConfig, Transform2D, arena_walls, simulate_scan
@@ -170,14 +171,12 @@ def test_gazebo_scans_of_a_third_party_recording_are_used_and_show_its_cylinders
         _, T_world_footprint = min(poses, key=lambda pose: abs(pose[0] - t_ns))
         T_world_scan = T_world_footprint @ T_FOOTPRINT_SCAN
         found = cylinders_of(array)
-        p_world = T_world_scan @ np.array([(m.pose.position.x, m.pose.position.y) for m in found])
-        distance = np.hypot(*(p_world[:, None, :] - TB3_WORLD_CYLINDERS[None]).transpose(2, 0, 1))
-        nearest = distance.argmin(axis=1)
+        nearest, distance_m = nearest_cylinders(found, T_world_scan, TB3_WORLD_CYLINDERS)
         assert len(found) >= 5, "five or six cylinders in range in these 2 s"
         assert len(set(nearest.tolist())) == len(found), "each cylinder once"
         # a detection is spurious unless its centre lies inside a cylinder
-        assert distance.min(axis=1).max() < TB3_WORLD_RADIUS_M, "no spurious cylinder"
-        errors_m.extend(distance.min(axis=1))
+        assert distance_m.max() < TB3_WORLD_RADIUS_M, "no spurious cylinder"
+        errors_m.extend(distance_m)
         radii_m.extend(0.5 * marker.scale.x for marker in found)
         # every point of the first 359 beams drawn once: beam 359 (at 6.28 rad) is dropped
         (clusters,) = [c for c in rig.clusters if stamp_ns(c.markers[0].header.stamp) == t_ns]
@@ -186,6 +185,77 @@ def test_gazebo_scans_of_a_third_party_recording_are_used_and_show_its_cylinders
     assert np.median(errors_m) < 0.02, "centres within 2 cm (the pose's timing included)"
     assert np.median(radii_m) == pytest.approx(TB3_WORLD_RADIUS_M, abs=0.01)
     assert rig.warnings() == []
+
+
+# nusim's world for the LiDAR models: three of our cylinders (0.038 m) and three of turtlebot3_world's
+# (0.15 m) around the robot at the origin, inside walls 6 m away, beyond every LiDAR's reach somewhere
+SIM_WORLD = {
+    "obstacles.x": [0.8, -0.7, 0.2, 1.5, -1.6, -0.3],
+    "obstacles.y": [0.3, 0.6, -0.9, 1.2, -1.0, 1.8],
+    "obstacles.r": [0.038] * 3 + [0.15] * 3,
+    "arena_x_length": 12.0,
+    "arena_y_length": 12.0,
+    "realtime_factor": 10.0,
+}
+SCANS_CHECKED = 5
+
+
+@pytest.mark.parametrize(
+    ("lidar_model", "no_return", "range_max"),
+    [("lds01", 0.0, 3.5), ("lds02", math.nan, 100.0), ("gazebo", math.inf, 3.5)],
+)
+def test_in_nusim_every_turtlebot3_lidar_shows_the_cylinders(ros, lidar_model, no_return, range_max):
+    overrides = {**SIM_WORLD, "lidar_model": lidar_model}
+    nusim = ros.add(
+        NusimNode(
+            context=ros.context, parameter_overrides=[Parameter(k, value=v) for k, v in overrides.items()]
+        )
+    )
+    rig = Rig(ros)
+    helper = ros.node("landmarks_nusim_helper")
+    scans: list[LaserScan] = []
+    subscription = helper.create_subscription(LaserScan, "scan", scans.append, qos_profile_sensor_data)
+    assert ros.spin_until(lambda: matched(subscription), 5.0)
+
+    def answered() -> list[tuple[LaserScan, MarkerArray]]:
+        """nusim's scans with the landmarks array that answered each."""
+        arrays = {stamp_ns(array.markers[0].header.stamp): array for array in rig.landmarks}
+        return [(scan, arrays[t]) for scan in scans if (t := stamp_ns(scan.header.stamp)) in arrays]
+
+    assert ros.spin_until(lambda: len(answered()) >= SCANS_CHECKED, 10.0)
+    # the robot stands at its start: every scan is cast from the same pose
+    config = nusim.simulation.config
+    T_world_scan = config.arena.T_world_start @ config.robot.T_body_scan
+    circles = nusim.simulation.circles
+    large = set(np.flatnonzero(circles[:, 2] == 0.15).tolist())
+    seen, errors_m = np.zeros(len(circles), dtype=int), []
+    for scan, array in answered()[:SCANS_CHECKED]:
+        nearest, distance_m = nearest_cylinders(cylinders_of(array), T_world_scan, circles[:, :2])
+        assert (distance_m < circles[nearest, 2]).all(), "no spurious cylinder"
+        assert large <= set(nearest.tolist()), "turtlebot3_world's cylinders in every scan"
+        seen[nearest] += 1
+        errors_m.extend(distance_m)
+        # what the driver writes: the model's range limit and no-return value
+        ranges = np.asarray(scan.ranges)
+        assert scan.range_max == pytest.approx(range_max)
+        assert np.count_nonzero(np.isnan(ranges) if math.isnan(no_return) else ranges == no_return) > 0
+    assert (seen > 0).all(), f"every cylinder seen in {SCANS_CHECKED} scans: {seen}"
+    assert np.median(errors_m) < 0.015
+    beam_counts = {len(scan.ranges) for scan, _ in answered()}
+    assert len(beam_counts) > 1 if lidar_model == "lds02" else beam_counts == {360}
+    assert rig.warnings() == []
+
+
+def nearest_cylinders(
+    found: list[Marker], T_world_scan: Transform2D, centres_world: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """For each detected cylinder (markers in the scan frame): the nearest true centre's index and the
+    distance to it (m)."""
+    p_scan = np.array([(m.pose.position.x, m.pose.position.y) for m in found]).reshape(-1, 2)
+    p_world = T_world_scan @ p_scan
+    distance = np.hypot(*(p_world[:, None, :] - centres_world[None]).transpose(2, 0, 1))
+    nearest = distance.argmin(axis=1)
+    return nearest, distance[np.arange(len(found)), nearest]
 
 
 @pytest.mark.parametrize(

@@ -739,7 +739,7 @@ def test_the_invariant_filter_in_localization_is_refused_at_start_up(ros):
 
 
 def test_the_filter_s_sensor_mount_is_the_robot_s_lidar_mount(ros):
-    """Written once: another robot's lidar_x, lidar_y, lidar_yaw (its diff_params) move the filter's
+    """Written once: another robot's lidar_x, lidar_y, lidar_yaw (set explicitly) move the filter's
     sensor."""
     overrides = [
         Parameter("lidar_x", value=0.1),

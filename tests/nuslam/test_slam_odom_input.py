@@ -136,7 +136,7 @@ def test_an_odometry_reset_restarts_from_the_estimate_with_a_warning_and_keeps_t
 def test_odom_moving_faster_than_the_robot_is_refused(ros):
     rig = OdomRig(ros, observation_timeout=100.0)
     rig.moved(10 * S, Transform2D())
-    # 1 m in 0.1 s: five times the Burger's top speed (0.21 m/s) with its margin
+    # 1 m in 0.1 s: 15 times the Burger's bound, 1.5 x 0.447 m/s (its fastest wheel, 13.55 rad/s, x r)
     rig.odom.publish(odom_at(10 * S + S // 10, Transform2D(1.0, 0.0, 0.0)))
     odom = rig.moved(10 * S + S // 5, Transform2D(0.02, 0.0, 0.0))
     assert close_pose(odom, Transform2D(0.02, 0.0, 0.0))

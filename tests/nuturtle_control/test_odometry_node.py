@@ -295,3 +295,23 @@ def test_parameters_set_joint_names_frames_and_robot_constants(ros):
 def test_odometry_frames_must_be_non_empty_and_distinct(fields, message):
     with pytest.raises(ValueError, match=message):
         OdometryFrames(**fields)
+
+
+@pytest.mark.parametrize("model", ["burger", "waffle"])
+def test_the_wheel_speed_bound_is_the_model_s_and_a_refusal_names_the_parameters_to_change(ros, model):
+    """22 rad/s: beyond the Burger's bound, 1.5 x (0.22 + 2.84 x 0.08) / 0.033 = 20.3 rad/s; within the
+    Waffle's, 1.5 x (0.26 + 1.82 x 0.1435) / 0.033 = 23.7 rad/s (a Gazebo Waffle at both teleop bounds)."""
+    rig = Rig(ros, parameter_overrides=[Parameter("model", value=model)])
+    rig.send(joint_state(1.0, (0.0, 0.0)))
+    dphi = 22.0 * 0.05
+    rig.joint_states.publish(joint_state(1.05, (dphi, dphi)))
+    ros.spin_for(0.3)
+    warnings = rig.warnings()
+    if model == "waffle":
+        assert len(rig.odoms) == 2 and not warnings
+        assert pose_of(rig.odoms[-1]) == pytest.approx((dphi * R_WHEEL, 0.0, 0.0), abs=TOL)
+    else:
+        assert len(rig.odoms) == 1 and len(warnings) == 1
+        assert "joint_states refused: value 0 moved 1.1 in 0.050 s" in warnings[0]
+        assert "max rate 13.55 rad/s" in warnings[0]
+        assert "a faster robot needs its own `model`" in warnings[0] and "speed_margin" in warnings[0]

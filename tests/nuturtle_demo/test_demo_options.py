@@ -1,4 +1,5 @@
-"""nuturtle_demo.run.DemoOptions: what a demo run accepts (checked before anything starts)."""
+"""nuturtle_demo.run.DemoOptions: what a demo run accepts (checked before anything starts), and the
+robot model it runs."""
 
 from __future__ import annotations
 
@@ -7,7 +8,10 @@ import math
 import numpy as np
 import pytest
 
-from nuturtle_demo.run import DemoOptions
+from nuturtle_demo.cli import main, parse_args
+from nuturtle_demo.run import DemoOptions, DemoSystem
+from nuturtle_description.robot_params import MODEL_ENV, model_params
+from nuturtle_tools.recorder import BagWriter
 
 
 def test_defaults_and_converted_values():
@@ -35,3 +39,52 @@ def test_defaults_and_converted_values():
 def test_invalid_options_raise_with_their_reason(fields, message):
     with pytest.raises(ValueError, match=message):
         DemoOptions(**fields)
+
+
+def test_the_model_is_the_option_else_turtlebot3_model_else_burger(monkeypatch):
+    monkeypatch.delenv(MODEL_ENV, raising=False)
+    assert DemoOptions().model == "burger"
+    monkeypatch.setenv(MODEL_ENV, "waffle_pi")
+    assert DemoOptions().model == "waffle_pi"
+    assert DemoOptions(model="waffle").model == "waffle"
+
+
+def test_an_unknown_model_is_one_error_line_and_exit_code_2(monkeypatch, capsys, tmp_path):
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--model", "wafle"])
+    assert exit_info.value.code == 2
+    errors = [line for line in capsys.readouterr().err.splitlines() if "error:" in line]
+    assert errors == [
+        "python -m nuturtle_demo: error: argument --model: invalid choice: 'wafle' "
+        "(choose from 'burger', 'waffle', 'waffle_pi')"
+    ]
+    # from the environment: refused before anything runs
+    monkeypatch.setenv(MODEL_ENV, "burger3")
+    assert main(["--out", str(tmp_path / "out")]) == 2
+    assert capsys.readouterr().err.splitlines() == [
+        "error: TURTLEBOT3_MODEL (the environment variable) must be one of "
+        "('burger', 'waffle', 'waffle_pi'), got 'burger3'"
+    ]
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.ros
+def test_every_node_of_a_waffle_demo_runs_the_waffle(ros, tmp_path):
+    """--model waffle: nusim, turtle_control, odometry, slam and the driver all take the Waffle's constants
+    (built as a run builds them, not run)."""
+    args = parse_args(["--model", "waffle", "--out", str(tmp_path)])
+    options = DemoOptions(model=args.model, out_dir=args.out, progress=False)
+    writer = BagWriter(tmp_path / "run")
+    system = DemoSystem(options, ros.context, writer)
+    try:
+        waffle = model_params("waffle")
+        for node in (system.nusim, system.turtle_control, system.odometry, system.slam, system.driver):
+            assert node.get_parameter("model").value == "waffle", node.get_name()
+            values = {name: node.get_parameter(name).value for name in vars(waffle)}
+            assert values == pytest.approx(vars(waffle), rel=1e-12), node.get_name()
+        assert system.nusim.simulation.config.robot == waffle
+        assert system.slam.config.T_body_sensor == waffle.T_body_scan
+    finally:
+        writer.close()
+        for node in system.nodes:
+            node.destroy_node()

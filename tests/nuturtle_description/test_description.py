@@ -1,4 +1,5 @@
-"""nuturtle_description: the generated URDF and the Burger's constants."""
+"""nuturtle_description: the generated URDF and the TurtleBot3 models' constants (expected values from
+the notes on the family: ROBOTIS' URDFs, teleop bounds and firmware)."""
 
 from __future__ import annotations
 
@@ -12,15 +13,26 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from nuturtle_description.robot_params import (
+    MODEL_ENV,
     RobotParams,
     burger_params,
-    diff_params_path,
+    model_names,
+    model_params,
+    models_path,
+    resolve_model,
 )
-from nuturtle_description.urdf import COLORS, burger_urdf
+from nuturtle_description.urdf import COLORS, robot_urdf
 from turtlelib import Transform2D
 
 PACKAGE = Path(__file__).resolve().parents[2] / "nuturtle_description"
 TOL = 1e-12
+MODELS = ("burger", "waffle", "waffle_pi")
+# per model: track width, collision radius, base_scan in base_footprint (m)
+GEOMETRY = {
+    "burger": (0.16, 0.11, (-0.032, 0.0, 0.182)),
+    "waffle": (0.287, 0.22, (-0.064, 0.0, 0.132)),
+    "waffle_pi": (0.287, 0.22, (-0.064, 0.0, 0.132)),
+}
 
 # ---------------------------------------------------------------------------------------------- URDF
 
@@ -52,9 +64,11 @@ class Urdf:
         return xyz
 
 
-def test_burger_urdf_dimensions_and_joints_equal_the_parameters():
-    params = burger_params()
-    urdf = Urdf(burger_urdf(params))
+@pytest.mark.parametrize("model", MODELS)
+def test_each_model_s_urdf_has_its_wheel_separation_and_lidar_joint(model):
+    track_width, collision_radius, scan_xyz = GEOMETRY[model]
+    urdf = Urdf(robot_urdf(model, model_params(model)))
+    assert urdf.robot.get("name") == f"turtlebot3_{model}_purple"
     assert set(urdf.links) == {
         "base_footprint",
         "base_link",
@@ -70,11 +84,14 @@ def test_burger_urdf_dimensions_and_joints_equal_the_parameters():
             assert urdf.cylinder(f"wheel_{side}_link", part)[0] == pytest.approx(0.033, abs=TOL)
         # wheel centres: on the axle, half the track to each side, one wheel radius above the ground
         assert urdf.position_in_footprint(f"wheel_{side}_link") == pytest.approx(
-            [0.0, sign * 0.08, 0.033], abs=TOL
+            [0.0, sign * track_width / 2, 0.033], abs=TOL
         )
-    assert urdf.cylinder("base_link")[0] == pytest.approx(0.11, abs=TOL)
+    assert urdf.cylinder("base_link")[0] == pytest.approx(collision_radius, abs=TOL)
     assert urdf.joints["scan_joint"].get("type") == "fixed"
-    assert urdf.position_in_footprint("base_scan") == pytest.approx([-0.032, 0.0, 0.182], abs=TOL)
+    assert urdf.position_in_footprint("base_scan") == pytest.approx(list(scan_xyz), abs=TOL)
+    # the body stays below the LiDAR: its top is the LiDAR's base
+    body_top = 0.010 + urdf.cylinder("base_link")[1]
+    assert body_top == pytest.approx(scan_xyz[2] - urdf.cylinder("base_scan")[1] / 2, abs=TOL)
 
 
 @settings(max_examples=30)
@@ -83,7 +100,7 @@ def test_urdf_follows_any_robot_parameters(wheel_radius, track_width, collision_
     params = RobotParams(
         wheel_radius=wheel_radius, track_width=track_width, collision_radius=collision_radius
     )
-    urdf = Urdf(burger_urdf(params, "green"))
+    urdf = Urdf(robot_urdf("burger", params, "green"))
     assert urdf.cylinder("wheel_left_link")[0] == pytest.approx(wheel_radius, rel=1e-11)
     assert urdf.cylinder("base_link")[0] == pytest.approx(collision_radius, rel=1e-11)
     left = urdf.position_in_footprint("wheel_left_link")
@@ -94,7 +111,7 @@ def test_urdf_follows_any_robot_parameters(wheel_radius, track_width, collision_
 
 
 def test_urdf_is_one_tree_rooted_at_base_footprint():
-    urdf = Urdf(burger_urdf(burger_params()))
+    urdf = Urdf(robot_urdf("burger", burger_params()))
     children = [joint.find("child").get("link") for joint in urdf.joints.values()]
     parents = [joint.find("parent").get("link") for joint in urdf.joints.values()]
     assert len(children) == len(set(children)), "every link has at most one parent"
@@ -106,7 +123,7 @@ def test_urdf_is_one_tree_rooted_at_base_footprint():
 
 @pytest.mark.parametrize("color", sorted(COLORS))
 def test_every_colour_tints_the_body(color):
-    urdf = Urdf(burger_urdf(burger_params(), color))
+    urdf = Urdf(robot_urdf("burger", burger_params(), color))
     assert urdf.robot.get("name") == f"turtlebot3_burger_{color}"
     assert urdf.links["base_link"].find("visual/material").get("name") == color
     assert floats(urdf.materials[color].find("color").get("rgba")) == list(COLORS[color])
@@ -118,7 +135,7 @@ def test_every_colour_tints_the_body(color):
 @pytest.mark.parametrize("color", ["orange", "Red", "", None])
 def test_unknown_colour_is_a_value_error(color):
     with pytest.raises(ValueError, match="color must be one of"):
-        burger_urdf(burger_params(), color)
+        robot_urdf("burger", burger_params(), color)
 
 
 def test_load_urdf_launch_offers_exactly_the_urdf_colours():
@@ -139,12 +156,15 @@ def test_load_urdf_launch_offers_exactly_the_urdf_colours():
 # ------------------------------------------------------------------------------------- RobotParams
 
 
-def test_burger_params_are_the_yaml_values():
-    assert diff_params_path() == PACKAGE / "config" / "diff_params.yaml"
-    params = burger_params()
-    assert params == RobotParams(
+def test_each_model_s_constants_are_the_family_s():
+    assert model_names() == MODELS
+    assert models_path() == PACKAGE / "config" / "models.yaml"
+    burger = model_params("burger")
+    assert burger == RobotParams(
         wheel_radius=0.033,
         track_width=0.16,
+        max_linear_speed=0.22,
+        max_angular_speed=2.84,
         motor_cmd_max=265,
         motor_cmd_per_rad_sec=41.6666667,
         encoder_ticks_per_rad=651.8986469,
@@ -154,13 +174,73 @@ def test_burger_params_are_the_yaml_values():
         lidar_z=0.182,
         lidar_yaw=0.0,
     )
-    assert params.T_body_scan == Transform2D(-0.032, 0.0, 0.0)
-    assert params.max_wheel_speed == pytest.approx(6.36, abs=1e-8)
-    drive = params.diff_drive()
-    assert (drive.wheel_radius, drive.track_width) == (0.033, 0.16)
-    # the dataclass defaults are the same robot
+    assert burger == burger_params()
+    waffle = model_params("waffle")
+    assert waffle == RobotParams(
+        wheel_radius=0.033,
+        track_width=0.287,
+        max_linear_speed=0.26,
+        max_angular_speed=1.82,
+        motor_cmd_max=337,
+        motor_cmd_per_rad_sec=41.6666667,
+        encoder_ticks_per_rad=651.8986469,
+        collision_radius=0.22,
+        lidar_x=-0.064,
+        lidar_y=0.0,
+        lidar_z=0.132,
+        lidar_yaw=0.0,
+    )
+    assert model_params("waffle_pi") == waffle  # the same base, motors and LiDAR mount
+    assert burger.T_body_scan == Transform2D(-0.032, 0.0, 0.0)
+    assert waffle.T_body_scan == Transform2D(-0.064, 0.0, 0.0)
+    # the motors: 265 x 0.024 rad/s (XL430, 61 rpm); 337 x 0.024 rad/s (XM430-W210, 77 rpm)
+    assert burger.max_wheel_speed == pytest.approx(6.36, abs=1e-8)
+    assert waffle.max_wheel_speed == pytest.approx(8.088, abs=1e-8)
+    # the fastest wheel: both teleop bounds at once, (v + omega d / 2) / r, beyond either motor limit
+    assert burger.wheel_speed_bound == pytest.approx((0.22 + 2.84 * 0.08) / 0.033, rel=1e-12)  # 13.55
+    assert waffle.wheel_speed_bound == pytest.approx((0.26 + 1.82 * 0.1435) / 0.033, rel=1e-12)  # 15.79
+    assert (waffle.diff_drive().wheel_radius, waffle.diff_drive().track_width) == (0.033, 0.287)
+    # the dataclass defaults are the Burger
     for name, value in vars(RobotParams()).items():
-        assert getattr(params, name) == pytest.approx(value, rel=1e-8)
+        assert getattr(burger, name) == pytest.approx(value, rel=1e-8)
+
+
+def test_a_model_without_every_constant_is_refused_rather_than_given_the_burger_s(tmp_path, monkeypatch):
+    from nuturtle_description import robot_params
+
+    lines = models_path().read_text().splitlines()
+    models = tmp_path / "models.yaml"
+    models.write_text("\n".join(line for line in lines if not line.startswith("  lidar_z: 0.132")) + "\n")
+    monkeypatch.setattr(robot_params, "models_path", lambda: models)
+    assert model_params("burger").lidar_z == 0.182  # the other models still load
+    with pytest.raises(ValueError, match=r"models.yaml: waffle must give exactly .*; missing \['lidar_z'\]"):
+        model_params("waffle")
+
+
+@pytest.mark.parametrize(
+    ("model", "environ", "expected"),
+    [
+        (None, {}, "burger"),
+        (None, {MODEL_ENV: ""}, "burger"),
+        (None, {MODEL_ENV: "waffle"}, "waffle"),
+        ("waffle_pi", {MODEL_ENV: "waffle"}, "waffle_pi"),  # explicit beats the environment
+        ("burger", {MODEL_ENV: "not_a_model"}, "burger"),
+    ],
+)
+def test_the_model_is_the_explicit_one_else_the_environment_s_else_burger(model, environ, expected):
+    assert resolve_model(model, environ) == expected
+
+
+def test_an_unknown_model_is_an_error_naming_the_choices():
+    choices = r"\('burger', 'waffle', 'waffle_pi'\)"
+    with pytest.raises(ValueError, match=rf"^model must be one of {choices}, got 'waffle_p'$"):
+        model_params("waffle_p")
+    with pytest.raises(ValueError, match=rf"^model must be one of {choices}, got 'Burger'$"):
+        resolve_model("Burger", {})
+    with pytest.raises(ValueError, match=rf"^TURTLEBOT3_MODEL .*must be one of {choices}, got 'burger2'$"):
+        resolve_model(None, {MODEL_ENV: "burger2"})
+    with pytest.raises(ValueError, match=rf"^model must be one of {choices}, got 'waffle_x'$"):
+        robot_urdf("waffle_x", burger_params())
 
 
 @pytest.mark.parametrize(
@@ -169,6 +249,8 @@ def test_burger_params_are_the_yaml_values():
         "wheel_radius",
         "track_width",
         "motor_cmd_max",
+        "max_linear_speed",
+        "max_angular_speed",
         "motor_cmd_per_rad_sec",
         "encoder_ticks_per_rad",
         "collision_radius",

@@ -15,8 +15,8 @@ ROOT = Path(__file__).resolve().parents[2]
 
 def test_share_file_finds_a_package_s_config_in_its_source_folder():
     # the pip editable install: no ament index, the source folder next to the import package
-    assert share_file("nuturtle_description", "config", "diff_params.yaml") == (
-        ROOT / "nuturtle_description" / "config" / "diff_params.yaml"
+    assert share_file("nuturtle_description", "config", "models.yaml") == (
+        ROOT / "nuturtle_description" / "config" / "models.yaml"
     )
     with pytest.raises(LookupError, match="no_such_package"):
         share_file("no_such_package", "config")

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
@@ -382,3 +383,21 @@ def _assert_same(topic: str, relayed, recorded) -> None:
         assert [(m.ns, m.id, m.pose.position.x, m.pose.position.y) for m in relayed.markers] == [
             (m.ns, m.id, m.pose.position.x, m.pose.position.y) for m in recorded.markers
         ]
+
+
+def test_the_model_option_reaches_slam_and_an_unknown_one_is_refused(live, tmp_path, capsys):
+    """--model waffle on a recording without its run's parameters: slam runs the Waffle's constants."""
+    bag = copy_bag(live.out / BAG_NAME, tmp_path / "short", StoragePlugin.MCAP, until_ns=int(3e9))
+    out = tmp_path / "replay"
+    assert main([str(bag), "--out", str(out), "--model", "waffle", "--no-progress"]) == 0
+    slam = yaml.safe_load((out / "config.yaml").read_text())["slam"]["ros__parameters"]
+    assert (slam["model"], slam["track_width"], slam["lidar_x"]) == ("waffle", 0.287, -0.064)
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exit_info:
+        main([str(bag), "--out", str(tmp_path / "again"), "--model", "burgr"])
+    assert exit_info.value.code == 2
+    errors = [line for line in capsys.readouterr().err.splitlines() if "error:" in line]
+    assert errors == [
+        "python -m nuturtle_tools.replay: error: argument --model: invalid choice: 'burgr' "
+        "(choose from 'burger', 'waffle', 'waffle_pi')"
+    ]

@@ -130,7 +130,7 @@ def test_ament_index_finds_every_package_and_executable(install: Path) -> None:
         assert found[pkg]["package_xml"], pkg
         assert sorted(found[pkg]["executables"]) == sorted(console_scripts(packages()[pkg])), pkg
     for package, folder, name in (
-        ("nuturtle_description", "config", "diff_params.yaml"),
+        ("nuturtle_description", "config", "models.yaml"),
         ("nuslam", "rviz", "slam.rviz"),
         ("nuturtle_tools", "config", "foxglove_layout.json"),
     ):

@@ -1,6 +1,7 @@
 """Every node's config file holds exactly what the node declares, with the node's defaults: running with it
-is the same as running with no arguments. The robot's constants are declared from
-nuturtle_description/config/diff_params.yaml, the one place they are written (real rclpy nodes)."""
+is the same as running with no arguments. The robot's constants (and slam's odom_* twist noise, made from
+them) are not in these files: they are the defaults of the node's `model` parameter, written once in
+nuturtle_description/config/models.yaml (real rclpy nodes)."""
 
 from __future__ import annotations
 
@@ -11,16 +12,17 @@ import pytest
 
 from nusim.nusim_node import NusimNode
 from nuslam.landmarks_node import LandmarksNode
-from nuslam.slam_node import SlamNode
+from nuslam.slam_node import WHEEL_NOISE, SlamNode
 from nuturtle_control.circle import CircleNode
 from nuturtle_control.odometry import OdometryNode
 from nuturtle_control.turtle_control import TurtleControlNode
-from nuturtle_ros_common.ros_files import load_ros_parameters, load_ros_yaml
+from nuturtle_description.robot_params import burger_params
+from nuturtle_ros_common.ros_files import load_ros_parameters
+from turtlelib import TwistNoise
 
 ROOT = Path(__file__).resolve().parents[2]
 # parameters rclpy declares on every node
 ROS_OWN = {"use_sim_time", "start_type_description_service"}
-DIFF_PARAMS = ROOT / "nuturtle_description" / "config" / "diff_params.yaml"
 
 # node class, its config file, whether it declares the robot's constants
 NODES = {
@@ -49,10 +51,13 @@ def test_config_file_holds_exactly_the_declared_parameters_and_their_defaults(ro
         if parameter not in ROS_OWN
     }
     expected = {key: comparable(value) for key, value in load_ros_parameters(config_file).items()}
-    if robot:
-        robot_constants = load_ros_yaml(DIFF_PARAMS)
-        assert not robot_constants.keys() & expected.keys(), "robot constants belong in diff_params.yaml"
-        expected.update(robot_constants)
+    if robot:  # the Burger's: no TURTLEBOT3_MODEL in the tests' environment
+        model_defaults = {"model": "burger", **vars(burger_params())}
+        if name == "slam":
+            noise = TwistNoise.from_wheel_slip(burger_params().diff_drive(), WHEEL_NOISE)
+            model_defaults.update({f"odom_{key}": value for key, value in vars(noise).items()})
+        assert not model_defaults.keys() & expected.keys(), "the model's defaults belong in models.yaml"
+        expected.update(model_defaults)
     assert declared.keys() == expected.keys()
     for parameter, value in expected.items():
         if isinstance(value, str | bool):

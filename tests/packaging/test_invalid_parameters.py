@@ -11,10 +11,10 @@ import pytest
 # module, an invalid parameter, the message it must give
 CASES = [
     ("nusim.nusim_node", "arena_x_length:=-1.0", "arena_x_length must be finite and > 0, got -1.0"),
-    (
+    (  # an unknown robot model: the choices
         "nuturtle_control.turtle_control",
-        "wheel_radius:=-1.0",
-        "wheel_radius must be finite and > 0, got -1.0",
+        "model:=waffle3",
+        "model must be one of ('burger', 'waffle', 'waffle_pi'), got 'waffle3'",
     ),
     ("nuturtle_control.odometry", "wheel_radius:=-1.0", "wheel_radius must be finite and > 0, got -1.0"),
     ("nuturtle_control.circle", "radius:=-1.0", "radius must be finite and > 0, got -1.0"),

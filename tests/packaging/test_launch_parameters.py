@@ -19,21 +19,21 @@ ROOT = Path(__file__).resolve().parents[2]
 
 @pytest.mark.parametrize("association", ["known", "unknown"])
 def test_the_association_argument_reaches_slam_over_its_yaml(association):
-    values = resolve(slam_parameters(association, use_sim_time=True), "slam")
+    values = resolve(slam_parameters(association, True, "waffle"), "slam")
     assert values["association"] == association
-    assert values["use_sim_time"] is True
-    # the rest from the files: the robot's constants and slam.yaml
-    assert values["wheel_radius"] == 0.033 and values["wheel_noise"] == 0.05
+    assert values["use_sim_time"] is True and values["model"] == "waffle"
+    # the rest from slam.yaml; the robot's constants are the model's defaults, in no file
+    assert values["wheel_noise"] == 0.05 and "wheel_radius" not in values
 
 
 def test_the_map_and_motion_arguments_reach_slam_over_its_yaml(tmp_path):
     map_file = str(tmp_path / "lab.json")
     parameters = slam_parameters(
-        "unknown", False, motion_source="odom", mode="localization", map_file=map_file
+        "unknown", False, "burger", motion_source="odom", mode="localization", map_file=map_file
     )
     values = resolve(parameters, "slam")
     assert (values["motion_source"], values["mode"], values["map_file"]) == ("odom", "localization", map_file)
-    defaults = resolve(slam_parameters("unknown", False), "slam")
+    defaults = resolve(slam_parameters("unknown", False, "burger"), "slam")
     assert [defaults[name] for name in SLAM_ARGUMENTS] == [default for default, _ in SLAM_ARGUMENTS.values()]
 
 
@@ -48,8 +48,12 @@ def test_a_dict_before_the_yaml_loses_to_it():
     ("parameters", "node", "expected"),
     [
         (landmarks_parameters(True), "landmarks", {"use_sim_time": True}),
-        (turtle_control_parameters(False), "turtle_control", {"use_sim_time": False, "cmd_timeout": 0.5}),
-        (odometry_parameters(True), "odometry", {"use_sim_time": True, "odom_id": "odom"}),
+        (
+            turtle_control_parameters(False, "waffle"),
+            "turtle_control",
+            {"use_sim_time": False, "cmd_timeout": 0.5, "model": "waffle"},
+        ),
+        (odometry_parameters(True, "burger"), "odometry", {"use_sim_time": True, "odom_id": "odom"}),
         (circle_parameters(True), "circle", {"use_sim_time": True, "radius": 0.5}),
     ],
 )
@@ -114,12 +118,12 @@ def test_world_to_map_is_the_world_file_s_start_pose(tmp_path):
 
 def test_robot_state_publisher_gets_the_urdf_with_the_lidar_mount_slam_uses():
     from nuturtle_control.launch_nodes import robot_state_publisher_parameters
-    from nuturtle_description.robot_params import burger_params
+    from nuturtle_description.robot_params import model_params
 
-    (parameters,) = robot_state_publisher_parameters(use_sim_time=True)
+    (parameters,) = robot_state_publisher_parameters(True, "waffle")
     assert parameters["use_sim_time"] is True
     urdf = parameters["robot_description"]
-    robot = burger_params()
+    robot = model_params("waffle")
     # the fixed scan joint base_link -> base_scan at the mount's x, y and yaw (base_link is planar with
     # base_footprint), so /tf_static's base_footprint -> base_scan is slam's T_body_scan
     scan_joint = urdf[urdf.index('<joint name="scan_joint"') :]

@@ -84,7 +84,7 @@ class Contract:
 
     # joint_states more than this after the last accepted one
     max_jump_ns: int = round(SampleGateConfig().max_sample_gap * S)
-    # wheel increments beyond factor x max_wheel_speed x dt ...
+    # wheel increments beyond factor x wheel_speed_bound x dt ...
     max_speed_factor: float = 1.0 + SampleGateConfig().speed_margin
     increment_ticks: float = ENCODER_SLACK_TICKS  # ... + this many encoder ticks
     # consecutive, mutually consistent refused samples restart the node from them
@@ -96,7 +96,7 @@ class Contract:
     quaternion_tolerance: float = QUATERNION_NORM_TOLERANCE  # | |q| - 1 | beyond this (or non-finite)
 
     def max_increment_rad(self, dt_ns: int) -> float:
-        return self.max_speed_factor * ROBOT.max_wheel_speed * dt_ns / S + self.increment_ticks * TICK_RAD
+        return self.max_speed_factor * ROBOT.wheel_speed_bound * dt_ns / S + self.increment_ticks * TICK_RAD
 
 
 CONTRACT = Contract()

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from turtlelib import beams_in_one_turn, check_scan_layout
@@ -99,3 +99,30 @@ def test_beams_in_one_turn_keep_distinct_directions_and_close_the_turn(samples, 
     if kept < samples:
         # the first dropped beam points within half a step of the first beam, one turn on, or further
         assert kept * step >= math.tau - 0.5 * step - 1e-12
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    samples=st.integers(4, 2000),
+    angle_min=st.floats(-math.pi, math.pi),
+    turn_fraction=st.floats(1e-3, 1.0),
+    clockwise=st.booleans(),
+)
+def test_a_consistent_layout_passes_and_its_contradicting_twins_do_not(
+    samples, angle_min, turn_fraction, clockwise
+):
+    # the beams span up to one turn; angle_max is the last beam, as nusim and Gazebo publish it
+    angle_increment = (-1.0 if clockwise else 1.0) * turn_fraction * 2.0 * math.pi / (samples - 1)
+    angle_max = angle_min + (samples - 1) * angle_increment
+    assume(abs(angle_max) <= 2.0 * math.pi)
+    check_scan_layout(samples, angle_min, angle_max, angle_increment)
+    # with angle_max unchanged, each twin's last beam lands more than its own increment off: (samples - 1)
+    # increments for the doubled one (tolerance two), 2 (samples - 1) for the negated, samples for twice
+    # the ranges
+    for twin in (
+        (samples, angle_min, angle_max, 2.0 * angle_increment),  # doubled increment
+        (samples, angle_min, angle_max, -angle_increment),  # negated increment
+        (2 * samples, angle_min, angle_max, angle_increment),  # twice the ranges
+    ):
+        with pytest.raises(ValueError, match="contradicts itself"):
+            check_scan_layout(*twin)

@@ -1,4 +1,5 @@
-"""turtlelib.scan_model: LidarConfig, ray casting against circles and segments, simulated LDS-01 scans.
+"""turtlelib.scan_model: LidarConfig and its per-scan layouts, ray casting against circles and segments,
+simulated scans of the TurtleBot3 LiDARs (LDS-01, LDS-02, Gazebo).
 
 References: hand-computed ranges, the geometric definition of a hit (the hit point lies on the object and
 nothing is hit earlier, checked by sampling the ray), and invariance under moving sensor and world
@@ -44,6 +45,13 @@ def test_lidar_config_angles():
     assert LidarConfig().angles().shape == (360,)
 
 
+def test_lidar_config_accepts_gazebos_layout_whose_last_beam_repeats_the_first():
+    gazebo = LidarConfig(angle_increment=6.28 / 359, samples=360, no_return=math.inf)
+    assert gazebo.angles()[-1] == pytest.approx(6.28, abs=1e-12)
+    assert math.isinf(gazebo.no_return)
+    assert math.isnan(LidarConfig(no_return=math.nan).no_return)
+
+
 def test_lidar_config_accepts_ints_for_floats():
     config = LidarConfig(range_min=0, range_max=4)
     assert isinstance(config.range_max, float) and config.range_max == 4.0
@@ -60,7 +68,16 @@ def test_lidar_config_accepts_ints_for_floats():
         {"samples": 0},
         {"samples": 3.0},
         {"samples": True},
-        {"samples": 361},
+        {"samples": 362},  # 361 beams of 1 deg is a turn with the first beam repeated
+        {"spin_spread": 0.02, "angle_increment": 2.0, "samples": 1},  # too few points to spin
+        {"no_return": -1.0},
+        {"no_return": 3.0},
+        {"no_return": -math.inf},
+        {"no_return": "nan"},
+        {"no_return": True},
+        {"spin_spread": -0.01},
+        {"spin_spread": 0.5},
+        {"spin_spread": math.nan},
         {"noise": -0.01},
         {"resolution": -0.01},
         {"range_max": "3.5"},
@@ -274,7 +291,61 @@ def test_simulate_scan_reads_zero_where_nothing_is_hit():
     assert np.all(simulate_scan(Transform2D(), NO_CIRCLES, NO_SEGMENTS, LidarConfig()) == 0.0)
 
 
-# --- arena_walls -------------------------------------------------------------------------------------
+@pytest.mark.parametrize("no_return", [0.0, math.nan, math.inf])
+def test_simulate_scan_reads_no_return_where_nothing_is_measured(no_return):
+    # as test_simulate_scan_applies_the_range_window: beams 1 (too near), 2 (too far) and 3 (nothing)
+    config = LidarConfig(
+        range_min=0.5, range_max=2.0, angle_increment=PI / 2.0, samples=4, no_return=no_return
+    )
+    circles = [[1.0, 0.0, 0.1], [0.0, 0.3, 0.1], [-3.0, 0.0, 0.2]]
+    ranges = simulate_scan(Transform2D(), circles, NO_SEGMENTS, config)
+    np.testing.assert_allclose(ranges, [0.9, no_return, no_return, no_return], rtol=0.0, atol=1e-14)
+
+
+# --- LidarConfig.scan_layout -------------------------------------------------------------------------
+
+
+def test_a_fixed_layout_is_every_scans_and_draws_nothing():
+    config = LidarConfig(noise=0.01)
+    rng = np.random.default_rng(5)
+    state = rng.bit_generator.state
+    assert config.scan_layout(rng) is config
+    assert rng.bit_generator.state == state
+
+
+@settings(max_examples=100, deadline=None)
+@given(
+    angle_increment=st.floats(1e-3, PI / 2.0),
+    spread=st.floats(0.001, 0.499),
+    angle_min=st.floats(-PI, PI),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_a_spinning_lidars_layouts_hold_one_turn_but_its_last_point(angle_increment, spread, angle_min, seed):
+    # the spacing scales by (1 + u), |u| <= spread; the turn starts within one spacing of angle_min, and the
+    # scan's end (one spacing past its last beam, the turn's last point) lies within the turn, with no room
+    # for another point before the turn closes
+    config = LidarConfig(angle_min=angle_min, angle_increment=angle_increment, samples=1, spin_spread=spread)
+    layout = config.scan_layout(np.random.default_rng(seed))
+    d = layout.angle_increment
+    assert 1.0 - spread <= d / angle_increment <= 1.0 + spread
+    assert layout.spin_spread == 0.0 and layout.samples >= 1
+    assert angle_min <= layout.angle_min <= angle_min + d
+    end = layout.angle_min + layout.samples * d
+    assert end < angle_min + 2.0 * PI
+    assert end + d >= angle_min + 2.0 * PI - 1e-9
+
+
+def test_an_lds02_like_spin_varies_the_beam_count_from_scan_to_scan():
+    # 2300 points per second at 6 Hz +- 2 %: 383.3 points per turn nominally, 375.8 to 391.2; the turn
+    # starts up to one spacing in, so it holds 375 to 392 points and the scans 374 to 391 beams
+    config = LidarConfig(angle_increment=2.0 * PI * 6.0 / 2300.0, samples=383, spin_spread=0.02)
+    rng = np.random.default_rng(11)
+    counts = np.array([config.scan_layout(rng).samples for _ in range(2000)])
+    assert counts.min() >= 374 and counts.max() <= 391
+    assert len(np.unique(counts)) >= 14
+
+
+# --- arena_walls, polygon_walls ----------------------------------------------------------------------
 
 
 def test_arena_walls_are_the_four_inner_faces():

@@ -1,5 +1,6 @@
-"""turtlelib.slip_recovery: the alignment of detections with the map, its covariance, and the recovery that
-holds contradicting scans and relocalizes (closed-loop scenarios in nusim: tests/nusim/test_slip_events.py).
+"""turtlelib.map_alignment and turtlelib.slip_recovery: the alignment of detections with the map, its
+covariance, and the recovery that holds contradicting scans and relocalizes (closed-loop scenarios in
+nusim: tests/nusim/test_slip_events.py).
 """
 
 from __future__ import annotations
@@ -12,8 +13,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from turtlelib import DiffDrive, DiffDriveMotion, EkfSlam, ObservationStatus, SlamConfig, Transform2D
+from turtlelib.map_alignment import align_to_map, explained, rigid_fit
 from turtlelib.range_bearing import observations_from_points
-from turtlelib.slip_recovery import SlipRecovery, SlipRecoveryConfig, _rigid_fit, align_to_map, explained
+from turtlelib.slip_recovery import SlipRecovery, SlipRecoveryConfig
 
 DRIVE = DiffDrive(0.033, 0.16)
 SENSOR = Transform2D(-0.032, 0.0, 0.0)
@@ -73,10 +75,10 @@ def test_fit_covariance_matches_monte_carlo():
     poses = []
     for _ in range(4000):
         noisy = p_map + rng.normal(0.0, sigma, size=p_map.shape)
-        T, _ = _rigid_fit(p_body, noisy, sigma**2)
+        T, _ = rigid_fit(p_body, noisy, sigma**2)
         poses.append(T.as_array())
     poses = np.array(poses)
-    _, covariance = _rigid_fit(p_body, p_map, sigma**2)
+    _, covariance = rigid_fit(p_body, p_map, sigma**2)
     empirical = np.cov(poses.T)
     # each entry to within 10 % of the diagonal scale it belongs to
     scale = np.sqrt(np.outer(np.diag(covariance), np.diag(covariance)))
@@ -147,22 +149,58 @@ def test_scans_that_agree_with_the_motion_update_exactly_as_the_filter():
     assert recovery.status.level == "ok" and recovery.status.held == 0
 
 
+def _wheels(travel_m: float, turn_rad: float) -> tuple[float, float]:
+    """Wheel increments (rad) of an arc of ``travel_m`` and ``turn_rad``."""
+    half = 0.5 * DRIVE.track_width
+    return (travel_m - turn_rad * half) / DRIVE.wheel_radius, (
+        travel_m + turn_rad * half
+    ) / DRIVE.wheel_radius
+
+
+def test_a_turn_in_place_the_body_does_not_make_is_taken_back_as_a_stall():
+    """The wheels report a 0.75 rad turn in place; the landmarks have not moved in the scan: the body stood
+    still, so the filter goes back to where it stood (and the invented heading is named wheel slip)."""
+    recovery = SlipRecovery()
+    slam = _mapped_filter(recovery)
+    slam.predict(_wheels(0.0, 0.75))
+    association = recovery.update(slam, _checked(slam, Transform2D(), False), stamp_ns=2_000_000_000)
+    assert (association.status == ObservationStatus.MATCHED).all()
+    assert math.hypot(slam.pose.x, slam.pose.y) < 1e-9 and abs(slam.pose.theta) < 1e-9
+    status = recovery.status
+    assert status.stalls == 1 and status.held == 0 and status.level == "warn"
+    assert status.message.startswith("wheel slip")
+
+
 @pytest.mark.parametrize("known", [False, True], ids=["unknown association", "known association"])
-def test_a_phantom_turn_is_held_then_relocalized_and_reported_as_wheel_slip(known: bool):
+def test_a_turn_while_driving_is_held_then_relocalized_against_the_map(known: bool):
+    """The body drives 0.3 m straight while the wheels report that travel and a 0.75 rad turn: the scans
+    moved, so no stall, but the map puts the body 0.75 rad from the filter: the first scan is held, the
+    second (after 5 cm more) agrees with it, and the filter is relocalized there."""
     recovery = SlipRecovery()
     slam = _mapped_filter(recovery, known)
-    # the wheels report a 0.75 rad turn in place that the body does not make
-    wheel = 0.75 * 0.5 * DRIVE.track_width / DRIVE.wheel_radius
-    slam.predict((-wheel, wheel))
-    first = recovery.update(slam, _checked(slam, Transform2D(), known), stamp_ns=2_000_000_000)
+    slam.predict(_wheels(0.3, 0.75))
+    first = recovery.update(slam, _checked(slam, Transform2D(0.3, 0.0, 0.0), known), stamp_ns=2_000_000_000)
     assert (first.status == ObservationStatus.REJECTED).all()
-    assert recovery.status.level == "warn" and "scan held" in recovery.status.message
+    assert recovery.status.level == "warn" and "scans held" in recovery.status.message
     assert abs(slam.pose.theta - 0.75) < 1e-9  # nothing fused
-    second = recovery.update(slam, _checked(slam, Transform2D(), known), stamp_ns=2_200_000_000)
+    slam.predict(_wheels(0.05, 0.0))
+    second = recovery.update(slam, _checked(slam, Transform2D(0.35, 0.0, 0.0), known), stamp_ns=2_200_000_000)
     assert (second.status == ObservationStatus.MATCHED).all()
-    assert math.hypot(slam.pose.x, slam.pose.y) < 0.005 and abs(slam.pose.theta) < 0.005
+    assert math.hypot(slam.pose.x - 0.35, slam.pose.y) < 0.005 and abs(slam.pose.theta) < 0.005
     assert recovery.status.level == "warn" and recovery.status.message.startswith("wheel slip")
     assert recovery.status.relocalized == 1 and len(slam.landmarks) == len(LANDMARKS)
+
+
+def test_a_push_against_an_obstacle_is_a_stall_named_bump():
+    """The wheels report 0.1 m of travel per scan while the scans do not change: after the motion would
+    have moved the landmarks by twice the tolerance, the filter goes back to where the body stands."""
+    recovery = SlipRecovery()
+    slam = _mapped_filter(recovery)
+    for k in range(3):
+        slam.predict(_wheels(0.04, 0.0))
+        recovery.update(slam, _checked(slam, Transform2D(), False), stamp_ns=(10 + k) * 200_000_000)
+    assert recovery.status.stalls >= 1 and recovery.status.message.startswith("bump or stall")
+    assert math.hypot(slam.pose.x, slam.pose.y) < 0.045
 
 
 def test_a_contradiction_beyond_the_reported_motion_is_not_relocalized():

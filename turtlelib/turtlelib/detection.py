@@ -93,9 +93,10 @@ class DetectorConfig:
     * ``range_std`` (m, > 0), ``bearing_std`` (rad, > 0): standard deviations of a detection's range and
       bearing, the diagonal of its covariance.
 
-    The defaults suit the LDS-01 (1 deg beams, about 1 cm range noise, 1 cm resolution) and cylinders of
-    0.03-0.2 m radius; ``range_std`` and ``bearing_std`` bound the errors measured on such scans (see
-    docs/benchmarks.md). Invalid values raise ValueError.
+    The defaults suit the TurtleBot3 LiDARs (LDS-01, LDS-02, Gazebo's: beams of about 1 deg, about 1 cm
+    range noise) and cylinders of 0.03-0.2 m radius (ours are 0.038 m, turtlebot3_world's 0.15 m);
+    ``range_std`` and ``bearing_std`` bound the errors measured on such scans (see docs/benchmarks.md).
+    Invalid values raise ValueError.
     """
 
     cluster_threshold: float = 0.1

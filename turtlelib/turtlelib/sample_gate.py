@@ -91,10 +91,17 @@ class GateResult:
 class SampleGate:
     """The gate of the module docstring over samples of ``len(max_rates)`` values.
 
-    ``max_rates`` (per value, units per second, > 0) and ``slack`` (per value, >= 0) set the rate bound.
+    ``max_rates`` (per value, units per second, > 0) and ``slack`` (per value, >= 0) set the rate bound;
+    ``rate_hint`` ends the reason a sample moved too fast (where the max rates come from, what to change).
     """
 
-    def __init__(self, config: SampleGateConfig, max_rates: Sequence[float], slack: Sequence[float]) -> None:
+    def __init__(
+        self,
+        config: SampleGateConfig,
+        max_rates: Sequence[float],
+        slack: Sequence[float],
+        rate_hint: str = "",
+    ) -> None:
         rates = [positive("max_rate", rate) for rate in max_rates]
         slacks = [non_negative("slack", value) for value in slack]
         if not rates or len(slacks) != len(rates):
@@ -102,6 +109,7 @@ class SampleGate:
         self.config = config
         self._max_speed = (1.0 + config.speed_margin) * np.array(rates) / NS_PER_S  # per ns
         self._slack = np.array(slacks)
+        self._rate_hint = f"; {rate_hint}" if rate_hint else ""
         self._gap_ns = round(config.max_sample_gap * NS_PER_S)
         self._bridged_gap_ns = round(config.max_bridged_gap * NS_PER_S)
         self._accepted: TimedSample | None = None
@@ -162,6 +170,6 @@ class SampleGate:
             i = int(np.argmax(step - bound))
             return (
                 f"value {i} moved {step[i]:.6g} in {dt_ns * 1e-9:.3f} s, more than {bound[i]:.6g} "
-                f"(max rate x (1 + speed_margin) x dt + slack)"
+                f"(max rate x (1 + speed_margin) x dt + slack){self._rate_hint}"
             )
         return None

@@ -15,26 +15,47 @@ frame), or ``inf`` when it hits nothing:
   ``t = (p0 x e) / (u x e)`` and ``s = (p0 x u) / (u x e)`` (``a x b = a_x b_y - a_y b_x``); a beam
   parallel to the segment (``u x e = 0``) never hits it.
 
-Measurement (the LDS-01 convention): ``range = quantise(t + n)``, ``n ~ N(0, noise^2)``,
+Measurement: ``range = quantise(t + n)``, ``n ~ N(0, noise^2)``,
 ``quantise(v) = resolution * round(v / resolution)`` (no quantisation when ``resolution == 0``), and a
-beam reads 0.0 ("no return") when the measured range lies outside ``[range_min, range_max]`` or it hit
-nothing.
+beam reads ``no_return`` when the measured range lies outside ``[range_min, range_max]`` or it hit
+nothing: 0.0 on the LDS-01, NaN on the LDS-02, inf in Gazebo.
+
+Beam layout of each scan (:meth:`LidarConfig.scan_layout`): fixed, or, for a LiDAR whose driver reports
+each turn as the sensor spins it (the LDS-02's ``ld08_driver``), drawn per scan: the sensor measures a
+fixed number of points per second, so a spin rate ``(1 + u)`` times the nominal spaces its points by
+``d = angle_increment (1 + u)``, ``u ~ U(-spin_spread, spin_spread)``. The turn's points lie at
+``angle_min + (v + k) d``, ``v ~ U(0, 1)``, for every ``k >= 0`` short of ``angle_min + 2 pi``; the
+driver's scan runs from the first point (``angle_min``) to the last (``angle_max``) in
+``ceil((angle_max - angle_min) / d)`` beams of ``d``, so it holds every point but the last.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from functools import partial
+from numbers import Real
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .geometry import Transform2D
-from .validation import finite_real, integer, non_negative, positive, store
+from .validation import finite_real, in_range, integer, non_negative, positive, store
 
-# Tolerance on samples * angle_increment <= 2 pi (beams may not wrap past a full turn).
+# Tolerance on the beams' span <= 2 pi (beams may not wrap past a full turn).
 _FULL_TURN_SLACK_RAD = 1e-9
+
+
+def _no_return(name: str, value: object) -> float:
+    """``value`` as a float; ValueError unless it is 0.0, NaN or +inf (what LiDAR drivers write)."""
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, Real)
+        or not (value == 0.0 or math.isnan(value) or value == math.inf)
+    ):
+        raise ValueError(f"{name} must be 0.0, nan or inf, got {value!r}")
+    return float(value)
 
 
 @dataclass(frozen=True)
@@ -45,9 +66,15 @@ class LidarConfig:
 
     * ``range_min``, ``range_max``: valid measured ranges, ``0 <= range_min < range_max``;
     * ``angle_min``: direction of beam 0; ``angle_increment > 0``: angle between beams;
-    * ``samples``: number of beams (int >= 1), with ``samples * angle_increment <= 2 pi``;
+    * ``samples``: number of beams (int >= 1), within one turn: ``(samples - 1) angle_increment <= 2 pi``
+      (Gazebo's last beam repeats its first: 360 beams of 6.28 / 359 rad); a spinning LiDAR's scans
+      have the beams of their turn instead (see ``spin_spread``);
     * ``noise``: standard deviation of the Gaussian range noise (m, >= 0);
-    * ``resolution``: range quantisation step (m, >= 0; 0 means none).
+    * ``resolution``: range quantisation step (m, >= 0; 0 means none);
+    * ``no_return``: what a beam without a return reads: 0.0 (LDS-01), NaN (LDS-02) or inf (Gazebo);
+    * ``spin_spread`` in [0, 0.5): 0 for a fixed beam layout, else the relative spread of the spin rate
+      of a LiDAR that reports each turn, whose layout then changes from scan to scan (the module
+      docstring); ``angle_increment`` is then the spacing at the nominal spin and at most pi / 2.
 
     Invalid values raise ValueError.
     """
@@ -59,22 +86,47 @@ class LidarConfig:
     samples: int = 360
     noise: float = 0.0
     resolution: float = 0.0
+    no_return: float = 0.0
+    spin_spread: float = 0.0
 
     def __post_init__(self) -> None:
         store(self, ("range_max", "angle_min"), finite_real, prefix="lidar ")
         store(self, ("range_min", "noise", "resolution"), non_negative, prefix="lidar ")
         store(self, ("angle_increment",), positive, prefix="lidar ")
         store(self, ("samples",), partial(integer, minimum=1), prefix="lidar ")
+        store(self, ("no_return",), _no_return, prefix="lidar ")
+        store(self, ("spin_spread",), partial(in_range, low=0.0, high=0.5, open_high=True), prefix="lidar ")
         if not self.range_min < self.range_max:
             raise ValueError(f"need range_min < range_max, got {self.range_min}, {self.range_max}")
-        if self.samples * self.angle_increment > 2.0 * math.pi + _FULL_TURN_SLACK_RAD:
+        if (self.samples - 1) * self.angle_increment > 2.0 * math.pi + _FULL_TURN_SLACK_RAD:
             raise ValueError(
-                f"samples * angle_increment = {self.samples * self.angle_increment} exceeds a full turn"
+                f"(samples - 1) * angle_increment = {(self.samples - 1) * self.angle_increment} exceeds a "
+                "full turn"
             )
+        if self.spin_spread > 0.0 and self.angle_increment > 0.5 * math.pi:
+            raise ValueError(f"a spinning LiDAR needs angle_increment <= pi / 2, got {self.angle_increment}")
 
     def angles(self) -> NDArray[np.float64]:
         """Beam directions ``phi_b = angle_min + b * angle_increment`` (rad), shape (samples,)."""
         return self.angle_min + self.angle_increment * np.arange(self.samples, dtype=np.float64)
+
+    def scan_layout(self, rng: np.random.Generator) -> LidarConfig:
+        """The layout of the next scan: this one when ``spin_spread`` is 0 (nothing is drawn), else one
+        turn of a spinning LiDAR drawn from ``rng`` (two uniform numbers; the module docstring)."""
+        if self.spin_spread == 0.0:
+            return self
+        u, v = rng.uniform(-self.spin_spread, self.spin_spread), rng.uniform(0.0, 1.0)
+        # points at angle_min + (v + k) d while (v + k) d < 2 pi: ceil(2 pi / d - v) of them (at least 2, as
+        # d < 3 pi / 4), all but the last in the scan
+        spacing = self.angle_increment * (1.0 + u)
+        points = math.ceil(2.0 * math.pi / spacing - v)
+        return dataclasses.replace(
+            self,
+            angle_min=self.angle_min + v * spacing,
+            angle_increment=spacing,
+            samples=points - 1,
+            spin_spread=0.0,
+        )
 
 
 def _as_objects(values: ArrayLike, columns: int, name: str) -> NDArray[np.float64]:
@@ -157,13 +209,14 @@ def simulate_scan(
     config: LidarConfig,
     rng: np.random.Generator | None = None,
 ) -> NDArray[np.float64]:
-    """A simulated scan: measured ranges (m), shape (config.samples,), 0.0 where there is no return.
+    """A simulated scan: measured ranges (m), shape (config.samples,), ``no_return`` where there is none.
 
     ``T_world_sensor`` is the sensor pose, ``circles`` (M, 3) ``[x, y, r]`` and ``segments`` (K, 4)
     ``[x0, y0, x1, y1]`` the world (m). Each beam's true range from :func:`cast_beams` becomes
-    ``quantise(t + n)`` with ``n ~ N(0, noise^2)``; a beam reads 0.0 when nothing was hit or the measured
-    range falls outside ``[range_min, range_max]``. ``rng`` draws the noise (a fresh, OS-seeded generator
-    when None and ``config.noise > 0``; pass a seeded one for reproducible scans).
+    ``quantise(t + n)`` with ``n ~ N(0, noise^2)``; a beam reads ``no_return`` when nothing was hit or
+    the measured range falls outside ``[range_min, range_max]``. ``rng`` draws the noise (a fresh,
+    OS-seeded generator when None and ``config.noise > 0``; pass a seeded one for reproducible scans).
+    The layout is ``config``'s own: draw a spinning LiDAR's with :meth:`LidarConfig.scan_layout` first.
     """
     true_range_m, _ = cast_beams(T_world_sensor, config.angles(), circles, segments)
     range_m = true_range_m
@@ -176,7 +229,7 @@ def simulate_scan(
         with np.errstate(invalid="ignore"):
             range_m = config.resolution * np.round(range_m / config.resolution)
     returned = (range_m >= config.range_min) & (range_m <= config.range_max)
-    return np.where(returned, range_m, 0.0)
+    return np.where(returned, range_m, config.no_return)
 
 
 def arena_walls(x_length: float, y_length: float) -> NDArray[np.float64]:

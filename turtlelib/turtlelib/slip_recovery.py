@@ -1,4 +1,4 @@
-"""Motion the LiDAR contradicts (wheel slip, bumps): detect it, report it, relocalize against the map.
+"""Motion the LiDAR contradicts (wheel slip, bumps): detect it, report it, undo it against the map.
 
 Why
 ---
@@ -6,56 +6,58 @@ The motion models take the wheels' word with a noise proportional to their trave
 report a turn the body does not make) or a bump (the robot pushes against an obstacle, its wheels spinning)
 breaks that model: the pose moves on by motion that never happened, far outside its covariance. Then every
 observation of a mapped landmark lands outside the association gates, the filter dead-reckons on the wrong
-pose, starts landmarks beside the true ones and never finds its way back.
+pose, starts landmarks beside the true ones and never finds its way back. Two checks run on each scan's
+detections ``p_k`` (body frame) before it reaches the filter.
 
-Evidence (per scan, ``K`` detections ``p_k`` in the body frame, ``m_j`` the confirmed landmarks)
----------------------------------------------------------------------------------------------------
-* ``n(T)``, the detections a pose ``T = T_map_body`` explains: those with ``|T p_k - m_j| < match_radius``
-  for some ``j``. ``n(T_hat)`` for the filter's pose ``T_hat``.
-* The best rigid alignment ``T*`` of the detections with the map (:func:`align_to_map`): every pair of
-  detections at least ``min_pair_separation`` apart against every pair of landmarks as far apart (to within
-  ``2 match_radius``) proposes the pose that lays the one on the other::
+Stall (:class:`StallDetector`): the wheels turn, the body stands still
+--------------------------------------------------------------------
+Against a reference scan (the last one whose detections moved as the wheels said, pose ``T_ref``): with
+``M = T_ref^-1 T_hat`` the motion the filter's pose ``T_hat`` says the body made since, each detection
+``p_k`` and its nearest reference detection ``q_k``, the body stood still while the wheels moved it when::
 
-      theta = atan2(m_b - m_a) - atan2(p_j - p_i),   t = (m_a + m_b) / 2 - R(theta) (p_i + p_j) / 2
+    |p_k - q_k| <= stall_tolerance   and   |M^-1 q_k - q_k| > 2 stall_tolerance    for every k
 
-  the proposal explaining the most detections wins (ties: the nearest to ``T_hat``), and is refined by the
-  least-squares rigid fit of its pairs (2D Procrustes).
+(no detection moved, and the motion would have moved each by more than twice as much). Then the filter goes
+back to ``T_ref`` (:meth:`EkfSlam.reset` with ``keep_map``, its covariance kept), and stays there while the
+stall lasts: a zero-velocity update. Detections that moved as the wheels said (``|p_k - M^-1 q_k| <=
+stall_tolerance``), or a scene with nothing of the reference's, make their scan the reference.
+
+Contradiction: the map puts the body elsewhere
+----------------------------------------------
+* ``n(T)``, the detections a pose ``T`` explains (:func:`turtlelib.map_alignment.explained`, within
+  ``match_radius`` of a confirmed landmark), and ``T*`` the best rigid alignment of the detections with the
+  map (:func:`turtlelib.map_alignment.align_to_map`; known association: the fit of the ids' pairs).
 * Slip and bumps only ever make the wheels report motion the body does not make, so ``T*`` is searched
-  within what the wheels reported since the last scan the map confirmed (``T_good``): a heading within
-  ``|theta_hat - theta_good| + margin_rad`` of ``theta_hat`` and a position within
+  within what the wheels reported since the last scan the map confirmed (``T_good``, two detections
+  matched): a heading within ``|theta_hat - theta_good| + margin_rad`` of ``theta_hat`` and a position within
   ``|p_hat - p_good| (1 + that heading bound) + margin_m`` of ``p_hat``. A repetitive world (a grid of
   cylinders) has other alignments further away; these are never candidates while the map confirms the scans.
+* A scan *contradicts the motion* when ``T*`` explains at least ``min_matches`` detections and two more than
+  ``T_hat``, and lies outside ``T_hat``'s uncertainty: ``d^T (P_rr + Sigma*)^-1 d > chi2_3^-1(0.999)`` for
+  ``d = [t* - t_hat, theta* (-) theta_hat]`` (``Sigma*`` the fit's covariance). It *agrees* when all its
+  detections but one are explained by ``T_hat``, or no alignment explains more; otherwise it tells nothing
+  (fewer than ``min_matches`` detections, no alignment within the search).
 
-A scan *contradicts the motion* when ``T*`` explains at least ``min_matches`` detections and at least two
-more than ``T_hat``, and ``T*`` is outside ``T_hat``'s uncertainty: ``d^T (P_rr + Sigma*)^-1 d >
-chi2_3^-1(0.999)`` for ``d = [t* - t_hat, theta* (-) theta_hat]``.
+A contradicting scan is held (not fused: its detections would start landmarks beside the true ones), and so
+is every scan that tells nothing while the episode lasts (at most ``MAX_EPISODE_S``). When
+``confirm_scans`` contradicting scans' alignments agree with each other (the body moved from one ``T*`` to
+the next by no more than the wheels reported between them, plus ``2 match_radius`` and
+``AGREEMENT_SLACK_RAD``: slip only takes motion away), the filter is relocalized at the last ``T*`` with the
+fit's covariance and no correlation with the map (:meth:`EkfSlam.reset` with ``keep_map``), and that scan
+is fused from there. An agreeing scan ends the episode.
 
-Recovery
---------
-A contradicting scan is held (not fused: its detections would start landmarks beside the true ones); when
-``confirm_scans`` scans in a row contradict the motion with the same correction ``T_hat^-1 T*`` (to within
-``2 match_radius`` and ``0.1 rad``), the filter is relocalized at ``T*`` with the fit's covariance and no
-correlation with the map (:meth:`EkfSlam.reset` with ``keep_map``), and the scan is fused from there. The
-fit's covariance, for ``n`` pairs of combined per-axis variance ``s^2`` (the observations' and the landmarks'
-position variance, at least the fit's mean squared residual) about the detections' centroid ``c``::
-
-    Var(theta) = s^2 / sum_k |p_k - c|^2
-    Cov(t) = s^2 / n I + a a^T Var(theta),   Cov(t, theta) = a Var(theta)
-
-with ``a = -J R(theta*) c`` (``J`` the 90 degree rotation): the body origin's lever arm about the centroid.
-
-Report (:attr:`SlipRecovery.status`): ``ok``; ``warn`` while a scan is held and for ``report_s`` after a
-relocalization, naming the cause from the correction (a heading the wheels invented: "wheel slip"; the body
-short of where the wheels put it: "bump or stall"); ``error`` when relocalizations follow each other (three
-within ``report_s``): the wheels keep slipping or the robot is stuck.
+Report (:attr:`SlipRecovery.status`): ``ok``; ``warn`` while scans are held and for ``report_s`` after an
+event (corrections of one cause at most ``EVENT_GAP_S`` apart), naming the cause (a correction that takes
+back travel: "bump or stall"; one that takes back a heading the wheels invented: "wheel slip"); ``error``
+while an event has lasted ``MAX_EPISODE_S`` or when ``REPEATS_FOR_ERROR`` events come within ``report_s``:
+the robot is stuck or the wheels keep slipping.
 """
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from enum import Enum
 from functools import partial
-from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -63,19 +65,22 @@ from scipy.stats import chi2
 
 from .data_association import REJECTED
 from .ekf_slam import Association, CheckedObservations, EkfSlam
-from .geometry import Transform2D, normalize_angle, normalize_angles
+from .geometry import Transform2D, normalize_angle
+from .map_alignment import Alignment, align_known, align_to_map, explained
 from .timebase import NS_PER_S
 from .validation import integer, non_negative, positive, store
 
 # chi2_3^-1(0.999): a correction outside this is not the filter's own uncertainty
-_SIGNIFICANT_D2 = float(chi2.ppf(0.999, 3))
-# consecutive held scans propose the same correction to within 2 match radii and this (rad)
-_SAME_CORRECTION_RAD = 0.1
-# a proposal's detections and landmarks are the nearest this many (bounds the O(H K M) scoring)
-_MAX_DETECTIONS = 12
-_MAX_LANDMARKS = 40
-# relocalizations within report_s that make the status an error (the wheels keep slipping: stuck)
-_REPEATS_FOR_ERROR = 3
+SIGNIFICANT_D2 = float(chi2.ppf(0.999, 3))
+# consecutive held alignments differ by no more than the reported motion, plus 2 match radii and this (rad)
+AGREEMENT_SLACK_RAD = 0.1
+# longest run of held scans (s) before the filter takes scans again unconfirmed; an event lasting this long is
+# an error (the robot is stuck, or the wheels keep slipping)
+MAX_EPISODE_S = 2.0
+# corrections at most this far apart (s) are one event
+EVENT_GAP_S = 0.5
+# events within report_s that make the status an error (the wheels keep slipping)
+REPEATS_FOR_ERROR = 3
 
 
 @dataclass(frozen=True)
@@ -85,7 +90,8 @@ class SlipRecoveryConfig:
     ``slip_match_radius`` (m, > 0): how near a mapped landmark a detection must fall to be explained;
     ``slip_confirm_scans`` (int >= 1): scans in a row that must contradict the motion the same way;
     ``slip_margin_m`` (m, >= 0), ``slip_margin_rad`` (rad, >= 0): how far the search reaches beyond the
-    motion reported since the last confirmed scan; ``slip_report_s`` (s, > 0): how long a relocalization
+    motion reported since the last confirmed scan; ``slip_stall_tolerance`` (m, > 0): how far a detection
+    may move between scans of a robot standing still; ``slip_report_s`` (s, > 0): how long a correction
     stays in the status. Invalid values raise ValueError."""
 
     slip_recovery: bool = True
@@ -94,6 +100,7 @@ class SlipRecoveryConfig:
     slip_confirm_scans: int = 2
     slip_margin_m: float = 0.15
     slip_margin_rad: float = 0.15
+    slip_stall_tolerance: float = 0.03
     slip_report_s: float = 5.0
 
     def __post_init__(self) -> None:
@@ -101,214 +108,120 @@ class SlipRecoveryConfig:
             raise ValueError(f"slip_recovery must be a bool, got {self.slip_recovery!r}")
         store(self, ("slip_min_matches",), partial(integer, minimum=2))
         store(self, ("slip_confirm_scans",), partial(integer, minimum=1))
-        store(self, ("slip_match_radius", "slip_report_s"), positive)
+        store(self, ("slip_match_radius", "slip_stall_tolerance", "slip_report_s"), positive)
         store(self, ("slip_margin_m", "slip_margin_rad"), non_negative)
 
 
-class Alignment(NamedTuple):
-    """A rigid alignment of detections with the map: the pose ``T_map_body``, its covariance (3, 3) over
-    ``[x, y, theta]``, and the pairs (n, 2) ``[detection index, landmark index]`` it explains."""
+class StallDetector:
+    """Wheels that turn while the LiDAR sees the body stand still (module docstring), from each scan's
+    filter pose ``T_hat`` and detections ``p_body`` (K, 2, body frame)."""
 
-    T_map_body: Transform2D
-    covariance: NDArray[np.float64]
-    pairs: NDArray[np.int64]
+    def __init__(self, tolerance_m: float) -> None:
+        self.tolerance_m = tolerance_m
+        self._reference: tuple[Transform2D, NDArray[np.float64]] | None = None
 
+    def observe(self, T_hat: Transform2D, p_body: NDArray[np.float64]) -> Transform2D | None:
+        """``T_ref`` if the body stood still since the reference scan while the wheels moved it, else None.
 
-def _rotations(theta: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``R(theta)`` (H, 2, 2)."""
-    c, s = np.cos(theta), np.sin(theta)
-    return np.stack((np.stack((c, -s), -1), np.stack((s, c), -1)), -2)
-
-
-def _nearest(
-    p_body: NDArray[np.float64],
-    landmarks: NDArray[np.float64],
-    R: NDArray[np.float64],
-    t: NDArray[np.float64],
-) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
-    """For poses ``(R (H, 2, 2), t (H, 2))``: each detection's nearest landmark (H, K), squared distance."""
-    # p_map = R p + t  (H, K, 2)
-    p_map = np.einsum("hij,kj->hki", R, p_body) + t[:, None, :]
-    d2 = ((p_map[:, :, None, :] - landmarks[None, None, :, :]) ** 2).sum(-1)
-    nearest = d2.argmin(axis=2)
-    return nearest, np.take_along_axis(d2, nearest[..., None], axis=2)[..., 0]
-
-
-def explained(
-    T_map_body: Transform2D, p_body: NDArray[np.float64], landmarks: NDArray[np.float64], radius_m: float
-) -> NDArray[np.int64]:
-    """``[detection, landmark]`` pairs (n, 2): detections ``p_body`` (K, 2) that ``T_map_body`` puts within
-    ``radius_m`` of a landmark (``landmarks`` (M, 2), map frame), each with its nearest one."""
-    if len(p_body) == 0 or len(landmarks) == 0:
-        return np.zeros((0, 2), dtype=np.int64)
-    R = _rotations(np.array([T_map_body.theta]))
-    nearest, d2 = _nearest(p_body, landmarks, R, T_map_body.translation[None, :])
-    inside = (d2[0] < radius_m * radius_m).nonzero()[0]
-    return np.stack((inside, nearest[0, inside]), axis=1).astype(np.int64)
-
-
-def _rigid_fit(
-    p_body: NDArray[np.float64], p_map: NDArray[np.float64], variance_m2: float
-) -> tuple[Transform2D, NDArray[np.float64]]:
-    """The least-squares ``T`` with ``T p_body ~ p_map`` (n >= 2 pairs) and its covariance (module
-    docstring), for a combined per-axis variance ``variance_m2`` (at least the mean squared residual)."""
-    c_body, c_map = p_body.mean(axis=0), p_map.mean(axis=0)
-    a, b = p_body - c_body, p_map - c_map
-    # theta = atan2(sum a x b, sum a . b)
-    theta = math.atan2(float((a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]).sum()), float((a * b).sum()))
-    R = _rotations(np.array([theta]))[0]
-    t = c_map - R @ c_body
-    residual = p_map - (p_body @ R.T + t)
-    s2 = max(variance_m2, float((residual**2).sum(axis=1).mean()) / 2.0)
-    n = len(p_body)
-    var_theta = s2 / max(float((a**2).sum()), 1e-12)
-    # a = -J R c: the body origin's lever arm about the centroid
-    Rc = R @ c_body
-    lever = np.array([Rc[1], -Rc[0]])
-    covariance = np.zeros((3, 3))
-    covariance[:2, :2] = s2 / n * np.eye(2) + np.outer(lever, lever) * var_theta
-    covariance[:2, 2] = covariance[2, :2] = lever * var_theta
-    covariance[2, 2] = var_theta
-    return Transform2D(float(t[0]), float(t[1]), theta), covariance
-
-
-def align_to_map(
-    p_body: NDArray[np.float64],
-    landmarks: NDArray[np.float64],
-    T_prior: Transform2D,
-    max_offset_m: float,
-    max_turn_rad: float,
-    radius_m: float,
-    variance_m2: float,
-) -> Alignment | None:
-    """The pose laying the most detections ``p_body`` (K, 2, body frame) on ``landmarks`` (M, 2, map frame),
-    within ``max_offset_m`` and ``max_turn_rad`` of ``T_prior`` (module docstring); None without a
-    proposal explaining two detections. ``radius_m``: how near a landmark an explained detection falls;
-    ``variance_m2``: the per-axis variance of one pair, for the covariance."""
-    min_pair_m = 2.0 * radius_m
-    if len(p_body) < 2 or len(landmarks) < 2:
+        Each detection is paired with the nearest reference detection ``q`` (it stood still) and with the
+        nearest ``M^-1 q`` (it moved as the wheels said), within ``tolerance_m``; a pair decides only where
+        the motion moves ``q`` by more than twice that. Every detection standing still: a stall. Some moving
+        as the wheels said and none standing still, or none paired at all (another scene): this scan becomes
+        the reference. Anything else (too little motion yet, noise) keeps the reference."""
+        if len(p_body) == 0:
+            return None
+        if self._reference is None:
+            self._reference = (T_hat, p_body)
+            return None
+        T_ref, q = self._reference
+        tolerance = self.tolerance_m
+        # M^-1 q: the reference detections seen from where the wheels put the body
+        predicted = (T_hat.inverse() @ T_ref) @ q
+        decides = np.linalg.norm(predicted - q, axis=1) > 2.0 * tolerance
+        still = np.linalg.norm(p_body[:, None, :] - q[None, :, :], axis=2)
+        moving = np.linalg.norm(p_body[:, None, :] - predicted[None, :, :], axis=2)
+        near_still, near_moving = still.argmin(axis=1), moving.argmin(axis=1)
+        rows = np.arange(len(p_body))
+        paired_still = still[rows, near_still] <= tolerance
+        paired_moving = moving[rows, near_moving] <= tolerance
+        stood = paired_still & decides[near_still]
+        moved = paired_moving & decides[near_moving]
+        if stood.all():
+            return T_ref
+        if (moved.any() and not stood.any()) or not (paired_still | paired_moving).any():
+            self._reference = (T_hat, p_body)
         return None
-    p_prior = T_prior.translation
-    reach = float(np.linalg.norm(p_body, axis=1).max()) + max_offset_m + radius_m
-    near = (np.linalg.norm(landmarks - p_prior, axis=1) <= reach).nonzero()[0]
-    near = near[np.argsort(np.linalg.norm(landmarks[near] - p_prior, axis=1))][:_MAX_LANDMARKS]
-    if len(near) < 2:
-        return None
-    nearest_detections = np.argsort(np.linalg.norm(p_body, axis=1))[:_MAX_DETECTIONS]
-    p, m = p_body[nearest_detections], landmarks[near]
-    i, j = np.triu_indices(len(p), 1)
-    a, b = np.nonzero(~np.eye(len(m), dtype=bool))
-    d_p = np.linalg.norm(p[j] - p[i], axis=1)
-    d_m = np.linalg.norm(m[b] - m[a], axis=1)
-    # pairs of detection pairs and landmark pairs of one length
-    u, v = np.nonzero((np.abs(d_p[:, None] - d_m[None, :]) < 2.0 * radius_m) & (d_p[:, None] >= min_pair_m))
-    if len(u) == 0:
-        return None
-    i, j, a, b = i[u], j[u], a[v], b[v]
-    dp, dm = p[j] - p[i], m[b] - m[a]
-    theta = np.arctan2(dm[:, 1], dm[:, 0]) - np.arctan2(dp[:, 1], dp[:, 0])
-    R = _rotations(theta)
-    # t = (m_a + m_b) / 2 - R (p_i + p_j) / 2
-    t = 0.5 * (m[a] + m[b]) - 0.5 * np.einsum("hij,hj->hi", R, p[i] + p[j])
-    turn = np.abs(normalize_angles(theta - T_prior.theta))
-    offset = np.linalg.norm(t - p_prior, axis=1)
-    within = (turn <= max_turn_rad) & (offset <= max_offset_m)
-    if not within.any():
-        return None
-    R, t, turn, offset = R[within], t[within], turn[within], offset[within]
-    _, d2 = _nearest(p, m, R, t)
-    count = (d2 < radius_m * radius_m).sum(axis=1)
-    # most detections explained; among those the proposal nearest the prior
-    closeness = (offset / max(max_offset_m, 1e-9)) ** 2 + (turn / max(max_turn_rad, 1e-9)) ** 2
-    best = int(np.lexsort((closeness, -count))[0])
-    T_best = Transform2D(
-        float(t[best, 0]), float(t[best, 1]), float(math.atan2(R[best, 1, 0], R[best, 0, 0]))
-    )
-    pairs = explained(T_best, p, m, radius_m)
-    if len(pairs) < 2:
-        return None
-    T_fit, covariance = _rigid_fit(p[pairs[:, 0]], m[pairs[:, 1]], variance_m2)
-    pairs = explained(T_fit, p, m, radius_m)
-    if len(pairs) < 2:
-        return None
-    T_fit, covariance = _rigid_fit(p[pairs[:, 0]], m[pairs[:, 1]], variance_m2)
-    return Alignment(
-        T_fit, covariance, np.stack((nearest_detections[pairs[:, 0]], near[pairs[:, 1]]), axis=1)
-    )
 
-
-def _align_known(
-    ids: NDArray[np.int64],
-    landmark_ids: NDArray[np.int64],
-    p_body: NDArray[np.float64],
-    landmarks: NDArray[np.float64],
-    T_prior: Transform2D,
-    max_offset_m: float,
-    max_turn_rad: float,
-    radius_m: float,
-    variance_m2: float,
-) -> tuple[int, Alignment | None]:
-    """Known association: the detections the prior explains (each within ``radius_m`` of its own landmark
-    ``ids`` (K,) among ``landmark_ids`` (M,)), and the rigid fit of all mapped pairs if within the search and
-    explaining two of them (:func:`align_to_map` for its arguments)."""
-    column = {int(landmark_id): j for j, landmark_id in enumerate(landmark_ids)}
-    pairs = np.array([(k, column[int(i)]) for k, i in enumerate(ids) if int(i) in column], dtype=np.int64)
-    if len(pairs) < 2:
-        return 0, None
-
-    def inside(T: Transform2D) -> NDArray[np.bool_]:
-        return np.linalg.norm(T @ p_body[pairs[:, 0]] - landmarks[pairs[:, 1]], axis=1) < radius_m
-
-    n_prior = int(inside(T_prior).sum())
-    T_fit, covariance = _rigid_fit(p_body[pairs[:, 0]], landmarks[pairs[:, 1]], variance_m2)
-    turn = abs(normalize_angle(T_fit.theta - T_prior.theta))
-    offset = float(np.linalg.norm(T_fit.translation - T_prior.translation))
-    fitted = pairs[inside(T_fit)]
-    if turn > max_turn_rad or offset > max_offset_m or len(fitted) < 2:
-        return n_prior, None
-    return n_prior, Alignment(T_fit, covariance, fitted)
+    def rebase(self, T_hat: Transform2D, p_body: NDArray[np.float64] | None) -> None:
+        """The reference is this pose and its detections (None: no reference): after a pose set from
+        outside, or corrected."""
+        self._reference = None if p_body is None or len(p_body) == 0 else (T_hat, p_body)
 
 
 @dataclass(frozen=True)
 class SlipEvent:
-    """One relocalization: at ``stamp_ns``, the correction ``T_hat^-1 T*`` (body frame of the filter's
-    pose) and its cause (``"wheel slip"`` or ``"bump or stall"``)."""
+    """Corrections of one cause on scans at most ``EVENT_GAP_S`` apart, from ``start_ns`` to ``stamp_ns``:
+    their ``scans``, the ``correction`` they add up to (``T_hat^-1 T_new`` of each, composed in order, in the
+    body frame) and their ``cause`` (``"wheel slip"`` or ``"bump or stall"``)."""
 
+    start_ns: int
     stamp_ns: int
+    scans: int
     correction: Transform2D
     cause: str
 
+    def then(self, stamp_ns: int, correction: Transform2D) -> SlipEvent:
+        """This event continued by a correction at ``stamp_ns``."""
+        return replace(self, stamp_ns=stamp_ns, scans=self.scans + 1, correction=self.correction @ correction)
+
+
+class _Evidence(Enum):
+    AGREES = "agrees"
+    NOTHING = "nothing"
+
 
 @dataclass
-class _Held:
-    """The scans held in a row and the correction they agree on."""
+class _Episode:
+    """Scans held in a row since ``since_ns``: ``contradictions`` of them agreeing with each other, the last
+    one's filter pose ``T_hat`` and alignment ``T_star`` (None before the first contradiction)."""
 
-    count: int
-    correction: Transform2D
+    since_ns: int
+    contradictions: int = 0
+    T_hat: Transform2D | None = None
+    T_star: Transform2D | None = None
+
+    @property
+    def correction(self) -> Transform2D | None:
+        """``T_hat^-1 T*``."""
+        return None if self.T_hat is None or self.T_star is None else self.T_hat.inverse() @ self.T_star
 
 
 @dataclass
 class SlipStatus:
     """What :class:`SlipRecovery` reports: ``level`` (``"ok"``, ``"warn"``, ``"error"``), ``message``,
-    and the totals ``held`` (scans not fused) and ``relocalized``."""
+    and the totals ``held`` (scans not fused), ``relocalized`` (against the map) and ``stalls`` (scans of a
+    stall)."""
 
     level: str = "ok"
     message: str = "the LiDAR agrees with the motion"
     held: int = 0
     relocalized: int = 0
+    stalls: int = 0
     events: list[SlipEvent] = field(default_factory=list)
 
 
 class SlipRecovery:
-    """Updates an :class:`EkfSlam` with one scan's observations as :meth:`EkfSlam.update` does, unless the
-    scan contradicts the motion (module docstring): then it is held, and the filter relocalized once
-    ``slip_confirm_scans`` agree. With known association the pairs are the ids' (the alignment is their
-    least-squares fit). Switched off (``slip_recovery`` false) it is :meth:`EkfSlam.update`."""
+    """Updates an :class:`EkfSlam` with one scan's observations as :meth:`EkfSlam.update` does, after the
+    stall and contradiction checks of the module docstring: a stalled body is put back where it stood, a
+    scan that contradicts the motion is held, and the filter relocalized once ``slip_confirm_scans`` agree.
+    With known association the pairs are the ids'. Switched off (``slip_recovery`` false) it is
+    :meth:`EkfSlam.update`."""
 
     def __init__(self, config: SlipRecoveryConfig | None = None) -> None:
         self.config = SlipRecoveryConfig() if config is None else config
+        self._stall = StallDetector(self.config.slip_stall_tolerance)
         self._T_good: Transform2D | None = None
-        self._held: _Held | None = None
+        self._episode: _Episode | None = None
         self._status = SlipStatus()
         self._now_ns = 0
 
@@ -318,121 +231,181 @@ class SlipRecovery:
         return self._status
 
     def update(self, slam: EkfSlam, observations: CheckedObservations, *, stamp_ns: int) -> Association:
-        """Fuse, hold or relocalize then fuse one scan taken at ``stamp_ns`` (ns) (class docstring)."""
+        """Check, then fuse or hold one scan taken at ``stamp_ns`` (ns) (class docstring)."""
         self._now_ns = stamp_ns
         if not self.config.slip_recovery:
             return slam.update(observations, stamp_ns=stamp_ns)
         if self._T_good is None:
             self._T_good = slam.pose
-        alignment = self._contradiction(slam, observations)
-        if alignment is None:
-            self._held = None
+        z, R, _ = observations
+        usable = slam.measurement.usable(z)
+        # the detections in the body frame and their position covariance G_z R G_z^T
+        p_body, _, G_z = slam.measurement.inverse(np.zeros(3), z[usable])
+        T_ref = self._stall.observe(slam.pose, p_body)
+        if T_ref is not None:
+            self._status.stalls += 1
+            self._correct(slam, T_ref, slam.pose_covariance, p_body, stamp_ns)
+            self._episode = None
         else:
-            correction = slam.pose.inverse() @ alignment.T_map_body
-            if self._held is not None and self._agree(self._held.correction, correction):
-                self._held = _Held(self._held.count + 1, correction)
-            else:
-                self._held = _Held(1, correction)
-            if self._held.count < self.config.slip_confirm_scans:
+            position_cov = np.einsum("kij,kjl,kml->kim", G_z, R[usable], G_z)
+            evidence = self._evidence(slam, observations.ids, usable, p_body, position_cov)
+            if self._hold(slam, evidence, p_body, stamp_ns):
                 self._status.held += 1
                 self._report()
-                count = len(observations.z)
+                count = len(z)
                 return Association(
                     np.full(count, REJECTED, dtype=np.int8), np.full(count, -1, dtype=np.int64)
                 )
-            self._relocalize(slam, alignment, correction, stamp_ns)
         association = slam.update(observations, stamp_ns=stamp_ns)
-        if association.counts["matched"] >= min(2, len(observations.z)) > 0:
+        if association.counts["matched"] >= 2:
             self._T_good = slam.pose
         self._report()
         return association
 
     def forget(self, T_map_body: Transform2D) -> None:
-        """Start over from a pose set from outside (a reset, an initial pose): nothing held, the search
-        bounded by the motion from ``T_map_body``."""
-        self._T_good, self._held = T_map_body, None
+        """Start over from a pose set from outside (a reset, an initial pose): nothing held, no stall
+        reference, the search bounded by the motion from ``T_map_body``."""
+        self._T_good, self._episode = T_map_body, None
+        self._stall.rebase(T_map_body, None)
 
     # --- helpers -----------------------------------------------------------------------------------------
 
-    def _contradiction(self, slam: EkfSlam, observations: CheckedObservations) -> Alignment | None:
-        """The alignment ``T*`` if this scan contradicts the motion (module docstring), else None."""
+    def _hold(
+        self, slam: EkfSlam, evidence: Alignment | _Evidence, p_body: NDArray[np.float64], stamp_ns: int
+    ) -> bool:
+        """Whether to hold this scan; relocalizes the filter when the episode's contradictions agree."""
+        episode = self._episode
+        if evidence is _Evidence.AGREES or (
+            episode is not None and stamp_ns - episode.since_ns > round(MAX_EPISODE_S * NS_PER_S)
+        ):
+            self._episode = None
+            return False
+        if evidence is _Evidence.NOTHING:
+            return episode is not None
+        if episode is None:
+            episode = self._episode = _Episode(stamp_ns)
+        agrees = self._agree(episode, slam.pose, evidence.T_map_body)
+        episode.contradictions = episode.contradictions + 1 if agrees else 1
+        episode.T_hat, episode.T_star = slam.pose, evidence.T_map_body
+        if episode.contradictions < self.config.slip_confirm_scans:
+            return True
+        self._status.relocalized += 1
+        self._correct(slam, evidence.T_map_body, evidence.covariance, p_body, stamp_ns)
+        self._episode = None
+        return False
+
+    def _evidence(
+        self,
+        slam: EkfSlam,
+        ids: NDArray[np.int64] | None,
+        usable: NDArray[np.bool_],
+        p_body: NDArray[np.float64],
+        position_cov: NDArray[np.float64],
+    ) -> Alignment | _Evidence:
+        """What this scan says about the filter's pose (module docstring): the alignment ``T*`` if it
+        contradicts the motion, else whether it agrees or tells nothing."""
         config = self.config
-        z, R, ids = observations
-        model = slam.measurement
-        usable = model.usable(z)
-        if usable.sum() < config.slip_min_matches or len(slam.landmark_ids) < 2:
-            return None
-        # the detections in the body frame and their position covariance G_z R G_z^T
-        p_body, _, G_z = model.inverse(np.zeros(3), z[usable])
-        position_cov = np.einsum("kij,kjl,kml->kim", G_z, R[usable], G_z)
-        landmark_var = float(np.trace(slam.landmark_covariances, axis1=1, axis2=2).mean()) / 2.0
-        variance = float(np.trace(position_cov, axis1=1, axis2=2).mean()) / 2.0 + landmark_var
-        T_hat = slam.pose
+        if len(p_body) < config.slip_min_matches or len(slam.landmark_ids) < 2:
+            return _Evidence.NOTHING
+        T_hat, landmarks = slam.pose, slam.landmarks
+        radius = config.slip_match_radius
+        if ids is None:
+            n_hat = len(explained(T_hat, p_body, landmarks, radius))
+            if len(p_body) - n_hat < 2:
+                return _Evidence.AGREES
         T_good = self._T_good if self._T_good is not None else T_hat
         max_turn = abs(normalize_angle(T_hat.theta - T_good.theta)) + config.slip_margin_rad
         travel = float(np.linalg.norm(T_hat.translation - T_good.translation))
         max_offset = travel * (1.0 + max_turn) + config.slip_margin_m
-        search = (p_body, slam.landmarks, T_hat, max_offset, max_turn, config.slip_match_radius, variance)
+        landmark_var = float(np.trace(slam.landmark_covariances, axis1=1, axis2=2).mean()) / 2.0
+        variance = float(np.trace(position_cov, axis1=1, axis2=2).mean()) / 2.0 + landmark_var
+        search = (p_body, landmarks, T_hat, max_offset, max_turn, radius, variance)
         if ids is None:
-            n_hat = len(explained(T_hat, p_body, slam.landmarks, config.slip_match_radius))
-            alignment = align_to_map(*search) if len(p_body) - n_hat >= 2 else None
+            alignment = align_to_map(*search)
         else:
-            n_hat, alignment = _align_known(ids[usable], slam.landmark_ids, *search)
-        if alignment is None or len(alignment.pairs) < max(config.slip_min_matches, n_hat + 2):
-            return None
+            n_hat, alignment = align_known(ids[usable], slam.landmark_ids, *search)
+        if alignment is None:
+            return _Evidence.NOTHING
+        if len(alignment.pairs) < max(config.slip_min_matches, n_hat + 2):
+            return _Evidence.AGREES
         d = alignment.T_map_body.as_array() - T_hat.as_array()
         d[2] = normalize_angle(d[2])
         S = slam.pose_covariance + alignment.covariance
-        if float(d @ np.linalg.solve(S, d)) <= _SIGNIFICANT_D2:
-            return None
+        if float(d @ np.linalg.solve(S, d)) <= SIGNIFICANT_D2:
+            return _Evidence.AGREES
         return alignment
 
-    def _agree(self, a: Transform2D, b: Transform2D) -> bool:
+    def _agree(self, episode: _Episode, T_hat: Transform2D, T_star: Transform2D) -> bool:
+        """Whether the body moved from the episode's last ``T*`` to ``T_star`` by no more than the wheels
+        reported (its ``T_hat`` to ``T_hat``), to within the slack (False before its first ``T*``)."""
+        if episode.T_hat is None or episode.T_star is None:
+            return False
+        reported = episode.T_hat.inverse() @ T_hat
+        aligned = episode.T_star.inverse() @ T_star
+        slack_m = 2.0 * self.config.slip_match_radius
         return (
-            float(np.linalg.norm(a.translation - b.translation)) < 2.0 * self.config.slip_match_radius
-            and abs(normalize_angle(a.theta - b.theta)) < _SAME_CORRECTION_RAD
+            float(np.linalg.norm(aligned.translation))
+            <= float(np.linalg.norm(reported.translation)) + slack_m
+            and abs(aligned.theta) <= abs(reported.theta) + AGREEMENT_SLACK_RAD
         )
 
-    def _relocalize(
-        self, slam: EkfSlam, alignment: Alignment, correction: Transform2D, stamp_ns: int
+    def _correct(
+        self,
+        slam: EkfSlam,
+        T_new: Transform2D,
+        covariance: NDArray[np.float64],
+        p_body: NDArray[np.float64],
+        stamp_ns: int,
     ) -> None:
-        """``T*`` with the fit's covariance, independent of the map; the event recorded with its cause."""
+        """The filter's pose becomes ``T_new`` with ``covariance`` (3, 3), independent of the map, and the
+        stall reference this pose and the scan's detections ``p_body``; the event recorded with its cause: a
+        heading the wheels invented is wheel slip, a correction that takes back travel (runs against the
+        motion reported since the last confirmed scan) a bump or stall."""
+        correction = slam.pose.inverse() @ T_new
         motion = (self._T_good or slam.pose).inverse() @ slam.pose
-        slam.reset(alignment.T_map_body, alignment.covariance, keep_map=True)
-        self._T_good, self._held = alignment.T_map_body, None
-        # the body short of where the wheels put it: the correction runs back along the reported motion
-        backwards = float(correction.translation @ motion.translation) < 0.0
-        cause = "bump or stall" if backwards and abs(correction.theta) < 0.1 else "wheel slip"
-        self._status.relocalized += 1
-        self._status.events.append(SlipEvent(stamp_ns, correction, cause))
+        takes_back_travel = float(correction.translation @ motion.translation) < 0.0
+        cause = "bump or stall" if takes_back_travel and abs(correction.theta) < 0.1 else "wheel slip"
+        slam.reset(T_new, covariance, keep_map=True)
+        self._stall.rebase(T_new, p_body)
+        self._T_good = T_new
+        events = self._status.events
+        if events and events[-1].cause == cause and stamp_ns - events[-1].stamp_ns <= EVENT_GAP_S * NS_PER_S:
+            events[-1] = events[-1].then(stamp_ns, correction)
+        else:
+            events.append(SlipEvent(stamp_ns, stamp_ns, 1, correction, cause))
 
     def _report(self) -> None:
-        """The status at ``_now_ns``: recent relocalizations and a held scan."""
+        """The status at ``_now_ns``: recent events (an error when one lasts ``MAX_EPISODE_S`` or
+        ``REPEATS_FOR_ERROR`` come within ``report_s``), held scans."""
         status, config = self._status, self.config
         since = self._now_ns - round(config.slip_report_s * NS_PER_S)
         recent = [event for event in status.events if event.stamp_ns >= since]
         del status.events[: len(status.events) - len(recent)]
-        if len(recent) >= _REPEATS_FOR_ERROR:
+        last = recent[-1] if recent else None
+        if last is not None and (
+            len(recent) >= REPEATS_FOR_ERROR or last.stamp_ns - last.start_ns >= MAX_EPISODE_S * NS_PER_S
+        ):
             status.level = "error"
-            causes = sorted({event.cause for event in recent})
+            span_s = (last.stamp_ns - recent[0].start_ns) / NS_PER_S
+            causes = ", ".join(sorted({event.cause for event in recent}))
             status.message = (
-                f"{len(recent)} relocalizations in {config.slip_report_s:g} s ({', '.join(causes)}): the "
-                "wheels keep reporting motion the LiDAR does not see (slipping, or the robot is stuck)"
+                f"{causes}: the wheels keep reporting motion the LiDAR does not see ({len(recent)} events, "
+                f"{sum(event.scans for event in recent)} corrections in {span_s:.1f} s): slipping, or stuck"
             )
-        elif recent:
-            event = recent[-1]
-            c = event.correction
+        elif last is not None:
+            c = last.correction
             status.level = "warn"
             status.message = (
-                f"{event.cause}: the wheels reported motion the LiDAR did not see; relocalized against the "
-                f"map by {np.hypot(c.x, c.y):.3f} m, {c.theta:+.3f} rad"
+                f"{last.cause}: the wheels reported motion the LiDAR did not see; pose corrected by "
+                f"{np.hypot(c.x, c.y):.3f} m, {c.theta:+.3f} rad over {last.scans} scans"
             )
-        elif self._held is not None:
+        elif self._episode is not None:
             status.level = "warn"
-            c = self._held.correction
-            status.message = (
-                f"the LiDAR contradicts the motion (slip or bump?): scan held, the map says the pose is off "
-                f"by {np.hypot(c.x, c.y):.3f} m, {c.theta:+.3f} rad"
+            c = self._episode.correction
+            status.message = "the LiDAR contradicts the motion (slip or bump?): scans held" + (
+                ""
+                if c is None
+                else f", the map says the pose is off by {np.hypot(c.x, c.y):.3f} m, {c.theta:+.3f} rad"
             )
         else:
             status.level, status.message = "ok", SlipStatus.message
