@@ -85,14 +85,12 @@ def test_a_ros1_bag_reads_as_the_rosbag2_recording_it_was_written_from(tmp_path)
         assert list(bag1.messages()) == list(bag2.messages())
 
 
-@pytest.mark.parametrize("form", ["rosbag2", "ROS 1 .bag"])
-def test_a_gazebo_recording_maps_every_cylinder_in_range_against_its_odom_truth(tmp_path, capsys, form):
+def test_a_gazebo_recording_maps_every_cylinder_in_range_against_its_odom_truth(tmp_path, capsys):
     """The Burger's defaults, joint_states motion, /odom played as both odometry and truth (one bag topic,
-    two roles): every cylinder that came within range mapped once, none spurious, ATE <= 2 cm; the table
-    without the demo's targets (not a nusim recording)."""
-    bag = RECORDING if form == "rosbag2" else to_ros1(RECORDING, tmp_path / "burger.bag")
+    two roles): every cylinder that came within range (and in sight) mapped once, none spurious,
+    ATE <= 2 cm; the table without the demo's targets (not a nusim recording)."""
     code, metrics, stdout, err = replay(
-        capsys, bag, tmp_path / "out", "--truth-topic", "/odom", "--params", str(WORLD)
+        capsys, RECORDING, tmp_path / "out", "--truth-topic", "/odom", "--params", str(WORLD)
     )
     assert code == 0, err
     assert metrics["messages_played"] == {"/joint_states": ODOMS, "/odom": ODOMS, "/scan": SCANS}
@@ -113,13 +111,16 @@ def test_a_gazebo_recording_maps_every_cylinder_in_range_against_its_odom_truth(
     assert "no landmarks" not in stdout
 
 
-@pytest.mark.parametrize("topics", ["joint_states and odom", "odom only"])
+@pytest.mark.parametrize("topics", ["joint_states and odom", "odom only, ROS 1 .bag"])
 def test_odom_motion_replays_bags_with_and_without_joint_states(tmp_path, capsys, topics):
     """--motion-source odom: slam moves on the recorded odometry; nothing waits for a joint_states
-    subscriber, and a bag without /joint_states plays (its first 10 s here)."""
-    drop = ("/joint_states",) if topics == "odom only" else ()
+    subscriber, and a bag without /joint_states plays (its first 10 s here), also as a ROS 1 bag."""
+    drop = ("/joint_states",) if topics.startswith("odom only") else ()
     bag = rewrite(RECORDING, tmp_path / "bag", drop=drop, until_ns=10 * 10**9)
-    scans = BagSource(bag).open().topics["/scan"].message_count
+    if topics.endswith("ROS 1 .bag"):
+        bag = to_ros1(bag, tmp_path / "odom_only.bag")
+    with BagSource(bag) as source:
+        scans = source.topics["/scan"].message_count
     code, metrics, stdout, err = replay(capsys, bag, tmp_path / "out", "--motion-source", "odom")
     assert code == 0, err
     assert metrics["motion_source"] == "odom"
@@ -127,6 +128,7 @@ def test_odom_motion_replays_bags_with_and_without_joint_states(tmp_path, capsys
     assert metrics["observation_arrays_applied"] == metrics["scans_played"] == scans >= 45
     assert metrics["map_landmarks"] >= 2
     assert "motion from odom" in stdout
+    assert metrics["storage"] == ("rosbag1" if topics.endswith("ROS 1 .bag") else "mcap")
 
 
 def test_a_bag_without_joint_states_names_the_odom_motion_source(tmp_path, capsys):
