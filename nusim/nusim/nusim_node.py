@@ -27,7 +27,8 @@ Services
         runs on (nodes on /clock never see time jump back, odometry sees no wheel motion).
 Parameters
     `NusimTiming` (rate, realtime_factor, joint_states_rate, scan_rate, fake_sensor_rate), `ArenaConfig`
-    (x0, y0, theta0, arena_x_length, arena_y_length), `Obstacles` (obstacles.x, obstacles.y, obstacles.r),
+    (x0, y0, theta0, arena_x_length, arena_y_length), `Walls` (walls.x, walls.y: a polygon of walls instead
+    of the rectangle), `Obstacles` (obstacles.x, obstacles.y, obstacles.r),
     `NoiseConfig` (input_noise, slip_fraction, basic_sensor_variance, max_range, seed), `LidarChoice`
     (lidar_model), `LidarConfig` (lidar.*, defaults from lidar_model), `model`, then `RobotParams` (that
     model's constants by default), `WheelJoints` (wheel_left, wheel_right), `CommandTimeoutConfig`
@@ -45,9 +46,11 @@ import math
 import sys
 from dataclasses import dataclass
 
+import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry, Path
+from numpy.typing import NDArray
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
@@ -60,6 +63,7 @@ from nuturtle_description.robot_declaration import declare_robot
 from nuturtle_ros_common.command_timeout import CommandTimeoutConfig, CommandWatchdog
 from nuturtle_ros_common.conversions import (
     odometry_message,
+    quaternion_from_yaw,
     stamp_from_seconds,
     transform_from_pose,
     transform_stamped,
@@ -83,6 +87,7 @@ from .simulation import (
     Obstacles,
     Simulation,
     SimulationConfig,
+    Walls,
 )
 
 WORLD_FRAME = "nusim/world"
@@ -122,27 +127,27 @@ class NusimTiming:
         return math.floor(step * stream_hz / self.rate) > math.floor((step - 1) * stream_hz / self.rate)
 
 
-def wall_markers(arena: ArenaConfig, stamp: Time) -> MarkerArray:
-    """Four CUBEs of WALL_THICKNESS_M just outside the arena's inner faces (frame nusim/world)."""
-    hx, hy = arena.half_extents_m
+def wall_markers(walls: NDArray[np.float64], stamp: Time) -> MarkerArray:
+    """One CUBE of WALL_THICKNESS_M per wall segment ``[x0, y0, x1, y1]`` of the arena's closed polygon, just
+    outside its inner face (frame nusim/world): centred on the segment's midpoint moved ``t / 2`` along its
+    outward normal, ``L + 2 t`` long (closing the corners), turned along the segment."""
     t = WALL_THICKNESS_M
-    # (centre x, centre y, length along x, length along y): bottom, right, top, left
-    walls = [
-        (0.0, -hy - t / 2, 2 * hx + 2 * t, t),
-        (hx + t / 2, 0.0, t, 2 * hy + 2 * t),
-        (0.0, hy + t / 2, 2 * hx + 2 * t, t),
-        (-hx - t / 2, 0.0, t, 2 * hy + 2 * t),
-    ]
+    e = walls[:, 2:] - walls[:, :2]
+    length = np.hypot(e[:, 0], e[:, 1])
+    # a counter-clockwise polygon (positive shoelace area) has its inside to the left of each edge
+    ccw = np.sum(walls[:, 0] * walls[:, 3] - walls[:, 2] * walls[:, 1]) > 0.0
+    outward = np.column_stack([e[:, 1], -e[:, 0]]) / length[:, None] * (1.0 if ccw else -1.0)
+    centres = 0.5 * (walls[:, :2] + walls[:, 2:]) + 0.5 * t * outward
     markers = []
-    for index, (x, y, length_x, length_y) in enumerate(walls):
+    for index, ((x, y), length_m, (ex, ey)) in enumerate(zip(centres, length, e, strict=True)):
         marker = Marker(ns="walls", id=index, type=Marker.CUBE, action=Marker.ADD)
         marker.header.frame_id = WORLD_FRAME
         marker.header.stamp = stamp
         marker.pose.position.x = float(x)
         marker.pose.position.y = float(y)
         marker.pose.position.z = 0.5 * MARKER_HEIGHT_M
-        marker.pose.orientation.w = 1.0
-        marker.scale.x, marker.scale.y, marker.scale.z = float(length_x), float(length_y), MARKER_HEIGHT_M
+        marker.pose.orientation = quaternion_from_yaw(math.atan2(ey, ex))
+        marker.scale.x, marker.scale.y, marker.scale.z = float(length_m + 2 * t), t, MARKER_HEIGHT_M
         set_color(marker, RED)
         markers.append(marker)
     return MarkerArray(markers=markers)
@@ -157,6 +162,7 @@ class NusimNode(Node):
         config = SimulationConfig(
             arena=declare_dataclass(self, ArenaConfig),
             obstacles=declare_dataclass(self, Obstacles, prefix="obstacles."),
+            walls=declare_dataclass(self, Walls, prefix="walls."),
             robot=declare_robot(self),
             noise=declare_dataclass(self, NoiseConfig),
             lidar=declare_dataclass(
@@ -193,7 +199,7 @@ class NusimNode(Node):
         start = self.sim_stamp()
         self._clock_publisher.publish(ClockMsg(clock=start))
         obstacles_publisher.publish(self._obstacle_markers(start))
-        walls_publisher.publish(wall_markers(config.arena, start))
+        walls_publisher.publish(wall_markers(self.simulation.walls, start))
         # a steady (wall) clock, never the ROS clock: this node is what drives /clock
         self.create_timer(
             1.0 / (self.timing.rate * self.timing.realtime_factor),

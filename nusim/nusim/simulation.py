@@ -2,11 +2,14 @@
 
 World (frame ``world``, m, rad)
 -------------------------------
-A rectangular arena ``|x| <= arena_x_length / 2``, ``|y| <= arena_y_length / 2`` (the inner faces of its
-walls), cylinders ``j`` at ``c_j = (obstacles.x[j], obstacles.y[j])`` of radius ``obstacles.r[j]``, and the
-robot, a disc of ``collision_radius`` ``R`` centred on ``base_footprint`` with true pose ``T_world_body``
-(starting at ``(x0, y0, theta0)``). The robot's centre ``p`` is *free* when
-``|p - c_j| >= R + r_j`` for every cylinder and ``|p_x| <= hx - R``, ``|p_y| <= hy - R`` (walls).
+An arena closed by walls: the polygon with corners ``(walls.x[k], walls.y[k])`` in order (any simple
+polygon, e.g. the hexagon of ROBOTIS' turtlebot3_world), or without them the rectangle
+``|x| <= arena_x_length / 2``, ``|y| <= arena_y_length / 2`` (the inner faces of its walls); cylinders ``j``
+at ``c_j = (obstacles.x[j], obstacles.y[j])`` of radius ``obstacles.r[j]``; and the robot, a disc of
+``collision_radius`` ``R`` centred on ``base_footprint`` with true pose ``T_world_body`` (starting at
+``(x0, y0, theta0)``). The robot's centre ``p`` is *free* when it is inside the polygon, ``|p - c_j| >=
+R + r_j`` for every cylinder and ``dist(p, wall_k) >= R`` for every wall segment (each wall is a capsule
+of radius ``R`` around its segment for the centre).
 
 Motors (per wheel ``i`` in (left, right), per physics step of ``dt`` s)
 ---------------------------------------------------------------------
@@ -26,9 +29,11 @@ Collisions (stop at contact)
 ----------------------------
 The body's translation over a step runs along the chord from ``p`` to the arc's end ``p'``
 (the arc's sagitta over one step is below a micrometre at the Burger's speeds). It is cut at the first
-contact, the smallest ``s`` in [0, 1] with ``p + s (p' - p)`` on the boundary of the free space; the heading
-still turns. So a robot pushing against a cylinder or a wall stays touching it while its wheels keep
-turning (and its encoders keep counting, as on the real robot), and it never passes through anything.
+contact, the smallest ``s`` in [0, 1] with ``p + s (p' - p)`` on the boundary of the free space
+(:func:`contact_fraction`: the inflated cylinders, the walls' lines offset by ``R``, their corners as discs
+of radius ``R``); the heading still turns. So a robot pushing against a cylinder or a wall stays touching
+it while its wheels keep turning (and its encoders keep counting, as on the real robot), and it never
+passes through anything.
 
 Sensors
 -------
@@ -56,7 +61,7 @@ from numpy.typing import NDArray
 
 from nuturtle_description.robot_params import RobotParams
 from turtlelib import DiffDrive, Transform2D
-from turtlelib.scan_model import LidarConfig, arena_walls, simulate_scan
+from turtlelib.scan_model import LidarConfig, arena_walls, polygon_walls, simulate_scan
 from turtlelib.validation import finite_real, in_range, integer, non_negative, one_of, positive, store
 
 # The default world: eight cylinders of the course's radius, 0.75 to 1.85 m from the centre. On any circle
@@ -86,10 +91,44 @@ class ArenaConfig:
     def T_world_start(self) -> Transform2D:
         return Transform2D(self.x0, self.y0, self.theta0)
 
-    @property
-    def half_extents_m(self) -> NDArray[np.float64]:
-        """``[hx, hy] = [arena_x_length, arena_y_length] / 2``, shape (2,)."""
-        return 0.5 * np.array([self.arena_x_length, self.arena_y_length])
+
+@dataclass(frozen=True)
+class Walls:
+    """The arena's walls as a polygon: corner ``k`` at ``(x[k], y[k])`` (m, finite), in order around it,
+    the last joined to the first (``turtlelib.polygon_walls``: a simple polygon of at least 3 corners).
+    Empty (the default): the rectangle of ``arena_x_length`` by ``arena_y_length``. ROS parameters
+    ``walls.x``, ``walls.y``; any sequences become float tuples.
+    """
+
+    x: tuple[float, ...] = ()
+    y: tuple[float, ...] = ()
+
+    def __post_init__(self) -> None:
+        for name in ("x", "y"):
+            values = getattr(self, name)
+            if isinstance(values, (str, bytes)) or not isinstance(values, Sequence):
+                raise ValueError(f"walls.{name} must be a list of numbers, got {values!r}")
+            object.__setattr__(
+                self, name, tuple(finite_real(f"walls.{name}[{k}]", v) for k, v in enumerate(values))
+            )
+        if len(self.x) != len(self.y):
+            raise ValueError(
+                f"walls.x and walls.y must have the same length, got {len(self.x)} and {len(self.y)}"
+            )
+        if self.x:
+            polygon_walls(np.column_stack([self.x, self.y]))
+
+    def segments(self, arena: ArenaConfig) -> NDArray[np.float64]:
+        """The walls (K, 4), rows ``[x0, y0, x1, y1]`` (m): the polygon's edges, or the ``arena``'s
+        rectangle without corners."""
+        if not self.x:
+            return arena_walls(arena.arena_x_length, arena.arena_y_length)
+        return polygon_walls(np.column_stack([self.x, self.y]))
+
+    def describe(self, arena: ArenaConfig) -> str:
+        if not self.x:
+            return f"the {arena.arena_x_length} m x {arena.arena_y_length} m arena"
+        return f"the arena's {len(self.x)}-corner polygon of walls"
 
 
 @dataclass(frozen=True)
@@ -220,19 +259,21 @@ class SimulationConfig:
     robot: RobotParams = field(default_factory=RobotParams)
     noise: NoiseConfig = field(default_factory=NoiseConfig)
     lidar: LidarConfig = field(default_factory=default_lidar)
+    walls: Walls = field(default_factory=Walls)
 
     def __post_init__(self) -> None:
-        hx, hy = self.arena.half_extents_m
+        segments = self.wall_segments
+        no_circles = np.zeros((0, 3))
         for j, (x, y, r) in enumerate(self.obstacles.circles()):
-            if abs(x) + r > hx or abs(y) + r > hy:
+            if first_collision(np.array([x, y]), no_circles, segments, r) is not None:
                 raise ValueError(
-                    f"obstacle {j} at ({x}, {y}) m with radius {r} m does not fit inside the "
-                    f"{self.arena.arena_x_length} m x {self.arena.arena_y_length} m arena"
+                    f"obstacle {j} at ({x}, {y}) m with radius {r} m does not fit inside "
+                    f"{self.walls.describe(self.arena)}"
                 )
         collision = first_collision(
             self.arena.T_world_start.translation,
             self.obstacles.circles(),
-            self.arena.half_extents_m,
+            segments,
             self.robot.collision_radius,
         )
         if collision is not None:
@@ -241,17 +282,47 @@ class SimulationConfig:
                 f"{self.robot.collision_radius} m {collision}"
             )
 
+    @property
+    def wall_segments(self) -> NDArray[np.float64]:
+        """The arena's walls (K, 4), rows ``[x0, y0, x1, y1]`` (m), a closed polygon (:class:`Walls`)."""
+        return self.walls.segments(self.arena)
+
+
+def inside_polygon(p_world: NDArray[np.float64], walls: NDArray[np.float64]) -> bool:
+    """Whether ``p_world`` lies inside the closed polygon whose edges are ``walls`` (K, 4): a ray from it
+    towards +x crosses the edges an odd number of times (each edge counted on its half-open y span)."""
+    x0, y0, x1, y1 = walls.T
+    spans = (y0 > p_world[1]) != (y1 > p_world[1])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x_cross = x0 + (p_world[1] - y0) * (x1 - x0) / (y1 - y0)
+    return bool(np.count_nonzero(spans & (x_cross > p_world[0])) % 2)
+
+
+def wall_distances(p_world: NDArray[np.float64], walls: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The distance (K,) from ``p_world`` to each wall segment ``[x0, y0, x1, y1]``: to its nearest point
+    ``a + s e``, ``e = b - a``, ``s = clip((p - a).e / e.e, 0, 1)``."""
+    a, e = walls[:, :2], walls[:, 2:] - walls[:, :2]
+    s = np.clip(np.einsum("kd,kd->k", p_world - a, e) / np.einsum("kd,kd->k", e, e), 0.0, 1.0)
+    return np.hypot(*(p_world - a - s[:, None] * e).T)
+
 
 def first_collision(
     p_world: NDArray[np.float64],
     circles: NDArray[np.float64],
-    half_extents_m: NDArray[np.float64],
+    walls: NDArray[np.float64],
     radius_m: float,
 ) -> str | None:
-    """Why a disc of ``radius_m`` centred at ``p_world`` is not free (see the module docstring), or None."""
-    hx, hy = half_extents_m
-    if abs(p_world[0]) > hx - radius_m or abs(p_world[1]) > hy - radius_m:
-        return f"is not inside the arena (walls at |x| = {hx} m, |y| = {hy} m)"
+    """Why a disc of ``radius_m`` centred at ``p_world`` is not free among ``circles`` (M, 3) inside the
+    polygon of ``walls`` (K, 4) (see the module docstring), or None."""
+    if not inside_polygon(p_world, walls):
+        return "is not inside the arena (outside its walls)"
+    distances = wall_distances(p_world, walls)
+    if np.any(distances < radius_m):
+        k = int(np.argmin(distances))
+        return (
+            f"is not inside the arena: {distances[k]:.3f} m from its wall ({walls[k, 0]}, {walls[k, 1]}) -> "
+            f"({walls[k, 2]}, {walls[k, 3]})"
+        )
     # |p - c_j| < R + r_j
     overlapping = np.hypot(*(p_world - circles[:, :2]).T) < radius_m + circles[:, 2]
     if np.any(overlapping):
@@ -264,7 +335,7 @@ def contact_fraction(
     p_world: NDArray[np.float64],
     d_world: NDArray[np.float64],
     circles: NDArray[np.float64],
-    half_extents_m: NDArray[np.float64],
+    walls: NDArray[np.float64],
     radius_m: float,
 ) -> float:
     """The fraction ``s`` in [0, 1] of the move ``p -> p + d`` a disc of ``radius_m`` makes before contact.
@@ -273,13 +344,19 @@ def contact_fraction(
     ``|m + s d|^2 = rho^2``, i.e. ``a s^2 + 2 b s + q = 0`` with ``a = d.d``, ``b = m.d``,
     ``q = |m|^2 - rho^2``; approaching (``b < 0``) and reaching it (``b^2 - a q >= 0``) the near root is
     ``s = q / (-b + sqrt(b^2 - a q))`` (no cancellation), and ``s = 0`` if already touching (``q <= 0``).
-    Walls: ``p_k + s d_k = +-(h_k - radius_m)`` on the side ``d_k`` points to. A start slightly inside
-    (rounding at a previous contact) only blocks the motion that goes further in.
+    Wall ``k`` from ``a_k`` along the unit ``t_k`` (length ``L_k``), normal ``n_k`` (``t_k`` turned by
+    +90 deg): at signed distance ``h = n.(p - a)`` and approaching it (``h (n.d) < 0``) the centre reaches
+    the line offset by ``radius_m`` at ``s = (|h| - radius_m) / |n.d|`` (0 if already nearer), a contact
+    when its foot ``t.(p + s d - a)`` lies in ``[0, L]``; beyond the segment's ends its corners act as
+    cylinders of radius 0. A start slightly inside (rounding at a previous contact) only blocks the motion
+    that goes further in.
     """
     a = float(d_world @ d_world)
     if a == 0.0:
         return 1.0
     fraction = 1.0
+    # the walls' corners: cylinders of radius 0
+    circles = np.vstack([circles.reshape(-1, 3), np.column_stack([walls[:, :2], np.zeros(len(walls))])])
     if circles.shape[0]:
         m = p_world - circles[:, :2]
         rho = radius_m + circles[:, 2]
@@ -291,13 +368,31 @@ def contact_fraction(
             # s = q / (-b + sqrt(b^2 - a q)), clamped at 0 when touching
             s = np.maximum(q[reaches], 0.0) / (-b[reaches] + np.sqrt(disc[reaches]))
             fraction = min(fraction, float(np.min(s)))
-    for k in range(2):
-        limit_m = half_extents_m[k] - radius_m
-        if d_world[k] > 0.0:
-            fraction = min(fraction, max((limit_m - p_world[k]) / d_world[k], 0.0))
-        elif d_world[k] < 0.0:
-            fraction = min(fraction, max((-limit_m - p_world[k]) / d_world[k], 0.0))
-    return fraction
+    return min(fraction, _wall_contact_fraction(p_world, d_world, walls, radius_m))
+
+
+def _wall_contact_fraction(
+    p_world: NDArray[np.float64], d_world: NDArray[np.float64], walls: NDArray[np.float64], radius_m: float
+) -> float:
+    """The first contact of the centre with a wall's line offset by ``radius_m`` within the segment's span
+    (:func:`contact_fraction`), 1.0 without one."""
+    if walls.shape[0] == 0:
+        return 1.0
+    a = walls[:, :2]
+    e = walls[:, 2:] - a
+    length = np.hypot(e[:, 0], e[:, 1])
+    t = e / length[:, None]
+    n = np.column_stack([-t[:, 1], t[:, 0]])
+    h = np.einsum("kd,kd->k", p_world - a, n)
+    hd = n @ d_world
+    approaching = h * hd < 0.0
+    if not np.any(approaching):
+        return 1.0
+    h, hd, a, t, length = h[approaching], hd[approaching], a[approaching], t[approaching], length[approaching]
+    s = np.maximum((np.abs(h) - radius_m) / np.abs(hd), 0.0)
+    foot = np.einsum("kd,kd->k", p_world + s[:, None] * d_world - a, t)
+    hits = (foot >= 0.0) & (foot <= length) & (s <= 1.0)
+    return float(np.min(s[hits])) if np.any(hits) else 1.0
 
 
 @dataclass(frozen=True)
@@ -328,7 +423,7 @@ class Simulation:
         self.config = config
         self.drive: DiffDrive = config.robot.diff_drive()
         self.circles = config.obstacles.circles()
-        self.walls = arena_walls(config.arena.arena_x_length, config.arena.arena_y_length)
+        self.walls = config.wall_segments
         wheel_seq, slip_seq, lidar_seq, landmark_seq = np.random.SeedSequence(config.noise.seed).spawn(4)
         self._wheel_rng = np.random.default_rng(wheel_seq)
         self._slip_rng = np.random.default_rng(slip_seq)
@@ -386,11 +481,7 @@ class Simulation:
         T_end = self.drive.step(T_start, dphi[0], dphi[1])
         d_world = T_end.translation - T_start.translation
         s = contact_fraction(
-            T_start.translation,
-            d_world,
-            self.circles,
-            self.config.arena.half_extents_m,
-            self.config.robot.collision_radius,
+            T_start.translation, d_world, self.circles, self.walls, self.config.robot.collision_radius
         )
         if s < 1.0:
             p_world = T_start.translation + s * d_world
@@ -412,10 +503,7 @@ class Simulation:
     def teleport(self, T_world_body: Transform2D) -> None:
         """Put the robot at ``T_world_body`` (the encoders keep their count); ValueError if not free."""
         collision = first_collision(
-            T_world_body.translation,
-            self.circles,
-            self.config.arena.half_extents_m,
-            self.config.robot.collision_radius,
+            T_world_body.translation, self.circles, self.walls, self.config.robot.collision_radius
         )
         if collision is not None:
             raise ValueError(

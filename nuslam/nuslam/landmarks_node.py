@@ -106,6 +106,16 @@ class LandmarksNode(Node):
         self._cylinders = 0
         DiagnosticsPublisher(self, self._statuses)
 
+    @property
+    def scan_counts(self) -> dict[str, int]:
+        """Scans so far (read-only): ``received`` on `scan`, ``refused`` (skipped with a warning)."""
+        return {"received": self._scans.count, "refused": self._refused}
+
+    @property
+    def last_refusal(self) -> str:
+        """Why the last refused scan was refused (``none`` before any was)."""
+        return self._last_refusal
+
     def _statuses(self, now_ns: int) -> list:
         """The scan input, and the detector: WARN when scans were refused since the last report, ERROR
         when every one since then was (with the last reason)."""

@@ -569,7 +569,8 @@ class SlamNode(Node):
             self._warnings.warn(
                 "observations",
                 f"no {topic} for {silent_s:.1f} s while the robot moves: slam is only dead-reckoning "
-                f"(is {source} running and publishing {topic}?)",
+                f"(is {source} running and publishing {topic}"
+                + ("? Its /diagnostics count the scans it refuses)" if topic == "landmarks" else "?)"),
             )
 
     def _restart(self, t_ns: int, sample: tuple[float, ...]) -> None:

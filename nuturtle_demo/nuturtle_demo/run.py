@@ -73,7 +73,8 @@ from nuturtle_tools.relay_config import RelayConfig
 from turtlelib import MODES, Transform2D, TwistNoise, normalize_angle
 from turtlelib.validation import finite_real, integer, one_of, positive, store
 
-from .driver import FigureEightDriver
+from .driver import FigureEightDriver, RouteConfig
+from .route_fit import fitted_route_radius
 from .slip_noise import matched_wheel_noise
 
 ASSOCIATIONS = ("known", "unknown")
@@ -198,8 +199,12 @@ class DemoSystem:
         world.update(seed=options.seed, realtime_factor=options.realtime_factor, model=options.model)
         if options.start is not None:
             world.update(zip(("x0", "y0", "theta0"), options.start, strict=True))
-        route = {} if options.route_radius is None else {"radius": options.route_radius}
         self.nusim = NusimNode(context=context, parameter_overrides=to_parameters(world))
+        # the route's loops fitted to the world unless a radius is given (route_fit.py)
+        radius_m = options.route_radius
+        if radius_m is None:
+            radius_m = fitted_route_radius(self.nusim.simulation.config, RouteConfig().radius)
+        route = {"radius": radius_m}
         self.monitor = RunMonitor(context=context, parameter_overrides=sim_time)
         self.driver = FigureEightDriver(context=context, parameter_overrides=robot + to_parameters(route))
         self.turtle_control = TurtleControlNode(context=context, parameter_overrides=robot)
@@ -448,5 +453,5 @@ def _run_record(system: DemoSystem, options: DemoOptions) -> RunRecord:
             angle_increment=lidar.angle_increment,
             lidar_range_m=lidar.range_max,
         ),
-        arena_xy_m=(arena.arena_x_length, arena.arena_y_length),
+        walls=simulation.walls,
     )

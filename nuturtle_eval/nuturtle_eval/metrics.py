@@ -189,17 +189,52 @@ def associate_landmarks(
     )
 
 
+# Path points checked for sight at a time (memory: chunk x M x M x 2 floats)
+SIGHT_CHUNK = 1024
+
+
 def landmarks_within_range(
-    true_xy: NDArray[np.float64], path_xy: NDArray[np.float64], range_m: float | NDArray[np.float64]
+    true_xy: NDArray[np.float64],
+    path_xy: NDArray[np.float64],
+    range_m: float | NDArray[np.float64],
+    radii_m: NDArray[np.float64] | None = None,
 ) -> NDArray[np.bool_]:
     """Mask (M,) of the true landmarks that came within ``range_m`` (one for all, or (M,) per landmark) of
-    some point of the path (N, 2)."""
+    some point of the path (N, 2), in sight there when the cylinders' ``radii_m`` (M,) are given.
+
+    Landmark ``j`` is in sight from ``p`` unless the segment from ``p`` to its centre ``c_j`` passes through
+    another cylinder ``i``: with ``v = c_j - p`` and ``s = clip((c_i - p).v / v.v, 0, 1)``, the segment's
+    nearest point to ``c_i`` is ``p + s v``, and it blocks when ``|p + s v - c_i| < r_i`` (a cylinder fully
+    hidden behind another along the row of a grid, never seen however close it comes)."""
     true_xy = np.asarray(true_xy, dtype=np.float64).reshape(-1, 2)
     path_xy = np.asarray(path_xy, dtype=np.float64).reshape(-1, 2)
-    if path_xy.shape[0] == 0:
-        return np.zeros(true_xy.shape[0], dtype=bool)
-    closest_m = np.min(np.linalg.norm(true_xy[:, None, :] - path_xy[None, :, :], axis=2), axis=1)
-    return closest_m <= range_m
+    radii = None if radii_m is None else np.asarray(radii_m, dtype=np.float64).reshape(-1)
+    seen = np.zeros(true_xy.shape[0], dtype=bool)
+    for start in range(0, path_xy.shape[0], SIGHT_CHUNK):
+        seen |= _seen_from(true_xy, path_xy[start : start + SIGHT_CHUNK], range_m, radii)
+    return seen
+
+
+def _seen_from(
+    true_xy: NDArray[np.float64],
+    path_xy: NDArray[np.float64],
+    range_m: float | NDArray[np.float64],
+    radii_m: NDArray[np.float64] | None,
+) -> NDArray[np.bool_]:
+    """:func:`landmarks_within_range` for a piece of the path."""
+    # v[k, j] = c_j - p_k, (N, M, 2)
+    v = true_xy[None, :, :] - path_xy[:, None, :]
+    within = np.linalg.norm(v, axis=2) <= range_m
+    if radii_m is not None:
+        vv = np.maximum(np.einsum("kjd,kjd->kj", v, v), 1e-300)
+        # s[k, j, i] = clip((c_i - p_k) . v_kj / v_kj . v_kj, 0, 1)
+        s = np.clip(np.einsum("kid,kjd->kji", v, v) / vv[:, :, None], 0.0, 1.0)
+        # the segment's nearest point to c_i, from c_i: s v_kj - (c_i - p_k)
+        gap = s[..., None] * v[:, :, None, :] - v[:, None, :, :]
+        blocked = np.linalg.norm(gap, axis=3) < radii_m[None, None, :]
+        blocked[:, np.arange(true_xy.shape[0]), np.arange(true_xy.shape[0])] = False
+        within &= ~np.any(blocked, axis=2)
+    return np.any(within, axis=0)
 
 
 def pose_nees(errors: NDArray[np.float64], covariances: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -254,7 +289,8 @@ class RunData:
 
     ``truth``, ``odom``, ``slam`` pose series; ``slam_covariances`` (K, 3, 3) the (x, y, theta) covariance
     of each SLAM pose; ``mapped_xy`` (n, 2) the final map; ``true_xy`` (M, 2) the true cylinder centres;
-    ``sensor_range_m`` the range within which a cylinder counts as seen (one for all, or (M,) per cylinder);
+    ``sensor_range_m`` the range within which a cylinder counts as seen (one for all, or (M,) per cylinder),
+    in sight of the path when ``true_radii_m`` (M,) are given (:func:`landmarks_within_range`);
     ``gate_m`` the association gate.
     """
 
@@ -266,6 +302,7 @@ class RunData:
     true_xy: NDArray[np.float64]
     sensor_range_m: float | NDArray[np.float64]
     gate_m: float
+    true_radii_m: NDArray[np.float64] | None = None
 
     def __post_init__(self) -> None:
         covariances = np.asarray(self.slam_covariances, dtype=np.float64).reshape(-1, 3, 3)
@@ -287,7 +324,7 @@ def evaluate_run(data: RunData, sim_seconds: float, wall_seconds: float) -> RunM
         raise ValueError("no SLAM pose has a positive definite covariance")
     low, high = nees_band()
     association = associate_landmarks(data.mapped_xy, data.true_xy, data.gate_m)
-    in_range = landmarks_within_range(data.true_xy, data.truth.xy, data.sensor_range_m)
+    in_range = landmarks_within_range(data.true_xy, data.truth.xy, data.sensor_range_m, data.true_radii_m)
     paired = np.zeros(in_range.size, dtype=bool)
     paired[association.true_index] = True
     return RunMetrics(

@@ -53,22 +53,22 @@ def plot_trajectory(
     true_circles: NDArray[np.float64],
     mapped_xy: NDArray[np.float64],
     mapped_covariances: NDArray[np.float64],
-    arena_xy_m: tuple[float, float] | None,
+    walls: NDArray[np.float64] | None,
 ) -> None:
     """trajectory.png: the arena walls, the true cylinders (rows ``[x, y, r]``), the ground truth (red),
     odometry (blue) and SLAM (green) paths in the world frame, and the mapped landmarks (n, 2) with their
     2-sigma ellipses from ``mapped_covariances`` (n, 2, 2). Without ``truth`` or ``odom`` (None) or true
-    cylinders (no rows) those are left out; without ``arena_xy_m`` (None) so are the walls, and the axes fit
-    the data."""
-    from matplotlib.patches import Circle, Rectangle
+    cylinders (no rows) those are left out. ``walls`` (K, 4) rows ``[x0, y0, x1, y1]`` are drawn and frame
+    the axes; without them (None) the axes fit the data."""
+    from matplotlib.patches import Circle
 
     figure = new_figure(7.0, 7.0)
     axes = figure.add_subplot()
     true_circles = np.asarray(true_circles, dtype=np.float64).reshape(-1, 3)
     mapped_xy = np.asarray(mapped_xy).reshape(-1, 2)
-    if arena_xy_m is not None:
-        hx, hy = 0.5 * arena_xy_m[0], 0.5 * arena_xy_m[1]
-        axes.add_patch(Rectangle((-hx, -hy), 2 * hx, 2 * hy, fill=False, edgecolor="black", linewidth=2.0))
+    if walls is not None:
+        for x0, y0, x1, y1 in np.asarray(walls, dtype=np.float64).reshape(-1, 4):
+            axes.plot([x0, x1], [y0, y1], color="black", linewidth=2.0)
     for x, y, r in true_circles:
         axes.add_patch(Circle((x, y), r, color="0.35", alpha=0.8))
     if true_circles.shape[0]:
@@ -87,9 +87,11 @@ def plot_trajectory(
     axes.plot(*mapped_xy.T, "+", color=SLAM_COLOR, markersize=9, label="mapped landmarks (2σ)")
     axes.set_aspect("equal")
     margin = 0.15
-    if arena_xy_m is not None:
-        axes.set_xlim(-hx - margin, hx + margin)
-        axes.set_ylim(-hy - margin, hy + margin)
+    if walls is not None:
+        corners = np.asarray(walls, dtype=np.float64).reshape(-1, 2)
+        low, high = corners.min(axis=0) - margin, corners.max(axis=0) + margin
+        axes.set_xlim(low[0], high[0])
+        axes.set_ylim(low[1], high[1])
     else:
         series = [s.xy for s in (truth, odom, slam) if s is not None]
         xy = np.vstack([*series, mapped_xy, true_circles[:, :2]])

@@ -107,8 +107,9 @@ class RunRecord:
     """What a run or a replay produced, in the truth's frame: the ``truth`` (None without ground truth),
     ``odom`` (None or empty without odometry) and ``slam`` pose series, ``slam_covariances`` (K, 3, 3) of
     the SLAM poses, the filter's final ``snapshot``, the true cylinders ``circles`` (M, 3) of rows
-    ``[x, y, r]``, ``sensor_range_m`` (:func:`sensor_range_m`) and ``arena_xy_m`` the arena's size, whose
-    walls the trajectory figure draws (None: no walls, the axes fit the data)."""
+    ``[x, y, r]``, ``sensor_range_m`` (:func:`sensor_range_m`) and ``walls`` (K, 4) the arena's wall
+    segments ``[x0, y0, x1, y1]``, which the trajectory figure draws (None: no walls, the axes fit the
+    data)."""
 
     truth: PoseSeries | None
     odom: PoseSeries | None
@@ -117,7 +118,7 @@ class RunRecord:
     snapshot: SlamSnapshot
     circles: NDArray[np.float64]
     sensor_range_m: float | NDArray[np.float64]
-    arena_xy_m: tuple[float, float] | None = None
+    walls: NDArray[np.float64] | None = None
 
 
 def evaluate_and_plot(
@@ -132,20 +133,22 @@ def evaluate_and_plot(
     if len(record.slam):
         plots.plot_trajectory(
             out_dir / "trajectory.png", record.truth, odom, record.slam, record.circles,
-            snapshot.landmarks_xy, snapshot.landmark_covariances, record.arena_xy_m,
+            snapshot.landmarks_xy, snapshot.landmark_covariances, record.walls,
         )  # fmt: skip
     plots.plot_covariance(out_dir / "covariance.png", snapshot.covariance)
     if record.truth is None or odom is None or not len(record.slam):
         return None
+    circles = np.asarray(record.circles, dtype=np.float64).reshape(-1, 3)
     data = RunData(
         truth=record.truth,
         odom=odom,
         slam=record.slam,
         slam_covariances=record.slam_covariances,
         mapped_xy=snapshot.landmarks_xy,
-        true_xy=np.asarray(record.circles, dtype=np.float64).reshape(-1, 3)[:, :2],
+        true_xy=circles[:, :2],
         sensor_range_m=record.sensor_range_m,
         gate_m=LANDMARK_GATE_M,
+        true_radii_m=circles[:, 2],
     )
     metrics = evaluate_run(data, sim_seconds=sim_seconds, wall_seconds=wall_seconds)
     plots.plot_slam_errors(out_dir / "errors.png", record.slam, record.slam_covariances, record.truth)
@@ -159,28 +162,41 @@ def write_metrics(out_dir: Path, values: Mapping[str, Any]) -> Path:
     return path
 
 
-def results_table(metrics: RunMetrics) -> str:
-    """A markdown table of the run's figures and targets (✓/✗ where a target applies)."""
+def results_table(metrics: RunMetrics, targets: bool = True) -> str:
+    """A markdown table of the run's figures and, with ``targets``, the demo's targets (✓/✗ where one
+    applies); without, the figures alone (a recording of another world, which those targets are not
+    about)."""
     values = metrics.as_dict()
-    rows = ["| metric | value | target | |", "|---|---:|---|---|"]
+    rows = (
+        ["| metric | value | target | |", "|---|---:|---|---|"]
+        if targets
+        else ["| metric | value |", "|---|---:|"]
+    )
+
+    def row(label: str, text: str, target: str, ok: bool | None) -> None:
+        mark = "" if ok is None else ("✓" if ok else "✗")
+        rows.append(f"| {label} | {text} | {target} | {mark} |" if targets else f"| {label} | {text} |")
+
     for key, label, fmt, target, check in TARGETS:
         value = values[key]
         if key == "wall_seconds":
             ok = value <= 0.5 * values["sim_seconds"]
         else:
             ok = check(value) if check is not None else None
-        mark = "" if ok is None else ("✓" if ok else "✗")
-        rows.append(f"| {label} | {fmt.format(value)} | {target} | {mark} |")
+        row(label, fmt.format(value), target, ok)
     mapped_ok = values["landmarks_in_range_unmapped"] == 0 and values["landmarks_duplicate"] == 0
-    rows.append(
-        f"| landmarks: true / came in range / mapped | {values['landmarks_true']} / "
-        f"{values['landmarks_in_range']} / {values['landmarks_mapped']} | every one in range mapped once | "
-        f"{'✓' if mapped_ok else '✗'} |"
+    row(
+        "landmarks: true / came in range / mapped",
+        f"{values['landmarks_true']} / {values['landmarks_in_range']} / {values['landmarks_mapped']}",
+        "every one in range mapped once",
+        mapped_ok,
     )
-    rows.append(
-        f"| landmarks: in range but unmapped / duplicates / spurious | "
+    row(
+        "landmarks: in range but unmapped / duplicates / spurious",
         f"{values['landmarks_in_range_unmapped']} / {values['landmarks_duplicate']} / "
-        f"{values['landmarks_spurious']} | 0 / 0 / 0 | |"
+        f"{values['landmarks_spurious']}",
+        "0 / 0 / 0",
+        None,
     )
     return "\n".join(rows)
 

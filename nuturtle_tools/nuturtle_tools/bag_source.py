@@ -1,4 +1,4 @@
-"""Read a rosbag2 recording for replay: its topics and its messages as raw CDR, in log-time order. No ROS.
+"""Read a ROS recording for replay: its topics and its messages as ROS 2 CDR, in log-time order. No ROS.
 
 What opens
 ----------
@@ -8,7 +8,12 @@ One code path, ``rosbags.highlevel.AnyReader``, for
   zstd-compressed files or messages), e.g. the demo's ``out/latest/run/``;
 * a single ``.mcap`` file without ``metadata.yaml`` (the demo's ``run/run.mcap``, a Foxglove export):
   rosbags reads the topics, types and the channels' ``offered_qos_profiles`` from the MCAP summary;
-* a single ``.db3`` file (sqlite3 storage without its metadata.yaml).
+* a single ``.db3`` file (sqlite3 storage without its metadata.yaml);
+* a ROS 1 ``.bag`` file (storage ``rosbag1``): rosbags' rosbag1 reader, the message definitions the bag
+  stores, and rosbags' ROS 1 -> ROS 2 message conversion (``rosbags.convert``'s, as ``rosbags-convert``
+  does it: the ROS 1 serialisation turned into the ROS 2 Jazzy type's CDR, the header's ``seq`` dropped, a
+  type whose fields differ migrated field by field), type by type as its messages are read. A ROS 1 bag
+  records no QoS: every topic is as if its publishers offered none (best effort for the scan).
 
 Anything else (a missing path, a folder without metadata.yaml, a file of another kind, a corrupt bag) is a
 :class:`BagError` with a message that names the path.
@@ -20,14 +25,15 @@ type_name, data, log_time_ns)``).
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
 from typing import Any, NamedTuple
 
 METADATA_FILE = "metadata.yaml"
-SINGLE_FILE_SUFFIXES = (".mcap", ".db3")
+ROS1_SUFFIX = ".bag"
+SINGLE_FILE_SUFFIXES = (".mcap", ".db3", ROS1_SUFFIX)
 
 
 class BagError(Exception):
@@ -57,7 +63,8 @@ class BagMessage(NamedTuple):
 
 
 def storage_of(path: Path) -> str:
-    """``mcap`` or ``sqlite3``: the storage of a bag directory (its metadata.yaml) or a single file."""
+    """``mcap``, ``sqlite3`` or ``rosbag1``: the storage of a bag directory (its metadata.yaml) or a single
+    file."""
     if path.is_dir():
         import yaml
 
@@ -66,7 +73,7 @@ def storage_of(path: Path) -> str:
             return str(metadata["rosbag2_bagfile_information"]["storage_identifier"])
         except (OSError, KeyError, TypeError, yaml.YAMLError) as error:
             raise BagError(f"{path}: unreadable {METADATA_FILE}: {error}") from error
-    return "mcap" if path.suffix == ".mcap" else "sqlite3"
+    return {".mcap": "mcap", ROS1_SUFFIX: "rosbag1"}.get(path.suffix, "sqlite3")
 
 
 def _check_path(path: Path) -> None:
@@ -76,16 +83,17 @@ def _check_path(path: Path) -> None:
         raise BagError(f"{path} is a folder without {METADATA_FILE}: not a rosbag2 bag directory")
     if path.is_file() and path.suffix not in SINGLE_FILE_SUFFIXES:
         raise BagError(
-            f"{path} is neither a rosbag2 bag directory nor a single {' or '.join(SINGLE_FILE_SUFFIXES)} file"
+            f"{path} is neither a rosbag2 bag directory nor a single {', '.join(SINGLE_FILE_SUFFIXES)} file"
         )
 
 
 class BagSource:
-    """A rosbag2 recording at ``path`` (module docstring), read through rosbags; a context manager.
+    """A ROS recording at ``path`` (module docstring), read through rosbags; a context manager.
 
     ``topics`` by name once open; ``messages(names)`` the messages of those topics (all topics if None)
-    merged in log-time order, as raw CDR; ``start_ns`` / ``end_ns`` the first and last log time.
-    BagError when the path cannot be read as a bag.
+    merged in log-time order, as ROS 2 CDR; ``start_ns`` / ``end_ns`` the first and last log time.
+    BagError when the path cannot be read as a bag, or (while reading) a ROS 1 message type has no ROS 2
+    counterpart.
     """
 
     def __init__(self, path: str | Path) -> None:
@@ -93,20 +101,25 @@ class BagSource:
         _check_path(self.path)
         self.storage = storage_of(self.path)
         self._reader: Any = None
+        self._typestore: Any = None
+        # ROS 1 serialisation -> ROS 2 CDR, by message type (ROS 1 bags only)
+        self._to_cdr: dict[str, Callable[[bytes | memoryview], Any]] = {}
         self.topics: dict[str, BagTopic] = {}
 
     def open(self) -> BagSource:
         from rosbags.highlevel import AnyReader, AnyReaderError
+        from rosbags.rosbag1 import ReaderError as Ros1ReaderError
         from rosbags.rosbag2 import ReaderError
         from rosbags.typesys import Stores, get_typestore
 
-        reader = AnyReader([self.path], default_typestore=get_typestore(Stores.ROS2_JAZZY))
+        self._typestore = get_typestore(Stores.ROS2_JAZZY)
+        reader = AnyReader([self.path], default_typestore=self._typestore)
         try:
             reader.open()
-        except (AnyReaderError, ReaderError, OSError, ValueError, KeyError) as error:
-            raise BagError(f"{self.path}: not a readable rosbag2 recording: {error}") from error
+        except (AnyReaderError, ReaderError, Ros1ReaderError, OSError, ValueError, KeyError) as error:
+            raise BagError(f"{self.path}: not a readable ROS recording: {error}") from error
         except Exception as error:  # rosbags' storage readers raise what their file format gives them
-            raise BagError(f"{self.path}: not a readable rosbag2 recording: {error!r}") from error
+            raise BagError(f"{self.path}: not a readable ROS recording: {error!r}") from error
         self._reader = reader
         topics: dict[str, BagTopic] = {}
         for connection in reader.connections:
@@ -144,7 +157,23 @@ class BagSource:
         if not connections:
             return
         for connection, log_time_ns, data in reader.messages(connections=connections):
+            if not reader.is2:
+                data = self._converter(connection.msgtype)(data)
             yield BagMessage(connection.topic, connection.msgtype, bytes(data), int(log_time_ns))
+
+    def _converter(self, msgtype: str) -> Callable[[bytes | memoryview], Any]:
+        """rosbags' ROS 1 -> ROS 2 (Jazzy) CDR conversion of ``msgtype`` (BagError without a ROS 2 type)."""
+        converter = self._to_cdr.get(msgtype)
+        if converter is None:
+            from rosbags.convert.converter import generate_message_converter
+
+            if msgtype not in self._typestore.fielddefs:
+                raise BagError(f"{self.path}: the ROS 1 type {msgtype} has no ROS 2 (Jazzy) counterpart")
+            converter = generate_message_converter(
+                self._reader.typestore, self._typestore, msgtype, msgtype, {}, src_is2=False, dst_is2=True
+            )
+            self._to_cdr[msgtype] = converter
+        return converter
 
     def close(self) -> None:
         if self._reader is not None:

@@ -4,9 +4,10 @@ and the executor steps that give in-process nodes back-pressure.
 The node
 --------
 :class:`BagPlayer` has one publisher per :class:`PlayedTopic` (a bag topic, e.g. ``/my_scan``, played under
-another name, e.g. ``scan``, with the recorded message type) and one on ``/clock``
-(rosgraph_msgs/Clock). :meth:`BagPlayer.play` publishes a message's log time on /clock, then the message's
-CDR bytes untouched (rclpy's ``Publisher.publish(bytes)`` publishes serialised data as it is).
+another name, e.g. ``scan``, with the recorded message type; one bag topic may be played under several
+names, e.g. a Gazebo ``/odom`` as both ``odom`` and the ground truth) and one on ``/clock``
+(rosgraph_msgs/Clock). :meth:`BagPlayer.publish_message` publishes a message's CDR bytes untouched on each
+of its names (rclpy's ``Publisher.publish(bytes)`` publishes serialised data as it is).
 
 QoS (:func:`played_qos`): reliable, volatile, keep last ``PLAY_DEPTH``; a sensor topic (the scan) mirrors
 the reliability and durability its recorded publishers offered (``offered_qos_profiles``: the LiDAR's best
@@ -83,19 +84,25 @@ class PlayedTopic:
 class BagPlayer(Node):
     """The `bag_player` node (module docstring) for ``topics``; kwargs go to rclpy's Node.
 
-    ``play(message)`` publishes /clock (when the log time moved on) and the message on its played topic
-    (KeyError for a topic not in ``topics``); ``played`` the messages published per bag topic.
-    ``relay_to(sink)`` also hands /clock and every played message, with its log time, to a
+    ``publish_clock(t_ns)`` publishes /clock (when the log time moved on), ``publish_message(message)`` the
+    message on each name its bag topic is played as (KeyError for a topic not in ``topics``); ``topics``
+    the played topics by bag topic, ``played`` the messages published per bag topic. ``relay_to(sink)``
+    also hands /clock and every played message, with its log time, to a
     :class:`~nuturtle_tools.recorder.TopicSink` (the Foxglove relay) without a subscription.
+    ValueError for two played topics of one name.
     """
 
     def __init__(self, topics: Sequence[PlayedTopic], **kwargs: Any) -> None:
         super().__init__("bag_player", **kwargs)
-        self.topics = {topic.bag_topic: topic for topic in topics}
-        self.publishers_by_topic = {
-            topic.bag_topic: self.create_publisher(message_class(topic.type_name), topic.name, topic.qos)
-            for topic in topics
-        }
+        names = [absolute(topic.name) for topic in topics]
+        if len(set(names)) < len(names):
+            raise ValueError(f"several bag topics played under one name: {sorted(names)}")
+        self.topics: dict[str, list[PlayedTopic]] = {}
+        self.publishers_by_topic: dict[str, list[Any]] = {}
+        for topic in topics:
+            publisher = self.create_publisher(message_class(topic.type_name), topic.name, topic.qos)
+            self.topics.setdefault(topic.bag_topic, []).append(topic)
+            self.publishers_by_topic.setdefault(topic.bag_topic, []).append(publisher)
         self.clock_publisher = self.create_publisher(Clock, CLOCK_TOPIC, QoSProfile(depth=PLAY_DEPTH))
         self.played = dict.fromkeys(self.topics, 0)
         self.clock_ns: int | None = None
@@ -104,8 +111,9 @@ class BagPlayer(Node):
     def relay_to(self, sink: TopicSink) -> None:
         """Hand /clock and the played messages to ``sink`` too, each on its played topic."""
         sink.add_topic(CLOCK_TOPIC, "rosgraph_msgs/msg/Clock", [self.clock_publisher.qos_profile])
-        for topic in self.topics.values():
-            sink.add_topic(absolute(topic.name), topic.type_name, [topic.qos])
+        for played in self.topics.values():
+            for topic in played:
+                sink.add_topic(absolute(topic.name), topic.type_name, [topic.qos])
         self._sink = sink
 
     def publish_clock(self, t_ns: int) -> bool:
@@ -120,24 +128,32 @@ class BagPlayer(Node):
         return True
 
     def publish_message(self, message: BagMessage) -> None:
-        """The message's CDR bytes on its played topic."""
-        self.publishers_by_topic[message.topic].publish(message.data)
+        """The message's CDR bytes on each name its bag topic is played as."""
+        for topic, publisher in zip(
+            self.topics[message.topic], self.publishers_by_topic[message.topic], strict=True
+        ):
+            publisher.publish(message.data)
+            if self._sink is not None:
+                self._sink.write(absolute(topic.name), message.data, message.log_time_ns)
         self.played[message.topic] += 1
-        if self._sink is not None:
-            self._sink.write(absolute(self.topics[message.topic].name), message.data, message.log_time_ns)
 
-    def reliable_publishers(self) -> list[Any]:
-        return [
-            self.publishers_by_topic[name]
-            for name, topic in self.topics.items()
+    def reliable_publishers(self, bag_topic: str | None = None) -> list[Any]:
+        """The reliable publishers of ``bag_topic`` (of every played topic and /clock if None)."""
+        names = list(self.topics) if bag_topic is None else [bag_topic]
+        reliable = [
+            publisher
+            for name in names
+            for topic, publisher in zip(self.topics[name], self.publishers_by_topic[name], strict=True)
             if topic.qos.reliability == ReliabilityPolicy.RELIABLE
-        ] + [self.clock_publisher]
+        ]
+        return reliable + ([self.clock_publisher] if bag_topic is None else [])
 
     def subscription_counts(self) -> dict[str, int]:
         """Matched subscriptions per played topic (by its played name) and /clock."""
         counts = {
-            self.topics[name].name: publisher.get_subscription_count()
-            for name, publisher in self.publishers_by_topic.items()
+            topic.name: publisher.get_subscription_count()
+            for name, publishers in self.publishers_by_topic.items()
+            for topic, publisher in zip(self.topics[name], publishers, strict=True)
         }
         counts[CLOCK_TOPIC] = self.clock_publisher.get_subscription_count()
         return counts

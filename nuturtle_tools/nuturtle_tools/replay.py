@@ -1,11 +1,11 @@
 """Command line of the bag replay: ``python -m nuturtle_tools.replay BAG [options]`` (``nuturtle-replay``,
 ``./dev.sh replay``).
 
-Plays a rosbag2 recording (a bag directory of MCAP or sqlite3 storage, or a single .mcap file such as the
-demo's ``run/run.mcap``) with /clock into the real `landmarks` and `slam` nodes, as fast as they keep up
-(no message dropped) or at ``--rate``, and writes ``slam/`` (the SLAM outputs, a rosbag2 MCAP bag),
-``trajectory.png``, ``map.json``, ``covariance.png``, ``config.yaml`` and ``metrics.json`` (with ground
-truth in the bag: ``errors.png`` and the demo's accuracy metrics) into ``--out`` (docs/replay.md).
+Plays a recording (a rosbag2 bag directory of MCAP or sqlite3 storage, a single .mcap file such as the
+demo's ``run/run.mcap``, or a ROS 1 .bag) with /clock into the real `landmarks` and `slam` nodes, as fast
+as they keep up (no message dropped) or at ``--rate``, and writes ``slam/`` (the SLAM outputs, a rosbag2
+MCAP bag), ``trajectory.png``, ``map.json``, ``covariance.png``, ``config.yaml`` and ``metrics.json`` (with
+ground truth in the bag: ``errors.png`` and the accuracy metrics) into ``--out`` (docs/replay.md).
 ``--play-only`` runs only the player, for nodes of your own. Exit code 2 for an unreadable bag, a missing
 topic or a bad option.
 
@@ -36,11 +36,13 @@ DEFAULT_TOPICS = {
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(
         prog="python -m nuturtle_tools.replay",
-        description="Replay a rosbag2 recording (MCAP or sqlite3 bag directory, or a single .mcap) with "
-        "/clock into the landmarks and slam nodes: SLAM outputs, trajectory, map and metrics.",
+        description="Replay a recording (MCAP or sqlite3 bag directory, a single .mcap, or a ROS 1 .bag) "
+        "with /clock into the landmarks and slam nodes: SLAM outputs, trajectory, map and metrics.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
-    parser.add_argument("bag", type=Path, help="bag directory (metadata.yaml) or a single .mcap / .db3 file")
+    parser.add_argument(
+        "bag", type=Path, help="bag directory (metadata.yaml), a single .mcap / .db3 file or a ROS 1 .bag"
+    )
     parser.add_argument("--out", type=Path, default=Path("out/replay"),
                         help="output folder (its files and its bag slam/ are replaced)")  # fmt: skip
     parser.add_argument("--params", type=Path, default=None,
@@ -74,10 +76,38 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
+def no_landmarks_hint(metrics: dict[str, Any]) -> str | None:
+    """Why slam got no landmarks from the LiDAR, from the counts of ``metrics`` (metrics.json): no scan in
+    the bag, none reaching the landmarks node, every one refused by it, or no cylinder found in them.
+    None when some landmarks arrived, or the observations are the fake sensor's."""
+    if metrics.get("observation_topic") != "landmarks" or metrics["map_landmarks"] > 0:
+        return None
+    played = metrics["scans_played"]
+    received = metrics.get("scans_received_by_landmarks", 0)
+    refused = metrics.get("scans_refused_by_landmarks", 0)
+    if played == 0:
+        return "no landmarks: the bag's scan topic has no messages"
+    if received == 0:
+        return f"no landmarks: none of the {played} scans played reached the landmarks node"
+    if refused == received:
+        return (
+            f"no landmarks: the landmarks node refused all {refused} scans it received, the last because: "
+            f"{metrics.get('last_scan_refusal', 'unknown')} (/diagnostics `landmarks: detector` counts them)"
+        )
+    return (
+        f"no landmarks: the landmarks node took {received - refused} of {received} scans but slam mapped "
+        "no cylinder (none of the detector's sizes in range? see landmarks/clusters in slam/)"
+    )
+
+
 def summary(result: Any) -> str:
-    """The printed report: the demo's results table when there is ground truth, then the counts."""
+    """The printed report: the results table when there is ground truth (with the demo's targets for a
+    nusim recording only), then the counts, the notes and why there are no landmarks if so."""
     metrics = result.metrics
-    lines = [f"replayed {metrics['bag']} ({metrics['storage']}), association {metrics['association']}"]
+    lines = [
+        f"replayed {metrics['bag']} ({metrics['storage']}), association {metrics['association']}, "
+        f"motion from {metrics['motion_source']}"
+    ]
     if result.interrupted:
         lines.append("interrupted: the outputs cover what was played so far")
     if result.accuracy:
@@ -87,10 +117,15 @@ def summary(result: Any) -> str:
         fields = RunMetrics.__dataclass_fields__
         values = {key: metrics[key] for key in fields}
         values["nees_pose_band_95"] = tuple(values["nees_pose_band_95"])
-        lines += ["", results_table(RunMetrics(**values)), ""]
+        lines += ["", results_table(RunMetrics(**values), targets=metrics["nusim_recording"]), ""]
+        if not metrics["nusim_recording"]:
+            lines.append("(not a nusim recording: the demo's targets do not apply)")
     rows = ["| count | value |", "|---|---:|"]
     for topic, count in metrics["messages_played"].items():
         rows.append(f"| messages played, {topic} | {count} |")
+    for key in ("scans_received_by_landmarks", "scans_refused_by_landmarks"):
+        if key in metrics:
+            rows.append(f"| {key.replace('_', ' ')} | {metrics[key]} |")
     for key in ("observation_arrays_received", "observation_arrays_applied", "observation_arrays_skipped",
                 "observation_arrays_pending"):  # fmt: skip
         if key in metrics:
@@ -98,6 +133,10 @@ def summary(result: Any) -> str:
     rows.append(f"| replay wall time (s) / bag time (s) | {metrics['replay_wall_seconds']:.1f} / "
                 f"{metrics['bag_seconds']:.1f} |")  # fmt: skip
     lines += rows
+    lines += [f"note: {note}" for note in metrics["notes"]]
+    hint = no_landmarks_hint(metrics)
+    if hint is not None:
+        lines.append(hint)
     if "observation_arrays_applied" in metrics:
         lines.append(f"outputs in {result.out_dir}/: metrics.json trajectory.png map.json covariance.png "
                      f"{'errors.png ' if result.accuracy else ''}slam/ config.yaml")  # fmt: skip

@@ -18,12 +18,20 @@ dropped either way (no queue ever holds more than one played message). Within a 
 first (its time source subscribed first), and slam hears the step's joint_states before the landmarks the
 step's scan gives, as in the live run.
 
+Motion: slam's ``motion_source`` (the option, else the params file's, else the node's default) decides
+which motion topic the bag must have and which is played: ``joint_states`` (the wheels; the bag's odom is
+played too, for slam's ``map -> odom`` and the odometry metrics) or ``odom`` (no joint_states played: slam
+does not subscribe to them then).
+
 Ground truth (``truth_topic``, nav_msgs/Odometry, default ``/nusim/ground_truth``) is played on
-``nusim/ground_truth``, which only the monitor hears. When the bag has it, SLAM starts at the truth's pose
-at the first joint_states stamp (so ``map`` = the truth's frame), odometry is placed in that frame by its
-first sample (``T_world_odom = T_world_body(t0) T_odom_body(t0)^-1``), and the demo's accuracy metrics are
-computed; the true cylinders come from the params file's ``nusim`` section (``obstacles.x/y/r``) or else the
-bag's ``/nusim/obstacles`` markers. Without it SLAM starts at the params' ``x0, y0, theta0``.
+``nusim/ground_truth``, which only the monitor hears. One bag topic may have several roles: a Gazebo
+``/odom`` (the model's true pose) given as ``truth_topic`` is played as both ``odom`` and the truth. When
+the bag has a truth, SLAM starts at the truth's pose at the first motion sample's stamp (so ``map`` = the
+truth's frame), odometry is placed in that frame by its first sample
+(``T_world_odom = T_world_body(t0) T_odom_body(t0)^-1``), and the demo's accuracy metrics are computed;
+the true cylinders come from the params file's ``nusim`` section (``obstacles.x/y/r``, e.g. a nusim world
+file) or else the bag's ``/nusim/obstacles`` markers. Without it SLAM starts at the params' ``x0, y0,
+theta0``. The demo's pass/fail targets apply to nusim recordings only (the bag has ``/nusim/ground_truth``).
 """
 
 from __future__ import annotations
@@ -82,6 +90,8 @@ from .relay_config import RelayConfig
 # The SLAM outputs: a rosbag2 bag directory in the output folder (slam/metadata.yaml + slam/slam.mcap)
 BAG_NAME = "slam"
 TRUTH_PLAYED_AS = "nusim/ground_truth"
+# a recording of nusim (the demo's): its pass/fail targets apply
+NUSIM_TRUTH_TOPIC = "/nusim/ground_truth"
 OBSTACLES_TOPIC = "/nusim/obstacles"
 # Wall time to wait for every subscription to match the player and the recorder to subscribe (s)
 DISCOVERY_TIMEOUT_S = 10.0
@@ -199,12 +209,12 @@ def node_parameters_from_file(path: Path | None, node: str) -> dict[str, Any]:
 
 @dataclass
 class BagFacts:
-    """Read from the bag before playing: ``truth`` (None without ground truth), the first joint_states
+    """Read from the bag before playing: ``truth`` (None without ground truth), the first motion sample's
     stamp (ns), the true cylinders ``[x, y, r]`` of /nusim/obstacles (or None), the first scan's
     ``angle_increment`` and ``range_max``."""
 
     truth: PoseSeries | None = None
-    first_joint_states_ns: int | None = None
+    first_motion_ns: int | None = None
     obstacles: np.ndarray | None = None
     angle_increment: float | None = None
     range_max: float | None = None
@@ -228,26 +238,30 @@ def pose_series(rows: list[list[float]]) -> PoseSeries:
     return PoseSeries(table[:, 0], table[:, 1:])
 
 
-def read_facts(source: BagSource, topics: dict[str, BagTopic]) -> BagFacts:
-    """One pass over the ground truth, the first joint_states and scan, and the obstacles."""
+def read_facts(source: BagSource, topics: dict[str, BagTopic], motion_role: str) -> BagFacts:
+    """One pass over the ground truth, the first motion sample (of ``motion_role``) and scan, and the
+    obstacles."""
     facts = BagFacts()
-    wanted = {topics[role].name: role for role in ("truth", "joint_states", "scan") if role in topics}
+    wanted: dict[str, set[str]] = {}
+    for role in ("truth", motion_role, "scan"):
+        if role in topics:
+            wanted.setdefault(topics[role].name, set()).add(role)
     if OBSTACLES_TOPIC in source.topics:
-        wanted[OBSTACLES_TOPIC] = "obstacles"
+        wanted.setdefault(OBSTACLES_TOPIC, set()).add("obstacles")
     truth_rows: list[list[float]] = []
     for message in source.messages(wanted):
-        role = wanted[message.topic]
-        if role == "truth":
+        roles = wanted[message.topic]
+        if "truth" in roles:
             truth_rows.append(
                 _odometry_row(deserialize_message(message.data, message_class(message.type_name)))
             )
-        elif role == "joint_states" and facts.first_joint_states_ns is None:
+        if motion_role in roles and facts.first_motion_ns is None:
             msg = deserialize_message(message.data, message_class(message.type_name))
-            facts.first_joint_states_ns = stamp_nanoseconds(msg.header.stamp)
-        elif role == "scan" and facts.angle_increment is None:
+            facts.first_motion_ns = stamp_nanoseconds(msg.header.stamp)
+        if "scan" in roles and facts.angle_increment is None:
             msg = deserialize_message(message.data, message_class(message.type_name))
             facts.angle_increment, facts.range_max = float(msg.angle_increment), float(msg.range_max)
-        elif role == "obstacles" and facts.obstacles is None:
+        if "obstacles" in roles and facts.obstacles is None:
             msg = deserialize_message(message.data, message_class(message.type_name))
             cylinders = [
                 [m.pose.position.x, m.pose.position.y, 0.5 * m.scale.x]
@@ -277,10 +291,21 @@ def odom_in_frame(odom: PoseSeries, T_world_body0: Transform2D) -> PoseSeries:
 # --- the run -----------------------------------------------------------------------------------------------
 
 
-def resolve_topics(source: BagSource, options: ReplayOptions, association: str) -> dict[str, BagTopic]:
-    """The bag topic of each role that is played (BagError when a needed one is missing or of another
-    type)."""
-    needed = {"joint_states", "scan" if association == "unknown" else "fake_sensor"}
+def default_motion_source() -> str:
+    """The slam node's default ``motion_source``."""
+    from nuslam.slam_node import SlamNodeConfig
+
+    return SlamNodeConfig.motion_source
+
+
+def resolve_topics(
+    source: BagSource, options: ReplayOptions, association: str, motion_source: str
+) -> dict[str, BagTopic]:
+    """The bag topic of each role that is played: the motion (``motion_source``: joint_states or odom) and
+    the observations (the scan, or the fake sensor with known association) are needed, the odometry (with
+    joint_states motion), the truth and the scan are played when the bag has them. BagError when a needed
+    one is missing or a topic is of another type than its role's."""
+    needed = {motion_source, "scan" if association == "unknown" else "fake_sensor"}
     optional = {"odom", "truth", "scan"} - needed
     resolved: dict[str, BagTopic] = {}
     for role in sorted(needed | optional):
@@ -289,9 +314,15 @@ def resolve_topics(source: BagSource, options: ReplayOptions, association: str) 
         if topic is None:
             if role in needed:
                 option = "--" + role.replace("_", "-") + "-topic"
+                other = "odom" if role == "joint_states" else "joint_states"
+                switch = (
+                    f", or --motion-source {other} for its {options.bag_topic(other)}"
+                    if role == motion_source and options.bag_topic(other) in source.topics
+                    else ""
+                )
                 raise BagError(
                     f"{source.path} has no topic {name} for {role} "
-                    f"(topics: {', '.join(sorted(source.topics))}; choose another with {option})"
+                    f"(topics: {', '.join(sorted(source.topics))}; choose another with {option}{switch})"
                 )
             continue
         expected = ROLES[role][1]
@@ -316,17 +347,30 @@ class Replay:
         self.source = source
         slam_file = node_parameters_from_file(options.params, "slam")
         self.association = options.association or str(slam_file.get("association", "unknown"))
-        self.topics = resolve_topics(source, options, self.association)
-        self.facts = read_facts(source, self.topics) if not options.play_only else BagFacts()
+        self.motion_source = options.motion_source or str(
+            slam_file.get("motion_source", default_motion_source())
+        )
+        self.topics = resolve_topics(source, options, self.association, self.motion_source)
+        self.facts = (
+            read_facts(source, self.topics, self.motion_source) if not options.play_only else BagFacts()
+        )
+        # a nusim recording (the demo's): its pass/fail targets apply
+        self.nusim_recording = NUSIM_TRUTH_TOPIC in source.topics
+        self.notes: list[str] = []
+        truth, motion = self.topics.get("truth"), self.topics.get(self.motion_source)
+        if truth is not None and motion is not None and truth.name == motion.name:
+            self.notes.append(
+                f"the truth topic {truth.name} is also slam's motion ({self.motion_source}): the accuracy "
+                "compares slam with its own input"
+            )
         self.slam_values = dict(slam_file)
         self.slam_values["association"] = self.association
-        if options.motion_source is not None:
-            self.slam_values["motion_source"] = options.motion_source
+        self.slam_values["motion_source"] = self.motion_source
         if options.model is not None:
             self.slam_values["model"] = options.model
         self.landmarks_values = node_parameters_from_file(options.params, "landmarks")
         if self.facts.truth is not None:
-            T0 = truth_pose_at(self.facts.truth, self.facts.first_joint_states_ns)
+            T0 = truth_pose_at(self.facts.truth, self.facts.first_motion_ns)
             self.slam_values.update(x0=T0.x, y0=T0.y, theta0=T0.theta)
         self.nusim_values = node_parameters_from_file(options.params, "nusim")
         for values in (self.slam_values, self.landmarks_values):
@@ -412,9 +456,10 @@ class Replay:
 
     def _wait_for_matching(self, executor: SingleThreadedExecutor) -> None:
         """Until every played topic has its in-process subscribers and the recorder hears slam's outputs."""
-        expected = {"scan": 1, "joint_states": 1, "odom": 2, TRUTH_PLAYED_AS: 1, "/clock": 4}
-        if self.association == "known":
-            expected["fake_sensor"] = 1
+        # the in-process subscribers of each played topic: landmarks (scan), slam (its motion source and,
+        # with joint_states motion, odom for map -> odom; the observations), the monitor (odom, truth)
+        expected = {self.motion_source: 1, "odom": 2, TRUTH_PLAYED_AS: 1, "/clock": 4}
+        expected["fake_sensor" if self.association == "known" else "scan"] = 1
         required = {"/slam/odom", "/slam/path", "/slam/map"} | (
             {"/landmarks"} if self.association == "unknown" else set()
         )
@@ -449,7 +494,6 @@ class Replay:
         pace = self.options.pace
         pacer = Pacer(pace) if pace > 0.0 else None
         in_process = not self.options.play_only
-        reliable = {id(p) for p in self.player.reliable_publishers()}
         start_ns = self.source.start_ns
         total_s = (self.source.end_ns - start_ns) * 1e-9
         with ProgressBar(total_s, "bag", self.options.progress) as progress:
@@ -467,9 +511,7 @@ class Replay:
                     if in_process:
                         step.add(message.topic)
                     elif pacer is None:
-                        publisher = self.player.publishers_by_topic[message.topic]
-                        if id(publisher) in reliable:
-                            wait_for_acks([publisher], ACK_TIMEOUT_S)
+                        wait_for_acks(self.player.reliable_publishers(message.topic), ACK_TIMEOUT_S)
                     progress.advance((message.log_time_ns - start_ns) * 1e-9)
                 if in_process:
                     run_until_idle(executor, self.logger)
@@ -489,6 +531,9 @@ class Replay:
             "bag": str(self.source.path),
             "storage": self.source.storage,
             "association": self.association,
+            "motion_source": self.motion_source,
+            "nusim_recording": self.nusim_recording,
+            "notes": list(self.notes),
             "messages_played": played,
             "scans_played": played.get(scan.name, 0) if scan is not None else 0,
             "bag_seconds": (self.source.end_ns - self.source.start_ns) / NS_PER_S,
@@ -502,10 +547,16 @@ class Replay:
                     "observation_arrays_applied": observations["applied"],
                     "observation_arrays_skipped": observations["skipped"],
                     "observation_arrays_pending": observations["pending"],
+                    "map_landmarks": len(self.slam.slam.landmark_ids),
                     "slam_outputs_recorded": self.writer.message_counts,
                     **slip_counts(self.slam),
                 }
             )
+            if self.association == "unknown":
+                scans = self.landmarks.scan_counts
+                values["scans_received_by_landmarks"] = scans["received"]
+                values["scans_refused_by_landmarks"] = scans["refused"]
+                values["last_scan_refusal"] = self.landmarks.last_refusal
         return values
 
     def _finish(self, out_dir: Path, wall_seconds: float, interrupted: bool) -> ReplayResult:

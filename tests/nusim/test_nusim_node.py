@@ -26,7 +26,7 @@ from std_srvs.srv import Empty
 from visualization_msgs.msg import Marker, MarkerArray
 
 from nusim.nusim_node import NusimNode, NusimTiming
-from nusim.simulation import ArenaConfig, NoiseConfig, Obstacles, default_lidar
+from nusim.simulation import ArenaConfig, NoiseConfig, Obstacles, Walls, default_lidar
 from nuturtle_description.robot_params import burger_params
 from nuturtle_ros_common.conversions import pose_from_transform, stamp_seconds, yaw_from_quaternion
 from nuturtle_ros_common.ros_files import load_ros_yaml
@@ -35,6 +35,7 @@ from turtlelib import DiffDrive, Transform2D
 pytestmark = pytest.mark.ros
 
 BASIC_WORLD = Path(__file__).resolve().parents[2] / "nusim" / "config" / "basic_world.yaml"
+TURTLEBOT3_WORLD = BASIC_WORLD.parent / "turtlebot3_world.yaml"
 BURGER = DiffDrive(0.033, 0.16)
 MCU_PER_RAD_S = burger_params().motor_cmd_per_rad_sec  # 41.6666667 in models.yaml
 HALF_TICK_RAD = 0.5 * 2.0 * math.pi / 4096.0
@@ -230,14 +231,14 @@ def test_obstacles_and_walls_are_latched_red_markers_in_the_world_frame(ros):
     assert len(walls[0].markers) == 4
     for marker in obstacles[0].markers + walls[0].markers:
         assert (marker.color.r, marker.color.g, marker.color.b) == (1.0, 0.0, 0.0)
-    # the walls' inner faces are the arena's bounds
-    inner = sorted(
-        abs(m.pose.position.x) - m.scale.x / 2
-        if m.scale.x < m.scale.y
-        else abs(m.pose.position.y) - m.scale.y / 2
-        for m in walls[0].markers
-    )
-    assert inner == pytest.approx([1.5, 1.5, 2.0, 2.0])
+    # the walls' inner faces are the arena's bounds: each wall turned by yaw along its face, whose normal
+    # (-sin yaw, cos yaw) is scale.y / 2 nearer the centre than the marker's
+    inner = []
+    for m in walls[0].markers:
+        yaw = yaw_from_quaternion(m.pose.orientation)
+        normal_m = -math.sin(yaw) * m.pose.position.x + math.cos(yaw) * m.pose.position.y
+        inner.append(abs(normal_m) - m.scale.y / 2)
+    assert sorted(inner) == pytest.approx([1.5, 1.5, 2.0, 2.0])
 
 
 def test_collision_stops_the_true_robot_while_the_encoders_keep_counting(ros):
@@ -329,13 +330,14 @@ def test_bad_wheel_commands_are_skipped_with_a_warning(ros, names, velocities, r
 def test_the_default_parameters_are_the_basic_world_yaml():
     world = load_ros_yaml(BASIC_WORLD)
     flat = {k: v for k, v in world.items() if not isinstance(v, dict)}
-    flat.update({f"obstacles.{k}": v for k, v in world["obstacles"].items()})
-    flat.update({f"lidar.{k}": v for k, v in world["lidar"].items()})
+    for group in ("obstacles", "lidar", "walls"):
+        flat.update({f"{group}.{k}": v for k, v in world[group].items()})
     defaults = {
         **vars(NusimTiming()),
         **vars(ArenaConfig()),
         **vars(NoiseConfig()),
         **{f"obstacles.{k}": list(v) for k, v in vars(Obstacles()).items()},
+        **{f"walls.{k}": list(v) for k, v in vars(Walls()).items()},
         **{f"lidar.{k}": v for k, v in vars(default_lidar()).items()},
         "lidar_model": "lds01",
         "wheel_left": "wheel_left_joint",
@@ -351,7 +353,7 @@ def test_the_default_parameters_are_the_basic_world_yaml():
 def test_parameters_from_the_world_file_give_the_default_world(ros):
     world = load_ros_yaml(BASIC_WORLD)
     flat = {k: v for k, v in world.items() if not isinstance(v, dict)}
-    for group in ("obstacles", "lidar"):
+    for group in ("obstacles", "lidar", "walls"):
         flat.update({f"{group}.{k}": v for k, v in world[group].items()})
     from_file = ros.add(NusimNode(context=ros.context, parameter_overrides=parameters(flat)))
     default = ros.add(NusimNode(context=ros.context))
@@ -410,3 +412,26 @@ def test_executable_runs_the_world_file_and_publishes_until_interrupted(ros, tmp
         process.send_signal(signal.SIGINT)
         output, _ = process.communicate(timeout=15)
     assert process.returncode == 0, output
+
+
+def test_turtlebot3_world_from_its_params_file():
+    """`ros2 run nusim nusim --ros-args --params-file nusim/config/turtlebot3_world.yaml`, as rcl reads it:
+    the hexagon's six walls, nine 0.15 m cylinders on the 1.1 m grid, the spawn at (-2.0, -0.5) facing +x."""
+    import rclpy
+    from rclpy.context import Context
+
+    context = Context()
+    rclpy.init(context=context, args=["--ros-args", "--params-file", str(TURTLEBOT3_WORLD)])
+    try:
+        node = NusimNode(context=context)
+        simulation = node.simulation
+        assert simulation.walls.shape == (6, 4)
+        np.testing.assert_allclose(np.abs(simulation.walls[:, [1, 3]]).max(), 2.54)
+        np.testing.assert_allclose(
+            sorted(map(tuple, simulation.circles)),
+            sorted((x, y, 0.15) for x in (-1.1, 0.0, 1.1) for y in (-1.1, 0.0, 1.1)),
+        )
+        assert simulation.T_world_body.as_array() == pytest.approx([-2.0, -0.5, 0.0])
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)

@@ -23,13 +23,15 @@ from nusim.simulation import (
     Obstacles,
     Simulation,
     SimulationConfig,
+    Walls,
     contact_fraction,
     default_lidar,
     first_collision,
+    wall_distances,
 )
 from nuturtle_description.robot_params import RobotParams
 from turtlelib import Transform2D
-from turtlelib.scan_model import LidarConfig
+from turtlelib.scan_model import LidarConfig, arena_walls, polygon_walls
 
 R_WHEEL = 0.033
 TRACK = 0.16
@@ -43,7 +45,12 @@ EXACT_LIDAR = LidarConfig(noise=0.0, resolution=0.0)
 
 
 def world(
-    obstacles=((), (), ()), arena=(4.0, 3.0), start=(0.0, 0.0, 0.0), noise=QUIET, lidar=EXACT_LIDAR
+    obstacles=((), (), ()),
+    arena=(4.0, 3.0),
+    start=(0.0, 0.0, 0.0),
+    noise=QUIET,
+    lidar=EXACT_LIDAR,
+    walls=None,
 ) -> Simulation:
     x0, y0, theta0 = start
     return Simulation(
@@ -53,6 +60,7 @@ def world(
             robot=RobotParams(),
             noise=noise,
             lidar=lidar,
+            walls=Walls() if walls is None else walls,
         )
     )
 
@@ -178,7 +186,7 @@ def test_wheel_speed_noise_has_the_configured_sigma_and_the_encoders_count_it():
 
 
 def test_contact_fraction_hand_cases():
-    half = np.array([2.0, 2.0])
+    half = arena_walls(4.0, 4.0)
     circle = np.array([[2.0, 0.0, 0.5]])
     origin = np.zeros(2)
     # inflated radius 1: contact at x = 1
@@ -192,7 +200,7 @@ def test_contact_fraction_hand_cases():
     # a 60 deg oblique approach: first contact where |p + s d - c| = 1
     d = np.array([4.0, 0.0])
     start = np.array([-1.0, math.sqrt(3) / 2])
-    s = contact_fraction(start, d, circle, np.array([9.0, 9.0]), 0.5)
+    s = contact_fraction(start, d, circle, arena_walls(18.0, 18.0), 0.5)
     assert np.hypot(*(start + s * d - circle[0, :2])) == pytest.approx(1.0, abs=1e-12)
     assert start[0] + s * d[0] == pytest.approx(1.5, abs=1e-12)
     # walls at |x| = 2 - 0.5 for the centre
@@ -217,6 +225,44 @@ def test_driving_into_a_cylinder_stops_at_contact_and_the_wheels_keep_turning():
     assert sim.T_world_body.x < 1.0 - R_ROBOT - 0.05 - 0.01
 
 
+def test_contact_with_a_slanted_wall_and_a_corner_pointing_in():
+    """Hand cases on the walls of NOTCHED (R = 0.5): its slanted edge (1.5, 1.5) -> (0, 1) is the line
+    x - 3 y + 3 = 0, normal (1, -3) / sqrt(10); its corner (0, 1) points into the arena."""
+    walls = polygon_walls(NOTCHED)
+    no_circles = np.empty((0, 3))
+    # from (0.9, 0) straight up: the centre meets the line offset by 0.5 where (0.9 - 3 y + 3) / sqrt(10)
+    # = 0.5, i.e. y = (3.9 - 0.5 sqrt(10)) / 3 = 0.773; its foot lies within the edge
+    s = contact_fraction(np.array([0.9, 0.0]), np.array([0.0, 1.0]), no_circles, walls, 0.5)
+    assert s == pytest.approx((3.9 - 0.5 * math.sqrt(10.0)) / 3.0, abs=1e-12)
+    # from (0, 0) straight up: the corner (0, 1) is met first, at y = 0.5 (both edges slope away from it)
+    s = contact_fraction(np.zeros(2), np.array([0.0, 1.0]), no_circles, walls, 0.5)
+    assert s == pytest.approx(0.5, abs=1e-12)
+    # touching the corner and moving away is free
+    assert contact_fraction(np.array([0.0, 0.5]), np.array([0.0, -0.3]), no_circles, walls, 0.5) == 1.0
+    assert first_collision(np.array([0.0, 0.51]), no_circles, walls, 0.5).startswith(
+        "is not inside the arena"
+    )
+    assert first_collision(np.array([0.0, 1.2]), no_circles, walls, 0.1) == (
+        "is not inside the arena (outside its walls)"
+    )
+    assert first_collision(np.array([1.0, 1.2]), no_circles, walls, 0.1) is None
+
+
+def test_a_scan_in_a_hexagonal_arena_sees_its_walls():
+    """turtlebot3_world's hexagon (flat sides at y = +-2.54, corners at (+-2.933, 0)), no cylinders, the
+    sensor at the origin facing +x (the robot at x = 0.032): along +-y the flat sides, along +x the corner."""
+    hexagon = ((2.933, 0.0), (1.466, 2.54), (-1.466, 2.54), (-2.933, 0.0), (-1.466, -2.54), (1.466, -2.54))
+    sim = world(
+        start=(-LIDAR_X, 0.0, 0.0),
+        walls=Walls(*zip(*hexagon, strict=True)),
+        lidar=replace(EXACT_LIDAR, range_max=3.5),
+    )
+    ranges = sim.scan().range_m
+    assert ranges[90] == pytest.approx(2.54, abs=1e-12)
+    assert ranges[270] == pytest.approx(2.54, abs=1e-12)
+    assert ranges[0] == pytest.approx(2.933, abs=1e-12)
+
+
 def test_driving_obliquely_into_a_wall_stops_at_the_wall():
     sim = world(arena=(4.0, 2.0), start=(0.0, 0.0, math.pi / 4))
     sim.command_wheels(6.0, 6.0)
@@ -235,7 +281,7 @@ def test_default_world_circles_are_collision_free_and_always_see_landmarks():
             for angle in np.linspace(0.0, 2.0 * math.pi, 90):
                 # a circle through the origin, centre (0, side * radius)
                 p = np.array([radius_m * math.sin(angle), side * radius_m * (1.0 - math.cos(angle))])
-                assert first_collision(p, circles, config.arena.half_extents_m, R_ROBOT) is None
+                assert first_collision(p, circles, config.wall_segments, R_ROBOT) is None
                 in_range = np.hypot(*(circles[:, :2] - p).T) <= config.noise.max_range
                 assert in_range.sum() >= 3
 
@@ -245,6 +291,9 @@ crowded = (
     (0.5, 0.0, 0.2, -0.6, -0.5, 0.9),
     (0.05, 0.01, 0.1, 0.038, 0.2, 0.05),
 )
+# a 3 m square whose top side is pushed in to a corner at (0, 1) (a reflex corner)
+NOTCHED = ((-1.5, -1.5), (1.5, -1.5), (1.5, 1.5), (0.0, 1.0), (-1.5, 1.5))
+NOTCHED_WALLS = Walls(*zip(*NOTCHED, strict=True))
 
 
 @settings(max_examples=40, deadline=None)
@@ -255,27 +304,32 @@ crowded = (
     seed=st.integers(0, 2**32),
 )
 def test_the_robot_never_overlaps_or_passes_through_anything(start, commands, dt_s, seed):
+    """Among crowded cylinders in an arena whose walls are a polygon with a corner pointing in (NOTCHED):
+    every pose is free and no straight move between poses crosses a cylinder or a wall."""
     circles = np.array(crowded).T
-    half = np.array([1.5, 1.5])
-    if first_collision(np.array(start[:2]), circles, half, R_ROBOT) is not None:
+    walls = polygon_walls(NOTCHED)
+    if first_collision(np.array(start[:2]), circles, walls, R_ROBOT) is not None:
         return
     sim = world(
         obstacles=crowded,
-        arena=(3.0, 3.0),
         start=start,
         noise=NoiseConfig(input_noise=0.5, slip_fraction=0.3, seed=seed),
+        walls=NOTCHED_WALLS,
     )
     p_previous = sim.T_world_body.translation
     for left, right in commands:
         sim.command_wheels(left, right)
         for T in run(sim, 15, dt_s):
             p = T.translation
-            assert first_collision(p, circles, half, R_ROBOT - 1e-9) is None
+            assert first_collision(p, circles, walls, R_ROBOT - 1e-9) is None
             # nor does the straight move cross an (inflated) cylinder: the closest chord point is clear
             d = p - p_previous
             s = np.clip(((circles[:, :2] - p_previous) @ d) / max(d @ d, 1e-300), 0.0, 1.0)
             closest = p_previous + s[:, None] * d
             assert np.all(np.hypot(*(closest - circles[:, :2]).T) >= R_ROBOT + circles[:, 2] - 1e-9)
+            # or a wall (the chord sampled every 1/50 of its length)
+            for f in np.linspace(0.0, 1.0, 51):
+                assert wall_distances(p_previous + f * d, walls).min() >= R_ROBOT - 1e-9
             p_previous = p
 
 
@@ -463,6 +517,19 @@ def test_teleport_refuses_poses_in_collision_and_reset_returns_to_the_start():
         (
             lambda: SimulationConfig(obstacles=Obstacles((2.48,), (0.0,), (0.038,))),
             "obstacle 0 at .* does not fit inside the 5.0 m x 5.0 m arena",
+        ),
+        (lambda: Walls((0.0, 1.0, 1.0), (0.0, 0.0)), "walls.x and walls.y must have the same length"),
+        (lambda: Walls((0.0, 1.0, 0.0, 1.0), (0.0, 1.0, 1.0, 0.0)), "edges 0 and 2 cross"),
+        (lambda: Walls((0.0, math.nan, 0.0), (0.0, 0.0, 1.0)), r"walls.x\[1\] must be a finite number"),
+        (
+            lambda: SimulationConfig(
+                walls=NOTCHED_WALLS, arena=ArenaConfig(y0=1.2), obstacles=Obstacles((), (), ())
+            ),
+            r"start .* is not inside the arena \(outside its walls\)",
+        ),
+        (
+            lambda: SimulationConfig(walls=NOTCHED_WALLS, obstacles=Obstacles((0.0,), (0.98,), (0.038,))),
+            "obstacle 0 at .* does not fit inside the arena's 5-corner polygon of walls",
         ),
     ],
 )

@@ -190,3 +190,25 @@ def test_evaluate_run_on_a_synthetic_run():
     singular = RunData(truth, odom, slam, np.zeros((t_slam.size, 3, 3)), mapped_xy, true_xy, 1.5, 0.15)
     with pytest.raises(ValueError, match="positive definite"):
         evaluate_run(singular, sim_seconds=60.0, wall_seconds=20.0)
+
+
+def test_a_landmark_hidden_behind_another_is_not_in_range():
+    """Three cylinders of radius 0.15 m in a row along x = 1.1 (as in turtlebot3_world), seen from a path
+    along that row: the two behind the first are hidden (the sight line to a centre passes 0 m from the
+    first's centre); from (0, 0) the line to (1.1, 1.1) passes (1.1, 0) at 0.778 m and (1.1, -1.1) is far
+    behind: all in sight; from (0.9, -2.2) the line to (1.1, 0) passes (1.1, -1.1) at 0.22 / sqrt(4.88) =
+    0.0996 m < 0.15 m, and the line to (1.1, 1.1) passes (1.1, 0) at 0.22 / sqrt(10.93) = 0.0665 m."""
+    true_xy = np.array([[1.1, -1.1], [1.1, 0.0], [1.1, 1.1]])
+    radii = np.full(3, 0.15)
+    row = np.array([[1.1, -2.2], [1.1, -2.5]])
+    assert landmarks_within_range(true_xy, row, 4.0).tolist() == [True, True, True]
+    assert landmarks_within_range(true_xy, row, 4.0, radii).tolist() == [True, False, False]
+    assert landmarks_within_range(true_xy, np.array([[0.0, 0.0]]), 4.0, radii).tolist() == [True] * 3
+    assert landmarks_within_range(true_xy, np.array([[0.9, -2.2]]), 4.0, radii).tolist() == [
+        True,
+        False,
+        False,
+    ]
+    # a thinner first cylinder (0.05 m) no longer hides the second from there
+    thin = np.array([0.05, 0.15, 0.15])
+    assert landmarks_within_range(true_xy, np.array([[0.9, -2.2]]), 4.0, thin).tolist() == [True, True, False]

@@ -6,6 +6,7 @@ from hypothesis import strategies as st
 
 from nuturtle_eval.metrics import PoseSeries
 from nuturtle_eval.plots import ellipse_points, plot_covariance, plot_errors, plot_trajectory
+from turtlelib import arena_walls
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -34,7 +35,9 @@ def test_figures_render(tmp_path):
     circles = np.array([[1.2, 0.3, 0.038], [-1.0, 0.8, 0.038]])
     mapped = circles[:, :2] + 0.01
     covariances = np.array([np.diag([1e-4, 4e-4]), [[2e-4, 1e-4], [1e-4, 2e-4]]])
-    plot_trajectory(tmp_path / "trajectory.png", truth, odom, slam, circles, mapped, covariances, (5.0, 5.0))
+    plot_trajectory(
+        tmp_path / "trajectory.png", truth, odom, slam, circles, mapped, covariances, arena_walls(5.0, 5.0)
+    )
     errors = slam.poses - truth.poses
     plot_errors(tmp_path / "errors.png", t, errors, np.full((t.size, 3), 0.02))
     A = np.random.default_rng(0).normal(size=(7, 7))

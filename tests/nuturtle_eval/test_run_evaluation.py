@@ -16,6 +16,7 @@ from nuturtle_eval.run_evaluation import (
     sensor_range_m,
     write_metrics,
 )
+from turtlelib import arena_walls
 
 CIRCLES = np.array([[1.2, 0.3, 0.038], [-1.0, 0.8, 0.05]])
 
@@ -40,7 +41,7 @@ def _record(truth=True, odom=True, slam_samples=50):
         snapshot=snapshot,
         circles=CIRCLES,
         sensor_range_m=1.0,
-        arena_xy_m=(5.0, 5.0),
+        walls=arena_walls(5.0, 5.0),
     )
 
 

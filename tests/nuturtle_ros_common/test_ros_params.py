@@ -65,6 +65,24 @@ def test_declare_dataclass_converts_every_field_type(ros):
     assert isinstance(config.gain, float) and all(isinstance(w, float) for w in config.weights)
 
 
+def test_an_empty_yaml_list_is_an_empty_tuple(tmp_path):
+    """rcl reads ``weights: []`` from a params file as a parameter without a type (value None)."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.node import Node
+
+    params = tmp_path / "params.yaml"
+    params.write_text("declare_empty:\n  ros__parameters:\n    weights: []\n")
+    context = Context()
+    rclpy.init(context=context, args=["--ros-args", "--params-file", str(params)])
+    try:
+        node = Node("declare_empty", context=context)
+        assert declare_dataclass(node, Example).weights == ()
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+
+
 @pytest.mark.parametrize(
     "parameter",
     [

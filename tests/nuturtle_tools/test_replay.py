@@ -205,18 +205,23 @@ def test_remapped_scan_without_ground_truth_gives_counts_but_no_accuracy(live, t
     assert "no topic /scan" in error and "--scan-topic" in error
 
 
-@pytest.mark.parametrize("kind", ["missing", "folder without metadata.yaml", "not a bag", "corrupt .mcap"])
+@pytest.mark.parametrize(
+    "kind", ["missing", "folder without metadata.yaml", "not a bag", "corrupt .mcap", "corrupt ROS 1 .bag"]
+)
 def test_an_unreadable_path_is_a_clear_error(tmp_path, capsys, kind):
     path = {
         "missing": tmp_path / "nowhere",
         "folder without metadata.yaml": tmp_path,
         "not a bag": tmp_path / "notes.txt",
         "corrupt .mcap": tmp_path / "broken.mcap",
+        "corrupt ROS 1 .bag": tmp_path / "broken.bag",
     }[kind]
     if kind == "not a bag":
         path.write_text("hello")
     if kind == "corrupt .mcap":
         path.write_bytes(b"\x89MCAP0\r\n" + b"\x00" * 64)
+    if kind == "corrupt ROS 1 .bag":
+        path.write_bytes(b"#ROSBAG V2.0\n" + b"\x00" * 64)
     with pytest.raises(BagError):
         BagSource(path).open()
     code = main([str(path), "--out", str(tmp_path / "out"), "--no-progress"])

@@ -14,7 +14,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from turtlelib import LidarConfig, Transform2D, arena_walls, cast_beams, simulate_scan
+from turtlelib import LidarConfig, Transform2D, arena_walls, cast_beams, polygon_walls, simulate_scan
 
 PI = math.pi
 NO_SEGMENTS = np.empty((0, 4))
@@ -343,3 +343,46 @@ def test_an_lds02_like_spin_varies_the_beam_count_from_scan_to_scan():
     counts = np.array([config.scan_layout(rng).samples for _ in range(2000)])
     assert counts.min() >= 374 and counts.max() <= 391
     assert len(np.unique(counts)) >= 14
+
+
+# --- arena_walls, polygon_walls ----------------------------------------------------------------------
+
+
+def test_arena_walls_are_the_four_inner_faces():
+    walls = arena_walls(4.0, 2.0)
+    np.testing.assert_array_equal(
+        walls,
+        [[-2.0, -1.0, 2.0, -1.0], [2.0, -1.0, 2.0, 1.0], [2.0, 1.0, -2.0, 1.0], [-2.0, 1.0, -2.0, -1.0]],
+    )
+
+
+@pytest.mark.parametrize(
+    ("x_length", "y_length"), [(0.0, 1.0), (1.0, -1.0), (math.nan, 1.0), (1.0, math.inf)]
+)
+def test_arena_walls_rejects_invalid_sizes(x_length, y_length):
+    with pytest.raises(ValueError):
+        arena_walls(x_length, y_length)
+
+
+def test_polygon_walls_close_the_polygon_and_a_beam_hits_a_slanted_wall():
+    # a triangle; its edges from each corner to the next, the last back to the first
+    walls = polygon_walls([[0.0, 0.0], [2.0, 0.0], [0.0, 2.0]])
+    np.testing.assert_array_equal(walls, [[0.0, 0.0, 2.0, 0.0], [2.0, 0.0, 0.0, 2.0], [0.0, 2.0, 0.0, 0.0]])
+    # from (0.5, 0.5) along +x the hypotenuse x + y = 2 is at x = 1.5; along 45 deg at (1, 1), sqrt(2) * 0.5
+    ranges, _ = cast_beams(Transform2D(0.5, 0.5, 0.0), [0.0, math.pi / 4], np.empty((0, 3)), walls)
+    np.testing.assert_allclose(ranges, [1.0, math.sqrt(2.0) * 0.5], atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "corners",
+    [
+        [[0.0, 0.0], [1.0, 0.0]],  # too few
+        [[0.0, 0.0], [1.0, 0.0], [1.0, 0.0], [0.0, 1.0]],  # a zero-length edge
+        [[0.0, 0.0], [1.0, 1.0], [1.0, 0.0], [0.0, 1.0]],  # a bow tie: edges 0 and 2 cross
+        [[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]],  # no area (edges 0 and 1 overlap edge 2)
+        [[0.0, 0.0], [1.0, 0.0], [math.nan, 1.0]],
+    ],
+)
+def test_polygon_walls_refuse_a_polygon_that_is_not_simple(corners):
+    with pytest.raises(ValueError):
+        polygon_walls(corners)

@@ -27,7 +27,7 @@ from .motion_models import (
 )
 from .motion_signals import HeldInputs, MotionSignal, OdometryPoses, WheelAngles
 from .sample_gate import GateResult, SampleGate, SampleGateConfig, Verdict
-from .scan_model import LidarConfig, arena_walls, cast_beams, simulate_scan
+from .scan_model import LidarConfig, arena_walls, cast_beams, polygon_walls, simulate_scan
 from .slam_map import LandmarkMap, load_map, save_map
 from .slam_timeline import SlamTimeline, TimelineConfig
 
@@ -41,6 +41,7 @@ __all__ = [
     "LidarConfig",
     "arena_walls",
     "cast_beams",
+    "polygon_walls",
     "beams_in_one_turn",
     "check_scan_layout",
     "cluster_scan",

@@ -235,18 +235,60 @@ def simulate_scan(
 def arena_walls(x_length: float, y_length: float) -> NDArray[np.float64]:
     """The inner faces of a rectangular arena centred at the world origin, shape (4, 4).
 
-    Rows ``[x0, y0, x1, y1]`` (m) run counter-clockwise: bottom (y = -y_length/2), right, top, left.
-    Both lengths must be finite and > 0 (ValueError).
+    Rows ``[x0, y0, x1, y1]`` (m) run counter-clockwise: bottom (y = -y_length/2), right, top, left
+    (:func:`polygon_walls` of the corners from ``(-x_length/2, -y_length/2)``). Both lengths must be
+    finite and > 0 (ValueError).
     """
     for name, value in (("x_length", x_length), ("y_length", y_length)):
         if not (math.isfinite(value) and value > 0.0):
             raise ValueError(f"arena {name} must be finite and > 0, got {value!r}")
     hx, hy = 0.5 * x_length, 0.5 * y_length
-    return np.array(
-        [
-            [-hx, -hy, hx, -hy],
-            [hx, -hy, hx, hy],
-            [hx, hy, -hx, hy],
-            [-hx, hy, -hx, -hy],
-        ]
+    return polygon_walls([[-hx, -hy], [hx, -hy], [hx, hy], [-hx, hy]])
+
+
+def polygon_walls(corners: ArrayLike) -> NDArray[np.float64]:
+    """The walls of a closed polygon, shape (N, 4): row ``k`` is ``[x_k, y_k, x_k+1, y_k+1]`` (m), from
+    corner ``k`` to the next (the last back to the first), for ``corners`` (N, 2) in order.
+
+    ValueError unless the polygon is simple: at least 3 finite corners, no edge of zero length, no two
+    edges that touch other than neighbours at their shared corner, and a non-zero area.
+    """
+    p = np.asarray(corners, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] != 2 or p.shape[0] < 3 or not np.all(np.isfinite(p)):
+        raise ValueError(f"a polygon needs at least 3 finite (x, y) corners, got {p.tolist()}")
+    walls = np.hstack([p, np.roll(p, -1, axis=0)])
+    if np.any(np.hypot(walls[:, 2] - walls[:, 0], walls[:, 3] - walls[:, 1]) == 0.0):
+        raise ValueError("a polygon's consecutive corners must differ")
+    n = p.shape[0]
+    for i in range(n):
+        for j in range(i + 1, n):
+            if j == i + 1 or (i == 0 and j == n - 1):
+                continue  # neighbours share a corner
+            if _segments_touch(walls[i], walls[j]):
+                raise ValueError(f"the polygon's edges {i} and {j} cross: it must be simple")
+    # shoelace: 2 A = sum x_k y_k+1 - x_k+1 y_k
+    if np.sum(walls[:, 0] * walls[:, 3] - walls[:, 2] * walls[:, 1]) == 0.0:
+        raise ValueError("the polygon has no area")
+    return walls
+
+
+def _segments_touch(a: NDArray[np.float64], b: NDArray[np.float64]) -> bool:
+    """Whether segments ``[x0, y0, x1, y1]`` ``a`` and ``b`` share a point (orientation tests)."""
+
+    def cross(o: NDArray[np.float64], p: NDArray[np.float64], q: NDArray[np.float64]) -> float:
+        return float((p[0] - o[0]) * (q[1] - o[1]) - (p[1] - o[1]) * (q[0] - o[0]))
+
+    def on(o: NDArray[np.float64], p: NDArray[np.float64], q: NDArray[np.float64]) -> bool:
+        # q, collinear with o -> p, lies within its bounding box
+        return bool(np.all(np.minimum(o, p) <= q) and np.all(q <= np.maximum(o, p)))
+
+    a0, a1, b0, b1 = a[:2], a[2:], b[:2], b[2:]
+    d1, d2, d3, d4 = cross(b0, b1, a0), cross(b0, b1, a1), cross(a0, a1, b0), cross(a0, a1, b1)
+    if ((d1 > 0) != (d2 > 0)) and ((d3 > 0) != (d4 > 0)) and 0 not in (d1, d2, d3, d4):
+        return True
+    return (
+        (d1 == 0 and on(b0, b1, a0))
+        or (d2 == 0 and on(b0, b1, a1))
+        or (d3 == 0 and on(a0, a1, b0))
+        or (d4 == 0 and on(a0, a1, b1))
     )
