@@ -98,8 +98,8 @@ class SlipRecoveryConfig:
     ``slip_margin_m`` (m, >= 0), ``slip_margin_rad`` (rad, >= 0): how far the search reaches beyond the
     motion reported since the last confirmed scan; ``slip_turn_per_m`` (rad/m, >= 0): the heading slip can
     invent per metre of reported travel (the robot's ``2 / track_width``; the Burger's by default);
-    ``slip_stall_tolerance`` (m, > 0): how far a detection
-    may move between scans of a robot standing still; ``slip_report_s`` (s, > 0): how long a correction
+    ``slip_stall_tolerance`` (m, > 0): how far a detection may move between scans of a robot standing
+    still; ``slip_report_s`` (s, > 0): how long a correction
     stays in the status. Invalid values raise ValueError."""
 
     slip_recovery: bool = True
