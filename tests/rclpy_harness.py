@@ -94,6 +94,14 @@ def record_rosout(helper: Node) -> list[Log]:
     return logs
 
 
+def rosout_matched(helper: Node) -> bool:
+    """True once ``helper``'s /rosout subscriptions (:func:`record_rosout`) have matched every /rosout
+    publisher of the graph: under load discovery can take longer than a test's wait for a warning."""
+    subscriptions = [s for s in helper.subscriptions if s.topic_name == "/rosout"]
+    publishers = helper.count_publishers("/rosout")
+    return bool(subscriptions) and all(s.get_publisher_count() >= publishers for s in subscriptions)
+
+
 def warnings_of(logs: list[Log], logger_name: str) -> list[str]:
     """The texts of the WARN messages of ``logger_name`` and its child loggers (``slam.fake_sensor``)."""
     return [

@@ -31,7 +31,7 @@ from nuslam.landmarks_node import LandmarksNode
 from nuslam.slam_node import SlamNode
 from nuturtle_description.robot_params import burger_params
 from nuturtle_ros_common.conversions import covariance_from_6x6, odometry_message, yaw_from_quaternion
-from rclpy_harness import matched, record_rosout, warnings_of
+from rclpy_harness import matched, record_rosout, rosout_matched, warnings_of
 from turtlelib import (
     DiffDriveMotion,
     EkfSlam,
@@ -148,7 +148,9 @@ class Rig:
             helper.create_subscription(MarkerArray, "slam/map", self.maps.append, 100),
             helper.create_subscription(Path, "slam/path", self.paths.append, 100),
         ]
-        assert ros.spin_until(lambda: matched(*endpoints) and node_inputs_matched(self.node), 10.0)
+        assert ros.spin_until(
+            lambda: matched(*endpoints) and node_inputs_matched(self.node) and rosout_matched(helper), 10.0
+        )
 
     def wheels(self, t_ns: int, positions, names=WHEELS) -> Odometry:
         """Publish joint_states and return the odom it causes."""
