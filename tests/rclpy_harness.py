@@ -11,9 +11,11 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import rclpy
+import yaml
 from rcl_interfaces.msg import Log
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
@@ -92,6 +94,31 @@ def record_rosout(helper: Node) -> list[Log]:
     )
     helper.create_subscription(Log, "/rosout", logs.append, qos)
     return logs
+
+
+def launch_ros_arguments(parameters: list, folder: Path) -> list[str]:
+    """``--ros-args --params-file ...`` as launch_ros builds it from a Node's ``parameters`` list: each YAML
+    file as it is, each dict written (into ``folder``) as a ``/**`` parameter file, in the list's order."""
+    arguments = ["--ros-args"]
+    for k, entry in enumerate(parameters):
+        if isinstance(entry, dict):
+            path = folder / f"launch_params_{k}.yaml"
+            path.write_text(yaml.safe_dump({"/**": {"ros__parameters": entry}}))
+            entry = str(path)
+        arguments += ["--params-file", str(entry)]
+    return arguments
+
+
+def rcl_parameters(context: Context, node_name: str, arguments: list[str]) -> dict[str, Any]:
+    """The parameter values rcl gives node ``node_name`` for command-line ``arguments`` (its own merge of
+    parameter files and ``-p`` values), read from a bare node that declares whatever it is given."""
+    node = Node(
+        node_name, context=context, cli_args=arguments, automatically_declare_parameters_from_overrides=True
+    )
+    try:
+        return {name: parameter.value for name, parameter in node.get_parameters_by_prefix("").items()}
+    finally:
+        node.destroy_node()
 
 
 def rosout_matched(helper: Node) -> bool:

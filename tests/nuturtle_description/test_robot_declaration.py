@@ -7,28 +7,16 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-import yaml
 
 from nuslam.launch_nodes import slam_parameters
 from nuslam.slam_node import SlamNode
 from nuturtle_control.launch_nodes import odometry_parameters, robot_state_publisher_parameters
 from nuturtle_control.odometry import OdometryNode
 from nuturtle_description.robot_params import MODEL_ENV
+from rclpy_harness import launch_ros_arguments
 from turtlelib import Transform2D
 
 ROOT = Path(__file__).resolve().parents[2]
-
-
-def launch_ros_arguments(parameters: list, tmp_path) -> list[str]:
-    """``--ros-args --params-file ...`` as launch_ros builds it from a Node's ``parameters`` list."""
-    arguments = ["--ros-args"]
-    for k, entry in enumerate(parameters):
-        if isinstance(entry, dict):
-            path = tmp_path / f"launch_params_{k}.yaml"
-            path.write_text(yaml.safe_dump({"/**": {"ros__parameters": entry}}))
-            entry = str(path)
-        arguments += ["--params-file", str(entry)]
-    return arguments
 
 
 def test_turtlebot3_model_gives_slam_the_waffle_s_track_and_lidar_mount(ros, monkeypatch):

@@ -1,6 +1,7 @@
 """What the launch files give their nodes, without `ros2 launch` (not installable here): the parameter
-lists come from plain functions, and `launch_parameters.resolve` applies a list as rcl does (later entries
-win), so a launch argument must beat the node's YAML file."""
+lists come from plain functions, turned into the command line launch_ros builds from them (each dict a
+``/**`` parameter file, in the list's order) and parsed by rcl itself into a real node's parameters, so a
+launch argument must beat the node's YAML file under rcl's own merge rule."""
 
 from __future__ import annotations
 
@@ -11,37 +12,44 @@ import pytest
 
 from nuslam.launch_nodes import SLAM_ARGUMENTS, landmarks_parameters, slam_parameters
 from nuturtle_control.launch_nodes import circle_parameters, odometry_parameters, turtle_control_parameters
-from nuturtle_ros_common.launch_parameters import resolve, with_arguments
+from nuturtle_ros_common.launch_parameters import with_arguments
 from nuturtle_ros_common.ros_files import share_file
+from rclpy_harness import launch_ros_arguments, rcl_parameters
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
+def resolved(ros, tmp_path, parameters: list, node_name: str) -> dict:
+    """What rcl gives ``node_name`` for the launch list ``parameters``."""
+    return rcl_parameters(ros.context, node_name, launch_ros_arguments(parameters, tmp_path))
+
+
 @pytest.mark.parametrize("association", ["known", "unknown"])
-def test_the_association_argument_reaches_slam_over_its_yaml(association):
-    values = resolve(slam_parameters(association, True, "waffle"), "slam")
+def test_the_association_argument_reaches_slam_over_its_yaml(ros, tmp_path, association):
+    values = resolved(ros, tmp_path, slam_parameters(association, True, "waffle"), "slam")
     assert values["association"] == association
     assert values["use_sim_time"] is True and values["model"] == "waffle"
     # the rest from slam.yaml; the robot's constants are the model's defaults, in no file
     assert values["wheel_noise"] == 0.05 and "wheel_radius" not in values
 
 
-def test_the_map_and_motion_arguments_reach_slam_over_its_yaml(tmp_path):
+def test_the_map_and_motion_arguments_reach_slam_over_its_yaml(ros, tmp_path):
     map_file = str(tmp_path / "lab.json")
     parameters = slam_parameters(
         "unknown", False, "burger", motion_source="odom", mode="localization", map_file=map_file
     )
-    values = resolve(parameters, "slam")
+    values = resolved(ros, tmp_path, parameters, "slam")
     assert (values["motion_source"], values["mode"], values["map_file"]) == ("odom", "localization", map_file)
-    defaults = resolve(slam_parameters("unknown", False, "burger"), "slam")
+    defaults = resolved(ros, tmp_path, slam_parameters("unknown", False, "burger"), "slam")
     assert [defaults[name] for name in SLAM_ARGUMENTS] == [default for default, _ in SLAM_ARGUMENTS.values()]
 
 
-def test_a_dict_before_the_yaml_loses_to_it():
+def test_a_dict_before_the_yaml_loses_to_it(ros, tmp_path):
     # what went wrong: slam.yaml (association: unknown) after the argument wins
     slam_yaml = share_file("nuslam", "config", "slam.yaml")
-    assert resolve([{"association": "known"}, slam_yaml], "slam")["association"] == "unknown"
-    assert resolve(with_arguments([slam_yaml], {"association": "known"}), "slam")["association"] == "known"
+    assert resolved(ros, tmp_path, [{"association": "known"}, slam_yaml], "slam")["association"] == "unknown"
+    arguments_last = with_arguments([slam_yaml], {"association": "known"})
+    assert resolved(ros, tmp_path, arguments_last, "slam")["association"] == "known"
 
 
 @pytest.mark.parametrize(
@@ -57,10 +65,10 @@ def test_a_dict_before_the_yaml_loses_to_it():
         (circle_parameters(True), "circle", {"use_sim_time": True, "radius": 0.5}),
     ],
 )
-def test_every_node_list_is_files_then_arguments(parameters, node, expected):
+def test_every_node_list_is_files_then_arguments(ros, tmp_path, parameters, node, expected):
     assert isinstance(parameters[-1], dict), "the launch arguments come last"
     assert all(Path(entry).is_file() for entry in parameters[:-1])
-    values = resolve(parameters, node)
+    values = resolved(ros, tmp_path, parameters, node)
     assert {name: values[name] for name in expected} == expected
 
 
