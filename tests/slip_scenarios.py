@@ -31,7 +31,7 @@ from turtlelib.motion_models import DiffDriveMotion
 from turtlelib.motion_signals import WheelAngles
 from turtlelib.range_bearing import observations_from_points
 from turtlelib.slam_map import LandmarkMap
-from turtlelib.slip_recovery import SlipRecovery, SlipRecoveryConfig
+from turtlelib.slip_recovery import SlipRecovery, SlipRecoveryConfig, lost_wheel_turn_per_m
 
 PHYSICS_DT_S = 0.01
 JOINT_EVERY = 5  # physics steps per joint_states (20 Hz)
@@ -80,8 +80,8 @@ class _Loop:
                 "map", 0, np.arange(len(circles)), circles[:, :2], 1e-6 * np.eye(2 * len(circles))
             )
             self.slam.load_map(true_map, self.sim.T_world_body)
-        # the heading a wheel that loses its grip invents per metre: this robot's
-        self.recovery = SlipRecovery(replace(recovery, slip_turn_per_m=2.0 / robot.track_width))
+        turn_per_m = lost_wheel_turn_per_m(robot.track_width)
+        self.recovery = SlipRecovery(replace(recovery, slip_turn_per_m=turn_per_m))
         self.timeline = SlamTimeline(self.slam, WheelAngles(), recovery=self.recovery)
         self.detector = LandmarkDetector(DetectorConfig())
         self.lidar = sim_config.lidar

@@ -52,7 +52,7 @@ how often one sensor is read does not change another's noise.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import partial
 
@@ -92,6 +92,20 @@ class ArenaConfig:
         return Transform2D(self.x0, self.y0, self.theta0)
 
 
+def _store_lists(
+    config: object, prefix: str, fields: Sequence[tuple[str, Callable[[str, object], float]]]
+) -> None:
+    """Each of ``config``'s list ``fields`` (name, check) as a tuple of checked floats; ValueError naming
+    the parameter ``<prefix><name>`` (and the entry) otherwise."""
+    for name, check in fields:
+        values = getattr(config, name)
+        if isinstance(values, (str, bytes)) or not isinstance(values, Sequence):
+            raise ValueError(f"{prefix}{name} must be a list of numbers, got {values!r}")
+        object.__setattr__(
+            config, name, tuple(check(f"{prefix}{name}[{k}]", v) for k, v in enumerate(values))
+        )
+
+
 @dataclass(frozen=True)
 class Walls:
     """The arena's walls as a polygon: corner ``k`` at ``(x[k], y[k])`` (m, finite), in order around it,
@@ -104,13 +118,7 @@ class Walls:
     y: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
-        for name in ("x", "y"):
-            values = getattr(self, name)
-            if isinstance(values, (str, bytes)) or not isinstance(values, Sequence):
-                raise ValueError(f"walls.{name} must be a list of numbers, got {values!r}")
-            object.__setattr__(
-                self, name, tuple(finite_real(f"walls.{name}[{k}]", v) for k, v in enumerate(values))
-            )
+        _store_lists(self, "walls.", (("x", finite_real), ("y", finite_real)))
         if len(self.x) != len(self.y):
             raise ValueError(
                 f"walls.x and walls.y must have the same length, got {len(self.x)} and {len(self.y)}"
@@ -143,13 +151,7 @@ class Obstacles:
     r: tuple[float, ...] = (DEFAULT_OBSTACLE_R_M,) * len(DEFAULT_OBSTACLES_X)
 
     def __post_init__(self) -> None:
-        for name, check in (("x", finite_real), ("y", finite_real), ("r", positive)):
-            values = getattr(self, name)
-            if isinstance(values, (str, bytes)) or not isinstance(values, Sequence):
-                raise ValueError(f"obstacles.{name} must be a list of numbers, got {values!r}")
-            object.__setattr__(
-                self, name, tuple(check(f"obstacles.{name}[{j}]", v) for j, v in enumerate(values))
-            )
+        _store_lists(self, "obstacles.", (("x", finite_real), ("y", finite_real), ("r", positive)))
         if not len(self.x) == len(self.y) == len(self.r):
             raise ValueError(
                 "obstacles.x, obstacles.y and obstacles.r must have the same length, got "

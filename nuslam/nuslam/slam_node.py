@@ -148,7 +148,7 @@ from turtlelib.pose_twist import PoseTwist
 from turtlelib.range_bearing import observations_from_points
 from turtlelib.sample_gate import GateResult, Verdict
 from turtlelib.slam_map import LandmarkMap, load_map, save_map
-from turtlelib.slip_recovery import SlipRecovery, SlipRecoveryConfig
+from turtlelib.slip_recovery import SlipRecovery, SlipRecoveryConfig, lost_wheel_turn_per_m
 from turtlelib.validation import finite_real, names, non_negative, one_of, positive, store
 from turtlelib.wheel_odometry import WheelOdometry
 
@@ -237,8 +237,7 @@ class SlamNode(Node):
         }
         self.config = declare_dataclass(self, SlamConfig, fixed=sensor_mount)
         timeline_config = declare_dataclass(self, TimelineConfig)
-        # the heading a wheel that loses its grip invents per metre: the robot's
-        lost_wheel = {"slip_turn_per_m": 2.0 / robot.track_width}
+        lost_wheel = {"slip_turn_per_m": lost_wheel_turn_per_m(robot.track_width)}
         self.recovery = SlipRecovery(declare_dataclass(self, SlipRecoveryConfig, fixed=lost_wheel))
         self.joints = declare_dataclass(self, WheelJoints)
         self.trail: PathTrail[PoseStamped] = PathTrail(declare_dataclass(self, PathTrailConfig))

@@ -13,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from turtlelib import DiffDrive, DiffDriveMotion, EkfSlam, ObservationStatus, SlamConfig, Transform2D
-from turtlelib.map_alignment import align_to_map, explained, rigid_fit
+from turtlelib.map_alignment import Search, align_to_map, explained, rigid_fit
 from turtlelib.range_bearing import observations_from_points
 from turtlelib.slip_recovery import SlipRecovery, SlipRecoveryConfig
 
@@ -27,12 +27,12 @@ def test_two_detections_give_the_pose_that_lays_them_on_two_landmarks():
     # body points (1, 0) and (1, 1) on map points (0, 1) and (-1, 1): a quarter turn about the origin
     p_body = np.array([[1.0, 0.0], [1.0, 1.0]])
     landmarks = np.array([[0.0, 1.0], [-1.0, 1.0], [3.0, 3.0]])
-    alignment = align_to_map(p_body, landmarks, Transform2D(0.0, 0.0, 1.4), 0.3, 0.5, 0.05, 1e-4)
+    alignment = align_to_map(p_body, landmarks, Search(Transform2D(0.0, 0.0, 1.4), 0.3, 0.5, 0.05, 1e-4))
     assert alignment is not None
     np.testing.assert_allclose(alignment.T_map_body.as_array(), [0.0, 0.0, math.pi / 2], atol=1e-12)
     np.testing.assert_array_equal(alignment.pairs, [[0, 0], [1, 1]])
     # the same pose outside the turn searched: no alignment
-    assert align_to_map(p_body, landmarks, Transform2D(0.0, 0.0, 0.5), 0.3, 0.5, 0.05, 1e-4) is None
+    assert align_to_map(p_body, landmarks, Search(Transform2D(0.0, 0.0, 0.5), 0.3, 0.5, 0.05, 1e-4)) is None
 
 
 @settings(max_examples=40, deadline=None)
@@ -57,7 +57,7 @@ def test_alignment_finds_the_true_pose_within_the_search(seed: int, turn: float,
     T_prior = Transform2D(
         T_true.x + shift * math.cos(direction), T_true.y + shift * math.sin(direction), T_true.theta + turn
     )
-    alignment = align_to_map(p_body, landmarks, T_prior, 0.4, 1.0, 0.1, 1e-4)
+    alignment = align_to_map(p_body, landmarks, Search(T_prior, 0.4, 1.0, 0.1, 1e-4))
     assert alignment is not None
     error = alignment.T_map_body.inverse() @ T_true
     assert math.hypot(error.x, error.y) < 0.03 and abs(error.theta) < 0.03

@@ -42,6 +42,25 @@ _MAX_DETECTIONS = 12
 _MAX_LANDMARKS = 40
 
 
+class Search(NamedTuple):
+    """Where and how an alignment is searched: within ``max_offset_m`` (m) and ``max_turn_rad`` (rad) of
+    ``T_prior``; a detection is explained within ``radius_m`` (m) of a landmark; ``variance_m2`` (m^2) is
+    the per-axis variance of one pair, for the fit's covariance."""
+
+    T_prior: Transform2D
+    max_offset_m: float
+    max_turn_rad: float
+    radius_m: float
+    variance_m2: float
+
+    def admits(self, T: Transform2D) -> bool:
+        """Whether ``T`` lies within the search."""
+        turn = abs(normalize_angle(T.theta - self.T_prior.theta))
+        return turn <= self.max_turn_rad and float(
+            np.linalg.norm(T.translation - self.T_prior.translation)
+        ) <= (self.max_offset_m)
+
+
 class Alignment(NamedTuple):
     """A rigid alignment of detections with the map: the pose ``T_map_body``, its covariance (3, 3) over
     ``[x, y, theta]``, and the pairs (n, 2) ``[detection index, landmark index]`` it explains."""
@@ -78,10 +97,10 @@ def explained(
     ``radius_m`` of a landmark (``landmarks`` (M, 2), map frame), each with its nearest one."""
     if len(p_body) == 0 or len(landmarks) == 0:
         return np.zeros((0, 2), dtype=np.int64)
-    R = _rotations(np.array([T_map_body.theta]))
-    nearest, d2 = _nearest(p_body, landmarks, R, T_map_body.translation[None, :])
-    inside = (d2[0] < radius_m * radius_m).nonzero()[0]
-    return np.stack((inside, nearest[0, inside]), axis=1).astype(np.int64)
+    distance = np.linalg.norm((T_map_body @ p_body)[:, None, :] - landmarks[None, :, :], axis=2)
+    nearest = distance.argmin(axis=1)
+    inside = (distance[np.arange(len(p_body)), nearest] < radius_m).nonzero()[0]
+    return np.stack((inside, nearest[inside]), axis=1).astype(np.int64)
 
 
 def rigid_fit(
@@ -93,35 +112,28 @@ def rigid_fit(
     a, b = p_body - c_body, p_map - c_map
     # theta = atan2(sum a x b, sum a . b)
     theta = math.atan2(float((a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]).sum()), float((a * b).sum()))
-    R = _rotations(np.array([theta]))[0]
-    t = c_map - R @ c_body
-    residual = p_map - (p_body @ R.T + t)
+    Rc = Transform2D(0.0, 0.0, theta) @ c_body
+    # t = c' - R c
+    T = Transform2D(float(c_map[0] - Rc[0]), float(c_map[1] - Rc[1]), theta)
+    residual = p_map - T @ p_body
     s2 = max(variance_m2, float((residual**2).sum(axis=1).mean()) / 2.0)
     n = len(p_body)
     var_theta = s2 / max(float((a**2).sum()), 1e-12)
-    # a = -J R c: the body origin's lever arm about the centroid
-    Rc = R @ c_body
+    # l = -J R c: the body origin's lever arm about the centroid
     lever = np.array([Rc[1], -Rc[0]])
     covariance = np.zeros((3, 3))
     covariance[:2, :2] = s2 / n * np.eye(2) + np.outer(lever, lever) * var_theta
     covariance[:2, 2] = covariance[2, :2] = lever * var_theta
     covariance[2, 2] = var_theta
-    return Transform2D(float(t[0]), float(t[1]), theta), covariance
+    return T, covariance
 
 
 def align_to_map(
-    p_body: NDArray[np.float64],
-    landmarks: NDArray[np.float64],
-    T_prior: Transform2D,
-    max_offset_m: float,
-    max_turn_rad: float,
-    radius_m: float,
-    variance_m2: float,
+    p_body: NDArray[np.float64], landmarks: NDArray[np.float64], search: Search
 ) -> Alignment | None:
-    """The pose laying the most detections ``p_body`` (K, 2, body frame) on ``landmarks`` (M, 2, map frame),
-    within ``max_offset_m`` and ``max_turn_rad`` of ``T_prior`` (module docstring); None without a
-    proposal explaining two detections. ``radius_m``: how near a landmark an explained detection falls;
-    ``variance_m2``: the per-axis variance of one pair, for the covariance."""
+    """The pose laying the most detections ``p_body`` (K, 2, body frame) on ``landmarks`` (M, 2, map frame)
+    within ``search`` (module docstring); None without a proposal explaining two detections."""
+    T_prior, max_offset_m, max_turn_rad, radius_m, variance_m2 = search
     min_pair_m = 2.0 * radius_m
     if len(p_body) < 2 or len(landmarks) < 2:
         return None
@@ -152,23 +164,19 @@ def align_to_map(
     within = (turn <= max_turn_rad) & (offset <= max_offset_m)
     if not within.any():
         return None
-    R, t, turn, offset = R[within], t[within], turn[within], offset[within]
+    R, t, theta, turn, offset = R[within], t[within], theta[within], turn[within], offset[within]
     _, d2 = _nearest(p, m, R, t)
     count = (d2 < radius_m * radius_m).sum(axis=1)
     # most detections explained; among those the proposal nearest the prior
     closeness = (offset / max(max_offset_m, 1e-9)) ** 2 + (turn / max(max_turn_rad, 1e-9)) ** 2
     best = int(np.lexsort((closeness, -count))[0])
-    T_best = Transform2D(
-        float(t[best, 0]), float(t[best, 1]), float(math.atan2(R[best, 1, 0], R[best, 0, 0]))
-    )
-    pairs = explained(T_best, p, m, radius_m)
-    if len(pairs) < 2:
-        return None
-    T_fit, covariance = rigid_fit(p[pairs[:, 0]], m[pairs[:, 1]], variance_m2)
-    pairs = explained(T_fit, p, m, radius_m)
-    if len(pairs) < 2:
-        return None
-    T_fit, covariance = rigid_fit(p[pairs[:, 0]], m[pairs[:, 1]], variance_m2)
+    T_fit = Transform2D(float(t[best, 0]), float(t[best, 1]), float(theta[best]))
+    # refine twice: the pairs the pose explains, their fit, the pairs the fit explains, their fit
+    for _ in range(2):
+        pairs = explained(T_fit, p, m, radius_m)
+        if len(pairs) < 2:
+            return None
+        T_fit, covariance = rigid_fit(p[pairs[:, 0]], m[pairs[:, 1]], variance_m2)
     return Alignment(
         T_fit, covariance, np.stack((nearest_detections[pairs[:, 0]], near[pairs[:, 1]]), axis=1)
     )
@@ -179,28 +187,22 @@ def align_known(
     landmark_ids: NDArray[np.int64],
     p_body: NDArray[np.float64],
     landmarks: NDArray[np.float64],
-    T_prior: Transform2D,
-    max_offset_m: float,
-    max_turn_rad: float,
-    radius_m: float,
-    variance_m2: float,
+    search: Search,
 ) -> tuple[int, Alignment | None]:
-    """Known association: the detections the prior explains (each within ``radius_m`` of its own landmark
-    ``ids`` (K,) among ``landmark_ids`` (M,)), and the rigid fit of all mapped pairs if within the search and
-    explaining two of them (:func:`align_to_map` for its arguments)."""
+    """Known association: how many detections ``search.T_prior`` explains (each within ``radius_m`` of its
+    own landmark: ``ids`` (K,) among ``landmark_ids`` (M,)), and the rigid fit of all mapped pairs if it
+    lies within the search and explains two of them."""
     column = {int(landmark_id): j for j, landmark_id in enumerate(landmark_ids)}
     pairs = np.array([(k, column[int(i)]) for k, i in enumerate(ids) if int(i) in column], dtype=np.int64)
     if len(pairs) < 2:
         return 0, None
 
     def inside(T: Transform2D) -> NDArray[np.bool_]:
-        return np.linalg.norm(T @ p_body[pairs[:, 0]] - landmarks[pairs[:, 1]], axis=1) < radius_m
+        return np.linalg.norm(T @ p_body[pairs[:, 0]] - landmarks[pairs[:, 1]], axis=1) < search.radius_m
 
-    n_prior = int(inside(T_prior).sum())
-    T_fit, covariance = rigid_fit(p_body[pairs[:, 0]], landmarks[pairs[:, 1]], variance_m2)
-    turn = abs(normalize_angle(T_fit.theta - T_prior.theta))
-    offset = float(np.linalg.norm(T_fit.translation - T_prior.translation))
+    n_prior = int(inside(search.T_prior).sum())
+    T_fit, covariance = rigid_fit(p_body[pairs[:, 0]], landmarks[pairs[:, 1]], search.variance_m2)
     fitted = pairs[inside(T_fit)]
-    if turn > max_turn_rad or offset > max_offset_m or len(fitted) < 2:
+    if not search.admits(T_fit) or len(fitted) < 2:
         return n_prior, None
     return n_prior, Alignment(T_fit, covariance, fitted)

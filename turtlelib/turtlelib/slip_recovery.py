@@ -70,7 +70,7 @@ from scipy.stats import chi2
 from .data_association import REJECTED
 from .ekf_slam import Association, CheckedObservations, EkfSlam
 from .geometry import Transform2D, normalize_angle
-from .map_alignment import Alignment, align_known, align_to_map, explained
+from .map_alignment import Alignment, Search, align_known, align_to_map, explained
 from .timebase import NS_PER_S
 from .validation import integer, non_negative, positive, store
 
@@ -89,6 +89,13 @@ EVENT_GAP_S = 0.5
 REPEATS_FOR_ERROR = 3
 
 
+def lost_wheel_turn_per_m(track_width_m: float) -> float:
+    """The heading (rad) a differential drive's wheels invent per metre of reported travel when one wheel
+    spins in place: ``2 / track_width`` (its own travel turns the robot by ``travel / track_width``, and the
+    reported travel is half the two wheels' sum)."""
+    return 2.0 / track_width_m
+
+
 @dataclass(frozen=True)
 class SlipRecoveryConfig:
     """``slip_recovery`` (bool): detect and recover (else the filter runs as it is);
@@ -97,7 +104,7 @@ class SlipRecoveryConfig:
     ``slip_confirm_scans`` (int >= 1): scans in a row that must contradict the motion the same way;
     ``slip_margin_m`` (m, >= 0), ``slip_margin_rad`` (rad, >= 0): how far the search reaches beyond the
     motion reported since the last confirmed scan; ``slip_turn_per_m`` (rad/m, >= 0): the heading slip can
-    invent per metre of reported travel (the robot's ``2 / track_width``; the Burger's by default);
+    invent per metre of reported travel (:func:`lost_wheel_turn_per_m` of the robot; the Burger's by default);
     ``slip_stall_tolerance`` (m, > 0): how far a detection may move between scans of a robot standing
     still; ``slip_report_s`` (s, > 0): how long a correction
     stays in the status. Invalid values raise ValueError."""
@@ -108,7 +115,7 @@ class SlipRecoveryConfig:
     slip_confirm_scans: int = 2
     slip_margin_m: float = 0.15
     slip_margin_rad: float = 0.15
-    slip_turn_per_m: float = 2.0 / 0.16
+    slip_turn_per_m: float = lost_wheel_turn_per_m(0.16)
     slip_stall_tolerance: float = 0.03
     slip_report_s: float = 5.0
 
@@ -356,11 +363,11 @@ class SlipRecovery:
         max_offset = travel * (1.0 + max_turn) + config.slip_margin_m
         landmark_var = float(np.trace(slam.landmark_covariances, axis1=1, axis2=2).mean()) / 2.0
         variance = float(np.trace(position_cov, axis1=1, axis2=2).mean()) / 2.0 + landmark_var
-        search = (p_body, landmarks, T_hat, max_offset, max_turn, radius, variance)
+        search = Search(T_hat, max_offset, max_turn, radius, variance)
         if ids is None:
-            alignment = align_to_map(*search)
+            alignment = align_to_map(p_body, landmarks, search)
         else:
-            n_hat, alignment = align_known(ids[usable], slam.landmark_ids, *search)
+            n_hat, alignment = align_known(ids[usable], slam.landmark_ids, p_body, landmarks, search)
         if alignment is None:
             return _Evidence.NOTHING
         if len(alignment.pairs) < max(config.slip_min_matches, n_hat + 2):
