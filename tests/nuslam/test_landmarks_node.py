@@ -3,7 +3,7 @@
 Scans are LDS-01 scans (360 beams of 1 deg, 0.12-3.5 m, frame base_scan) ray cast by
 `turtlelib.simulate_scan` with 1 cm noise and 1 cm resolution (seeded), of two cylinders at known places
 inside a square arena, everything given in the sensor frame; and Gazebo's scans as recorded by a third
-party (data/tb3_gazebo_burger_2s, the first 2 s of the shared recording: data/README.md), decoded by
+party (the first 2 s of tests/data/tb3_gazebo_burger: tests/data/README.md), decoded by
 rclpy from the recorded bytes, against the world's cylinders seen from the recording's true /odom.
 """
 
@@ -40,10 +40,11 @@ GREEN = (0.1, 0.8, 0.2, 1.0)
 CENTRE_TOL_M = 0.015
 RADIUS_TOL_M = 0.01
 T0_NS = 1_700_000_000_123_456_789  # an epoch-sized stamp with every nanosecond digit used
-# The first 2 s of a TurtleBot3 Burger in Gazebo's turtlebot3_world (data/README.md): nine cylinders of
+# The first 2 s of a TurtleBot3 Burger in Gazebo's turtlebot3_world (tests/data/README.md): nine cylinders of
 # radius 0.15 m at x, y in {-1.1, 0, 1.1} (world frame, m); /odom is the true pose of base_footprint, and
 # base_scan sits 0.032 m behind it
-GAZEBO_EXCERPT = Path(__file__).parent / "data" / "tb3_gazebo_burger_2s"
+GAZEBO_RECORDING = Path(__file__).resolve().parents[1] / "data" / "tb3_gazebo_burger"
+EXCERPT_NS = 2_000_000_000
 TB3_WORLD_CYLINDERS = np.array([(x, y) for x in (-1.1, 0.0, 1.1) for y in (-1.1, 0.0, 1.1)])
 TB3_WORLD_RADIUS_M = 0.15
 T_FOOTPRINT_SCAN = Transform2D(-0.032, 0.0, 0.0)
@@ -144,8 +145,11 @@ def gazebo_recording() -> tuple[list[LaserScan], list[tuple[int, Transform2D]]]:
     """The excerpt's scans (rclpy messages of the recorded bytes) and true poses ``(stamp_ns,
     T_world_footprint)`` from /odom."""
     scans, poses = [], []
-    with Reader(GAZEBO_EXCERPT) as reader:
-        for connection, _, data in reader.messages():
+    with Reader(GAZEBO_RECORDING) as reader:
+        end_ns = reader.start_time + EXCERPT_NS
+        for connection, log_ns, data in reader.messages():
+            if log_ns >= end_ns:
+                break
             if connection.topic == "/scan":
                 scans.append(deserialize_message(data, LaserScan))
             elif connection.topic == "/odom":

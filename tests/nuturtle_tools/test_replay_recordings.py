@@ -1,7 +1,7 @@
 """The bag replay on a real third-party recording: a TurtleBot3 Burger in ROBOTIS' Gazebo `turtlebot3_world`
-(data/tb3_gazebo_burger, data/README.md), replayed into the real landmarks and slam nodes, as a rosbag2 bag
-and as a ROS 1 bag written from it by rosbags' own converter (rosbag1 writer) and read by rosbags' rosbag1
-reader.
+(tests/data/tb3_gazebo_burger, tests/data/README.md), replayed into the real landmarks and slam nodes, as a
+rosbag2 bag and as a ROS 1 bag written from it by rosbags' own converter (rosbag1 writer) and read by
+rosbags' rosbag1 reader.
 
 What a TurtleBot3 user does with such a recording: the Burger's defaults, wheel motion from /joint_states
 and Gazebo's /odom (the model's true pose) as the truth, or the odometry as the motion, on bags with both
@@ -25,7 +25,7 @@ from nuturtle_tools.replay import main, no_landmarks_hint
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 ROOT = Path(__file__).resolve().parents[2]
-RECORDING = Path(__file__).resolve().parent / "data" / "tb3_gazebo_burger"
+RECORDING = Path(__file__).resolve().parents[1] / "data" / "tb3_gazebo_burger"
 WORLD = ROOT / "nusim" / "config" / "turtlebot3_world.yaml"
 SCANS = 138
 ODOMS = 810
