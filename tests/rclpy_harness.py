@@ -121,6 +121,22 @@ def rcl_parameters(context: Context, node_name: str, arguments: list[str]) -> di
         node.destroy_node()
 
 
+def served_parameters(harness: RosHarness, node: Node, names: list[str]) -> dict[str, Any]:
+    """The values of ``names`` as ``node`` serves them on its ``~/get_parameters`` service, asked by a
+    parameter client in ``harness`` (what ``ros2 param get`` does)."""
+    from rclpy.parameter import parameter_value_to_python
+    from rclpy.parameter_client import AsyncParameterClient
+
+    client = AsyncParameterClient(
+        harness.node(f"parameter_reader_{len(harness.nodes)}"), node.get_fully_qualified_name()
+    )
+    assert harness.spin_until(client.services_are_ready), "the parameter services did not appear"
+    future = client.get_parameters(names)
+    assert harness.spin_until(future.done), "get_parameters did not answer"
+    values = future.result().values
+    return {name: parameter_value_to_python(value) for name, value in zip(names, values, strict=True)}
+
+
 def rosout_matched(helper: Node) -> bool:
     """True once ``helper``'s /rosout subscriptions (:func:`record_rosout`) have matched every /rosout
     publisher of the graph: under load discovery can take longer than a test's wait for a warning."""

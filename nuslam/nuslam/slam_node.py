@@ -474,6 +474,8 @@ class SlamNode(Node):
         """The map in ``map_file``, if set and there; ValueError for a file that is not a map in ``map_id``
         or one that is missing in localization."""
         path = self.node_config.map_file
+        if not path and self.config.mode == "localization":
+            raise ValueError("mode localization needs map_file: a map saved by ~/save_map")
         if not path or (not os.path.exists(path) and self.config.mode == "mapping"):
             return None
         landmark_map = load_map(path)

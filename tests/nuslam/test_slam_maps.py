@@ -223,10 +223,12 @@ def test_a_bad_map_file_stops_the_node_at_start_up_with_a_clear_message(ros, tmp
     assert str(path) in str(error.value)
 
 
-def test_localization_without_a_map_file_stops_the_node(ros, tmp_path):
+@pytest.mark.parametrize(("map_file", "message"), [("missing.json", "missing.json"), ("", "needs map_file")])
+def test_localization_without_a_map_file_stops_the_node(ros, tmp_path, map_file, message):
+    # an empty map_file ran localization in an empty map: dead reckoning, silently
     from rclpy.parameter import Parameter
 
-    missing = tmp_path / "missing.json"
-    overrides = [Parameter("map_file", value=str(missing)), Parameter("mode", value="localization")]
-    with pytest.raises(ValueError, match="missing.json"):
+    path = str(tmp_path / map_file) if map_file else ""
+    overrides = [Parameter("map_file", value=path), Parameter("mode", value="localization")]
+    with pytest.raises(ValueError, match=message):
         SlamNode(context=ros.context, parameter_overrides=overrides)

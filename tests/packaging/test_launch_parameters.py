@@ -1,7 +1,8 @@
 """What the launch files give their nodes, without `ros2 launch` (not installable here): the parameter
 lists come from plain functions, turned into the command line launch_ros builds from them (each dict a
-``/**`` parameter file, in the list's order) and parsed by rcl itself into a real node's parameters, so a
-launch argument must beat the node's YAML file under rcl's own merge rule."""
+``/**`` parameter file, in the list's order); the real node is started with it, rcl parses it, and the
+values are read back through the node's parameter services, so a launch argument must beat the node's
+YAML file under rcl's own merge rule."""
 
 from __future__ import annotations
 
@@ -14,42 +15,76 @@ from nuslam.launch_nodes import SLAM_ARGUMENTS, landmarks_parameters, slam_param
 from nuturtle_control.launch_nodes import circle_parameters, odometry_parameters, turtle_control_parameters
 from nuturtle_ros_common.launch_parameters import with_arguments
 from nuturtle_ros_common.ros_files import share_file
-from rclpy_harness import launch_ros_arguments, rcl_parameters
+from rclpy_harness import launch_ros_arguments, rcl_parameters, served_parameters
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def resolved(ros, tmp_path, parameters: list, node_name: str) -> dict:
-    """What rcl gives ``node_name`` for the launch list ``parameters``."""
-    return rcl_parameters(ros.context, node_name, launch_ros_arguments(parameters, tmp_path))
+def node_class(node_name: str) -> type:
+    from nuslam.landmarks_node import LandmarksNode
+    from nuslam.slam_node import SlamNode
+    from nuturtle_control.circle import CircleNode
+    from nuturtle_control.odometry import OdometryNode
+    from nuturtle_control.turtle_control import TurtleControlNode
+
+    return {
+        "slam": SlamNode,
+        "landmarks": LandmarksNode,
+        "turtle_control": TurtleControlNode,
+        "odometry": OdometryNode,
+        "circle": CircleNode,
+    }[node_name]
+
+
+def resolved(ros, tmp_path, parameters: list, node_name: str, names: list[str]) -> dict:
+    """``names`` as the real node ``node_name``, started with the command line launch_ros builds from
+    ``parameters``, serves them."""
+    node = ros.add(
+        node_class(node_name)(context=ros.context, cli_args=launch_ros_arguments(parameters, tmp_path))
+    )
+    try:
+        return served_parameters(ros, node, names)
+    finally:
+        ros.remove(node)
 
 
 @pytest.mark.parametrize("association", ["known", "unknown"])
 def test_the_association_argument_reaches_slam_over_its_yaml(ros, tmp_path, association):
-    values = resolved(ros, tmp_path, slam_parameters(association, True, "waffle"), "slam")
+    names = ["association", "use_sim_time", "model", "wheel_noise", "track_width"]
+    values = resolved(ros, tmp_path, slam_parameters(association, True, "waffle"), "slam", names)
     assert values["association"] == association
     assert values["use_sim_time"] is True and values["model"] == "waffle"
     # the rest from slam.yaml; the robot's constants are the model's defaults, in no file
-    assert values["wheel_noise"] == 0.05 and "wheel_radius" not in values
+    assert values["wheel_noise"] == 0.05 and values["track_width"] == pytest.approx(0.287)
 
 
 def test_the_map_and_motion_arguments_reach_slam_over_its_yaml(ros, tmp_path):
+    import numpy as np
+
+    from turtlelib.slam_map import LandmarkMap, save_map
+
     map_file = str(tmp_path / "lab.json")
+    save_map(map_file, LandmarkMap("map", 0, np.array([3]), np.array([[1.0, 2.0]]), 1e-4 * np.eye(2)))
     parameters = slam_parameters(
         "unknown", False, "burger", motion_source="odom", mode="localization", map_file=map_file
     )
-    values = resolved(ros, tmp_path, parameters, "slam")
-    assert (values["motion_source"], values["mode"], values["map_file"]) == ("odom", "localization", map_file)
-    defaults = resolved(ros, tmp_path, slam_parameters("unknown", False, "burger"), "slam")
-    assert [defaults[name] for name in SLAM_ARGUMENTS] == [default for default, _ in SLAM_ARGUMENTS.values()]
+    names = list(SLAM_ARGUMENTS)
+    values = resolved(ros, tmp_path, parameters, "slam", names)
+    assert values == {"motion_source": "odom", "mode": "localization", "map_file": map_file}
+    defaults = resolved(ros, tmp_path, slam_parameters("unknown", False, "burger"), "slam", names)
+    assert list(defaults.values()) == [default for default, _ in SLAM_ARGUMENTS.values()]
 
 
 def test_a_dict_before_the_yaml_loses_to_it(ros, tmp_path):
     # what went wrong: slam.yaml (association: unknown) after the argument wins
+    # rcl's own rule, shown on a bare node that takes whatever rcl gives it
     slam_yaml = share_file("nuslam", "config", "slam.yaml")
-    assert resolved(ros, tmp_path, [{"association": "known"}, slam_yaml], "slam")["association"] == "unknown"
-    arguments_last = with_arguments([slam_yaml], {"association": "known"})
-    assert resolved(ros, tmp_path, arguments_last, "slam")["association"] == "known"
+
+    def association(parameters: list) -> str:
+        return rcl_parameters(ros.context, "slam", launch_ros_arguments(parameters, tmp_path))["association"]
+
+    assert association([{"association": "known"}, slam_yaml]) == "unknown"
+    assert association(with_arguments([slam_yaml], {"association": "known"})) == "known"
 
 
 @pytest.mark.parametrize(
@@ -68,8 +103,7 @@ def test_a_dict_before_the_yaml_loses_to_it(ros, tmp_path):
 def test_every_node_list_is_files_then_arguments(ros, tmp_path, parameters, node, expected):
     assert isinstance(parameters[-1], dict), "the launch arguments come last"
     assert all(Path(entry).is_file() for entry in parameters[:-1])
-    values = resolved(ros, tmp_path, parameters, node)
-    assert {name: values[name] for name in expected} == expected
+    assert resolved(ros, tmp_path, parameters, node, list(expected)) == expected
 
 
 @pytest.mark.parametrize(
