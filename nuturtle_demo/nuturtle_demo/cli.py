@@ -15,6 +15,7 @@ from pathlib import Path
 
 from nuturtle_description.robot_params import add_model_argument
 from nuturtle_eval.run_evaluation import results_table
+from nuturtle_ros_common.dds_domain import add_domain_argument
 from nuturtle_tools.relay_config import add_foxglove_argument, parse_endpoint
 
 from .run import (
@@ -53,6 +54,7 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
                         "when not --realtime")  # fmt: skip
     parser.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     add_foxglove_argument(parser, "--realtime")
+    add_domain_argument(parser)
     maps = parser.add_argument_group("maps and localization (docs/maps.md)")
     maps.add_argument("--motion-source", choices=MOTION_SOURCES, default="joint_states",
                       help="slam's motion input: the wheel angles or the odometry node's odom (the same "
@@ -120,6 +122,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             initial_pose_std=tuple(args.initial_pose_std),
             route_radius=args.route_radius,
             foxglove=foxglove,
+            domain_id=args.domain_id,
         )
     except ValueError as error:
         print(f"error: {error}", file=sys.stderr)

@@ -62,6 +62,7 @@ from nuturtle_eval.run_evaluation import (
     write_metrics,
 )
 from nuturtle_ros_common.conversions import planar_covariance_6x6, pose_from_transform
+from nuturtle_ros_common.dds_domain import PRIVATE, DomainChoice, domain_choice, run_context
 from nuturtle_ros_common.node_main import spin_once_guarded
 from nuturtle_ros_common.ros_files import load_ros_parameters, share_file
 from nuturtle_tools.foxglove_relay import FoxgloveRelay, StaticTransform, slam_view_transforms
@@ -115,7 +116,9 @@ class DemoOptions:
     ``route_radius`` (m, > 0) replaces the driver's figure-eight loop radius.
 
     ``foxglove`` (host, port) serves every topic live on a Foxglove WebSocket there (docs/live.md; with
-    ``realtime`` it plays at robot speed). ValueError for invalid values."""
+    ``realtime`` it plays at robot speed). ``domain_id`` the run's DDS world: ``"private"`` (no other ROS
+    program hears it), ``"env"`` (the shell's ROS_DOMAIN_ID) or a domain id 0-232
+    (:mod:`nuturtle_ros_common.dds_domain`). ValueError for invalid values."""
 
     association: str = "unknown"
     model: str | None = None
@@ -134,9 +137,11 @@ class DemoOptions:
     initial_pose_std: tuple[float, float, float] = (0.05, 0.05, 0.05)
     route_radius: float | None = None
     foxglove: tuple[str, int] | None = None
+    domain_id: DomainChoice = PRIVATE
 
     def __post_init__(self) -> None:
         one_of("association", self.association, ASSOCIATIONS)
+        store(self, ("domain_id",), domain_choice)
         object.__setattr__(self, "model", resolve_model(self.model))
         if self.foxglove is not None:
             host, port = self.foxglove
@@ -364,8 +369,7 @@ def run_demo(options: DemoOptions, on_progress: ProgressCallback | None = None) 
     out_dir = Path(options.out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     writer = BagWriter(out_dir / BAG_NAME, overwrite=True)
-    context = Context()
-    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    context = run_context(options.domain_id, signal_handler_options=SignalHandlerOptions.NO)
     executor = SingleThreadedExecutor(context=context)
     system: DemoSystem | None = None
     interrupted = False

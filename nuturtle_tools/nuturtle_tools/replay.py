@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from nuturtle_description.robot_params import add_model_argument
+from nuturtle_ros_common.dds_domain import add_domain_argument
 
 from .relay_config import add_foxglove_argument, parse_endpoint
 
@@ -73,6 +74,7 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
                         "topic before playing")  # fmt: skip
     parser.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     add_foxglove_argument(parser, "--rate 1")
+    add_domain_argument(parser, "private; env with --play-only, for your own nodes")
     return parser.parse_args(argv)
 
 
@@ -178,6 +180,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             wait_for_subscribers_s=args.wait_for_subscribers,
             progress=not args.no_progress,
             foxglove=foxglove,
+            domain_id=getattr(args, "domain_id", None),
         )
         result = run_replay(options)
     except (BagError, ValueError, OSError) as error:

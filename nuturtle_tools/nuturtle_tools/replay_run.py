@@ -65,10 +65,12 @@ from nuturtle_eval.run_evaluation import (
     write_metrics,
 )
 from nuturtle_ros_common.conversions import stamp_nanoseconds, transform_from_pose
+from nuturtle_ros_common.dds_domain import ENVIRONMENT, PRIVATE, DomainChoice, domain_choice, run_context
 from nuturtle_ros_common.ros_files import flatten
 from turtlelib import Transform2D
 from turtlelib.slam_map import save_map
 from turtlelib.timebase import NS_PER_S
+from turtlelib.validation import store
 
 from .bag_source import BagError, BagSource, BagTopic
 from .foxglove_relay import FoxgloveRelay, slam_view_transforms
@@ -120,7 +122,10 @@ class ReplayOptions:
     (None: 0, or 1.0 with ``play_only``); ``play_only`` runs only the player, which first waits up to
     ``wait_for_subscribers_s`` (wall) for a subscriber on every played topic; ``progress`` a bar on
     stderr; ``foxglove`` (host, port) serves every topic live on a Foxglove WebSocket there (docs/live.md;
-    with ``rate`` 1 it plays at robot speed)."""
+    with ``rate`` 1 it plays at robot speed); ``domain_id`` the run's DDS world: ``"private"`` (no other
+    ROS program hears it), ``"env"`` (the shell's ROS_DOMAIN_ID) or a domain id 0-232
+    (:mod:`nuturtle_ros_common.dds_domain`; None: private, or env with ``play_only``, whose listeners are
+    the user's nodes)."""
 
     bag: Path
     out_dir: Path = Path("out/replay")
@@ -142,8 +147,11 @@ class ReplayOptions:
     wait_for_subscribers_s: float = 5.0
     progress: bool = True
     foxglove: tuple[str, int] | None = None
+    domain_id: DomainChoice | None = None
 
     def __post_init__(self) -> None:
+        if self.domain_id is not None:
+            store(self, ("domain_id",), domain_choice)
         if self.foxglove is not None:
             host, port = self.foxglove
             endpoint = RelayConfig(host=host, port=port)
@@ -168,6 +176,13 @@ class ReplayOptions:
         if self.rate is not None:
             return float(self.rate)
         return 1.0 if self.play_only else 0.0
+
+    @property
+    def domain(self) -> DomainChoice:
+        """The DDS world in use (``domain_id``, else private, or env with ``play_only``)."""
+        if self.domain_id is not None:
+            return self.domain_id
+        return ENVIRONMENT if self.play_only else PRIVATE
 
     def bag_topic(self, role: str) -> str:
         return absolute(self.topics.get(role, ""))
@@ -379,8 +394,7 @@ class Replay:
     def run(self) -> ReplayResult:
         out_dir = Path(self.options.out_dir)
         out_dir.mkdir(parents=True, exist_ok=True)
-        context = Context()
-        rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+        context = run_context(self.options.domain, signal_handler_options=SignalHandlerOptions.NO)
         executor = SingleThreadedExecutor(context=context)
         nodes: list[Any] = []
         writer = None
