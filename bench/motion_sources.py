@@ -2,9 +2,9 @@
 (the odometry node's poses, `motion_source: odom`, twist noise matched to the same wheel slip).
 
 Each seed runs the demo twice, once per motion source (default world and route, two minutes of robot time
-unless --duration says otherwise), one after the other in this process, in a private DDS domain on
-loopback; outputs stay in --out/<source>-seed<S>/. Prints one markdown row per seed and the means, with the
-ratio odom / joint_states of the SLAM accuracy figures (the issue's target: within 20 %).
+unless --duration says otherwise), one after the other in this process, each in its own DDS world
+(docs/demo.md); outputs stay in --out/<source>-seed<S>/. Prints one markdown row per seed and the means,
+with the ratio odom / joint_states of the SLAM accuracy figures (the issue's target: within 20 %).
 
 Usage: python bench/motion_sources.py [--seeds 5] [--association unknown] [--duration 120] [--out DIR]
 """
@@ -14,9 +14,6 @@ from __future__ import annotations
 import os
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy loads OpenBLAS
-# a private domain on loopback: no other ROS process on this machine may publish its own /clock into the run
-os.environ.setdefault("ROS_DOMAIN_ID", str(os.getpid() % 100 + 1))
-os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
 import argparse
 from pathlib import Path

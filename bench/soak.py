@@ -30,8 +30,8 @@ Outputs in --out: ``soak.json`` (every sample, the summary, the targets and the 
 ``soak.png`` (RSS, smallest eigenvalue of P, landmarks, SLAM error over robot time) and the demo's own
 outputs (metrics.json, the figures, the bag run/, config.yaml).
 
-The run uses a private DDS domain on loopback (ROS_DOMAIN_ID = pid % 100 + 1 unless set), so no other ROS
-process on the machine joins it.
+The run lives in its own DDS world (the demo's default ``--domain-id private``: a free domain with discovery
+off, docs/demo.md), so no other ROS process on the machine or the network joins it.
 
 Usage: python -P bench/soak.py [--duration 3600] [--out out/soak] [--association unknown|known] [--seed 0]
        [--sample-period 10] [--no-progress]
@@ -42,11 +42,6 @@ from __future__ import annotations
 import os
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy loads OpenBLAS
-# A private DDS domain on loopback unless ROS_DOMAIN_ID says otherwise (before rclpy starts): another ROS
-# process on this machine, e.g. a demo on the default domain 0, would otherwise publish its own /clock and
-# joint_states into this run (and hear this one)
-os.environ.setdefault("ROS_DOMAIN_ID", str(os.getpid() % 100 + 1))
-os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
 import argparse
 import gc
@@ -392,7 +387,6 @@ def run_soak(
         "machine": {
             "cores": os.cpu_count(), "machine": platform.machine(), "python": platform.python_version(),
             "openblas_num_threads": os.environ.get("OPENBLAS_NUM_THREADS"),
-            "ros_domain_id": os.environ.get("ROS_DOMAIN_ID"),
         },
         "interrupted": result.interrupted,
         "summary": summary,
@@ -417,8 +411,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     print(
         f"soak: {args.duration:g} s of robot time, association {args.association}, seed {args.seed} "
-        f"(ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID')}, "
-        f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS')}; {platform.machine()}, "
+        f"(OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS')}; {platform.machine()}, "
         f"{os.cpu_count()} cores, Python {platform.python_version()})",
         flush=True,
     )
