@@ -77,7 +77,7 @@ def domain_choice(name: str, value: object) -> DomainChoice:
 
 def _parse_choice(text: str) -> DomainChoice:
     try:
-        return domain_choice("--domain-id", text)
+        return domain_choice("the domain id", text)
     except ValueError as error:
         raise argparse.ArgumentTypeError(str(error)) from None
 
@@ -140,8 +140,8 @@ def lease_domain(
     candidates: Sequence[int] = PRIVATE_DOMAIN_IDS, directory: Path | None = None
 ) -> DomainLease:
     """The first of ``candidates`` that is free (module docstring), locked for this run; the shell's
-    ``ROS_DOMAIN_ID`` is skipped. RuntimeError when none is free; OSError when the lock folder cannot be
-    made."""
+    ``ROS_DOMAIN_ID`` is skipped. OSError when none is free (like a port in use) or the lock folder cannot
+    be made."""
     folder = lock_dir() if directory is None else Path(directory)
     folder.mkdir(mode=0o700, parents=True, exist_ok=True)
     shell_domain = os.environ.get("ROS_DOMAIN_ID", "").strip()
@@ -158,7 +158,7 @@ def lease_domain(
         if bound_udp_ports().isdisjoint(domain_ports(domain_id)):
             return DomainLease(domain_id, fd)
         os.close(fd)
-    raise RuntimeError(
+    raise OSError(
         f"no free DDS domain among {min(candidates)}-{max(candidates)} (each has a DDS participant or "
         "another run's lock): choose one with --domain-id"
     )
@@ -188,7 +188,7 @@ def _environment(values: dict[str, str | None]) -> Iterator[None]:
 def run_context(choice: DomainChoice, **init_options: Any) -> Context:
     """A new initialised rclpy Context in the DDS world ``choice`` (module docstring); ``init_options`` go to
     ``rclpy.init`` (e.g. ``signal_handler_options``). A private context holds its domain lease until it
-    shuts down (``rclpy.try_shutdown(context=...)``). RuntimeError when no private domain is free."""
+    shuts down (``rclpy.try_shutdown(context=...)``). OSError when no private domain is free."""
     import rclpy
     from rclpy.context import Context
 

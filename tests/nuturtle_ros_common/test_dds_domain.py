@@ -63,7 +63,7 @@ def test_runs_lease_distinct_free_domains_until_released(tmp_path):
         second = lease_domain([shell, *candidates], tmp_path)
         third = lease_domain([shell, *candidates], tmp_path)
         assert [first.domain_id, second.domain_id, third.domain_id] == free
-        with pytest.raises(RuntimeError, match="no free DDS domain"):
+        with pytest.raises(OSError, match="no free DDS domain"):
             lease_domain(candidates, tmp_path)
         second.release()
         again = lease_domain(candidates, tmp_path)
