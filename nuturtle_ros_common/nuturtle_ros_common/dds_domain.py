@@ -70,7 +70,7 @@ def domain_choice(name: str, value: object) -> DomainChoice:
         value = int(value)
     if isinstance(value, bool) or not isinstance(value, int):
         raise ValueError(
-            f"{name} must be {PRIVATE}, {ENVIRONMENT} or a domain id 0-{MAX_DOMAIN_ID}, got {value!r}"
+            f"{name} must be {PRIVATE}, {ENVIRONMENT} or an integer 0-{MAX_DOMAIN_ID}, got {value!r}"
         )
     return integer(name, value, 0, MAX_DOMAIN_ID)
 
