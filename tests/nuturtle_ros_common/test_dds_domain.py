@@ -10,6 +10,7 @@ import time
 import pytest
 
 from nuturtle_ros_common.dds_domain import (
+    bound_udp_ports,
     domain_choice,
     domain_ports,
     lease_domain,
@@ -39,24 +40,14 @@ def test_the_replay_is_private_unless_it_only_plays_for_the_users_nodes(tmp_path
     assert ReplayOptions(bag=tmp_path, domain_id="12").domain == 12
 
 
-def bound_domain(candidates):
-    """A UDP socket bound in the port block of the first of ``candidates`` where that port is free, and
-    that domain id."""
-    for domain_id in candidates:
-        udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        try:
-            udp.bind(("127.0.0.1", domain_ports(domain_id)[11]))
-            return udp, domain_id
-        except OSError:
-            udp.close()
-    raise AssertionError(f"every probe port of {candidates} is taken")
-
-
 def test_runs_lease_distinct_free_domains_until_released(tmp_path):
     shell = int(os.environ["ROS_DOMAIN_ID"])
-    candidates = [d for d in (131, 132, 133, 134) if d != shell]
-    udp, taken = bound_domain(candidates)
-    free = [d for d in candidates if d != taken]
+    # four domains below the ephemeral ports with no UDP port bound in their blocks right now
+    bound = bound_udp_ports()
+    idle = [d for d in range(100, 1, -1) if d != shell and bound.isdisjoint(domain_ports(d))]
+    taken, *free = candidates = idle[:4]
+    udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    udp.bind(("127.0.0.1", domain_ports(taken)[11]))  # as a DDS participant's unicast port
     try:
         # the shell's own domain and a domain with a bound port are skipped; each lease locks another id
         first = lease_domain([shell, *candidates], tmp_path)
@@ -72,7 +63,9 @@ def test_runs_lease_distinct_free_domains_until_released(tmp_path):
             lease.release()
     finally:
         udp.close()
-    assert lease_domain(candidates, tmp_path).domain_id == candidates[0]
+    last = lease_domain(candidates, tmp_path)
+    assert last.domain_id == taken
+    last.release()
 
 
 def test_a_private_run_hears_its_own_nodes_only_even_beside_programs_on_its_domain_id():
