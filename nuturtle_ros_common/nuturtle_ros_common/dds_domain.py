@@ -10,9 +10,9 @@ each other inside that participant. The choice (``--domain-id``, docs/demo.md):
      override it, is lifted for the call too): nothing changes in the environment the rest of the process
      or its children see. rmw_fastrtps then allows the participant no remote participant at all, in any
      domain, whatever the others' discovery range (measured in docs/demo.md).
-  2. a domain id of its own, for middlewares whose OFF lets unicast peers in: the first of
-     ``PRIVATE_DOMAIN_IDS`` (100 down to 1; not the shell's ``ROS_DOMAIN_ID``) on which no process of
-     this host has a UDP port bound in the domain's block of the RTPS port mapping
+  2. a domain id of its own, for middlewares whose OFF may be weaker (each implements it its own way):
+     the first of ``PRIVATE_DOMAIN_IDS`` (100 down to 1; not the shell's ``ROS_DOMAIN_ID``) on which no
+     process of this host has a UDP port bound in the domain's block of the RTPS port mapping
      (``7400 + 250 d`` to ``7400 + 250 d + 249``, read from /proc/net/udp and udp6 on Linux) and whose
      advisory lock (``flock`` of ``<temp dir>/nuturtle-dds-domains-<uid>/<d>.lock``) no other run holds.
      The lock is held until the context shuts down; the kernel drops it when the process dies, even by
@@ -54,7 +54,7 @@ MAX_DOMAIN_ID = 232
 # The blocks of domains 1-100 (ports 7650-32649) lie below Linux's ephemeral ports (32768-60999), which
 # any socket may get; 0 is everyone's default
 PRIVATE_DOMAIN_IDS = tuple(range(100, 0, -1))
-# RTPS port mapping (DDSI-RTPS 9.6.1.1): port base PB and domain gain DG, the block of one domain
+# The RTPS well-known port mapping: port base PB and domain gain DG, the block of one domain
 PORT_BASE = 7400
 DOMAIN_GAIN = 250
 # The environment rcl reads for discovery, set for the duration of rclpy.init of a private context only
