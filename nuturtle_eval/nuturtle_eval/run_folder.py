@@ -1,0 +1,113 @@
+"""An output folder that a run never destroys: the run writes into a staging folder beside it and the
+previous result is replaced only when the run completes. No ROS.
+
+For the output folder ``OUT`` (``--out``) of a run with pid ``P``::
+
+    OUT.partial-P/   the staging folder the run writes into, holding INCOMPLETE from its first moment
+                     (what a kill -9 or a power cut leaves: the marker says which run, since when)
+    OUT/             the last complete result: replaced by the staging folder only when the run completes
+                     (INCOMPLETE removed, then ``OUT`` renamed aside, the staging folder renamed to ``OUT``,
+                     the old one deleted: two renames in one parent folder, so ``OUT`` is always a whole
+                     result, and between the renames ``OUT.previous-P`` holds the old one)
+    OUT.incomplete/  a run stopped early (a signal, an error after it started): its outputs, with
+                     INCOMPLETE saying why; ``OUT`` is left as it was
+
+A folder is only ever replaced or deleted when every entry in it is one the run writes (``outputs``,
+INCOMPLETE, and the files named in ``keep``): anything else in ``OUT`` or ``OUT.incomplete`` makes
+:func:`check_replaceable` a ValueError before the run starts, so a mistyped ``--out ~`` is refused. Files
+in ``keep`` directly inside ``OUT`` (the demo's ``--map-file``, which slam may write during the run) are
+moved into the new result when it replaces the old one.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import time
+from collections.abc import Iterable
+from pathlib import Path
+
+# The marker of a folder that does not hold a complete run
+INCOMPLETE = "INCOMPLETE"
+INCOMPLETE_SUFFIX = ".incomplete"
+
+
+def incomplete_folder(final: Path) -> Path:
+    """Where a run stopped early leaves its outputs: ``OUT.incomplete`` beside ``OUT``."""
+    return final.with_name(final.name + INCOMPLETE_SUFFIX)
+
+
+def check_replaceable(folder: Path, outputs: Iterable[str], keep: Iterable[Path] = ()) -> None:
+    """ValueError unless ``folder`` is missing, or a folder whose entries are all in ``outputs``,
+    INCOMPLETE or the names of the ``keep`` files inside it: a folder a run may replace."""
+    if not folder.exists():
+        return
+    if not folder.is_dir():
+        raise ValueError(f"output folder {folder} is a file")
+    allowed = set(outputs) | {INCOMPLETE} | {p.name for p in keep if p.parent.resolve() == folder.resolve()}
+    foreign = sorted(entry.name for entry in folder.iterdir() if entry.name not in allowed)
+    if foreign:
+        shown = ", ".join(foreign[:5]) + (", ..." if len(foreign) > 5 else "")
+        raise ValueError(
+            f"output folder {folder} holds files a run does not write ({shown}): not replacing it; "
+            "choose another --out"
+        )
+
+
+class RunFolder:
+    """The staging folder of one run for the output folder ``final`` (module docstring).
+
+    ``outputs``: the names of the entries a run writes (files and folders). Creating it checks ``final``
+    and ``final.incomplete`` (:func:`check_replaceable`, ValueError) and then creates the staging folder
+    ``path`` with its INCOMPLETE marker. Then exactly one of :meth:`complete`, :meth:`keep_incomplete` or
+    :meth:`discard`; each returns where the outputs are (None for discard)."""
+
+    def __init__(self, final: Path, outputs: Iterable[str], keep: Iterable[Path] = ()) -> None:
+        self.final = Path(final)
+        self.outputs = frozenset(outputs)
+        self.keep = [Path(p) for p in keep]
+        check_replaceable(self.final, self.outputs, self.keep)
+        check_replaceable(incomplete_folder(self.final), self.outputs)
+        self.final.parent.mkdir(parents=True, exist_ok=True)
+        self.path = self.final.with_name(f"{self.final.name}.partial-{os.getpid()}")
+        if self.path.exists():
+            shutil.rmtree(self.path)
+        self.path.mkdir()
+        started = time.strftime("%Y-%m-%d %H:%M:%S %Z")
+        self._mark(f"this run has not finished: started {started}, process {os.getpid()}")
+
+    def _mark(self, reason: str) -> None:
+        (self.path / INCOMPLETE).write_text(
+            f"{reason}\nThe outputs here are not a complete run; the last complete one is in {self.final}.\n",
+            encoding="utf-8",
+        )
+
+    def complete(self) -> Path:
+        """Replace ``final`` with the staging folder (the ``keep`` files inside ``final`` move along);
+        ``final``."""
+        (self.path / INCOMPLETE).unlink()
+        if self.final.exists():
+            for kept in self.keep:
+                if kept.parent.resolve() == self.final.resolve() and kept.is_file():
+                    kept.rename(self.path / kept.name)
+            previous = self.final.with_name(f"{self.final.name}.previous-{os.getpid()}")
+            self.final.rename(previous)
+            self.path.rename(self.final)
+            shutil.rmtree(previous)
+        else:
+            self.path.rename(self.final)
+        return self.final
+
+    def keep_incomplete(self, reason: str) -> Path:
+        """Leave the outputs in ``final.incomplete`` (replacing an earlier incomplete run's) with INCOMPLETE
+        saying ``reason``; ``final`` stays as it was. That folder."""
+        self._mark(reason)
+        target = incomplete_folder(self.final)
+        if target.exists():
+            shutil.rmtree(target)
+        self.path.rename(target)
+        return target
+
+    def discard(self) -> None:
+        """Delete the staging folder: the run wrote nothing worth keeping."""
+        shutil.rmtree(self.path, ignore_errors=True)
