@@ -25,7 +25,8 @@ Metrics
   centre is another one's partner a *duplicate*; RMSE ``sqrt(mean |m_hat_i - m_j|^2)`` over the pairs;
 * pose NEES ``eps_k = e_k^T P_k^-1 e_k`` (3 dof) per estimate with covariance ``P_k``, judged against the
   two-sided 95% chi2 interval for one run (``turtlelib.consistency``); estimates whose covariance is
-  singular (the exactly known start, before the robot moves) are left out.
+  singular (the exactly known start, before the robot moves) are left out; with none left (a run that
+  ended before the robot moved) the NEES figures are NaN (null in metrics.json).
 """
 
 from __future__ import annotations
@@ -320,8 +321,6 @@ def evaluate_run(data: RunData, sim_seconds: float, wall_seconds: float) -> RunM
         raise ValueError("the estimates do not overlap the ground truth in time")
     eps = pose_nees(e_slam, data.slam_covariances[slam_covered])
     eps = eps[np.isfinite(eps)]
-    if eps.size == 0:
-        raise ValueError("no SLAM pose has a positive definite covariance")
     low, high = nees_band()
     association = associate_landmarks(data.mapped_xy, data.true_xy, data.gate_m)
     in_range = landmarks_within_range(data.true_xy, data.truth.xy, data.sensor_range_m, data.true_radii_m)
@@ -342,8 +341,9 @@ def evaluate_run(data: RunData, sim_seconds: float, wall_seconds: float) -> RunM
         landmarks_duplicate=int(association.duplicates.size),
         landmarks_spurious=int(association.spurious.size),
         landmark_rmse_m=association.rmse_m,
-        nees_pose_mean=float(np.mean(eps)),
-        nees_pose_within_95_fraction=float(np.mean((eps >= low) & (eps <= high))),
+        # NaN when no pose had a positive definite covariance (the robot never moved from its known start)
+        nees_pose_mean=float(np.mean(eps)) if eps.size else math.nan,
+        nees_pose_within_95_fraction=float(np.mean((eps >= low) & (eps <= high))) if eps.size else math.nan,
         nees_pose_band_95=(low, high),
         sim_seconds=float(sim_seconds),
         wall_seconds=float(wall_seconds),

@@ -11,6 +11,7 @@ what a replay without ground truth still writes.
 from __future__ import annotations
 
 import json
+import math
 import sys
 import time
 from collections.abc import Mapping
@@ -155,49 +156,78 @@ def evaluate_and_plot(
     return metrics
 
 
+def json_value(value: Any) -> Any:
+    """``value`` with every non-finite float (NaN: a figure that could not be measured) as None, in nested
+    dicts, lists and tuples: what JSON can hold (``json.dumps(..., allow_nan=False)`` accepts it)."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, Mapping):
+        return {key: json_value(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_value(item) for item in value]
+    return value
+
+
 def write_metrics(out_dir: Path, values: Mapping[str, Any]) -> Path:
-    """``out_dir/metrics.json``: ``values`` as indented JSON; its path."""
+    """``out_dir/metrics.json``: ``values`` as indented, valid JSON (a NaN figure is null); its path."""
     path = out_dir / METRICS_FILE
-    path.write_text(json.dumps(values, indent=2) + "\n", encoding="utf-8")
+    path.write_text(json.dumps(json_value(values), indent=2, allow_nan=False) + "\n", encoding="utf-8")
     return path
+
+
+def target_rows(metrics: RunMetrics) -> list[tuple[str, str, str, bool | None]]:
+    """The rows of the results table: (label, value text, target text, met) with ``met`` None where no
+    target applies or the figure could not be measured (NaN, shown ``n/a``)."""
+    values = metrics.as_dict()
+    rows: list[tuple[str, str, str, bool | None]] = []
+    for key, label, fmt, target, check in TARGETS:
+        value = values[key]
+        if isinstance(value, float) and math.isnan(value):
+            rows.append((label, "n/a", target, None))
+            continue
+        if key == "wall_seconds":
+            ok = value <= 0.5 * values["sim_seconds"]
+        else:
+            ok = check(value) if check is not None else None
+        rows.append((label, fmt.format(value), target, ok))
+    mapped_ok = values["landmarks_in_range_unmapped"] == 0 and values["landmarks_duplicate"] == 0
+    rows.append(
+        (
+            "landmarks: true / came in range / mapped",
+            f"{values['landmarks_true']} / {values['landmarks_in_range']} / {values['landmarks_mapped']}",
+            "every one in range mapped once",
+            mapped_ok,
+        )
+    )
+    rows.append(
+        (
+            "landmarks: in range but unmapped / duplicates / spurious",
+            f"{values['landmarks_in_range_unmapped']} / {values['landmarks_duplicate']} / "
+            f"{values['landmarks_spurious']}",
+            "0 / 0 / 0",
+            None,
+        )
+    )
+    return rows
+
+
+def failed_targets(metrics: RunMetrics) -> list[str]:
+    """The labels of the targets the results table marks failed (✗)."""
+    return [label for label, _, _, ok in target_rows(metrics) if ok is False]
 
 
 def results_table(metrics: RunMetrics, targets: bool = True) -> str:
     """A markdown table of the run's figures and, with ``targets``, the demo's targets (✓/✗ where one
     applies); without, the figures alone (a recording of another world, which those targets are not
     about)."""
-    values = metrics.as_dict()
     rows = (
         ["| metric | value | target | |", "|---|---:|---|---|"]
         if targets
         else ["| metric | value |", "|---|---:|"]
     )
-
-    def row(label: str, text: str, target: str, ok: bool | None) -> None:
+    for label, text, target, ok in target_rows(metrics):
         mark = "" if ok is None else ("✓" if ok else "✗")
         rows.append(f"| {label} | {text} | {target} | {mark} |" if targets else f"| {label} | {text} |")
-
-    for key, label, fmt, target, check in TARGETS:
-        value = values[key]
-        if key == "wall_seconds":
-            ok = value <= 0.5 * values["sim_seconds"]
-        else:
-            ok = check(value) if check is not None else None
-        row(label, fmt.format(value), target, ok)
-    mapped_ok = values["landmarks_in_range_unmapped"] == 0 and values["landmarks_duplicate"] == 0
-    row(
-        "landmarks: true / came in range / mapped",
-        f"{values['landmarks_true']} / {values['landmarks_in_range']} / {values['landmarks_mapped']}",
-        "every one in range mapped once",
-        mapped_ok,
-    )
-    row(
-        "landmarks: in range but unmapped / duplicates / spurious",
-        f"{values['landmarks_in_range_unmapped']} / {values['landmarks_duplicate']} / "
-        f"{values['landmarks_spurious']}",
-        "0 / 0 / 0",
-        None,
-    )
     return "\n".join(rows)
 
 

@@ -3,22 +3,33 @@ the sensor range of a cylinder, the progress bar)."""
 
 import json
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from nuturtle_eval.metrics import PoseSeries
+from nuturtle_eval.metrics import PoseSeries, RunMetrics
 from nuturtle_eval.run_evaluation import (
     ProgressBar,
     RunRecord,
     SlamSnapshot,
     evaluate_and_plot,
+    failed_targets,
+    results_table,
     sensor_range_m,
     write_metrics,
 )
 from turtlelib import arena_walls
 
 CIRCLES = np.array([[1.2, 0.3, 0.038], [-1.0, 0.8, 0.05]])
+# a run meeting every target of the results table
+FIGURES = dict(
+    final_position_error_odom_m=0.3, final_position_error_slam_m=0.01, final_heading_error_odom_rad=0.1,
+    final_heading_error_slam_rad=0.01, ate_rmse_odom_m=0.2, ate_rmse_slam_m=0.01, landmarks_true=8,
+    landmarks_in_range=8, landmarks_mapped=8, landmarks_paired=8, landmarks_in_range_unmapped=0,
+    landmarks_duplicate=0, landmarks_spurious=0, landmark_rmse_m=0.01, nees_pose_mean=3.0,
+    nees_pose_within_95_fraction=0.95, nees_pose_band_95=(1.0, 8.0), sim_seconds=120.0, wall_seconds=20.0,
+)  # fmt: skip
 
 
 def _series(t, phase):
@@ -51,6 +62,30 @@ def test_with_truth_odometry_and_slam_every_figure_and_the_metrics(tmp_path):
     assert {path.name for path in tmp_path.iterdir()} == {"trajectory.png", "covariance.png", "errors.png"}
     write_metrics(tmp_path, metrics.as_dict())
     assert json.loads((tmp_path / "metrics.json").read_text()) == metrics.as_dict()
+
+
+def test_a_figure_that_could_not_be_measured_is_null_in_the_json_and_n_a_in_the_table(tmp_path):
+    metrics = evaluate_and_plot(tmp_path, _record(), sim_seconds=6.0, wall_seconds=0.5)
+    unmeasured = replace(metrics, nees_pose_mean=math.nan, nees_pose_within_95_fraction=math.nan)
+    write_metrics(tmp_path, {**unmeasured.as_dict(), "nested": [math.inf, {"x": np.float64("nan")}]})
+    # strict JSON: a bare NaN or Infinity would be refused
+    written = json.loads(
+        (tmp_path / "metrics.json").read_text(), parse_constant=lambda name: pytest.fail(f"bare {name}")
+    )
+    assert written["nees_pose_mean"] is None and written["nested"] == [None, {"x": None}]
+    table = results_table(unmeasured)
+    assert "| pose NEES inside the 95% band | n/a | >= 0.9 |  |" in table
+    assert "pose NEES inside the 95% band" not in failed_targets(unmeasured)
+
+
+def test_failed_targets_are_the_rows_the_table_marks_failed():
+    metrics = RunMetrics(
+        **{**FIGURES, "final_position_error_slam_m": 2.7, "final_position_error_odom_m": 0.3}
+    )
+    table = results_table(metrics)
+    assert failed_targets(metrics) == ["final position error, SLAM (m)"]
+    assert table.count("✗") == 1 and "| final position error, SLAM (m) | 2.7000 | <= 0.02 | ✗ |" in table
+    assert failed_targets(replace(metrics, final_position_error_slam_m=0.01)) == []
 
 
 @pytest.mark.parametrize(

@@ -14,15 +14,17 @@ parameters used (``params.yaml``) into ``--out``; ``--params FILE`` replaces the
 from __future__ import annotations
 
 import argparse
-import json
-import math
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from ..run_evaluation import write_metrics
+from ..run_folder import RunFolder, check_replaceable
 from .experiment import ASSOCIATIONS, Experiment, ExperimentResult, run_experiment
 
+# what a run writes into --out (the folder is replaced as a whole, nuturtle_eval.run_folder)
+OUTPUTS = ("metrics.json", "params.yaml", "trajectory.png", "errors.png", "nees.png")
 # the calibrate command's default window (docs/real_data.md: chosen on MRCLAM robot 1)
 WINDOW_S = 10.0
 
@@ -72,16 +74,6 @@ def _progress(total: int, enabled: bool, label: str):
     return tqdm(total=total, unit="samples", desc=label, file=sys.stderr, disable=not enabled, leave=False)
 
 
-def _json_value(value):
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if isinstance(value, dict):
-        return {key: _json_value(item) for key, item in value.items()}
-    if isinstance(value, list):
-        return [_json_value(item) for item in value]
-    return value
-
-
 def _write_run(
     args: argparse.Namespace,
     experiment: Experiment,
@@ -97,15 +89,21 @@ def _write_run(
         result = run_experiment(experiment, bar.update)
     evaluation = evaluate(experiment, result)
     metrics = {"run": experiment.name, **evaluation.metrics}
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "metrics.json").write_text(
-        json.dumps(_json_value(metrics), indent=2) + "\n", encoding="utf-8"
-    )
-    (args.out / "params.yaml").write_text(yaml.safe_dump(params.as_dict(), sort_keys=False), encoding="utf-8")
-    if args.plots:
-        plot_trajectory(args.out / "trajectory.png", evaluation, experiment.name)
-        plot_errors(args.out / "errors.png", evaluation)
-        plot_nees(args.out / "nees.png", evaluation)
+    # written into a staging folder that replaces args.out only once every file is there
+    folder = RunFolder(args.out, OUTPUTS)
+    try:
+        write_metrics(folder.path, metrics)
+        (folder.path / "params.yaml").write_text(
+            yaml.safe_dump(params.as_dict(), sort_keys=False), encoding="utf-8"
+        )
+        if args.plots:
+            plot_trajectory(folder.path / "trajectory.png", evaluation, experiment.name)
+            plot_errors(folder.path / "errors.png", evaluation)
+            plot_nees(folder.path / "nees.png", evaluation)
+    except BaseException:
+        folder.discard()
+        raise
+    folder.complete()
     return metrics
 
 
@@ -144,22 +142,25 @@ def main(argv: Sequence[str] | None = None) -> int:
             from .evaluation import evaluate_mrclam
             from .mrclam import load_mrclam
 
-            recording = load_mrclam(args.data, args.robot)
-            params = load_params(mrclam_params(args.association), args.params)
-            experiment = mrclam_experiment(recording, params, args.association)
             args.out = args.out or Path("results") / f"mrclam_robot{args.robot}_{args.association}"
+            check_replaceable(args.out, OUTPUTS)
+            params = load_params(mrclam_params(args.association), args.params)
+            recording = load_mrclam(args.data, args.robot)
+            experiment = mrclam_experiment(recording, params, args.association)
             metrics = _write_run(args, experiment, lambda e, r: evaluate_mrclam(e, r, recording), params)
         else:
             from .evaluation import evaluate_victoria
             from .victoria import load_victoria
 
-            recording = load_victoria(args.data)
-            params = load_params(VICTORIA_PARAMS, args.params)
-            experiment = victoria_experiment(recording, params)
             args.out = args.out or Path("results") / "victoria_park"
+            check_replaceable(args.out, OUTPUTS)
+            params = load_params(VICTORIA_PARAMS, args.params)
+            recording = load_victoria(args.data)
+            experiment = victoria_experiment(recording, params)
             metrics = _write_run(args, experiment, lambda e, r: evaluate_victoria(e, r, recording), params)
-    except ValueError as error:
-        print(f"error: {error}", file=sys.stderr)
+    except (ValueError, OSError) as error:
+        # one line, whatever the error (a YAML error spans several)
+        print(f"error: {' '.join(str(error).split())}", file=sys.stderr)
         return 2
     print(summary(metrics))
     print(f"results in {args.out}")

@@ -16,16 +16,24 @@ def existing_file(path: Path) -> Path:
     return path
 
 
+def existing_folder(path: Path) -> Path:
+    """``path`` itself, or a ValueError naming it when it is not a folder (a dataset's directory)."""
+    if not path.is_dir():
+        raise ValueError(f"{path}: no such folder" if not path.exists() else f"{path}: not a folder")
+    return path
+
+
 def read_table(path: Path, columns: int) -> NDArray[np.float64]:
     """The numbers of a whitespace-separated text file as an (N, ``columns``) float64 array, N >= 1.
 
     Lines starting with ``#`` are comments; CRLF and LF line endings both read.
     """
+    existing_file(path)
     try:
         with warnings.catch_warnings():
             # an empty file is reported below, with the file's name
             warnings.simplefilter("ignore", UserWarning)
-            table = np.loadtxt(existing_file(path), comments="#", ndmin=2)
+            table = np.loadtxt(path, comments="#", ndmin=2)
     except ValueError as error:
         raise ValueError(f"{path}: not a table of {columns} numeric columns ({error})") from error
     if table.shape[0] == 0:

@@ -42,7 +42,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from nuturtle_eval.datasets._files import read_table
+from nuturtle_eval.datasets._files import existing_folder, read_table
 
 ROBOTS = range(1, 6)
 
@@ -91,7 +91,7 @@ def load_mrclam(directory: str | Path, robot: int) -> MrclamRecording:
     if isinstance(robot, bool) or not isinstance(robot, int | np.integer) or int(robot) not in ROBOTS:
         raise ValueError(f"robot must be one of 1..5, got {robot!r}")
     robot = int(robot)
-    folder = Path(directory)
+    folder = existing_folder(Path(directory))
 
     barcodes_path = folder / "Barcodes.dat"
     barcodes = read_table(barcodes_path, 2)

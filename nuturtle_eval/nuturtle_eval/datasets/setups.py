@@ -128,8 +128,11 @@ def load_params(defaults: Params, path: str | Path | None) -> Params:
         return defaults
     import yaml
 
-    with open(path, encoding="utf-8") as stream:
-        values = yaml.safe_load(stream) or {}
+    try:
+        with open(path, encoding="utf-8") as stream:
+            values = yaml.safe_load(stream) or {}
+    except (OSError, yaml.YAMLError) as error:
+        raise ValueError(f"{path}: not a readable params file: {error}") from error
     if not isinstance(values, dict):
         raise ValueError(f"{path}: expected a mapping of parameter sections (noise:, slam:, ...)")
     try:

@@ -42,7 +42,7 @@ import numpy as np
 import scipy.io
 from numpy.typing import NDArray
 
-from nuturtle_eval.datasets._files import existing_file, read_table
+from nuturtle_eval.datasets._files import existing_file, existing_folder, read_table
 
 
 @dataclass(frozen=True)
@@ -75,7 +75,7 @@ def load_victoria(directory: str | Path) -> VictoriaRecording:
     Raises ValueError, naming the file, for a missing or unreadable file, a missing variable, variables
     of unequal length, a non-integer time, a wrong column count, or stamps out of order.
     """
-    folder = Path(directory)
+    folder = existing_folder(Path(directory))
     gps_path = folder / "aa3_gpsx.mat"
     gps = _read_mat(gps_path, ("timeGps", "Lo_m", "La_m"))
     base_ms = int(gps["timeGps"][0])

@@ -126,9 +126,36 @@ def test_calibrate_writes_params_that_a_run_takes(tmp_path, capsys):
     assert "too few" in capsys.readouterr().err
 
 
-def test_a_missing_directory_is_a_clear_error(tmp_path, capsys):
-    assert main(["mrclam", "--data", str(tmp_path / "nowhere"), "--robot", "1", "--no-progress"]) == 2
-    assert "error:" in capsys.readouterr().err
+def test_a_missing_directory_or_a_bad_params_file_is_one_error_line_and_the_output_untouched(
+    tmp_path, capsys
+):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "metrics.json").write_text("previous")
+    nowhere = tmp_path / "nowhere"
+    common = ["--robot", "1", "--no-progress", "--out", str(out)]
+    assert main(["mrclam", "--data", str(nowhere), *common]) == 2
+    assert capsys.readouterr().err == f"error: {nowhere}: no such folder\n"
+    (tmp_path / "bad.yaml").write_text("noise: [")
+    assert (
+        main(
+            [
+                "mrclam",
+                "--data",
+                str(DATA / "mrclam7_robot1_60s"),
+                "--params",
+                str(tmp_path / "bad.yaml"),
+                *common,
+            ]
+        )
+        == 2
+    )
+    err = capsys.readouterr().err
+    assert (
+        err.startswith(f"error: {tmp_path / 'bad.yaml'}: not a readable params file") and err.count("\n") == 1
+    )
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.yaml", "out"]
+    assert (out / "metrics.json").read_text() == "previous"
 
 
 def test_params_file_replaces_defaults(tmp_path):
