@@ -14,7 +14,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from nuturtle_description.robot_params import add_model_argument
-from nuturtle_eval.run_evaluation import results_table
+from nuturtle_eval.run_evaluation import failed_targets, results_table
 from nuturtle_ros_common.dds_domain import add_domain_argument
 from nuturtle_tools.relay_config import add_foxglove_argument, parse_endpoint
 
@@ -45,7 +45,8 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--seed", type=int, default=0, help="seed of every noise stream of the simulator")
     parser.add_argument("--duration", type=float, default=120.0, help="simulation (robot) seconds to run")
     parser.add_argument("--out", type=Path, default=Path("out/latest"),
-                        help="output folder (its files and its bag run/ are replaced)")  # fmt: skip
+                        help="output folder, replaced as a whole when the run completes (a run stopped "
+                        "early goes to OUT.incomplete)")  # fmt: skip
     parser.add_argument("--realtime", action="store_true",
                         help="pace the simulation at real time (to watch it live) "
                         "instead of as fast as it goes")  # fmt: skip
@@ -53,6 +54,8 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
                         help="upper bound on simulated seconds per wall second "
                         "when not --realtime")  # fmt: skip
     parser.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    parser.add_argument("--check", action="store_true",
+                        help="exit status 1 when a target of the results table fails (for CI)")  # fmt: skip
     add_foxglove_argument(parser, "--realtime")
     add_domain_argument(parser)
     maps = parser.add_argument_group("maps and localization (docs/maps.md)")
@@ -86,7 +89,11 @@ def report(result: DemoResult, options: DemoOptions) -> str:
         f"slam: {options.mode}, motion from {options.motion_source}"
         + ("" if options.map_file is None else f", map file {options.map_file}")
         + ("" if options.start is None else f", start {tuple(options.start)}"),
-        "" if not result.interrupted else "interrupted: the figures cover the time simulated so far",
+        ""
+        if result.interrupted is None
+        else f"INCOMPLETE: interrupted by {result.interrupted} after {result.metrics.sim_seconds:.1f} of "
+        f"{options.duration_s:.1f} s; the figures cover the time simulated so far; the last complete run is "
+        f"still in {options.out_dir}/",
         results_table(result.metrics),
         "",
         f"{result.message_count} messages on {len(result.recorded_topics)} topics recorded in the "
@@ -125,12 +132,22 @@ def main(argv: Sequence[str] | None = None) -> int:
             domain_id=args.domain_id,
         )
     except ValueError as error:
-        print(f"error: {error}", file=sys.stderr)
+        print(f"error: {error_line(error)}", file=sys.stderr)
         return 2
     try:
         result = run_demo(options)
-    except OSError as error:
-        print(f"error: {error}", file=sys.stderr)
-        return 2
+    except (OSError, ValueError, RuntimeError) as error:
+        print(f"error: {error_line(error)}", file=sys.stderr)
+        # a bad input (refused before the run started) is 2, a run that failed 1
+        return 1 if getattr(error, "__notes__", None) else 2
     print(report(result, options))
+    failed = failed_targets(result.metrics)
+    if args.check and failed:
+        print(f"targets failed (--check): {'; '.join(failed)}", file=sys.stderr)
+        return 1
     return 1 if result.saved_map is not None and not result.saved_map[0] else 0
+
+
+def error_line(error: BaseException) -> str:
+    """The error and its notes (where a failed run left its outputs) on one line."""
+    return " ".join(" ".join([str(error), *getattr(error, "__notes__", ())]).split())

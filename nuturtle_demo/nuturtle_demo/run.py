@@ -31,13 +31,14 @@ from __future__ import annotations
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import rclpy
+import yaml
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
@@ -61,6 +62,7 @@ from nuturtle_eval.run_evaluation import (
     slip_counts,
     write_metrics,
 )
+from nuturtle_eval.run_folder import RunFolder
 from nuturtle_ros_common.conversions import planar_covariance_6x6, pose_from_transform
 from nuturtle_ros_common.dds_domain import PRIVATE, DomainChoice, domain_choice, run_context
 from nuturtle_ros_common.node_main import spin_once_guarded
@@ -70,8 +72,10 @@ from nuturtle_tools.monitor import RunMonitor
 from nuturtle_tools.params import params_file, to_parameters
 from nuturtle_tools.player import spin_until, wait_until
 from nuturtle_tools.recorder import BagWriter, TeeSink, TopicRecorder
-from nuturtle_tools.relay_config import RelayConfig
+from nuturtle_tools.relay_config import RelayConfig, check_port_free
+from nuturtle_tools.stop_signals import StopSignals
 from turtlelib import MODES, Transform2D, TwistNoise, normalize_angle
+from turtlelib.slam_map import load_map
 from turtlelib.validation import finite_real, integer, one_of, positive, store
 
 from .driver import FigureEightDriver, RouteConfig
@@ -83,6 +87,8 @@ ASSOCIATIONS = ("known", "unknown")
 SLAM_SERVICE_TIMEOUT_S = 10.0
 # The recording: a rosbag2 bag directory in the output folder
 BAG_NAME = "run"
+# Everything a run writes into its output folder (nuturtle_eval.run_folder)
+OUTPUTS = ("metrics.json", "trajectory.png", "errors.png", "covariance.png", "config.yaml", BAG_NAME)
 # Wall time to wait for the recorder to subscribe to every topic before the simulation starts (s)
 DISCOVERY_TIMEOUT_S = 10.0
 # Wall time to let the last messages arrive after the simulation stops (s)
@@ -153,6 +159,10 @@ class DemoOptions:
         store(self, ("duration_s", "max_realtime_factor"), positive)
         if not Path(self.world).is_file():
             raise ValueError(f"world file {self.world} does not exist")
+        try:
+            load_ros_parameters(Path(self.world))
+        except (OSError, yaml.YAMLError, ValueError, AttributeError) as error:
+            raise ValueError(f"world file {self.world} is not a ROS params file: {error}") from None
         if self.start is not None:
             object.__setattr__(self, "start", _triple("start", self.start, finite_real))
         object.__setattr__(
@@ -166,6 +176,8 @@ class DemoOptions:
             raise ValueError("save_map needs a map_file to save the map to")
         if self.mode == "localization" and (self.map_file is None or not self.map_file.is_file()):
             raise ValueError(f"localization needs an existing map_file, got {self.map_file}")
+        if self.map_file is not None and self.map_file.exists():
+            load_map(self.map_file)  # slam loads it at start-up: ValueError naming the file
 
     @property
     def realtime_factor(self) -> float:
@@ -180,13 +192,16 @@ def _triple(name: str, values: Any, check: Callable[[str, object], float]) -> tu
 
 @dataclass(frozen=True)
 class DemoResult:
-    """``saved_map``: slam's ``~/save_map`` answer (success, message) with ``save_map``, else None."""
+    """``out_dir`` where the outputs are (``OUT``, or ``OUT.incomplete`` for a run stopped early);
+    ``interrupted`` the name of the signal that stopped the run early (``SIGTERM``), None when it ran its
+    whole duration; ``saved_map``: slam's ``~/save_map`` answer (success, message) with ``save_map``, else
+    None."""
 
     metrics: RunMetrics
     out_dir: Path
     recorded_topics: list[str]
     message_count: int
-    interrupted: bool
+    interrupted: str | None
     saved_map: tuple[bool, str] | None = None
 
 
@@ -359,80 +374,125 @@ ProgressCallback = Callable[[DemoSystem, float], None]
 
 def run_demo(options: DemoOptions, on_progress: ProgressCallback | None = None) -> DemoResult:
     """Run the system for ``options.duration_s`` of simulation time and write every output (module
-    docstring, docs/demo.md). Ctrl-C ends the run early; the outputs then cover the time simulated.
+    docstring, docs/demo.md) into a staging folder beside ``options.out_dir`` that replaces it only when
+    the run completes (:class:`nuturtle_eval.run_folder.RunFolder`). SIGINT (Ctrl-C), SIGTERM or SIGHUP
+    end the run early (:mod:`nuturtle_tools.stop_signals`): the outputs then cover the time simulated,
+    metrics.json says ``"complete": false`` and they are left in ``OUT.incomplete`` beside the untouched
+    ``OUT``. An error once the simulation ran (a full disk: OSError) leaves what was written there too;
+    an error before (a port in use: OSError, a world nusim refuses: ValueError) leaves nothing.
 
     ``on_progress(system, sim_time_s)``, if given, is called in the executor's thread after each executor
     step that followed a new physics step, with the running :class:`DemoSystem` and the simulation time
     it has reached (s): a hook to watch the nodes during the run (``bench/soak.py``). It must only read
     them. nusim steps on the same thread, so a slow hook costs wall time, never simulation time.
     """
-    out_dir = Path(options.out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    writer = BagWriter(out_dir / BAG_NAME, overwrite=True)
-    context = run_context(options.domain_id, signal_handler_options=SignalHandlerOptions.NO)
-    executor = SingleThreadedExecutor(context=context)
-    system: DemoSystem | None = None
-    interrupted = False
+    if options.foxglove is not None:
+        check_port_free(*options.foxglove)
+    keep = [] if options.map_file is None else [options.map_file]
+    folder = RunFolder(Path(options.out_dir), OUTPUTS, keep)
+    run = _DemoRun(options, folder.path)
     try:
-        system = DemoSystem(options, context, writer)
-        for node in system.nodes:
-            if node is not system.nusim:
-                executor.add_node(node)
+        with StopSignals() as stop:
+            result = run.run(stop, on_progress)
+    except BaseException as error:
+        if run.started:
+            where = folder.keep_incomplete(f"the run failed: {error}")
+            error.add_note(f"the outputs written so far are in {where}/")
+        else:
+            folder.discard()
+        raise
+    if result.interrupted is None:
+        return replace(result, out_dir=folder.complete())
+    reason = (
+        f"interrupted by {result.interrupted} after {result.metrics.sim_seconds:.1f} of "
+        f"{options.duration_s:.1f} s of simulation"
+    )
+    return replace(result, out_dir=folder.keep_incomplete(reason))
 
-        def subscribed() -> bool:
-            return set(REQUIRED_TOPICS) <= set(system.recorder.recorded_topics)
 
-        logger = system.nusim.get_logger()
-        if not spin_until(executor, logger, subscribed, DISCOVERY_TIMEOUT_S):
-            missing = sorted(set(REQUIRED_TOPICS) - set(system.recorder.recorded_topics))
-            raise RuntimeError(f"the recorder did not discover {missing} within {DISCOVERY_TIMEOUT_S} s")
-        if options.mode == "localization":
-            relocalize(executor, system, options)
-        executor.add_node(system.nusim)
-        wall_start = time.monotonic()
-        reported_step = system.nusim.step_count
-        with ProgressBar(options.duration_s, "sim", options.progress) as progress:
-            try:
-                while system.sim_time_s < options.duration_s:
+class _DemoRun:
+    """One run of the system into ``out_dir`` (the staging folder); ``started`` once nusim steps."""
+
+    def __init__(self, options: DemoOptions, out_dir: Path) -> None:
+        self.options = options
+        self.out_dir = out_dir
+        self.started = False
+
+    def run(self, stop: StopSignals, on_progress: ProgressCallback | None) -> DemoResult:
+        options, out_dir = self.options, self.out_dir
+        writer = BagWriter(out_dir / BAG_NAME)
+        context = run_context(options.domain_id, signal_handler_options=SignalHandlerOptions.NO)
+        executor = SingleThreadedExecutor(context=context)
+        system: DemoSystem | None = None
+        try:
+            system = DemoSystem(options, context, writer)
+            for node in system.nodes:
+                if node is not system.nusim:
+                    executor.add_node(node)
+
+            def subscribed() -> bool:
+                return set(REQUIRED_TOPICS) <= set(system.recorder.recorded_topics)
+
+            logger = system.nusim.get_logger()
+            if not spin_until(executor, logger, subscribed, DISCOVERY_TIMEOUT_S):
+                missing = sorted(set(REQUIRED_TOPICS) - set(system.recorder.recorded_topics))
+                raise RuntimeError(f"the recorder did not discover {missing} within {DISCOVERY_TIMEOUT_S} s")
+            if options.mode == "localization":
+                relocalize(executor, system, options)
+            executor.add_node(system.nusim)
+            self.started = True
+            wall_start = time.monotonic()
+            reported_step = system.nusim.step_count
+            with ProgressBar(options.duration_s, "sim", options.progress) as progress:
+                while system.sim_time_s < options.duration_s and stop.received is None:
                     spin_once_guarded(executor, logger, timeout_sec=0.1)
+                    writer.check()
                     if on_progress is not None and system.nusim.step_count != reported_step:
                         reported_step = system.nusim.step_count
                         on_progress(system, system.sim_time_s)
                     progress.advance(system.sim_time_s)
-            except KeyboardInterrupt:
-                interrupted = True
-        wall_seconds = time.monotonic() - wall_start
-        sim_seconds = system.sim_time_s
-        executor.remove_node(system.nusim)
-        system.driver.stop()
-        wait_until(executor, logger, time.monotonic() + DRAIN_S)
-        saved_map = call_save_map(executor, system) if options.save_map else None
-        writer.close()
-        # the pace of this run is not part of the world: reusing the file runs nusim at real time
-        config = params_file(system.nodes, replace={"nusim": {"realtime_factor": 1.0}})
-        (out_dir / "config.yaml").write_text(config, encoding="utf-8")
-        metrics = evaluate_and_plot(
-            out_dir, _run_record(system, options), sim_seconds=sim_seconds, wall_seconds=wall_seconds
-        )
-        if metrics is None:
-            raise RuntimeError("the run published no odometry or SLAM pose to evaluate")
-        write_metrics(out_dir, {**metrics.as_dict(), **slip_counts(system.slam)})
-        return DemoResult(
-            metrics,
-            out_dir,
-            sorted(system.recorder.recorded_topics),
-            writer.message_count,
-            interrupted,
-            saved_map,
-        )
-    finally:
-        writer.close()
-        if system is not None and system.relay is not None:
-            system.relay.close()
-        for node in system.nodes if system else []:
-            node.destroy_node()
-        executor.shutdown()
-        rclpy.try_shutdown(context=context)
+            wall_seconds = time.monotonic() - wall_start
+            sim_seconds = system.sim_time_s
+            executor.remove_node(system.nusim)
+            system.driver.stop()
+            wait_until(executor, logger, time.monotonic() + DRAIN_S)
+            saved_map = call_save_map(executor, system) if options.save_map else None
+            writer.close()
+            # the pace of this run is not part of the world: reusing the file runs nusim at real time
+            config = params_file(system.nodes, replace={"nusim": {"realtime_factor": 1.0}})
+            (out_dir / "config.yaml").write_text(config, encoding="utf-8")
+            metrics = evaluate_and_plot(
+                out_dir, _run_record(system, options), sim_seconds=sim_seconds, wall_seconds=wall_seconds
+            )
+            if metrics is None:
+                raise RuntimeError("the run published no odometry or SLAM pose to evaluate")
+            write_metrics(
+                out_dir,
+                {
+                    **metrics.as_dict(),
+                    **slip_counts(system.slam),
+                    "complete": stop.received is None,
+                    "stopped_by": stop.received,
+                },
+            )
+            return DemoResult(
+                metrics,
+                out_dir,
+                sorted(system.recorder.recorded_topics),
+                writer.message_count,
+                stop.received,
+                saved_map,
+            )
+        finally:
+            try:
+                writer.close()
+            finally:
+                if system is not None and system.relay is not None:
+                    system.relay.close()
+                for node in system.nodes if system else []:
+                    node.destroy_node()
+                executor.shutdown()
+                rclpy.try_shutdown(context=context)
 
 
 def _run_record(system: DemoSystem, options: DemoOptions) -> RunRecord:

@@ -208,6 +208,8 @@ class BagWriter(ClosingSink):
             self._bag.set_custom_data(key, value)
         self._bag.open()
         self._connections: dict[str, Connection] = {}
+        # the first OSError of a write (the bag is then no longer written)
+        self.failure: OSError | None = None
         super().__init__()
 
     @property
@@ -248,20 +250,36 @@ class BagWriter(ClosingSink):
 
     def write(self, topic: str, data: bytes, timestamp_ns: int) -> None:
         """Append one CDR-serialised message of a registered topic (KeyError otherwise) stamped
-        ``timestamp_ns``; ignored once closed."""
+        ``timestamp_ns``; ignored once closed or failed. An OSError of the file (a full disk: ENOSPC, a
+        file size limit: EFBIG) is kept in ``failure`` and ends the writing: :meth:`check` raises it."""
         with self._lock:
-            if self.closed:
+            if self.closed or self.failure is not None:
                 return
-            self._bag.write(self._connections[topic], int(timestamp_ns), data)
+            try:
+                self._bag.write(self._connections[topic], int(timestamp_ns), data)
+            except OSError as error:
+                self.failure = error
+                return
             self._counts[topic] += 1
 
+    def check(self) -> None:
+        """OSError, naming the bag, once a write failed (``failure``)."""
+        if self.failure is not None:
+            raise OSError(f"cannot write the bag {self.path}: {self.failure.strerror or self.failure}")
+
     def close(self) -> None:
-        """Finish the .mcap file (summary and index) and write metadata.yaml (idempotent)."""
+        """Finish the .mcap file (summary and index) and write metadata.yaml (idempotent). After a failed
+        write the bag is left as it is (the replay recovers its complete chunks, docs/replay.md) and
+        :meth:`check` raises."""
         with self._lock:
             if self.closed:
                 return
             self.closed = True
-            self._bag.close()
+            try:
+                self._bag.close()
+            except OSError as error:
+                self.failure = self.failure or error
+        self.check()
 
 
 def absolute(topic: str) -> str:

@@ -52,3 +52,20 @@ def add_foxglove_argument(parser: argparse.ArgumentParser, pacing: str) -> None:
                         help=f"serve every topic live on a Foxglove WebSocket (default {DEFAULT_HOST}:"
                         f"{DEFAULT_PORT}, this machine only; another address such as 0.0.0.0 exposes every "
                         f"topic to that network); add {pacing} to watch at robot speed")  # fmt: skip
+
+
+def check_port_free(host: str, port: int) -> None:
+    """OSError (naming ``host:port``) when nothing could listen there now, e.g. another relay or demo
+    serves on it: checked before a run starts. Port 0 (any free port) is always fine."""
+    import socket
+
+    if port == 0:
+        return
+    try:
+        family, kind, proto, _, address = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)[0]
+        with socket.socket(family, kind, proto) as probe:
+            probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            probe.bind(address)
+            probe.listen(1)
+    except OSError as error:
+        raise OSError(f"cannot serve Foxglove on {host}:{port}: {error.strerror or error}") from None
