@@ -15,6 +15,7 @@ from pathlib import Path
 
 from nuturtle_description.robot_params import add_model_argument
 from nuturtle_eval.run_evaluation import failed_targets, results_table
+from nuturtle_eval.run_folder import error_line
 from nuturtle_ros_common.dds_domain import add_domain_argument
 from nuturtle_tools.relay_config import add_foxglove_argument, parse_endpoint
 
@@ -146,8 +147,3 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"targets failed (--check): {'; '.join(failed)}", file=sys.stderr)
         return 1
     return 1 if result.saved_map is not None and not result.saved_map[0] else 0
-
-
-def error_line(error: BaseException) -> str:
-    """The error and its notes (where a failed run left its outputs) on one line."""
-    return " ".join(" ".join([str(error), *getattr(error, "__notes__", ())]).split())

@@ -17,6 +17,8 @@ INCOMPLETE, and the files named in ``keep``): anything else in ``OUT`` or ``OUT.
 :func:`check_replaceable` a ValueError before the run starts, so a mistyped ``--out ~`` is refused. Files
 in ``keep`` directly inside ``OUT`` (the demo's ``--map-file``, which slam may write during the run) are
 moved into the new result when it replaces the old one.
+
+:func:`error_line` is how the commands (demo, replay, dataset runs) print an error: one line.
 """
 
 from __future__ import annotations
@@ -111,3 +113,9 @@ class RunFolder:
     def discard(self) -> None:
         """Delete the staging folder: the run wrote nothing worth keeping."""
         shutil.rmtree(self.path, ignore_errors=True)
+
+
+def error_line(error: BaseException) -> str:
+    """What a run's command prints after ``error: ``: the error and its notes (where a failed run left its
+    outputs, added by the run) on one line, whatever line breaks they hold (a YAML error spans several)."""
+    return " ".join(" ".join([str(error), *getattr(error, "__notes__", ())]).split())

@@ -7,7 +7,9 @@ as they keep up (no message dropped) or at ``--rate``, and writes ``slam/`` (the
 MCAP bag), ``trajectory.png``, ``map.json``, ``covariance.png``, ``config.yaml`` and ``metrics.json`` (with
 ground truth in the bag: ``errors.png`` and the accuracy metrics) into ``--out`` (docs/replay.md).
 ``--play-only`` runs only the player, for nodes of your own. Exit code 2 for an unreadable bag, a missing
-topic or a bad option.
+topic, a bad option or params file, or a Foxglove port in use (one ``error:`` line, nothing written);
+1 for a replay that failed once playing (a full disk) and, with ``--check``, for a failed target.
+SIGINT, SIGTERM and SIGHUP end a replay alike: the outputs of what was played go to ``OUT.incomplete``.
 
 The heavy modules (rclpy, the nodes, matplotlib) are imported only once the arguments are good.
 """
@@ -45,7 +47,8 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         "bag", type=Path, help="bag directory (metadata.yaml), a single .mcap / .db3 file or a ROS 1 .bag"
     )
     parser.add_argument("--out", type=Path, default=Path("out/replay"),
-                        help="output folder (its files and its bag slam/ are replaced)")  # fmt: skip
+                        help="output folder, replaced as a whole when the replay completes (one stopped "
+                        "early goes to OUT.incomplete)")  # fmt: skip
     parser.add_argument("--params", type=Path, default=None,
                         help="ROS params YAML; its slam and landmarks sections (and /**) go to those nodes "
                         "(default: the demo's config.yaml next to a demo recording, if there)")  # fmt: skip
@@ -73,6 +76,9 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
                         help="with --play-only: wait up to S wall seconds for a subscriber on every played "
                         "topic before playing")  # fmt: skip
     parser.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    parser.add_argument("--check", action="store_true",
+                        help="exit status 1 when a target of the results table fails (a nusim recording; "
+                        "for CI)")  # fmt: skip
     add_foxglove_argument(parser, "--rate 1")
     add_domain_argument(parser, "private; env with --play-only, for your own nodes")
     return parser.parse_args(argv)
@@ -110,16 +116,14 @@ def summary(result: Any) -> str:
         f"replayed {metrics['bag']} ({metrics['storage']}), association {metrics['association']}, "
         f"motion from {metrics['motion_source']}"
     ]
-    if result.interrupted:
-        lines.append("interrupted: the outputs cover what was played so far")
+    if result.interrupted is not None:
+        lines.append(
+            f"INCOMPLETE: interrupted by {result.interrupted}; the outputs cover what was played so far"
+        )
     if result.accuracy:
-        from nuturtle_eval.metrics import RunMetrics
         from nuturtle_eval.run_evaluation import results_table
 
-        fields = RunMetrics.__dataclass_fields__
-        values = {key: metrics[key] for key in fields}
-        values["nees_pose_band_95"] = tuple(values["nees_pose_band_95"])
-        lines += ["", results_table(RunMetrics(**values), targets=metrics["nusim_recording"]), ""]
+        lines += ["", results_table(run_metrics(metrics), targets=metrics["nusim_recording"]), ""]
         if not metrics["nusim_recording"]:
             lines.append("(not a nusim recording: the demo's targets do not apply)")
     rows = ["| count | value |", "|---|---:|"]
@@ -183,11 +187,37 @@ def main(argv: Sequence[str] | None = None) -> int:
             domain_id=getattr(args, "domain_id", None),
         )
         result = run_replay(options)
-    except (BagError, ValueError, OSError) as error:
-        print(f"error: {error}", file=sys.stderr)
-        return 2
+    except (BagError, ValueError, OSError, RuntimeError) as error:
+        from nuturtle_eval.run_folder import error_line
+
+        print(f"error: {error_line(error)}", file=sys.stderr)
+        # a bad input (refused before anything was played) is 2, a replay that failed 1
+        return 1 if getattr(error, "__notes__", None) else 2
     print(summary(result))
+    failed = failed_targets(result)
+    if args.check and failed:
+        print(f"targets failed (--check): {'; '.join(failed)}", file=sys.stderr)
+        return 1
     return 0
+
+
+def failed_targets(result: Any) -> list[str]:
+    """The demo's targets the results table marks failed: a nusim recording with accuracy metrics only."""
+    metrics = result.metrics
+    if not (result.accuracy and metrics["nusim_recording"]):
+        return []
+    from nuturtle_eval.run_evaluation import failed_targets
+
+    return failed_targets(run_metrics(metrics))
+
+
+def run_metrics(metrics: dict[str, Any]) -> Any:
+    """The :class:`nuturtle_eval.metrics.RunMetrics` in a replay's metrics.json values."""
+    from nuturtle_eval.metrics import RunMetrics
+
+    values = {key: metrics[key] for key in RunMetrics.__dataclass_fields__}
+    values["nees_pose_band_95"] = tuple(values["nees_pose_band_95"])
+    return RunMetrics(**values)
 
 
 if __name__ == "__main__":

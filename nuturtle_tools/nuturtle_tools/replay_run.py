@@ -40,7 +40,7 @@ import math
 import sys
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -64,6 +64,7 @@ from nuturtle_eval.run_evaluation import (
     slip_counts,
     write_metrics,
 )
+from nuturtle_eval.run_folder import RunFolder
 from nuturtle_ros_common.conversions import stamp_nanoseconds, transform_from_pose
 from nuturtle_ros_common.dds_domain import ENVIRONMENT, PRIVATE, DomainChoice, domain_choice, run_context
 from nuturtle_ros_common.ros_files import flatten
@@ -87,10 +88,15 @@ from .player import (
     wait_until,
 )
 from .recorder import BagWriter, TeeSink, TopicRecorder, TopicTap, absolute, message_class
-from .relay_config import RelayConfig
+from .relay_config import RelayConfig, check_port_free
+from .stop_signals import StopSignals
 
 # The SLAM outputs: a rosbag2 bag directory in the output folder (slam/metadata.yaml + slam/slam.mcap)
 BAG_NAME = "slam"
+# Everything a replay writes into its output folder (nuturtle_eval.run_folder)
+OUTPUTS = (
+    "metrics.json", "trajectory.png", "errors.png", "covariance.png", "map.json", "config.yaml", BAG_NAME,
+)  # fmt: skip
 TRUTH_PLAYED_AS = "nusim/ground_truth"
 # a recording of nusim (the demo's): its pass/fail targets apply
 NUSIM_TRUTH_TOPIC = "/nusim/ground_truth"
@@ -190,13 +196,14 @@ class ReplayOptions:
 
 @dataclass(frozen=True)
 class ReplayResult:
-    """``metrics`` (metrics.json), ``out_dir``, ``accuracy`` whether the accuracy metrics are in it,
-    ``interrupted`` (Ctrl-C)."""
+    """``metrics`` (metrics.json), ``out_dir`` where the outputs are (``OUT``, or ``OUT.incomplete`` for a
+    replay stopped early), ``accuracy`` whether the accuracy metrics are in it, ``interrupted`` the name of
+    the signal that stopped it early (``SIGTERM``), None when the whole bag was played."""
 
     metrics: dict[str, Any]
     out_dir: Path
     accuracy: bool
-    interrupted: bool
+    interrupted: str | None
 
 
 def node_parameters_from_file(path: Path | None, node: str) -> dict[str, Any]:
@@ -392,8 +399,36 @@ class Replay:
             values["use_sim_time"] = True
 
     def run(self) -> ReplayResult:
+        """Play the bag and write the outputs into a staging folder beside ``out_dir`` that replaces it
+        only when the whole bag was played (:class:`nuturtle_eval.run_folder.RunFolder`); a replay
+        stopped early by SIGINT, SIGTERM or SIGHUP, or failing once it plays (a full disk: OSError),
+        leaves its outputs in ``OUT.incomplete``. ValueError/OSError before anything is written for a
+        ``out_dir`` that holds the bag or other files, or a Foxglove port in use."""
         out_dir = Path(self.options.out_dir)
-        out_dir.mkdir(parents=True, exist_ok=True)
+        if out_dir.resolve() in Path(self.options.bag).resolve().parents:
+            raise ValueError(
+                f"the bag {self.options.bag} is inside the output folder {out_dir}: choose another --out"
+            )
+        if self.options.foxglove is not None:
+            check_port_free(*self.options.foxglove)
+        folder = RunFolder(out_dir, OUTPUTS)
+        self.started = False
+        try:
+            with StopSignals() as stop:
+                result = self._run(folder.path, stop)
+        except BaseException as error:
+            if self.started:
+                where = folder.keep_incomplete(f"the replay failed: {error}")
+                error.add_note(f"the outputs written so far are in {where}/")
+            else:
+                folder.discard()
+            raise
+        if result.interrupted is None:
+            return replace(result, out_dir=folder.complete())
+        reason = f"interrupted by {result.interrupted}: the outputs cover the bag up to where it stopped"
+        return replace(result, out_dir=folder.keep_incomplete(reason))
+
+    def _run(self, out_dir: Path, stop: StopSignals) -> ReplayResult:
         context = run_context(self.options.domain, signal_handler_options=SignalHandlerOptions.NO)
         executor = SingleThreadedExecutor(context=context)
         nodes: list[Any] = []
@@ -403,7 +438,7 @@ class Replay:
             nodes.append(self.player)
             self.relay = None
             if not self.options.play_only:
-                writer = BagWriter(out_dir / BAG_NAME, overwrite=True)
+                writer = BagWriter(out_dir / BAG_NAME)
                 nodes.extend(self._build_nodes(context, writer))
             elif self.options.foxglove is not None:
                 self.relay = self._relay()
@@ -420,22 +455,25 @@ class Replay:
                 self._wait_for_subscribers(executor)
             else:
                 self._wait_for_matching(executor)
+            self.started = True
             wall_start = time.monotonic()
-            interrupted = self._play(executor)
+            self._play(executor, stop, writer)
             wall_seconds = time.monotonic() - wall_start
             run_until_idle(executor, self.logger)
             if writer is not None:
                 writer.close()
-            return self._finish(out_dir, wall_seconds, interrupted)
+            return self._finish(out_dir, wall_seconds, stop.received)
         finally:
-            if writer is not None:
-                writer.close()
-            if self.relay is not None:
-                self.relay.close()
-            for node in nodes:
-                node.destroy_node()
-            executor.shutdown()
-            rclpy.try_shutdown(context=context)
+            try:
+                if writer is not None:
+                    writer.close()
+            finally:
+                if self.relay is not None:
+                    self.relay.close()
+                for node in nodes:
+                    node.destroy_node()
+                executor.shutdown()
+                rclpy.try_shutdown(context=context)
 
     def _build_nodes(self, context: Context, writer: BagWriter) -> list[Any]:
         from nuslam.landmarks_node import LandmarksNode
@@ -503,38 +541,39 @@ class Replay:
             unmatched = sorted(n for n, c in self.player.subscription_counts().items() if c == 0)
             self.logger.info(f"playing although nothing subscribes to {unmatched} yet")
 
-    def _play(self, executor: SingleThreadedExecutor) -> bool:
-        """Every played message in log-time order; True when Ctrl-C ended it early."""
+    def _play(self, executor: SingleThreadedExecutor, stop: StopSignals, writer: BagWriter | None) -> None:
+        """Every played message in log-time order, until ``stop`` receives a signal; OSError once
+        ``writer`` failed to write."""
         pace = self.options.pace
         pacer = Pacer(pace) if pace > 0.0 else None
         in_process = not self.options.play_only
         start_ns = self.source.start_ns
         total_s = (self.source.end_ns - start_ns) * 1e-9
         with ProgressBar(total_s, "bag", self.options.progress) as progress:
-            try:
-                # the topics published since the executor last ran until idle, all of one log time
-                step: set[str] = set()
-                for message in self.source.messages(self.player.topics):
-                    if step and (message.log_time_ns != self.player.clock_ns or message.topic in step):
-                        run_until_idle(executor, self.logger)
-                        step.clear()
-                    if pacer is not None:
-                        wait_until(executor, self.logger, pacer.deadline_s(message.log_time_ns))
-                    self.player.publish_clock(message.log_time_ns)
-                    self.player.publish_message(message)
-                    if in_process:
-                        step.add(message.topic)
-                    elif pacer is None:
-                        wait_for_acks(self.player.reliable_publishers(message.topic), ACK_TIMEOUT_S)
-                    progress.advance((message.log_time_ns - start_ns) * 1e-9)
-                if in_process:
+            # the topics published since the executor last ran until idle, all of one log time
+            step: set[str] = set()
+            for message in self.source.messages(self.player.topics):
+                if stop.received is not None:
+                    return
+                if step and (message.log_time_ns != self.player.clock_ns or message.topic in step):
                     run_until_idle(executor, self.logger)
-                progress.advance(total_s)
-            except KeyboardInterrupt:
-                return True
+                    step.clear()
+                    if writer is not None:
+                        writer.check()
+                if pacer is not None:
+                    wait_until(executor, self.logger, pacer.deadline_s(message.log_time_ns))
+                self.player.publish_clock(message.log_time_ns)
+                self.player.publish_message(message)
+                if in_process:
+                    step.add(message.topic)
+                elif pacer is None:
+                    wait_for_acks(self.player.reliable_publishers(message.topic), ACK_TIMEOUT_S)
+                progress.advance((message.log_time_ns - start_ns) * 1e-9)
+            if in_process:
+                run_until_idle(executor, self.logger)
+            progress.advance(total_s)
         if self.options.play_only:
             wait_for_acks(self.player.reliable_publishers(), ACK_TIMEOUT_S)
-        return False
 
     # --- outputs -----------------------------------------------------------------------------------------
 
@@ -573,10 +612,11 @@ class Replay:
                 values["last_scan_refusal"] = self.landmarks.last_refusal
         return values
 
-    def _finish(self, out_dir: Path, wall_seconds: float, interrupted: bool) -> ReplayResult:
+    def _finish(self, out_dir: Path, wall_seconds: float, interrupted: str | None) -> ReplayResult:
         values = self._counts()
         values["replay_wall_seconds"] = wall_seconds
-        values["interrupted"] = interrupted
+        values["complete"] = interrupted is None
+        values["stopped_by"] = interrupted
         accuracy = False
         if not self.options.play_only:
             (out_dir / "config.yaml").write_text(params_file([self.landmarks, self.slam]), encoding="utf-8")

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..run_evaluation import write_metrics
-from ..run_folder import RunFolder, check_replaceable
+from ..run_folder import RunFolder, check_replaceable, error_line
 from .experiment import ASSOCIATIONS, Experiment, ExperimentResult, run_experiment
 
 # what a run writes into --out (the folder is replaced as a whole, nuturtle_eval.run_folder)
@@ -159,8 +159,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             experiment = victoria_experiment(recording, params)
             metrics = _write_run(args, experiment, lambda e, r: evaluate_victoria(e, r, recording), params)
     except (ValueError, OSError) as error:
-        # one line, whatever the error (a YAML error spans several)
-        print(f"error: {' '.join(str(error).split())}", file=sys.stderr)
+        print(f"error: {error_line(error)}", file=sys.stderr)
         return 2
     print(summary(metrics))
     print(f"results in {args.out}")
