@@ -15,8 +15,11 @@ One code path, ``rosbags.highlevel.AnyReader``, for
   type whose fields differ migrated field by field), type by type as its messages are read. A ROS 1 bag
   records no QoS: every topic is as if its publishers offered none (best effort for the scan).
 
-Anything else (a missing path, a folder without metadata.yaml, a file of another kind, a corrupt bag) is a
-:class:`BagError` with a message that names the path.
+An unfinished MCAP recording (a recorder killed with SIGKILL: a bag folder with one .mcap file and no
+metadata.yaml, or a .mcap file without its footer) is first recovered into a temporary single .mcap file
+(:mod:`nuturtle_tools.bag_recovery`: its complete chunks), deleted on close; ``recovery`` then says what
+was recovered. Anything else (a missing path, a folder without metadata.yaml, a file of another kind, a
+corrupt bag) is a :class:`BagError` with a message that names the path.
 
 Pieces: :class:`BagTopic` (one topic: name, type, message count, the QoS its publishers offered, as recorded),
 :class:`BagSource` (open, ``topics``, ``messages(topics)`` yielding :class:`BagMessage` tuples ``(topic,
@@ -25,11 +28,14 @@ type_name, data, log_time_ns)``).
 
 from __future__ import annotations
 
+import tempfile
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
 from typing import Any, NamedTuple
+
+from .bag_recovery import Recovery, recover_mcap, unfinished_mcap
 
 METADATA_FILE = "metadata.yaml"
 ROS1_SUFFIX = ".bag"
@@ -65,6 +71,8 @@ class BagMessage(NamedTuple):
 def storage_of(path: Path) -> str:
     """``mcap``, ``sqlite3`` or ``rosbag1``: the storage of a bag directory (its metadata.yaml) or a single
     file."""
+    if unfinished_mcap(path) is not None:
+        return "mcap"
     if path.is_dir():
         import yaml
 
@@ -79,6 +87,8 @@ def storage_of(path: Path) -> str:
 def _check_path(path: Path) -> None:
     if not path.exists():
         raise BagError(f"{path} does not exist")
+    if unfinished_mcap(path) is not None:
+        return
     if path.is_dir() and not (path / METADATA_FILE).is_file():
         raise BagError(f"{path} is a folder without {METADATA_FILE}: not a rosbag2 bag directory")
     if path.is_file() and path.suffix not in SINGLE_FILE_SUFFIXES:
@@ -105,6 +115,9 @@ class BagSource:
         # ROS 1 serialisation -> ROS 2 CDR, by message type (ROS 1 bags only)
         self._to_cdr: dict[str, Callable[[bytes | memoryview], Any]] = {}
         self.topics: dict[str, BagTopic] = {}
+        # an unfinished recording: what was recovered, and the temporary folder of the recovered file
+        self.recovery: Recovery | None = None
+        self._recovered: tempfile.TemporaryDirectory | None = None
 
     def open(self) -> BagSource:
         from rosbags.highlevel import AnyReader, AnyReaderError
@@ -113,7 +126,8 @@ class BagSource:
         from rosbags.typesys import Stores, get_typestore
 
         self._typestore = get_typestore(Stores.ROS2_JAZZY)
-        reader = AnyReader([self.path], default_typestore=self._typestore)
+        readable = self._recover() or self.path
+        reader = AnyReader([readable], default_typestore=self._typestore)
         try:
             reader.open()
         except (AnyReaderError, ReaderError, Ros1ReaderError, OSError, ValueError, KeyError) as error:
@@ -133,6 +147,21 @@ class BagSource:
             )
         self.topics = topics
         return self
+
+    def _recover(self) -> Path | None:
+        """The recovered single .mcap file of an unfinished recording (module docstring), else None."""
+        unfinished = unfinished_mcap(self.path)
+        if unfinished is None:
+            return None
+        self._recovered = tempfile.TemporaryDirectory(prefix="nuturtle_recovered_")
+        target = Path(self._recovered.name) / unfinished.name
+        try:
+            self.recovery = recover_mcap(unfinished, target)
+        except (ValueError, OSError) as error:
+            raise BagError(
+                f"{self.path}: an unfinished recording that cannot be recovered: {error}"
+            ) from error
+        return target
 
     @property
     def start_ns(self) -> int:
@@ -179,6 +208,9 @@ class BagSource:
         if self._reader is not None:
             reader, self._reader = self._reader, None
             reader.close()
+        if self._recovered is not None:
+            recovered, self._recovered = self._recovered, None
+            recovered.cleanup()
 
     def __enter__(self) -> BagSource:
         return self.open()

@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import importlib
 import threading
+import time
 from collections.abc import Collection, Iterable, Sequence
 from pathlib import Path
 from types import TracebackType
@@ -64,6 +65,10 @@ MESSAGE_ENCODING = "cdr"
 CUSTOM_DATA = {"recorded_by": __name__}
 # Queue of each recording subscription: room for bursts when the executor falls behind
 RECORD_DEPTH = 200
+# Wall time between two flushes of a bag: the pending MCAP chunk is closed and written to the file, so a
+# recorder killed with SIGKILL leaves every message but those of its last FLUSH_PERIOD_S in whole chunks
+# (nuturtle_tools.bag_recovery reads them back)
+FLUSH_PERIOD_S = 1.0
 
 
 def _bag_time(duration: Duration) -> QosTime:
@@ -190,7 +195,9 @@ class BagWriter(ClosingSink):
     thread safe; use as a context manager.
 
     ``add_topic(topic, type_name, offered_qos_profiles)`` once per topic, then ``write(topic, cdr_bytes,
-    timestamp_ns)``; ``close()`` (idempotent) finishes the .mcap file and writes metadata.yaml. ``path``
+    timestamp_ns)``, which closes the pending chunk and writes it to the file every ``FLUSH_PERIOD_S`` of
+    wall time (what a kill leaves, :mod:`nuturtle_tools.bag_recovery`, loses at most that); ``close()``
+    (idempotent) finishes the .mcap file and writes metadata.yaml. ``path``
     must not exist (FileExistsError), unless ``overwrite`` and it is a bag, which is then replaced.
     ``typestore`` (default: rosbags' ROS 2 Jazzy types) gives the definitions and type hashes.
     """
@@ -207,6 +214,8 @@ class BagWriter(ClosingSink):
         for key, value in CUSTOM_DATA.items():
             self._bag.set_custom_data(key, value)
         self._bag.open()
+        self._flush()
+        self._flushed_at = time.monotonic()
         self._connections: dict[str, Connection] = {}
         # the first OSError of a write (the bag is then no longer written)
         self.failure: OSError | None = None
@@ -257,10 +266,20 @@ class BagWriter(ClosingSink):
                 return
             try:
                 self._bag.write(self._connections[topic], int(timestamp_ns), data)
+                if time.monotonic() - self._flushed_at >= FLUSH_PERIOD_S:
+                    self._flush()
+                    self._flushed_at = time.monotonic()
             except OSError as error:
                 self.failure = error
                 return
             self._counts[topic] += 1
+
+    def _flush(self) -> None:
+        """Close the pending chunk of rosbags' MCAP storage writer and write the file's buffer out."""
+        storage = self._bag.storage
+        if storage.chunk.bio.tell():
+            storage.close_chunk()
+        storage.bio.flush()
 
     def check(self) -> None:
         """OSError, naming the bag, once a write failed (``failure``)."""

@@ -378,7 +378,7 @@ class Replay:
         )
         # a nusim recording (the demo's): its pass/fail targets apply
         self.nusim_recording = NUSIM_TRUTH_TOPIC in source.topics
-        self.notes: list[str] = []
+        self.notes: list[str] = [] if source.recovery is None else [source.recovery.note()]
         truth, motion = self.topics.get("truth"), self.topics.get(self.motion_source)
         if truth is not None and motion is not None and truth.name == motion.name:
             self.notes.append(

@@ -25,6 +25,7 @@ THIRD_PARTY = {
     "matplotlib": ("python3-matplotlib", "matplotlib"),
     "tqdm": ("python3-tqdm", "tqdm"),
     "rosbags": ("python3-rosbags-pip", "rosbags"),
+    "mcap": ("python3-mcap-pip", "mcap"),
     "foxglove": ("python3-foxglove-sdk-pip", "foxglove-sdk"),
 }
 # Python modules that are ROS packages of the same name (rclpy, message packages, launch)
