@@ -118,4 +118,4 @@ class RunFolder:
 def error_line(error: BaseException) -> str:
     """What a run's command prints after ``error: ``: the error and its notes (where a failed run left its
     outputs, added by the run) on one line, whatever line breaks they hold (a YAML error spans several)."""
-    return " ".join(" ".join([str(error), *getattr(error, "__notes__", ())]).split())
+    return "; ".join(" ".join(str(part).split()) for part in [error, *getattr(error, "__notes__", ())])

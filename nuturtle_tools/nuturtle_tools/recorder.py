@@ -31,6 +31,7 @@ it does not know (or knows in another version) is left out.
 
 from __future__ import annotations
 
+import errno
 import importlib
 import threading
 import time
@@ -284,7 +285,9 @@ class BagWriter(ClosingSink):
     def check(self) -> None:
         """OSError, naming the bag, once a write failed (``failure``)."""
         if self.failure is not None:
-            raise OSError(f"cannot write the bag {self.path}: {self.failure.strerror or self.failure}")
+            code = errno.errorcode.get(self.failure.errno or 0)
+            reason = f"{self.failure.strerror} ({code})" if code else str(self.failure)
+            raise OSError(f"cannot write the bag {self.path.name}/: {reason}")
 
     def close(self) -> None:
         """Finish the .mcap file (summary and index) and write metadata.yaml (idempotent). After a failed
