@@ -56,7 +56,8 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
                         "when not --realtime")  # fmt: skip
     parser.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     parser.add_argument("--check", action="store_true",
-                        help="exit status 1 when a target of the results table fails (for CI)")  # fmt: skip
+                        help="exit status 1 when a target of the results table fails or the run is "
+                        "stopped early (for CI)")  # fmt: skip
     add_foxglove_argument(parser, "--realtime")
     add_domain_argument(parser)
     maps = parser.add_argument_group("maps and localization (docs/maps.md)")
@@ -143,7 +144,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 1 if getattr(error, "__notes__", None) else 2
     print(report(result, options))
     failed = failed_targets(result.metrics)
+    if result.interrupted is not None:
+        failed.insert(0, f"the run is incomplete ({result.interrupted})")
     if args.check and failed:
-        print(f"targets failed (--check): {'; '.join(failed)}", file=sys.stderr)
+        print(f"check failed: {'; '.join(failed)}", file=sys.stderr)
         return 1
     return 1 if result.saved_map is not None and not result.saved_map[0] else 0

@@ -77,8 +77,8 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
                         "topic before playing")  # fmt: skip
     parser.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     parser.add_argument("--check", action="store_true",
-                        help="exit status 1 when a target of the results table fails (a nusim recording; "
-                        "for CI)")  # fmt: skip
+                        help="exit status 1 when a target of the results table fails (a nusim recording) "
+                        "or the replay is stopped early (for CI)")  # fmt: skip
     add_foxglove_argument(parser, "--rate 1")
     add_domain_argument(parser, "private; env with --play-only, for your own nodes")
     return parser.parse_args(argv)
@@ -195,8 +195,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 1 if getattr(error, "__notes__", None) else 2
     print(summary(result))
     failed = failed_targets(result)
+    if result.interrupted is not None:
+        failed.insert(0, f"the replay is incomplete ({result.interrupted})")
     if args.check and failed:
-        print(f"targets failed (--check): {'; '.join(failed)}", file=sys.stderr)
+        print(f"check failed: {'; '.join(failed)}", file=sys.stderr)
         return 1
     return 0
 

@@ -4,6 +4,7 @@ robot model it runs."""
 from __future__ import annotations
 
 import math
+import socket
 
 import numpy as np
 import pytest
@@ -66,6 +67,34 @@ def test_an_unknown_model_is_one_error_line_and_exit_code_2(monkeypatch, capsys,
         "('burger', 'waffle', 'waffle_pi'), got 'burger3'"
     ]
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("bad", ["world", "map", "foxglove port"])
+def test_a_bad_input_is_one_error_line_exit_2_and_the_output_folder_untouched(tmp_path, capsys, bad):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "metrics.json").write_text("previous")
+    broken = tmp_path / "broken.yaml"
+    broken.write_text("nusim: {ros__parameters: {rate: [}\n")
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen(1)
+        port = busy.getsockname()[1]
+        args, message = {
+            "world": (["--world", str(broken)], f"error: world file {broken} is not a ROS params file: "),
+            "map": (["--map-file", str(broken)], f"error: {broken}: not a JSON document (truncated?): "),
+            "foxglove port": (
+                ["--foxglove", f"127.0.0.1:{port}"],
+                f"error: cannot serve Foxglove on 127.0.0.1:{port}: Address already in use",
+            ),
+        }[bad]
+        assert main(["--out", str(out), "--no-progress", *args]) == 2
+    (line,) = capsys.readouterr().err.splitlines()
+    assert line.startswith(message)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["broken.yaml", "out"]
+    assert [p.name for p in out.iterdir()] == ["metrics.json"] and (
+        out / "metrics.json"
+    ).read_text() == "previous"
 
 
 @pytest.mark.ros

@@ -35,9 +35,10 @@ def _previous_result(tmp_path: Path) -> Path:
     return out
 
 
-def _start_demo(tmp_path: Path, out: Path, **kwargs) -> subprocess.Popen:
+def _start_demo(tmp_path: Path, out: Path, *options: str, **kwargs) -> subprocess.Popen:
     return subprocess.Popen(
-        [sys.executable, "-m", "nuturtle_demo", "--duration", LONG_S, "--out", str(out), "--no-progress"],
+        [sys.executable, "-m", "nuturtle_demo", "--duration", LONG_S, "--out", str(out), "--no-progress",
+         *options],
         cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kwargs,
     )  # fmt: skip
 
@@ -63,11 +64,13 @@ def _stderr_lines(stderr: str) -> list[str]:
 @pytest.mark.ros
 def test_sigterm_ends_the_demo_like_ctrl_c_and_keeps_the_previous_result(tmp_path):
     out = _previous_result(tmp_path)
-    process = _start_demo(tmp_path, out)
+    process = _start_demo(tmp_path, out, "--check")
     _wait_for_bag(process, out)
     process.send_signal(signal.SIGTERM)
     stdout, stderr = process.communicate(timeout=60)
-    assert process.returncode == 0, stderr
+    # without --check the exit status is 0, as after Ctrl-C; --check fails an incomplete run
+    assert process.returncode == 1, stderr
+    assert _stderr_lines(stderr)[-1].startswith("check failed: the run is incomplete (SIGTERM)")
     incomplete = tmp_path / "out.incomplete"
     assert (out / "metrics.json").read_text() == PREVIOUS
     assert "interrupted by SIGTERM" in (incomplete / "INCOMPLETE").read_text()

@@ -197,3 +197,16 @@ def test_the_no_landmarks_hint_tells_the_cases_apart(counts, expected):
         assert hint is None
     else:
         assert hint is not None and expected in hint
+
+
+def test_a_bad_params_file_is_one_error_line_and_the_output_folder_untouched(tmp_path, capsys):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "metrics.json").write_text("previous")
+    params = tmp_path / "params.yaml"
+    params.write_text("slam: [\n")
+    assert main([str(RECORDING), "--params", str(params), "--out", str(out), "--no-progress"]) == 2
+    (line,) = capsys.readouterr().err.splitlines()
+    assert line.startswith(f"error: cannot read params file {params}: while parsing a flow node")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "params.yaml"]
+    assert (out / "metrics.json").read_text() == "previous"
