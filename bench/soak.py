@@ -366,10 +366,12 @@ def run_soak(
     progress: bool = True,
 ) -> SoakResult:
     """Run the demo for ``duration_s`` of robot time (s) into ``out_dir``, sampling every
-    ``sample_period_s`` (s) of it (module docstring); writes soak.json and soak.png there."""
+    ``sample_period_s`` (s) of it (module docstring); writes soak.json and soak.png there, the demo's
+    outputs into ``out_dir/demo``."""
     out_dir = Path(out_dir)
+    # the demo's own output folder, replaced as a whole by each run (docs/demo.md)
     options = DemoOptions(
-        association=association, seed=seed, duration_s=duration_s, out_dir=out_dir, progress=progress
+        association=association, seed=seed, duration_s=duration_s, out_dir=out_dir / "demo", progress=progress
     )
     sampler = SoakSampler(sample_period_s)
     wall_start = time.monotonic()
@@ -394,6 +396,7 @@ def run_soak(
         "demo_metrics": metrics,
         "samples": [asdict(s) for s in sampler.samples],
     }  # fmt: skip
+    out_dir.mkdir(parents=True, exist_ok=True)
     json_path, png_path = out_dir / "soak.json", out_dir / "soak.png"
     json_path.write_text(json.dumps(report, indent=2, allow_nan=True) + "\n", encoding="utf-8")
     plot_soak(png_path, sampler.samples, metrics["landmarks_true"])
