@@ -439,6 +439,8 @@ class _DemoRun:
                 raise RuntimeError(f"the recorder did not discover {missing} within {DISCOVERY_TIMEOUT_S} s")
             if options.mode == "localization":
                 relocalize(executor, system, options)
+            if stop.received is not None:
+                raise RuntimeError(f"stopped by {stop.received} before the simulation started")
             executor.add_node(system.nusim)
             self.started = True
             wall_start = time.monotonic()
