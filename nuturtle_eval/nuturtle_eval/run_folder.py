@@ -80,7 +80,7 @@ class RunFolder:
 
     def _mark(self, reason: str) -> None:
         (self.path / INCOMPLETE).write_text(
-            f"{reason}\nThe outputs here are not a complete run; the last complete one is in {self.final}.\n",
+            f"{reason}\nThe outputs here are not a complete run; complete runs go to {self.final} only.\n",
             encoding="utf-8",
         )
 
