@@ -3,7 +3,10 @@
 Runs nusim, turtle_control, odometry, landmarks, slam and a figure-eight driver headless for two minutes of
 robot time, faster than real time, then writes metrics.json, trajectory.png, errors.png, covariance.png,
 the rosbag2 bag run/ (every topic: metadata.yaml + run.mcap) and config.yaml into the output folder and
-prints a results table (docs/demo.md).
+prints a results table (docs/demo.md). The output folder is replaced only by a complete run; a run stopped
+by SIGINT, SIGTERM or SIGHUP goes to OUT.incomplete. Exit status: 2 for a bad input (one ``error:`` line,
+nothing written), 1 for a failed run, a failed save_map or, with ``--check``, a failed target or a stopped
+run, else 0.
 """
 
 from __future__ import annotations
