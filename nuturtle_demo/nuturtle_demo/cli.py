@@ -18,7 +18,7 @@ from pathlib import Path
 
 from nuturtle_description.robot_params import add_model_argument
 from nuturtle_eval.run_evaluation import failed_targets, results_table
-from nuturtle_eval.run_folder import error_line
+from nuturtle_eval.run_folder import error_line, unfinished_runs
 from nuturtle_ros_common.dds_domain import add_domain_argument
 from nuturtle_tools.relay_config import add_foxglove_argument, parse_endpoint
 
@@ -139,6 +139,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ValueError as error:
         print(f"error: {error_line(error)}", file=sys.stderr)
         return 2
+    for path in unfinished_runs(options.out_dir):
+        print(f"note: {path}/ holds a run that was killed (INCOMPLETE); its bag is read by "
+              f"python -m nuturtle_tools.replay {path}/{BAG_NAME}", file=sys.stderr)  # fmt: skip
     try:
         result = run_demo(options)
     except (OSError, ValueError, RuntimeError) as error:

@@ -18,6 +18,7 @@ INCOMPLETE, and the files named in ``keep``): anything else in ``OUT`` or ``OUT.
 in ``keep`` directly inside ``OUT`` (the demo's ``--map-file``, which slam may write during the run) are
 moved into the new result when it replaces the old one.
 
+:func:`unfinished_runs` finds the staging folders of killed runs (the commands name them before a run);
 :func:`error_line` is how the commands (demo, replay, dataset runs) print an error: one line.
 """
 
@@ -113,6 +114,27 @@ class RunFolder:
     def discard(self) -> None:
         """Delete the staging folder: the run wrote nothing worth keeping."""
         shutil.rmtree(self.path, ignore_errors=True)
+
+
+def unfinished_runs(final: Path) -> list[Path]:
+    """The staging folders beside ``final`` whose process is gone: runs that were killed (SIGKILL, a power
+    cut) and left their outputs there, marked INCOMPLETE. They are never deleted automatically."""
+    found = []
+    for path in Path(final).parent.glob(f"{Path(final).name}.partial-*"):
+        pid = path.name.rpartition("-")[2]
+        if path.is_dir() and pid.isdigit() and not _running(int(pid)):
+            found.append(path)
+    return sorted(found)
+
+
+def _running(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
 
 
 def error_line(error: BaseException) -> str:

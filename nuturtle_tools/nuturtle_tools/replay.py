@@ -161,6 +161,8 @@ def recording_params(bag: Path) -> Path | None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = parse_args(argv)
+    from nuturtle_eval.run_folder import error_line, unfinished_runs
+
     from .bag_source import BagError, BagSource
 
     try:
@@ -186,10 +188,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             foxglove=foxglove,
             domain_id=getattr(args, "domain_id", None),
         )
+        for path in unfinished_runs(options.out_dir):
+            print(f"note: {path}/ holds a replay that was killed (INCOMPLETE)", file=sys.stderr)
         result = run_replay(options)
     except (BagError, ValueError, OSError, RuntimeError) as error:
-        from nuturtle_eval.run_folder import error_line
-
         print(f"error: {error_line(error)}", file=sys.stderr)
         # a bad input (refused before anything was played) is 2, a replay that failed 1
         return 1 if getattr(error, "__notes__", None) else 2

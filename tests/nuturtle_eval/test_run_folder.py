@@ -1,9 +1,19 @@
 """nuturtle_eval.run_folder: a run writes into a staging folder; the previous result is replaced only when
 the run completes, an early stop leaves a marked OUT.incomplete, a foreign folder is never replaced."""
 
+import os
+import subprocess
+import sys
+
 import pytest
 
-from nuturtle_eval.run_folder import INCOMPLETE, RunFolder, check_replaceable, incomplete_folder
+from nuturtle_eval.run_folder import (
+    INCOMPLETE,
+    RunFolder,
+    check_replaceable,
+    incomplete_folder,
+    unfinished_runs,
+)
 
 OUTPUTS = ("metrics.json", "run")
 
@@ -74,3 +84,14 @@ def test_a_folder_with_other_files_is_refused_before_anything_is_written(tmp_pat
     (tmp_path / "file").write_text("")
     with pytest.raises(ValueError, match="is a file"):
         check_replaceable(tmp_path / "file", OUTPUTS)
+
+
+def test_the_staging_folder_of_a_killed_run_is_found_and_a_running_one_is_not(tmp_path):
+    gone = subprocess.run(
+        [sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True
+    )
+    killed = tmp_path / f"latest.partial-{int(gone.stdout)}"
+    killed.mkdir()
+    (tmp_path / f"latest.partial-{os.getpid()}").mkdir()
+    (tmp_path / "other.partial-1").mkdir()
+    assert unfinished_runs(tmp_path / "latest") == [killed]
