@@ -59,7 +59,7 @@ import numpy as np
 
 from nuturtle_demo.run import ASSOCIATIONS, DemoOptions, DemoSystem, run_demo
 from nuturtle_eval.metrics import associate_landmarks, pose_errors
-from nuturtle_eval.run_evaluation import LANDMARK_GATE_M
+from nuturtle_eval.run_evaluation import LANDMARK_GATE_M, json_value
 
 SAMPLE_PERIOD_S = 10.0
 # Targets
@@ -398,7 +398,8 @@ def run_soak(
     }  # fmt: skip
     out_dir.mkdir(parents=True, exist_ok=True)
     json_path, png_path = out_dir / "soak.json", out_dir / "soak.png"
-    json_path.write_text(json.dumps(report, indent=2, allow_nan=True) + "\n", encoding="utf-8")
+    # strict JSON, as metrics.json: a NaN (no SLAM pose yet) is null
+    json_path.write_text(json.dumps(json_value(report), indent=2, allow_nan=False) + "\n", encoding="utf-8")
     plot_soak(png_path, sampler.samples, metrics["landmarks_true"])
     return SoakResult(sampler.samples, summary, targets, metrics, wall_seconds, json_path, png_path)
 
