@@ -420,11 +420,12 @@ class _DemoRun:
 
     def run(self, stop: StopSignals, on_progress: ProgressCallback | None) -> DemoResult:
         options, out_dir = self.options, self.out_dir
-        writer = BagWriter(out_dir / BAG_NAME)
         context = run_context(options.domain_id, signal_handler_options=SignalHandlerOptions.NO)
         executor = SingleThreadedExecutor(context=context)
         system: DemoSystem | None = None
+        writer: BagWriter | None = None
         try:
+            writer = BagWriter(out_dir / BAG_NAME)
             system = DemoSystem(options, context, writer)
             for node in system.nodes:
                 if node is not system.nusim:
@@ -487,7 +488,8 @@ class _DemoRun:
             )
         finally:
             try:
-                writer.close()
+                if writer is not None:
+                    writer.close()
             finally:
                 if system is not None and system.relay is not None:
                     system.relay.close()
