@@ -326,7 +326,7 @@ class NusimNode(Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    sys.exit(run_node(lambda: NusimNode(), "nusim", args))
+    sys.exit(run_node(lambda: NusimNode(), "nusim", __doc__, args))
 
 
 if __name__ == "__main__":

@@ -163,7 +163,7 @@ class LandmarksNode(Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    sys.exit(run_node(lambda: LandmarksNode(), "landmarks", args))
+    sys.exit(run_node(lambda: LandmarksNode(), "landmarks", __doc__, args))
 
 
 if __name__ == "__main__":

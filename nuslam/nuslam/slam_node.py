@@ -629,7 +629,7 @@ class SlamNode(Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    sys.exit(run_node(lambda: SlamNode(), "slam", args))
+    sys.exit(run_node(lambda: SlamNode(), "slam", __doc__, args))
 
 
 if __name__ == "__main__":

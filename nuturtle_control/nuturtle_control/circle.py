@@ -9,6 +9,7 @@ Services (std_srvs/Empty)
         node's parameters (frequency, radius, velocity) is set; either resumes driving (reverse in the
         flipped direction; setting a parameter, even to its current value, in the current one).
         Nothing is published while stopped, so another command source (teleop) can take over.
+        The node publishes one zero Twist when it stops (SIGINT, SIGTERM, SIGHUP).
 Parameters (`CircleConfig`, changeable at run time; invalid values are rejected with the reason)
     `frequency` (Hz, finite > 0), `radius` (m, finite > 0), `velocity` (m/s, finite; negative drives
     backwards).
@@ -101,13 +102,17 @@ class CircleNode(Node):
         return response
 
     def _on_stop(self, request: Empty.Request, response: Empty.Response) -> Empty.Response:
+        self.stop()
+        return response
+
+    def stop(self) -> None:
+        """Publish one zero Twist and stop driving (`~/stop`, and the node's own stop: `run_node`)."""
         self.stopped = True
         self._cmd_vel_publisher.publish(Twist())
-        return response
 
 
 def main(args: list[str] | None = None) -> None:
-    sys.exit(run_node(lambda: CircleNode(), "circle", args))
+    sys.exit(run_node(lambda: CircleNode(), "circle", __doc__, args))
 
 
 if __name__ == "__main__":

@@ -140,7 +140,7 @@ class OdometryNode(Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    sys.exit(run_node(lambda: OdometryNode(), "odometry", args))
+    sys.exit(run_node(lambda: OdometryNode(), "odometry", __doc__, args))
 
 
 if __name__ == "__main__":

@@ -16,7 +16,8 @@ arc, only slower). A lateral velocity (linear.y) cannot be followed by a differe
 dropped with a warning and the rest of the command is executed. The out-of-plane components (linear.z,
 angular.x, angular.y) are ignored. A command with a non-finite component is logged and skipped.
 Warnings are throttled. A command holds for `cmd_timeout` s (node clock) without a newer one; then one
-zero `wheel_cmd` stops the wheels.
+zero `wheel_cmd` stops the wheels. The node also publishes one zero `wheel_cmd` when it stops (SIGINT,
+SIGTERM, SIGHUP: `nuturtle_ros_common.node_main`), so the wheels never keep the last command.
 """
 
 from __future__ import annotations
@@ -55,12 +56,15 @@ class TurtleControlNode(Node):
         self.create_timer(WATCHDOG_PERIOD_S, self._on_watchdog)
 
     def _on_watchdog(self) -> None:
-        now = self.get_clock().now()
-        if self.watchdog.expired(now.nanoseconds):
-            stop = JointState(name=self.joints.names, velocity=[0.0, 0.0])
-            stop.header.stamp = now.to_msg()
-            self._wheel_cmd_publisher.publish(stop)
+        if self.watchdog.expired(self.get_clock().now().nanoseconds):
+            self.stop()
             self.get_logger().info("no cmd_vel for cmd_timeout: wheels stopped")
+
+    def stop(self) -> None:
+        """Publish one zero `wheel_cmd` (the command timeout, and the node's own stop: `run_node`)."""
+        stop = JointState(name=self.joints.names, velocity=[0.0, 0.0])
+        stop.header.stamp = self.get_clock().now().to_msg()
+        self._wheel_cmd_publisher.publish(stop)
 
     def _on_cmd_vel(self, msg: Twist) -> None:
         components = (msg.linear.x, msg.linear.y, msg.linear.z, msg.angular.x, msg.angular.y, msg.angular.z)
@@ -101,7 +105,7 @@ class TurtleControlNode(Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    sys.exit(run_node(lambda: TurtleControlNode(), "turtle_control", args))
+    sys.exit(run_node(lambda: TurtleControlNode(), "turtle_control", __doc__, args))
 
 
 if __name__ == "__main__":

@@ -33,7 +33,8 @@ Subscribes
     `slam/odom` (nav_msgs/Odometry) when ``feedback`` is true.
 Publishes
     `cmd_vel` (geometry_msgs/Twist) at ``rate`` Hz (timer on the node's clock: run it with
-    ``use_sim_time`` so the route follows simulation time).
+    ``use_sim_time`` so the route follows simulation time); one zero twist when the node stops (SIGINT,
+    SIGTERM, SIGHUP) or ``stop()`` is called.
 Parameters
     `RouteConfig`, `model` and `RobotParams` (that model's constants by default).
 """
@@ -185,7 +186,7 @@ class FigureEightDriver(Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    sys.exit(run_node(lambda: FigureEightDriver(), "driver", args))
+    sys.exit(run_node(lambda: FigureEightDriver(), "driver", __doc__, args))
 
 
 if __name__ == "__main__":

@@ -1,18 +1,89 @@
-"""The one `main` every node uses: init, log the effective parameters, spin, stop cleanly; invalid
-parameters stop start-up with a message, and no single message can stop a running node.
+"""The one `main` every node uses: ``--help``, init, log the effective parameters, spin, stop cleanly;
+invalid parameters stop start-up with a message, and no single message can stop a running node.
+
+Stopping: SIGINT (Ctrl-C), SIGTERM (launch after its ``sigterm_timeout``, ``timeout``, systemd, docker)
+and SIGHUP (the terminal closed) each end the node the same way, with exit code 0 and no traceback. A
+signal only records the request (:class:`StopSignals`); the spin loop sees it within ``SPIN_PERIOD_S``,
+then, in the main thread and with the context still up, a node that commands something (:class:`SafeStop`)
+publishes its safe command (zero wheel speeds) and waits up to ``FLUSH_TIMEOUT_S`` for its subscribers to
+acknowledge it, and only then are the node and the context shut down. rclpy's own handlers are not
+installed: they shut the context down from a second thread while a callback may still be running (a
+callback then fails on a dead context), and re-raise SIGINT as a ``KeyboardInterrupt`` wherever the main
+thread is (a traceback and exit code -2 when a second SIGINT lands in the shutdown). A second signal while
+the node stops is ignored; a signal whose disposition is SIG_IGN at start-up (``nohup``, a background job
+of a script) stays ignored. Exit codes: 0 stopped (a signal, or the context shut down), 1 could not start
+(an invalid parameter, a port in use), 2 a bad command line (argparse's usage error).
 """
 
 from __future__ import annotations
 
+import argparse
+import signal
+import sys
+import time
 import traceback
 from collections.abc import Callable, Sequence
+from types import FrameType
+from typing import Protocol, runtime_checkable
 
 import rclpy
+from rclpy.duration import Duration
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.impl.rcutils_logger import RcutilsLogger
 from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
+from rclpy.utilities import remove_ros_args
 
 from .throttle import WARN_THROTTLE_S
+
+# The longest one spin step waits (s): a stop signal is acted on within this time
+SPIN_PERIOD_S = 0.1
+# The longest a stopping node waits for its last messages to be acknowledged (s)
+FLUSH_TIMEOUT_S = 0.5
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+ROS_ARGUMENTS_HELP = """\
+ROS arguments come after --ros-args: -p NAME:=VALUE sets a parameter, --params-file FILE loads a YAML
+file of them, -r FROM:=TO remaps a name (docs/robot.md, "Parameters", says which value wins).
+`ros2 param describe /NODE NAME` describes a parameter of the running node.
+
+Stops on SIGINT (Ctrl-C), SIGTERM or SIGHUP with exit code 0 (docs/robot.md, "Stopping a node");
+exit code 1: it could not start (an invalid parameter: the message says which), 2: a bad command line.
+"""
+
+
+@runtime_checkable
+class SafeStop(Protocol):
+    """A node that commands something and has a safe command to leave behind when it stops."""
+
+    def stop(self) -> None:
+        """Publish the safe command (e.g. zero wheel speeds) and publish nothing more; called once by
+        :func:`run_node`, while the context is still up."""
+
+
+class StopSignals:
+    """Records the first of SIGINT, SIGTERM and SIGHUP as the request to stop (``received``); later ones
+    are ignored. Nothing else happens in the handler: the spin loop polls ``received``."""
+
+    def __init__(self) -> None:
+        self.received: signal.Signals | None = None
+
+    def install(self) -> None:
+        """Handle every stop signal that is not ignored (SIG_IGN stays: ``nohup``, background jobs)."""
+        for signum in STOP_SIGNALS:
+            if signal.getsignal(signum) is not signal.SIG_IGN:
+                signal.signal(signum, self._on_signal)
+
+    def ignore(self) -> None:
+        """Ignore every stop signal from now on: the node is gone and the process is exiting. (Python's
+        exit restores the default action of every signal it handles before C++ tears DDS down, ~0.3 s in
+        which a second SIGINT would otherwise end the process with -2; SIG_IGN survives it.)"""
+        for signum in STOP_SIGNALS:
+            signal.signal(signum, signal.SIG_IGN)
+
+    def _on_signal(self, signum: int, frame: FrameType | None) -> None:
+        if self.received is None:
+            self.received = signal.Signals(signum)
 
 
 def effective_parameters(node: Node) -> str:
@@ -46,28 +117,52 @@ def spin_once_guarded(executor: Executor, logger: RcutilsLogger, timeout_sec: fl
     return run_guarded(lambda: executor.spin_once(timeout_sec=timeout_sec), logger)
 
 
-def spin_guarded(node: Node) -> None:
-    """Spin ``node`` until its context shuts down, as ``rclpy.spin`` does, with every step guarded by
-    :func:`spin_once_guarded`."""
+def spin_guarded(node: Node, stop: StopSignals) -> None:
+    """Spin ``node`` until its context shuts down or ``stop`` has received a signal, every step guarded by
+    :func:`spin_once_guarded` and waiting at most ``SPIN_PERIOD_S``."""
     executor = SingleThreadedExecutor(context=node.context)
     executor.add_node(node)
     try:
-        while node.context.ok():
-            spin_once_guarded(executor, node.get_logger())
+        while node.context.ok() and stop.received is None:
+            spin_once_guarded(executor, node.get_logger(), timeout_sec=SPIN_PERIOD_S)
     finally:
         executor.shutdown()
 
 
-def run_node(factory: Callable[[], Node], name: str, args: Sequence[str] | None = None) -> int:
-    """Spin the node `factory()` builds until shutdown; returns the process exit code.
+def check_command_line(name: str, description: str, args: Sequence[str]) -> None:
+    """``-h`` / ``--help``: print ``description`` (the node's module docstring) and how ROS arguments and
+    stopping work, and exit 0; an argument that is neither ROS's nor ``--help``, or malformed ROS
+    arguments: a usage error, exit 2. Never starts anything."""
+    parser = argparse.ArgumentParser(
+        prog=name,
+        usage="%(prog)s [-h] [--ros-args ...]",
+        description=description,
+        epilog=ROS_ARGUMENTS_HELP,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    try:
+        user_args = remove_ros_args(args=list(args))[1:]
+    except rclpy_implementation.RCLError as error:  # malformed ROS arguments
+        parser.error(str(error))
+    parser.parse_args(user_args)
+
+
+def run_node(
+    factory: Callable[[], Node], name: str, description: str, args: Sequence[str] | None = None
+) -> int:
+    """Spin the node `factory()` builds until a stop signal or shutdown; returns the process exit code
+    (module docstring: 0 stopped, 1 could not start; ``--help`` and a bad command line exit here).
 
     A ValueError (an invalid parameter) or an OSError (something the node cannot have: a port in use)
     while building the node is logged as fatal with its message and gives exit code 1, without a
-    traceback. The node's effective parameters are logged at start-up. An
-    exception in a callback is logged and the node keeps spinning (:func:`spin_guarded`). Use as
-    `sys.exit(run_node(MyNode, "my_node"))`.
+    traceback. The node's effective parameters are logged at start-up. An exception in a callback is
+    logged and the node keeps spinning (:func:`spin_guarded`). A :class:`SafeStop` node's ``stop()`` runs
+    before the node is destroyed. Use as `sys.exit(run_node(MyNode, "my_node", __doc__))`.
     """
-    rclpy.init(args=args)
+    check_command_line(name, description, sys.argv if args is None else args)
+    stop = StopSignals()
+    stop.install()
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     try:
         try:
@@ -78,12 +173,28 @@ def run_node(factory: Callable[[], Node], name: str, args: Sequence[str] | None 
         except OSError as error:
             rclpy.logging.get_logger(name).fatal(f"cannot start: {error}")
             return 1
-        node.get_logger().info(f"parameters: {effective_parameters(node)}")
-        spin_guarded(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
+        if stop.received is None:
+            node.get_logger().info(f"parameters: {effective_parameters(node)}")
+            spin_guarded(node, stop)
+        if stop.received is not None:
+            node.get_logger().info(f"{stop.received.name}: stopping")
+        if isinstance(node, SafeStop) and node.context.ok():
+            node.stop()
+            flush(node, FLUSH_TIMEOUT_S)
+    except ExternalShutdownException:
         pass
     finally:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+        stop.ignore()
     return 0
+
+
+def flush(node: Node, timeout_s: float) -> None:
+    """Wait until every reliable subscriber has acknowledged what ``node`` published, at most
+    ``timeout_s`` in all (best-effort publishers return at once)."""
+    deadline = time.monotonic() + timeout_s
+    for publisher in node.publishers:
+        remaining_s = max(deadline - time.monotonic(), 0.0)
+        publisher.wait_for_all_acked(Duration(nanoseconds=round(remaining_s * 1e9)))

@@ -22,6 +22,10 @@ Pieces: :class:`FoxgloveRelay` (the server, a :class:`~nuturtle_tools.recorder.T
 ROS graph), :class:`FoxgloveRelayNode` (the node ``foxglove_relay``: a
 :class:`~nuturtle_tools.recorder.TopicTap` into a relay, ``ros2 run nuturtle_tools foxglove_relay``).
 
+Parameters of the node (:class:`~nuturtle_tools.relay_config.RelayConfig`, read-only): ``host``
+(127.0.0.1), ``port`` (8765; 0: any free port), ``discovery_period`` (0.5 s between two looks for new
+topics). docs/live.md has the rest.
+
 Binding: ``host`` 127.0.0.1 (the default) serves this machine only. Any other address (``0.0.0.0``: every
 interface) lets anyone on that network read every topic of the system: choose it explicitly.
 """
@@ -314,7 +318,7 @@ class FoxgloveRelayNode(Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    sys.exit(run_node(lambda: FoxgloveRelayNode(), "foxglove_relay", args))
+    sys.exit(run_node(lambda: FoxgloveRelayNode(), "foxglove_relay", __doc__, args))
 
 
 if __name__ == "__main__":
