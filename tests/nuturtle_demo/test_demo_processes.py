@@ -57,6 +57,12 @@ def test_nodes_as_processes_flow_with_expected_types_and_frames(tmp_path):
                 process.wait()
             log.close()
     assert probe.returncode == 0, probe.stderr
+    for name, (process, _) in processes.items():
+        log = (tmp_path / f"{name}.log").read_text()
+        # SIGTERM on a busy system: each node stops cleanly (docs/robot.md, "Stopping a node")
+        assert process.returncode == 0 and "Traceback" not in log, (
+            f"{name} exited {process.returncode}: {log}"
+        )
     seen = json.loads(probe.stdout.strip().splitlines()[-1])
     expected = {
         "/scan": ("sensor_msgs/msg/LaserScan", ["base_scan"]),
