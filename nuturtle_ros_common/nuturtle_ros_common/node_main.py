@@ -3,27 +3,26 @@ invalid parameters stop start-up with a message, and no single message can stop 
 
 Stopping: SIGINT (Ctrl-C), SIGTERM (launch after its ``sigterm_timeout``, ``timeout``, systemd, docker)
 and SIGHUP (the terminal closed) each end the node the same way, with exit code 0 and no traceback. A
-signal only records the request (:class:`StopSignals`); the spin loop sees it within ``SPIN_PERIOD_S``,
-then, in the main thread and with the context still up, a node that commands something (:class:`SafeStop`)
-publishes its safe command (zero wheel speeds) and waits up to ``FLUSH_TIMEOUT_S`` for its subscribers to
-acknowledge it, and only then are the node and the context shut down. rclpy's own handlers are not
-installed: they shut the context down from a second thread while a callback may still be running (a
-callback then fails on a dead context), and re-raise SIGINT as a ``KeyboardInterrupt`` wherever the main
-thread is (a traceback and exit code -2 when a second SIGINT lands in the shutdown). A second signal while
-the node stops is ignored; a signal whose disposition is SIG_IGN at start-up (``nohup``, a background job
-of a script) stays ignored. Exit codes: 0 stopped (a signal, or the context shut down), 1 could not start
-(an invalid parameter, a port in use), 2 a bad command line (argparse's usage error).
+signal only records the request (:mod:`~nuturtle_ros_common.stop_signals`); the spin loop sees it within
+``SPIN_PERIOD_S``, then, in the main thread and with the context still up, a node that commands something
+(:class:`SafeStop`) publishes its safe command (zero wheel speeds) and waits up to ``FLUSH_TIMEOUT_S`` for
+its subscribers to acknowledge it, and only then are the node and the context shut down. rclpy's own
+handlers are not installed: they shut the context down from a second thread while a callback may still be
+running (a callback then fails on a dead context), and re-raise SIGINT as a ``KeyboardInterrupt`` wherever
+the main thread is (a traceback and exit code -2 when a second SIGINT lands in the shutdown). A second
+signal while the node stops is ignored, and every stop signal once it has stopped; a signal whose
+disposition is SIG_IGN at start-up (``nohup``, a background job of a script) stays ignored. Exit codes: 0
+stopped (a signal, or the context shut down), 1 could not start (an invalid parameter, a port in use), 2 a
+bad command line (argparse's usage error).
 """
 
 from __future__ import annotations
 
 import argparse
-import signal
 import sys
 import time
 import traceback
 from collections.abc import Callable, Sequence
-from types import FrameType
 from typing import Protocol, runtime_checkable
 
 import rclpy
@@ -35,13 +34,13 @@ from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import remove_ros_args
 
+from .stop_signals import StopSignals, ignore_stop_signals
 from .throttle import WARN_THROTTLE_S
 
 # The longest one spin step waits (s): a stop signal is acted on within this time
 SPIN_PERIOD_S = 0.1
 # The longest a stopping node waits for its last messages to be acknowledged (s)
 FLUSH_TIMEOUT_S = 0.5
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 ROS_ARGUMENTS_HELP = """\
 ROS arguments come after --ros-args: -p NAME:=VALUE sets a parameter, --params-file FILE loads a YAML
 file of them, -r FROM:=TO remaps a name (docs/robot.md, "Parameters", says which value wins).
@@ -59,31 +58,6 @@ class SafeStop(Protocol):
     def stop(self) -> None:
         """Publish the safe command (e.g. zero wheel speeds) and publish nothing more; called once by
         :func:`run_node`, while the context is still up."""
-
-
-class StopSignals:
-    """Records the first of SIGINT, SIGTERM and SIGHUP as the request to stop (``received``); later ones
-    are ignored. Nothing else happens in the handler: the spin loop polls ``received``."""
-
-    def __init__(self) -> None:
-        self.received: signal.Signals | None = None
-
-    def install(self) -> None:
-        """Handle every stop signal that is not ignored (SIG_IGN stays: ``nohup``, background jobs)."""
-        for signum in STOP_SIGNALS:
-            if signal.getsignal(signum) is not signal.SIG_IGN:
-                signal.signal(signum, self._on_signal)
-
-    def ignore(self) -> None:
-        """Ignore every stop signal from now on: the node is gone and the process is exiting. (Python's
-        exit restores the default action of every signal it handles before C++ tears DDS down, ~0.3 s in
-        which a second SIGINT would otherwise end the process with -2; SIG_IGN survives it.)"""
-        for signum in STOP_SIGNALS:
-            signal.signal(signum, signal.SIG_IGN)
-
-    def _on_signal(self, signum: int, frame: FrameType | None) -> None:
-        if self.received is None:
-            self.received = signal.Signals(signum)
 
 
 def effective_parameters(node: Node) -> str:
@@ -160,8 +134,18 @@ def run_node(
     before the node is destroyed. Use as `sys.exit(run_node(MyNode, "my_node", __doc__))`.
     """
     check_command_line(name, description, sys.argv if args is None else args)
-    stop = StopSignals()
-    stop.install()
+    try:
+        with StopSignals(second="ignore") as stop:
+            return spin_until_stopped(factory, name, args, stop)
+    finally:
+        # the node is gone, the process exits: a late signal must not end it with its default action
+        ignore_stop_signals()
+
+
+def spin_until_stopped(
+    factory: Callable[[], Node], name: str, args: Sequence[str] | None, stop: StopSignals
+) -> int:
+    """:func:`run_node` once the command line is checked, with ``stop`` handling the stop signals."""
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     try:
@@ -177,7 +161,7 @@ def run_node(
             node.get_logger().info(f"parameters: {effective_parameters(node)}")
             spin_guarded(node, stop)
         if stop.received is not None:
-            node.get_logger().info(f"{stop.received.name}: stopping")
+            node.get_logger().info(f"{stop.received}: stopping")
         if isinstance(node, SafeStop) and node.context.ok():
             node.stop()
             flush(node, FLUSH_TIMEOUT_S)
@@ -187,7 +171,6 @@ def run_node(
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
-        stop.ignore()
     return 0
 
 

@@ -3,7 +3,7 @@ like Ctrl-C (a closed, readable bag and the metrics of what ran, marked incomple
 the replay's reader recovers, a file size limit (a full disk) stops it with one error line; the previous
 complete result is never touched. The staging folder logic itself is tested in
 tests/nuturtle_eval/test_run_folder.py, the SIGHUP/SIGINT handling in
-tests/nuturtle_tools/test_stop_signals.py."""
+tests/nuturtle_ros_common/test_stop_signals.py."""
 
 from __future__ import annotations
 

@@ -34,7 +34,7 @@ from ros_test_messages import cylinder_array, stamp
 from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
 
-from nuturtle_ros_common.node_main import STOP_SIGNALS
+from nuturtle_ros_common.stop_signals import STOP_SIGNALS
 from rclpy_harness import RosHarness, matched
 
 pytestmark = pytest.mark.ros
