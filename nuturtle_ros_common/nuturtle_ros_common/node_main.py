@@ -105,8 +105,8 @@ def spin_guarded(node: Node, stop: StopSignals) -> None:
 
 def check_command_line(name: str, description: str, args: Sequence[str]) -> None:
     """``-h`` / ``--help``: print ``description`` (the node's module docstring) and how ROS arguments and
-    stopping work, and exit 0; an argument that is neither ROS's nor ``--help``, or malformed ROS
-    arguments: a usage error, exit 2. Never starts anything."""
+    stopping work, and exit 0; an argument that is neither ROS's nor ``--help``, malformed ROS arguments
+    or a parameter file rcl cannot open or parse: a usage error, exit 2. Never starts anything."""
     parser = argparse.ArgumentParser(
         prog=name,
         usage="%(prog)s [-h] [--ros-args ...]",
@@ -116,7 +116,7 @@ def check_command_line(name: str, description: str, args: Sequence[str]) -> None
     )
     try:
         user_args = remove_ros_args(args=list(args))[1:]
-    except rclpy_implementation.RCLError as error:  # malformed ROS arguments
+    except rclpy_implementation.RCLError as error:  # malformed ROS arguments, an unreadable params file
         parser.error(str(error))
     parser.parse_args(user_args)
 

@@ -218,11 +218,21 @@ def test_every_node_main_answers_help_with_its_parameters(name, capsys):
     assert "Parameters" in usage and "-p NAME:=VALUE" in usage and "SIGTERM" in usage, usage
 
 
-def test_a_node_refuses_an_argument_it_does_not_know(capsys):
+def test_a_node_refuses_an_argument_it_does_not_know_and_a_params_file_rcl_cannot_read(capsys, tmp_path):
+    main = importlib.import_module(NODES["slam"][0]).main
     with pytest.raises(SystemExit) as stop:
-        importlib.import_module(NODES["slam"][0]).main(["slam", "--bogus"])
+        main(["slam", "--bogus"])
     assert stop.value.code == 2
     assert "slam: error: unrecognized arguments: --bogus" in capsys.readouterr().err
+    broken = tmp_path / "broken.yaml"
+    broken.write_text("slam: {ros__parameters: {association: [known")
+    with pytest.raises(SystemExit) as stop:
+        main(["slam", "--ros-args", "--params-file", str(broken)])
+    assert stop.value.code == 2
+    error = capsys.readouterr().err
+    assert error.splitlines()[-1].startswith(
+        "slam: error: Failed to parse ROS arguments: Couldn't parse params"
+    )
 
 
 def test_slam_stops_cleanly_while_busy(ros, tmp_path):
