@@ -67,13 +67,13 @@ from nuturtle_ros_common.conversions import planar_covariance_6x6, pose_from_tra
 from nuturtle_ros_common.dds_domain import PRIVATE, DomainChoice, domain_choice, run_context
 from nuturtle_ros_common.node_main import spin_once_guarded
 from nuturtle_ros_common.ros_files import load_ros_parameters, share_file
+from nuturtle_ros_common.stop_signals import StopSignals
 from nuturtle_tools.foxglove_relay import FoxgloveRelay, StaticTransform, slam_view_transforms
 from nuturtle_tools.monitor import RunMonitor
 from nuturtle_tools.params import params_file, to_parameters
 from nuturtle_tools.player import spin_until, wait_until
 from nuturtle_tools.recorder import BagWriter, TeeSink, TopicRecorder
 from nuturtle_tools.relay_config import RelayConfig, check_port_free
-from nuturtle_tools.stop_signals import StopSignals
 from turtlelib import MODES, Transform2D, TwistNoise, normalize_angle
 from turtlelib.slam_map import load_map
 from turtlelib.validation import finite_real, integer, one_of, positive, store
@@ -376,7 +376,7 @@ def run_demo(options: DemoOptions, on_progress: ProgressCallback | None = None) 
     """Run the system for ``options.duration_s`` of simulation time and write every output (module
     docstring, docs/demo.md) into a staging folder beside ``options.out_dir`` that replaces it only when
     the run completes (:class:`nuturtle_eval.run_folder.RunFolder`). SIGINT (Ctrl-C), SIGTERM or SIGHUP
-    end the run early (:mod:`nuturtle_tools.stop_signals`): the outputs then cover the time simulated,
+    end the run early (:mod:`nuturtle_ros_common.stop_signals`): the outputs then cover the time simulated,
     metrics.json says ``"complete": false`` and they are left in ``OUT.incomplete`` beside the untouched
     ``OUT``. An error once the simulation ran (a full disk: OSError) leaves what was written there too;
     an error before (a port in use: OSError, a world nusim refuses: ValueError) leaves nothing.

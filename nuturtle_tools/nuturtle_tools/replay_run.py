@@ -68,6 +68,7 @@ from nuturtle_eval.run_folder import RunFolder
 from nuturtle_ros_common.conversions import stamp_nanoseconds, transform_from_pose
 from nuturtle_ros_common.dds_domain import ENVIRONMENT, PRIVATE, DomainChoice, domain_choice, run_context
 from nuturtle_ros_common.ros_files import flatten
+from nuturtle_ros_common.stop_signals import StopSignals
 from turtlelib import Transform2D
 from turtlelib.slam_map import save_map
 from turtlelib.timebase import NS_PER_S
@@ -89,7 +90,6 @@ from .player import (
 )
 from .recorder import BagWriter, TeeSink, TopicRecorder, TopicTap, absolute, message_class
 from .relay_config import RelayConfig, check_port_free
-from .stop_signals import StopSignals
 
 # The SLAM outputs: a rosbag2 bag directory in the output folder (slam/metadata.yaml + slam/slam.mcap)
 BAG_NAME = "slam"
