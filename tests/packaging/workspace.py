@@ -17,7 +17,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 
 # rosdep keys of the third-party Python modules the packages import (a module missing here fails the
-# dependency test: add its key), and the pip distribution each key installs in pyproject.toml
+# dependency test: add its key), and the pip distribution each key installs in pyproject.toml; a module
+# without a rosdep key is in PIP_ONLY with its distribution, installed by the README's pip step
 THIRD_PARTY = {
     "numpy": ("python3-numpy", "numpy"),
     "scipy": ("python3-scipy", "scipy"),
@@ -25,9 +26,8 @@ THIRD_PARTY = {
     "matplotlib": ("python3-matplotlib", "matplotlib"),
     "tqdm": ("python3-tqdm", "tqdm"),
     "rosbags": ("python3-rosbags-pip", "rosbags"),
-    "mcap": ("python3-mcap-pip", "mcap"),
-    "foxglove": ("python3-foxglove-sdk-pip", "foxglove-sdk"),
 }
+PIP_ONLY = {"mcap": "mcap", "foxglove": "foxglove-sdk"}
 # Python modules that are ROS packages of the same name (rclpy, message packages, launch)
 ROS_MODULE_SUFFIXES = ("_msgs", "_srvs", "_interfaces")
 ROS_MODULES = {"rclpy", "ament_index_python", "launch", "launch_ros"}
@@ -74,8 +74,9 @@ def imported_modules(path: Path) -> set[str]:
 
 def dependency_key(module: str) -> str | None:
     """The package.xml key a module needs: a workspace or ROS package's own name, a third-party
-    module's rosdep key; None for the standard library; KeyError for a module nobody has mapped."""
-    if module in STDLIB:
+    module's rosdep key; None for the standard library and a PIP_ONLY module; KeyError for a module
+    nobody has mapped."""
+    if module in STDLIB or module in PIP_ONLY:
         return None
     if module in packages() or module in ROS_MODULES or module.endswith(ROS_MODULE_SUFFIXES):
         return module
