@@ -62,22 +62,47 @@ def field_defaults(cls: type) -> dict[str, Any]:
     return defaults
 
 
+def _clauses(text: str) -> list[str]:
+    """``text`` cut after each ``;`` and each sentence's ``.`` that stand outside parentheses and quotes
+    (backticks), its whitespace collapsed: the clauses of one bullet."""
+    clauses = []
+    depth, quoted, start = 0, False, 0
+    for i, char in enumerate(text):
+        if char == "`":
+            quoted = not quoted
+        elif not quoted and char in "([":
+            depth += 1
+        elif not quoted and char in ")]":
+            depth = max(depth - 1, 0)
+        elif not quoted and depth == 0 and char in ".;" and text[i + 1 : i + 2] in (" ", ""):
+            clauses.append(text[start : i + 1].strip())
+            start = i + 1
+    clauses.append(text[start:].strip())
+    return [clause for clause in clauses if clause]
+
+
 def field_descriptions(cls: type) -> dict[str, str]:
-    """Each field's description: the first clause of ``cls``'s docstring that names it within backticks
-    (a bullet, or a sentence or ``;``-separated part of one), else the docstring's summary line."""
+    """Each field's description, one sentence: the first clause of ``cls``'s docstring (a bullet, or a
+    sentence or ``;``-separated part of one, cut outside parentheses and backticks) that opens with a
+    backticked span naming the field, else the first clause that names it in backticks at all, else the
+    docstring's summary line; ended with a full stop."""
     doc = inspect.getdoc(cls) or ""
     summary = doc.strip().splitlines()[0] if doc.strip() else cls.__name__
-    # clauses: bullets, then sentences and ;-separated parts, with their whitespace collapsed
     clauses = []
     for bullet in re.split(r"\n\s*\*\s+", "\n" + doc):
-        text = " ".join(bullet.split())
-        clauses += [part.strip() for part in re.split(r"(?<=[.;])\s+(?=[A-Z`*])|;\s+", text) if part.strip()]
+        clauses += _clauses(" ".join(bullet.split()))
+    # each clause's backticked spans (``name``, ``name > 0``, ``(x0, y0)``)
+    spans = [re.findall(r"`+([^`]+)`+", clause) for clause in clauses]
     descriptions = {}
     for field in dataclasses.fields(cls):
-        # a backticked span holding the name as a word: ``name``, ``name > 0``, ``(x0, y0)``
-        pattern = re.compile(rf"`[^`]*(?<![\w.]){re.escape(field.name)}\b[^`]*`")
-        named = next((clause for clause in clauses if pattern.search(clause)), None)
-        descriptions[field.name] = f"{cls.__name__}: {named if named is not None else summary}"
+        word = re.compile(rf"(?<![\w.]){re.escape(field.name)}\b")
+        defining = [
+            c for c, found in zip(clauses, spans, strict=True) if c.startswith("`") and word.search(found[0])
+        ]
+        naming = [c for c, found in zip(clauses, spans, strict=True) if any(word.search(f) for f in found)]
+        named = next(iter(defining + naming), summary)
+        ending = "" if named.endswith(".") else "."
+        descriptions[field.name] = f"{cls.__name__}: {named.rstrip(';,:')}{ending}"
     return descriptions
 
 

@@ -5,6 +5,8 @@ parameters at start-up."""
 
 from __future__ import annotations
 
+import re
+
 import pytest
 from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
@@ -15,7 +17,9 @@ from nuslam.slam_node import SlamNode
 from nuturtle_control.circle import CircleNode
 from nuturtle_control.odometry import OdometryNode
 from nuturtle_control.turtle_control import TurtleControlNode
+from nuturtle_demo.driver import FigureEightDriver
 from nuturtle_ros_common.node_main import effective_parameters
+from nuturtle_tools.foxglove_relay import FoxgloveRelayNode
 
 # parameters rclpy declares on every node
 ROS_OWN = {"use_sim_time", "start_type_description_service"}
@@ -40,18 +44,49 @@ def wait(ros, future):
     return future.result()
 
 
-@pytest.mark.parametrize("name", [*NODES, "circle"])
-def test_every_parameter_is_described(ros, name):
-    cls = CircleNode if name == "circle" else NODES[name][0]
-    node = ros.add(cls(context=ros.context))
+# every node with parameters, and what it needs to start here
+DESCRIBED = {
+    **{name: (cls, []) for name, (cls, _) in NODES.items()},
+    "circle": (CircleNode, []),
+    "driver": (FigureEightDriver, []),
+    "foxglove_relay": (FoxgloveRelayNode, [Parameter("port", value=0)]),
+}
+
+
+def names_parameter(description: str, parameter: str) -> bool:
+    """Whether a backticked span of ``description`` holds ``parameter`` as a word, or its field name
+    after a prefix (``lidar.noise``: ``noise``; ``odom_forward_m2_per_m``: ``forward_m2_per_m``) when the
+    description opens with the parameter's full name."""
+    fields = [parameter]
+    if description.startswith(f"{parameter}: "):
+        fields += [parameter[i + 1 :] for i, char in enumerate(parameter) if char in "._"]
+    spans = re.findall(r"`+([^`]+)`+", description)
+    return any(re.search(rf"(?<![\w.]){re.escape(f)}\b", span) for f in fields for span in spans)
+
+
+@pytest.mark.parametrize("name", list(DESCRIBED))
+def test_every_parameter_is_described_by_a_whole_sentence_of_its_own(ros, name):
+    cls, overrides = DESCRIBED[name]
+    node = ros.add(cls(context=ros.context, parameter_overrides=overrides))
     client = client_for(ros, name)
     names = sorted(set(node.get_parameters_by_prefix("")) - ROS_OWN)
     descriptors = wait(ros, client.describe_parameters(names)).descriptors
     assert len(descriptors) == len(names)
-    for parameter, descriptor in zip(names, descriptors, strict=True):
+    described = dict(zip(names, (d.description for d in descriptors), strict=True))
+    for parameter, description in described.items():
         # the description names the parameter (the docstring clause it comes from) and says more
-        assert parameter.split(".")[-1] in descriptor.description, parameter
-        assert len(descriptor.description) > len(parameter) + 10, parameter
+        assert names_parameter(description, parameter), (parameter, description)
+        assert len(description) > len(parameter) + 10, parameter
+        # a whole sentence: not cut inside a parenthesis or a quote, and ended
+        assert description.endswith("."), (parameter, description)
+        opened = sum(map(description.count, "([")) - sum(map(description.count, ")]"))
+        assert opened == 0, (parameter, description)  # intervals such as [0, 1) count as one pair
+        assert description.count("`") % 2 == 0, (parameter, description)
+    # a description shared by several parameters names each of them (one clause of them all)
+    for parameter, description in described.items():
+        for other, same in described.items():
+            if other != parameter and same == description:
+                assert names_parameter(description, other), (parameter, other, description)
 
 
 @pytest.mark.parametrize("name", list(NODES))
