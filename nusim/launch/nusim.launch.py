@@ -2,8 +2,8 @@
 
 Arguments
     model:=burger|waffle|waffle_pi   the simulated robot (default: $TURTLEBOT3_MODEL, else burger)
-    config_file:=<path>      the world (default: this package's config/basic_world.yaml)
-    use_rviz:=true|false     RViz with fixed frame nusim/world, on nusim's /clock (default false)
+    world:=<path>            the world (default: this package's config/basic_world.yaml)
+    rviz:=true|false         RViz with fixed frame nusim/world, on nusim's /clock (default false)
 
 nusim gets the world, then `model`, whose constants (nuturtle_description/config/models.yaml) are its
 robot's defaults.
@@ -31,15 +31,18 @@ def generate_launch_description() -> LaunchDescription:
         [
             model_argument(),
             DeclareLaunchArgument(
-                "config_file", default_value=basic_world, description="nusim parameter file (the world)"
+                "world", default_value=basic_world, description="nusim's parameter file (the world)"
             ),
             DeclareLaunchArgument(
-                "use_rviz", default_value="false", choices=["true", "false"], description="start RViz"
+                "rviz",
+                default_value="false",
+                choices=["true", "false"],
+                description="true: also RViz2 in nusim/world",
             ),
             Node(
                 package="nusim",
                 executable="nusim",
-                parameters=[LaunchConfiguration("config_file"), {"model": LaunchConfiguration("model")}],
+                parameters=[LaunchConfiguration("world"), {"model": LaunchConfiguration("model")}],
                 output="screen",
             ),
             Node(
@@ -47,7 +50,7 @@ def generate_launch_description() -> LaunchDescription:
                 executable="rviz2",
                 arguments=["-f", "nusim/world"],
                 parameters=[{"use_sim_time": True}],
-                condition=IfCondition(LaunchConfiguration("use_rviz")),
+                condition=IfCondition(LaunchConfiguration("rviz")),
             ),
         ]
     )

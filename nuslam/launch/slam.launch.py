@@ -74,15 +74,38 @@ def generate_launch_description() -> LaunchDescription:
     return LaunchDescription(
         [
             model_argument(),
-            DeclareLaunchArgument("association", default_value="unknown", choices=["unknown", "known"]),
-            DeclareLaunchArgument("use_sim_time", default_value="false", choices=["true", "false"]),
-            DeclareLaunchArgument("cmd_src", default_value="none", choices=list(CMD_SOURCES)),
-            DeclareLaunchArgument("rviz", default_value="false", choices=["true", "false"]),
+            DeclareLaunchArgument(
+                "association",
+                default_value="unknown",
+                choices=["unknown", "known"],
+                description="unknown: LiDAR landmarks (landmarks node); known: nusim's fake_sensor",
+            ),
+            DeclareLaunchArgument(
+                "use_sim_time",
+                default_value="false",
+                choices=["true", "false"],
+                description="true: every node on /clock (the simulator)",
+            ),
+            DeclareLaunchArgument(
+                "cmd_src",
+                default_value="none",
+                choices=list(CMD_SOURCES),
+                description="what publishes cmd_vel (none: nothing moves the robot until asked)",
+            ),
+            DeclareLaunchArgument(
+                "rviz",
+                default_value="false",
+                choices=["true", "false"],
+                description="true: also RViz2 (slam.rviz)",
+            ),
             *[
                 DeclareLaunchArgument(
-                    name, default_value=default, **({"choices": list(choices)} if choices else {})
+                    name,
+                    default_value=argument.default,
+                    description=argument.description,
+                    **({"choices": list(argument.choices)} if argument.choices else {}),
                 )
-                for name, (default, choices) in SLAM_ARGUMENTS.items()
+                for name, argument in SLAM_ARGUMENTS.items()
             ],
             IncludeLaunchDescription(
                 PythonLaunchDescriptionSource(

@@ -12,6 +12,7 @@ Arguments
     motion_source:=joint_states|odom   the wheel angles (default) or the robot's odom as slam's motion
     mode:=mapping|localization         SLAM (default), or localization in the map of map_file
     map_file:=PATH                     the map loaded at start-up (if there) and written by slam/save_map
+    use_sim_time:=false|true           true: every node on /clock (Gazebo, or `ros2 bag play --clock`)
     rviz:=false|true                   true: also RViz2 with nuslam's rviz/slam.rviz (fixed frame `map`)
 
     ros2 launch nuslam turtlebot3.launch.py      # on the laptop, same ROS_DOMAIN_ID as the robot
@@ -34,16 +35,31 @@ from nuslam.launch_nodes import SLAM_ARGUMENTS, landmarks_parameters, rviz_argum
 from nuturtle_description.model_argument import model_argument
 
 
-def _slam(context):
+def _nodes(context):
     arguments = {name: LaunchConfiguration(name).perform(context) for name in SLAM_ARGUMENTS}
     model = LaunchConfiguration("model").perform(context)
+    use_sim_time = LaunchConfiguration("use_sim_time").perform(context) == "true"
     return [
         Node(
             package="nuslam",
-            executable="slam",
-            parameters=slam_parameters("unknown", False, model, **arguments),
+            executable="landmarks",
+            parameters=landmarks_parameters(use_sim_time),
             output="screen",
-        )
+        ),
+        Node(
+            package="nuslam",
+            executable="slam",
+            parameters=slam_parameters("unknown", use_sim_time, model, **arguments),
+            output="screen",
+        ),
+        Node(
+            package="rviz2",
+            executable="rviz2",
+            arguments=rviz_arguments(),
+            parameters=[{"use_sim_time": use_sim_time}],
+            condition=IfCondition(LaunchConfiguration("rviz")),
+            output="screen",
+        ),
     ]
 
 
@@ -53,24 +69,25 @@ def generate_launch_description() -> LaunchDescription:
             model_argument(),
             *[
                 DeclareLaunchArgument(
-                    name, default_value=default, **({"choices": list(choices)} if choices else {})
+                    name,
+                    default_value=argument.default,
+                    description=argument.description,
+                    **({"choices": list(argument.choices)} if argument.choices else {}),
                 )
-                for name, (default, choices) in SLAM_ARGUMENTS.items()
+                for name, argument in SLAM_ARGUMENTS.items()
             ],
-            DeclareLaunchArgument("rviz", default_value="false", choices=["true", "false"]),
-            Node(
-                package="nuslam",
-                executable="landmarks",
-                parameters=landmarks_parameters(use_sim_time=False),
-                output="screen",
+            DeclareLaunchArgument(
+                "use_sim_time",
+                default_value="false",
+                choices=["true", "false"],
+                description="true: every node on /clock (a simulated robot, or a bag played with --clock)",
             ),
-            OpaqueFunction(function=_slam),
-            Node(
-                package="rviz2",
-                executable="rviz2",
-                arguments=rviz_arguments(),
-                condition=IfCondition(LaunchConfiguration("rviz")),
-                output="screen",
+            DeclareLaunchArgument(
+                "rviz",
+                default_value="false",
+                choices=["true", "false"],
+                description="true: also RViz2 (slam.rviz)",
             ),
+            OpaqueFunction(function=_nodes),
         ]
     )

@@ -7,18 +7,31 @@ Every list is the node's own defaults (config/<node>.yaml), then the launch argu
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, NamedTuple
 
 from nuslam.slam_node import MOTION_SOURCES
 from nuturtle_ros_common.launch_parameters import with_arguments
 from nuturtle_ros_common.ros_files import share_file
 from turtlelib import MODES
 
-# slam's launch arguments besides association and use_sim_time: name -> (default, choices or None for any)
-SLAM_ARGUMENTS: dict[str, tuple[str, tuple[str, ...] | None]] = {
-    "motion_source": ("joint_states", MOTION_SOURCES),
-    "mode": ("mapping", MODES),
-    "map_file": ("", None),
+
+class LaunchArgument(NamedTuple):
+    """A launch argument's ``default``, its ``choices`` (None: any value) and its ``description``."""
+
+    default: str
+    choices: tuple[str, ...] | None
+    description: str
+
+
+# slam's launch arguments besides association and use_sim_time
+SLAM_ARGUMENTS: dict[str, LaunchArgument] = {
+    "motion_source": LaunchArgument(
+        "joint_states", MOTION_SOURCES, "slam's motion input: the wheel angles, or a base's odom"
+    ),
+    "mode": LaunchArgument("mapping", MODES, "mapping (SLAM), or localization in the map of map_file"),
+    "map_file": LaunchArgument(
+        "", None, "the map slam loads at start-up (if there; required by localization) and saves on save_map"
+    ),
 }
 
 

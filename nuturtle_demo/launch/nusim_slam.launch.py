@@ -10,7 +10,11 @@ Arguments
                                   --ros-args -p use_sim_time:=true` once everything is up.
     world:=<path>                 nusim's world (default: nusim/config/basic_world.yaml).
     rviz:=false|true              true: also RViz2 with nuslam's rviz/slam.rviz on the simulator's clock
-                                  (passed on to slam.launch.py, which starts it).
+                                  (passed on to slam.launch.py, which starts it; nusim.launch.py's RViz
+                                  stays off: one RViz).
+    use_sim_time:=true            always true (declared so that --show-args says so).
+
+slam.launch.py's motion_source, mode and map_file reach slam as given here.
 
     ros2 launch nuturtle_demo nusim_slam.launch.py association:=known
     ros2 launch nuturtle_demo nusim_slam.launch.py rviz:=true cmd_src:=circle
@@ -44,6 +48,7 @@ def _world_to_map(context):
             package="tf2_ros",
             executable="static_transform_publisher",
             arguments=world_to_map_arguments(world),
+            parameters=[{"use_sim_time": LaunchConfiguration("use_sim_time").perform(context) == "true"}],
             output="screen",
         )
     ]
@@ -53,16 +58,43 @@ def generate_launch_description() -> LaunchDescription:
     return LaunchDescription(
         [
             model_argument(),
-            DeclareLaunchArgument("association", default_value="unknown", choices=["unknown", "known"]),
+            DeclareLaunchArgument(
+                "association",
+                default_value="unknown",
+                choices=["unknown", "known"],
+                description="unknown: LiDAR landmarks (landmarks node); known: nusim's fake_sensor",
+            ),
             # none: the robot stays still until asked, so every node is up (and slam at the true start) first
-            DeclareLaunchArgument("cmd_src", default_value="none", choices=["none", "circle", "teleop"]),
-            DeclareLaunchArgument("world", default_value=_share("nusim", "config", "basic_world.yaml")),
-            DeclareLaunchArgument("rviz", default_value="false", choices=["true", "false"]),
+            DeclareLaunchArgument(
+                "cmd_src",
+                default_value="none",
+                choices=["none", "circle", "teleop"],
+                description="what publishes cmd_vel (none: nothing moves the robot until asked)",
+            ),
+            DeclareLaunchArgument(
+                "world",
+                default_value=_share("nusim", "config", "basic_world.yaml"),
+                description="nusim's parameter file (the world)",
+            ),
+            DeclareLaunchArgument(
+                "rviz",
+                default_value="false",
+                choices=["true", "false"],
+                description="true: one RViz2 (slam.rviz) on the simulator's clock",
+            ),
+            # declared here so that --show-args offers what this file does with it: always true
+            DeclareLaunchArgument(
+                "use_sim_time",
+                default_value="true",
+                choices=["true"],
+                description="always true: every node runs on nusim's /clock",
+            ),
             IncludeLaunchDescription(
                 PythonLaunchDescriptionSource(_share("nusim", "launch", "nusim.launch.py")),
                 launch_arguments={
-                    "config_file": LaunchConfiguration("world"),
+                    "world": LaunchConfiguration("world"),
                     "model": LaunchConfiguration("model"),
+                    "rviz": "false",  # the one RViz is slam.launch.py's
                 }.items(),
             ),
             OpaqueFunction(function=_world_to_map),
@@ -73,7 +105,7 @@ def generate_launch_description() -> LaunchDescription:
                     "association": LaunchConfiguration("association"),
                     "cmd_src": LaunchConfiguration("cmd_src"),
                     "rviz": LaunchConfiguration("rviz"),
-                    "use_sim_time": "true",
+                    "use_sim_time": LaunchConfiguration("use_sim_time"),
                 }.items(),
             ),
         ]

@@ -51,10 +51,23 @@ def generate_launch_description() -> LaunchDescription:
         [
             model_argument(),
             DeclareLaunchArgument(
-                "color", default_value="purple", choices=["red", "green", "blue", "purple"]
+                "color",
+                default_value="purple",
+                choices=["red", "green", "blue", "purple"],
+                description="the robot's colour, also its frame prefix <color>/",
             ),
-            DeclareLaunchArgument("use_jsp", default_value="true"),
-            DeclareLaunchArgument("use_rviz", default_value="false"),
+            DeclareLaunchArgument(
+                "use_jsp",
+                default_value="true",
+                choices=["true", "false"],
+                description="true: joint_state_publisher publishes the wheel joints",
+            ),
+            DeclareLaunchArgument(
+                "use_rviz",
+                default_value="false",
+                choices=["true", "false"],
+                description="true: also RViz2 showing the model",
+            ),
             OpaqueFunction(function=_nodes),
         ]
     )

@@ -72,7 +72,7 @@ def test_the_map_and_motion_arguments_reach_slam_over_its_yaml(ros, tmp_path):
     values = resolved(ros, tmp_path, parameters, "slam", names)
     assert values == {"motion_source": "odom", "mode": "localization", "map_file": map_file}
     defaults = resolved(ros, tmp_path, slam_parameters("unknown", False, "burger"), "slam", names)
-    assert list(defaults.values()) == [default for default, _ in SLAM_ARGUMENTS.values()]
+    assert list(defaults.values()) == [argument.default for argument in SLAM_ARGUMENTS.values()]
 
 
 def test_a_dict_before_the_yaml_loses_to_it(ros, tmp_path):
