@@ -8,9 +8,14 @@ bytes as received (rclpy ``raw=True``), with log time = the relaying node's cloc
 (simulation time under ``use_sim_time``). The server advertises the ``time`` capability and broadcasts
 that clock (at most every ``TIME_PERIOD_NS`` of it), so Foxglove's timeline follows simulation time.
 
-Latched topics (every publisher transient local, such as ``slam/map`` or ``nusim/walls``) keep their last
-message, which is sent again on its channel whenever a client subscribes, so a viewer that connects late
-still sees the map. (The protocol has no per-client send: clients already subscribed receive that message
+Latched topics (every publisher transient local, such as ``slam/map`` or ``nusim/walls``) keep what a
+transient-local subscriber would get, which is sent again on its channel whenever a client subscribes, so a
+viewer that connects late still sees the map. A latched TFMessage topic (``/tf_static``, where each node
+publishes its own static transforms) keeps what tf2 holds: the union of every message's transforms, the
+newest per child frame, sent as one message (``nusim/world -> map`` from one publisher and the LiDAR mount
+from another both reach a late viewer). Any other latched topic keeps its last message: rclpy's message
+info names no publisher, so one message per publisher cannot be told apart there (every such topic here has
+one publisher). (The protocol has no per-client send: clients already subscribed receive that message
 twice.)
 
 Without tf2_msgs (the wheels-only install) no node broadcasts ``/tf``. The demo and the replay then give
@@ -119,9 +124,11 @@ class FoxgloveRelay(ClosingSink):
         self._context = foxglove.Context()
         super().__init__()
         self._channels: dict[str, Any] = {}
-        # latched channels by id, and the last message (data, log time) of each
+        # latched channels by id, the last message (data, log time) of each, and for a latched TFMessage
+        # channel its transforms by child frame
         self._latched_channels: dict[int, Any] = {}
         self._latched: dict[int, tuple[bytes, int]] = {}
+        self._static_transforms: dict[int, dict[str, Any]] = {}
         self._tf_from_odometry = {absolute(topic) for topic in tf_from_odometry}
         self._last_time_ns: int | None = None
         try:
@@ -191,6 +198,8 @@ class FoxgloveRelay(ClosingSink):
             self._counts[topic] = 0
             if latched:
                 self._latched_channels[channel.id()] = channel
+                if type_name == TF_TYPE:
+                    self._static_transforms[channel.id()] = {}
 
     def write(self, topic: str, data: bytes, timestamp_ns: int) -> None:
         """Send one CDR message of an advertised topic (KeyError otherwise) with log time ``timestamp_ns``
@@ -202,7 +211,9 @@ class FoxgloveRelay(ClosingSink):
             channel = self._channels[topic]
             channel.log(data, log_time=timestamp_ns)
             self._counts[topic] += 1
-            if channel.id() in self._latched_channels:
+            if channel.id() in self._static_transforms:
+                self._latched[channel.id()] = (self._merged_transforms(channel.id(), data), timestamp_ns)
+            elif channel.id() in self._latched_channels:
                 self._latched[channel.id()] = (data, timestamp_ns)
             if self._last_time_ns is None or timestamp_ns - self._last_time_ns >= TIME_PERIOD_NS:
                 self._last_time_ns = timestamp_ns
@@ -217,6 +228,14 @@ class FoxgloveRelay(ClosingSink):
                 return
             data, timestamp_ns = self._latched[channel_id]
             self._latched_channels[channel_id].log(data, log_time=timestamp_ns)
+
+    def _merged_transforms(self, channel_id: int, data: bytes) -> bytes:
+        """The CDR TFMessage of every transform the channel has carried, the newest per child frame, after
+        the TFMessage ``data``."""
+        by_child = self._static_transforms[channel_id]
+        for transform in self.typestore.deserialize_cdr(data, TF_TYPE).transforms:
+            by_child[transform.child_frame_id] = transform
+        return self._tf_message(list(by_child.values()))
 
     def _odometry_tf(self, data: bytes) -> bytes:
         """The CDR TFMessage of one nav_msgs/Odometry: ``header.frame_id -> child_frame_id`` at its pose."""

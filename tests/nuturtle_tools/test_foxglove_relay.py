@@ -111,6 +111,48 @@ def test_a_latched_topic_gives_its_last_message_to_a_client_that_subscribes_late
         client.close()
 
 
+def static_tf_cdr(*transforms: tuple[str, str, float]) -> bytes:
+    """A /tf_static TFMessage of (parent, child, x) transforms."""
+    t = JAZZY.types
+    stamped = [
+        t["geometry_msgs/msg/TransformStamped"](
+            header=t["std_msgs/msg/Header"](
+                stamp=t["builtin_interfaces/msg/Time"](sec=0, nanosec=0), frame_id=parent
+            ),
+            child_frame_id=child,
+            transform=t["geometry_msgs/msg/Transform"](
+                translation=t["geometry_msgs/msg/Vector3"](x=x, y=0.0, z=0.0),
+                rotation=t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+            ),
+        )
+        for parent, child, x in transforms
+    ]
+    return cdr(t["tf2_msgs/msg/TFMessage"](transforms=stamped), "tf2_msgs/msg/TFMessage")
+
+
+def test_a_late_client_gets_every_publishers_static_transforms_as_tf2_holds_them():
+    """Two publishers of /tf_static (the robot's mount, the world's map frame), one of them updating its
+    transform: a client subscribing afterwards gets the union by child frame, newest per child."""
+    with FoxgloveRelay(port=0) as relay:
+        relay.add_topic("/tf_static", "tf2_msgs/msg/TFMessage", [LATCHED])
+        relay.write("/tf_static", static_tf_cdr(("base_footprint", "base_scan", -0.03)), 1)
+        relay.write("/tf_static", static_tf_cdr(("nusim/world", "map", 0.5)), 2)
+        relay.write("/tf_static", static_tf_cdr(("base_footprint", "base_scan", -0.032)), 3)
+        client = FoxgloveClient(relay.url)
+        assert client.wait_for(lambda: "/tf_static" in client.channels)
+        client.subscribe(["/tf_static"])
+        assert client.wait_for(lambda: client.messages["/tf_static"], timeout_s=5.0)
+        client.receive(0.3)
+        (received,) = client.messages["/tf_static"]
+        transforms = client.decode(received).transforms
+        assert {(t.header.frame_id, t.child_frame_id, t.transform.translation.x) for t in transforms} == {
+            ("base_footprint", "base_scan", -0.032),
+            ("nusim/world", "map", 0.5),
+        }
+        assert received.log_time_ns == 3
+        client.close()
+
+
 def test_a_topic_twice_or_of_an_unknown_type_is_refused():
     with FoxgloveRelay(port=0) as relay:
         relay.add_topic("/a", STRING)
