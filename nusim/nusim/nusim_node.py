@@ -48,8 +48,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
-from nav_msgs.msg import Odometry, Path
+from geometry_msgs.msg import PoseWithCovarianceStamped
+from nav_msgs.msg import Odometry
 from numpy.typing import NDArray
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
@@ -70,12 +70,12 @@ from nuturtle_ros_common.conversions import (
 )
 from nuturtle_ros_common.markers import MARKER_HEIGHT_M, cylinder_marker, set_color
 from nuturtle_ros_common.node_main import run_node
+from nuturtle_ros_common.path_topic import PathTopic
 from nuturtle_ros_common.ros_params import declare_dataclass
 from nuturtle_ros_common.tf_compat import OptionalTfBroadcaster
 from nuturtle_ros_common.throttle import WARN_THROTTLE_S
 from nuturtle_ros_common.wheel_joints import WheelJoints, wheel_values
 from turtlelib import Twist2D
-from turtlelib.path_trail import PathTrail, PathTrailConfig
 from turtlelib.scan_model import LidarConfig
 from turtlelib.timebase import NS_PER_S
 from turtlelib.validation import positive, store
@@ -171,7 +171,7 @@ class NusimNode(Node):
         )
         self.joints = declare_dataclass(self, WheelJoints)
         self.watchdog = CommandWatchdog(declare_dataclass(self, CommandTimeoutConfig))
-        self.trail: PathTrail[PoseStamped] = PathTrail(declare_dataclass(self, PathTrailConfig))
+        self.path = PathTopic(self)
         self.simulation = Simulation(config)
         self.step_count = 0
         lidar = config.lidar
@@ -187,7 +187,6 @@ class NusimNode(Node):
         self._scan_publisher = self.create_publisher(LaserScan, "scan", qos_profile_sensor_data)
         self._fake_sensor_publisher = self.create_publisher(MarkerArray, "fake_sensor", 10)
         self._ground_truth_publisher = self.create_publisher(Odometry, "~/ground_truth", 10)
-        self._path_publisher = self.create_publisher(Path, "~/path", 10)
         latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         obstacles_publisher = self.create_publisher(MarkerArray, "~/obstacles", latched)
         walls_publisher = self.create_publisher(MarkerArray, "~/walls", latched)
@@ -235,13 +234,13 @@ class NusimNode(Node):
         except ValueError as error:
             self.get_logger().warning(f"teleport refused: {error}", throttle_duration_sec=WARN_THROTTLE_S)
             return
-        self.trail.clear()
+        self.path.clear()
         T = self.simulation.T_world_body
         self.get_logger().info(f"teleported to x = {T.x:.3f} m, y = {T.y:.3f} m, theta = {T.theta:.3f} rad")
 
     def _on_reset(self, request: Empty.Request, response: Empty.Response) -> Empty.Response:
         self.simulation.reset()
-        self.trail.clear()
+        self.path.clear()
         self.get_logger().info("reset to the start pose")
         return response
 
@@ -278,8 +277,7 @@ class NusimNode(Node):
         odom = odometry_message(T_world_body, V_body, WORLD_FRAME, TRUE_BODY_FRAME, stamp)
         self._ground_truth_publisher.publish(odom)
         self._tf.send(transform_stamped(T_world_body, WORLD_FRAME, TRUE_BODY_FRAME, stamp))
-        if self.trail.offer(T_world_body, PoseStamped(header=odom.header, pose=odom.pose.pose)):
-            self._path_publisher.publish(Path(header=odom.header, poses=list(self.trail.items)))
+        self.path.add(T_world_body, odom)
 
     def _publish_scan(self, stamp: Time) -> None:
         scan = self.simulation.scan()

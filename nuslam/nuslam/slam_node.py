@@ -94,8 +94,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
-from nav_msgs.msg import Odometry, Path
+from geometry_msgs.msg import PoseWithCovarianceStamped
+from nav_msgs.msg import Odometry
 from numpy.typing import NDArray
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -124,6 +124,7 @@ from nuturtle_ros_common.diagnostics import (
 from nuturtle_ros_common.markers import cylinder_marker, delete_all_marker, ellipse_marker, marker_positions
 from nuturtle_ros_common.node_main import run_node
 from nuturtle_ros_common.odom_stream import OdomStream
+from nuturtle_ros_common.path_topic import PathTopic
 from nuturtle_ros_common.ros_params import declare_dataclass
 from nuturtle_ros_common.tf_compat import OptionalTfBroadcaster
 from nuturtle_ros_common.throttle import SourceWarnings
@@ -142,7 +143,6 @@ from turtlelib import (
     TwistNoise,
     WheelAngles,
 )
-from turtlelib.path_trail import PathTrail, PathTrailConfig
 from turtlelib.pose_buffer import PoseBuffer
 from turtlelib.pose_twist import PoseTwist
 from turtlelib.range_bearing import observations_from_points
@@ -240,7 +240,7 @@ class SlamNode(Node):
         lost_wheel = {"slip_turn_per_m": lost_wheel_turn_per_m(robot.track_width)}
         self.recovery = SlipRecovery(declare_dataclass(self, SlipRecoveryConfig, fixed=lost_wheel))
         self.joints = declare_dataclass(self, WheelJoints)
-        self.trail: PathTrail[PoseStamped] = PathTrail(declare_dataclass(self, PathTrailConfig))
+        self.path = PathTopic(self)
         drive = robot.diff_drive()
         odom_noise = declare_dataclass(
             self, TwistNoise, prefix="odom_", overrides=vars(TwistNoise.from_wheel_slip(drive, WHEEL_NOISE))
@@ -276,7 +276,6 @@ class SlamNode(Node):
         )
 
         self._odom_publisher = self.create_publisher(Odometry, "~/odom", 10)
-        self._path_publisher = self.create_publisher(Path, "~/path", 10)
         # REP 2003: maps are reliable and transient local, so a late subscriber (RViz, Foxglove) gets one
         self._map_publisher = self.create_publisher(MarkerArray, "~/map", MAP_QOS)
         self._tf = OptionalTfBroadcaster(self)
@@ -605,8 +604,7 @@ class SlamNode(Node):
         if self._tf.available:
             self._map_to_odom_pending = (stamp_nanoseconds(stamp), T_map_body, stamp)
             self._send_map_to_odom()
-        if self.trail.offer(T_map_body, PoseStamped(header=odom.header, pose=odom.pose.pose)):
-            self._path_publisher.publish(Path(header=odom.header, poses=list(self.trail.items)))
+        self.path.add(T_map_body, odom)
 
     def _publish_map(self, stamp: Time) -> None:
         map_id = self.node_config.map_id

@@ -33,8 +33,8 @@ import sys
 from dataclasses import dataclass
 
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
-from nav_msgs.msg import Odometry, Path
+from geometry_msgs.msg import PoseWithCovarianceStamped
+from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
@@ -46,13 +46,13 @@ from nuturtle_ros_common.conversions import (
     transform_stamped,
 )
 from nuturtle_ros_common.node_main import run_node
+from nuturtle_ros_common.path_topic import PathTopic
 from nuturtle_ros_common.ros_params import declare_dataclass
 from nuturtle_ros_common.tf_compat import OptionalTfBroadcaster
 from nuturtle_ros_common.throttle import SourceWarnings
 from nuturtle_ros_common.wheel_joints import WheelJoints
 from nuturtle_ros_common.wheel_stream import declare_wheel_stream
 from turtlelib import Transform2D, Twist2D
-from turtlelib.path_trail import PathTrail, PathTrailConfig
 from turtlelib.sample_gate import Verdict
 from turtlelib.validation import names
 from turtlelib.wheel_odometry import WheelOdometry
@@ -81,9 +81,8 @@ class OdometryNode(Node):
         self._warnings = SourceWarnings(self.get_logger())
         self._wheels = declare_wheel_stream(self, self.joints, robot, self._warnings)
         self.odometry = WheelOdometry(robot.diff_drive())
-        self.trail: PathTrail[PoseStamped] = PathTrail(declare_dataclass(self, PathTrailConfig))
+        self.path = PathTopic(self)
         self._odom_publisher = self.create_publisher(Odometry, "odom", 10)
-        self._path_publisher = self.create_publisher(Path, "~/path", 10)
         self._tf = OptionalTfBroadcaster(self)
         self.create_subscription(JointState, "joint_states", self._on_joint_states, 10)
         self.create_subscription(PoseWithCovarianceStamped, "initialpose", self._on_initial_pose, 10)
@@ -114,8 +113,7 @@ class OdometryNode(Node):
         odom = odometry_message(T_odom_body, V_body, frames.odom_id, frames.body_id, stamp)
         self._odom_publisher.publish(odom)
         self._tf.send(transform_stamped(T_odom_body, self.frames.odom_id, self.frames.body_id, stamp))
-        if self.trail.offer(T_odom_body, PoseStamped(header=odom.header, pose=odom.pose.pose)):
-            self._path_publisher.publish(Path(header=odom.header, poses=list(self.trail.items)))
+        self.path.add(T_odom_body, odom)
 
     def _on_initial_pose(self, msg: PoseWithCovarianceStamped) -> None:
         frame_id = msg.header.frame_id
@@ -132,7 +130,7 @@ class OdometryNode(Node):
             self._warnings.warn("initialpose", f"initialpose skipped: {error}")
             return
         self.odometry.T_odom_body = T_odom_body
-        self.trail.clear()
+        self.path.clear()
         self.get_logger().info(
             f"pose reset to x = {T_odom_body.x:.3f} m, y = {T_odom_body.y:.3f} m, "
             f"theta = {T_odom_body.theta:.3f} rad"

@@ -31,6 +31,7 @@ from nuturtle_description.robot_params import burger_params
 from nuturtle_ros_common.conversions import pose_from_transform, stamp_seconds, yaw_from_quaternion
 from nuturtle_ros_common.ros_files import load_ros_yaml
 from turtlelib import DiffDrive, Transform2D
+from turtlelib.path_trail import PathTrailConfig
 
 pytestmark = pytest.mark.ros
 
@@ -343,9 +344,7 @@ def test_the_default_parameters_are_the_basic_world_yaml():
         "wheel_left": "wheel_left_joint",
         "wheel_right": "wheel_right_joint",
         "cmd_timeout": 0.5,
-        "path_min_step_m": 0.02,
-        "path_min_turn_rad": 0.1,
-        "path_max_poses": 3000,
+        **vars(PathTrailConfig()),
     }
     assert flat == defaults
 

@@ -198,7 +198,16 @@ def assert_covariance(odom: Odometry) -> np.ndarray:
 def test_straight_drive_then_arc_follow_the_kinematics_from_the_start_pose_with_a_growing_covariance(ros):
     T0 = Transform2D(0.5, -0.25, 0.7)
     # no observations in this test: no warning that slam only dead-reckons
-    rig = Rig(ros, x0=T0.x, y0=T0.y, theta0=T0.theta, observation_timeout=100.0)
+    # the path at every kept pose (path_period 0), a pose every 2 cm
+    rig = Rig(
+        ros,
+        x0=T0.x,
+        y0=T0.y,
+        theta0=T0.theta,
+        observation_timeout=100.0,
+        path_period=0.0,
+        path_min_step_m=0.02,
+    )
     t_ns, phi = 50 * S, (2.0, -1.0)  # any start angles: only increments count
     first = rig.wheels(t_ns, phi)
     assert close_pose(first, T0)

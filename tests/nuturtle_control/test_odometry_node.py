@@ -19,6 +19,7 @@ from sensor_msgs.msg import JointState
 from nuturtle_control.odometry import OdometryFrames, OdometryNode
 from nuturtle_ros_common.conversions import quaternion_from_yaw, yaw_from_quaternion
 from rclpy_harness import matched, record_rosout, warnings_of
+from turtlelib.path_trail import PathTrailConfig
 
 pytestmark = pytest.mark.ros
 
@@ -103,10 +104,11 @@ def test_a_known_arc_in_steps_ends_at_the_hand_computed_pose_with_its_body_twist
     assert rig.warnings() == []
 
 
-def test_path_is_decimated_and_ends_at_the_odometry_pose(ros):
+def test_path_is_decimated_published_once_per_period_and_ends_at_the_odometry_pose(ros):
     rig = Rig(ros)
+    config = PathTrailConfig()  # the node's defaults: a pose every 5 cm, the path once per second
     rig.send(joint_state(1.0, (0.0, 0.0)))
-    # 0.2 m straight in 1 mm steps: a new path pose every 2 cm (path_min_step_m), not every message
+    # 0.2 m straight in 1 mm steps over 2 s: a new path pose every 5 cm, not every message
     for k in range(1, 201):
         phi = k * 0.001 / R_WHEEL
         odom = rig.send(joint_state(1.0 + 0.01 * k, (phi, phi)))
@@ -115,11 +117,11 @@ def test_path_is_decimated_and_ends_at_the_odometry_pose(ros):
     path = rig.paths[-1]
     assert path.header.frame_id == "odom"
     xs = [pose.pose.position.x for pose in path.poses]
-    assert len(xs) == pytest.approx(11, abs=1)
-    assert xs[0] == 0.0
-    assert all(b - a >= 0.02 - 1e-12 for a, b in pairwise(xs))
-    assert xs[-1] == pytest.approx(0.2, abs=0.02)
-    assert len(rig.paths) == len(xs), "a path is published only when a pose is added"
+    assert xs == pytest.approx([0.0, 0.05, 0.1, 0.15, 0.2], abs=0.0011)
+    assert all(b - a >= config.path_min_step_m - 1e-12 for a, b in pairwise(xs))
+    # published whole at t = 1, 2 and 3 s only: once per path_period, not at every kept pose
+    stamps = [(p.header.stamp.sec, p.header.stamp.nanosec) for p in rig.paths]
+    assert stamps == [(1, 0), (2, 0), (3, 0)]
 
 
 def test_initialpose_resets_the_pose_and_following_motion_starts_from_it(ros):
