@@ -238,6 +238,30 @@ def test_remove_is_the_marginal(slot):
     np.testing.assert_array_equal(state.covariance, P[np.ix_(indices, indices)])
 
 
+def test_the_storage_shrinks_back_when_landmarks_are_removed_and_keeps_the_marginal():
+    """A flood of landmarks that are then dropped (expired tentative ones) must not leave the storage, whose
+    size every update's cost follows, at its peak: it shrinks to within twice the size a state of the
+    remaining landmarks would grow to, and what remains is exactly the marginal."""
+    rng = np.random.default_rng(11)
+    state = grown_state(rng, 300)
+    assert state.capacity_landmarks >= 300
+    x, P = state.mean.copy(), state.covariance.copy()
+    while state.n_landmarks > 5:
+        assert state.remove(state.n_landmarks - 1) is None  # the last slot: nothing moves
+    n = state.n_landmarks
+    assert n <= state.capacity_landmarks <= 2 * (n + 8)
+    keep = np.arange(3 + 2 * n)
+    np.testing.assert_array_equal(state.mean, x[keep])
+    np.testing.assert_array_equal(state.covariance, P[np.ix_(keep, keep)])
+    # and it grows again as before
+    z = np.array([[1.0, 0.2]])
+    p_map, G_robot, G_z = landmarks_from_observations(state.mean[:3], z, SENSOR)
+    for _ in range(30):
+        state.append(p_map[0], G_robot[0], G_z[0], np.diag([4e-4, 1e-3]))
+    assert state.n_landmarks == n + 30 <= state.capacity_landmarks
+    np.testing.assert_array_equal(state.covariance[: 3 + 2 * n, : 3 + 2 * n], P[np.ix_(keep, keep)])
+
+
 def random_state_step(rng, state):
     """One random filter step on ``state``: predict (1-3 times), correct some landmarks (or consider them),
     append or remove one."""

@@ -9,7 +9,10 @@ Layout
 (m, m, rad, then landmark positions in m, all in the map frame); landmark slot ``i`` occupies indices
 ``3 + 2i`` and ``4 + 2i``; ``P`` is the (N, N) covariance. The arrays are allocated with spare capacity
 (``P`` is stored as the leading block of a larger C-ordered square) so that adding landmarks reallocates
-only when the capacity (grown by an eighth at a time) is exhausted.
+only when the capacity (grown by an eighth at a time) is exhausted; removing landmarks shrinks it back once
+it is more than twice what the remaining ones would grow to (the full update's cost follows the capacity,
+so a flood of landmarks that are then dropped, such as expired tentative ones, must not leave it at its
+peak).
 
 ``P`` is kept by its upper triangle (with the diagonal; the robot rows, ``P_qq`` included, are kept whole):
 the filter steps write only that triangle, and every read of covariance entries takes ``P_ij`` for
@@ -120,6 +123,11 @@ class SlamState:
     @property
     def n_landmarks(self) -> int:
         return self._n
+
+    @property
+    def capacity_landmarks(self) -> int:
+        """Landmark slots the storage holds without reallocating (>= :attr:`n_landmarks`)."""
+        return (self._cov.shape[0] - ROBOT_DIM) // LANDMARK_DIM
 
     @property
     def tracks(self) -> LandmarkTracks:
@@ -480,6 +488,8 @@ class SlamState:
             moved = last
         self._tracks.remove(slot)
         self._n -= 1
+        if self.capacity_landmarks > 2 * _grown(self._n):
+            self._reallocate(_grown(self._n))
         return moved
 
     def reset_robot(
@@ -606,17 +616,23 @@ class SlamState:
 
     def _reserve(self, n_landmarks: int) -> None:
         """Grow the storage (by at least an eighth) so that ``n_landmarks`` slots fit."""
-        needed = ROBOT_DIM + LANDMARK_DIM * n_landmarks
-        capacity = self._cov.shape[0]
-        if needed <= capacity:
-            return
-        capacity = needed + LANDMARK_DIM * max(8, n_landmarks // 8)
+        if n_landmarks > self.capacity_landmarks:
+            self._reallocate(_grown(n_landmarks))
+
+    def _reallocate(self, capacity_landmarks: int) -> None:
+        """Storage for ``capacity_landmarks`` (>= n) slots, holding the current mean and ``P`` block."""
+        capacity = ROBOT_DIM + LANDMARK_DIM * capacity_landmarks
         dim = self.dim
         mean = np.zeros(capacity)
         mean[:dim] = self._mean[:dim]
         cov = np.zeros((capacity, capacity))
         cov[:dim, :dim] = self._cov[:dim, :dim]
         self._mean, self._cov = mean, cov
+
+
+def _grown(n_landmarks: int) -> int:
+    """The capacity (landmark slots) a storage grows to for ``n_landmarks``: an eighth more, at least 8."""
+    return n_landmarks + max(8, n_landmarks // 8)
 
 
 def _mirror_upper_triangle(P: NDArray[np.float64], dim: int) -> None:
