@@ -13,6 +13,13 @@ parameters used (``params.yaml``) into ``--out``; ``--params FILE`` replaces the
 
 from __future__ import annotations
 
+import os
+
+# One BLAS thread unless the caller says otherwise, set before numpy loads OpenBLAS (which reads it once):
+# the filter's small matrices gain nothing from threads, and two threads on two busy cores tripled the
+# CPU time of an MRCLAM run (docs/real_data.md).
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
 import argparse
 import sys
 from collections.abc import Callable, Sequence

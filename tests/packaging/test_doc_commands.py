@@ -1,0 +1,42 @@
+"""The commands the docs show run as written from the repository root: a Python command is
+``.venv/bin/python -P`` (``-P``: the source folders at the root, which hold each package one level down,
+must not shadow the installed packages; the interpreter with the project, not whichever ``python`` is
+first on PATH), and ``./dev.sh`` is given one of its subcommands. The commands are read, not run."""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+
+from workspace import ROOT
+
+DOCS = sorted([ROOT / "README.md", *ROOT.glob("docs/*.md"), *ROOT.glob("*/README.md")])
+# an interpreter followed by its options and then a module (-m), a program (-c) or a script
+PYTHON_COMMAND = re.compile(
+    r"(?<![\w/.-])(?P<python>[\w./-]*python[\d.]*)(?P<options>(?:\s+-[A-Za-z]+)*)\s+(?P<what>-m\s+\S+|-c\b|\S+\.py\b)"
+)
+# pip and venv are not shadowed by the source folders
+ANY_PYTHON = ("pip", "venv")
+DEV_SH = re.compile(r"\./dev\.sh\s+(\w+)")
+DEV_SH_COMMANDS = re.compile(r"^\s+(\w+)\)", re.MULTILINE)
+
+
+@pytest.mark.parametrize("path", DOCS, ids=lambda p: str(p.relative_to(ROOT)))
+def test_python_commands_are_the_venv_interpreter_with_dash_p(path):
+    text = path.read_text(encoding="utf-8")
+    for match in PYTHON_COMMAND.finditer(text):
+        if match["what"].split()[-1] in ANY_PYTHON:
+            continue
+        line = text.count("\n", 0, match.start()) + 1
+        assert match["python"] == ".venv/bin/python" and "-P" in match["options"].split(), (
+            f"{path.name}:{line}: {match.group()!r} is not `.venv/bin/python -P ...`"
+        )
+
+
+def test_dev_sh_commands_in_the_docs_exist():
+    known = set(DEV_SH_COMMANDS.findall((ROOT / "dev.sh").read_text(encoding="utf-8")))
+    used = {
+        (path.name, command) for path in DOCS for command in DEV_SH.findall(path.read_text(encoding="utf-8"))
+    }
+    assert used and {command for _, command in used} <= known, sorted(used)
