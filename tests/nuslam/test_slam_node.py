@@ -347,10 +347,11 @@ def test_unknown_association_maps_each_landmark_once_after_confirm_count_sightin
 
 def test_confirm_count_sets_the_sightings_that_confirm_a_landmark(ros):
     rig = Rig(ros, confirm_count=2)
-    rig.wheels(S, (0.0, 0.0))
-    counts = [
-        len(mapped(rig.observe(cylinder_array("base_scan", S, relative(T_BODY_SENSOR))))) for _ in range(3)
-    ]
+    counts = []
+    for k in range(3):  # three scans (distinct stamps: copies of one scan count once)
+        t_ns = S + k * S // 5
+        rig.wheels(t_ns, (0.0, 0.0))
+        counts.append(len(mapped(rig.observe(cylinder_array("base_scan", t_ns, relative(T_BODY_SENSOR))))))
     assert counts == [0, 3, 3]
 
 

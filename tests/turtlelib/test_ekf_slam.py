@@ -241,6 +241,33 @@ def test_tentative_landmark_is_confirmed_after_confirm_count_sightings():
     assert slam.tentative_ids.shape == (0,)
 
 
+def test_sightings_at_one_stamp_count_once_so_a_flood_confirms_nothing():
+    """A tentative landmark is confirmed by sightings in confirm_count scans (distinct stamps): the same
+    observation sent again and again at one stamp (a flood of copies of a scan) counts once, and the
+    landmark expires as any unconfirmed one does."""
+    config = SlamConfig(sensor_x=-0.032, confirm_count=2, tentative_timeout=1.0)
+    slam = EkfSlam(config, MOTION)
+    landmark = [[1.0, 0.5]]
+    new_id = int(slam.update_unknown(observe(slam, landmark), stamp_ns=0).landmark_ids[0])
+    for _ in range(50):
+        again = slam.update_unknown(observe(slam, landmark), stamp_ns=0)
+        np.testing.assert_array_equal(again.landmark_ids, [new_id])
+        assert again.confirmed_ids.shape == (0,)
+    np.testing.assert_array_equal(slam.tentative_ids, [new_id])
+    # the next scan confirms it
+    np.testing.assert_array_equal(
+        slam.update_unknown(observe(slam, landmark), stamp_ns=SCAN_NS).confirmed_ids, [new_id]
+    )
+    # another landmark flooded at one stamp expires unconfirmed
+    other = [[2.0, -1.0]]
+    other_id = int(slam.update_unknown(observe(slam, other), stamp_ns=2 * SCAN_NS).landmark_ids[-1])
+    for _ in range(50):
+        slam.update_unknown(observe(slam, other), stamp_ns=2 * SCAN_NS)
+    dropped = slam.update_unknown(np.zeros((0, 2)), stamp_ns=7 * SCAN_NS)  # 1 s later: the timeout
+    np.testing.assert_array_equal(dropped.dropped_ids, [other_id])
+    np.testing.assert_array_equal(slam.landmark_ids, [new_id])
+
+
 def test_unconfirmed_landmark_is_dropped_after_the_timeout():
     # a timeout of 3 scans at 5 Hz
     config = SlamConfig(sensor_x=-0.032, confirm_count=2, tentative_timeout=0.6)

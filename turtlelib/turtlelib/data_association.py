@@ -231,8 +231,8 @@ class AssociationPolicy(Protocol):
         """The plan for observations ``z`` (K, 2) with noise ``R`` (K, 2, 2) (and their ``ids``, if known)."""
         ...
 
-    def sighted(self, tracks: LandmarkTracks, slots: NDArray[np.int64]) -> NDArray[np.int64]:
-        """Record a sighting of the fused ``slots``; returns the ids this confirms."""
+    def sighted(self, tracks: LandmarkTracks, slots: NDArray[np.int64], stamp_ns: int) -> NDArray[np.int64]:
+        """Record a sighting at ``stamp_ns`` of the fused ``slots``; returns the ids this confirms."""
         ...
 
     def admits(
@@ -297,7 +297,7 @@ class KnownIds:
             gate=self._gate,
         )
 
-    def sighted(self, tracks: LandmarkTracks, slots: NDArray[np.int64]) -> NDArray[np.int64]:
+    def sighted(self, tracks: LandmarkTracks, slots: NDArray[np.int64], stamp_ns: int) -> NDArray[np.int64]:
         return np.zeros(0, dtype=np.int64)
 
     def admits(
@@ -368,8 +368,8 @@ class GatedTracks:
             match = np.where(unexplained, self._matcher.match(gating, to_tentative, R, view), match)
         return match
 
-    def sighted(self, tracks: LandmarkTracks, slots: NDArray[np.int64]) -> NDArray[np.int64]:
-        return tracks.sighted(slots, self._confirm_count)
+    def sighted(self, tracks: LandmarkTracks, slots: NDArray[np.int64], stamp_ns: int) -> NDArray[np.int64]:
+        return tracks.sighted(slots, self._confirm_count, stamp_ns)
 
     def admits(
         self, view: SlamView, z: NDArray[np.float64], R: NDArray[np.float64], started: list[int]

@@ -130,7 +130,8 @@ compatible observations join a landmark by nearest neighbour or by JCBB (``match
 that no confirmed landmark is compatible with, so a tentative duplicate next to a confirmed landmark
 starves and expires. An unpaired observation starts a new tentative
 landmark only if ``D2 > chi2_2^-1(gate_new)`` for every landmark, and is discarded otherwise. A tentative
-landmark is confirmed once seen ``confirm_count`` times (its first sighting included) and is dropped
+landmark is confirmed once seen in ``confirm_count`` scans (its first sighting included; sightings at one
+stamp count once, so copies of a scan confirm nothing) and is dropped
 (marginalised out) if still unconfirmed ``tentative_timeout`` seconds after the scan that created it (scan
 stamps in integer ns), so a single spurious detection never enters the map.
 
@@ -223,8 +224,9 @@ class SlamConfig:
       EKF, mapping only): the consistency remedies of the module docstring; ``relinearize_gate`` in
       (0, 1]: chi2 probability (2 dof) beyond which fej / oc reset a landmark's first estimate to its current
       one (1: never).
-    * ``confirm_count`` (>= 1): sightings that confirm a tentative landmark; ``tentative_timeout`` (s, > 0):
-      how long after its first sighting a tentative landmark may stay unconfirmed.
+    * ``confirm_count`` (>= 1): sightings (in as many scans) that confirm a tentative landmark;
+      ``tentative_timeout`` (s, > 0): how long after its first sighting a tentative landmark may stay
+      unconfirmed.
     * ``min_range`` (m, >= 0) < ``max_range`` (m): observations nearer or farther than these are rejected
       (the sensor's range_min and range_max: nothing real is seen outside them).
     * ``max_landmarks`` (>= 1): the map's size bound; observations that would start a landmark beyond it
@@ -563,7 +565,7 @@ class EkfSlam:
         status, landmark_ids = plan.status, plan.landmark_ids
         # one stacked update with the matched observations, then the new landmarks from the updated pose
         nis, fused = self._fuse(model, plan, R[plan.rows])
-        confirmed_ids = [policy.sighted(self._state.tracks, fused)]
+        confirmed_ids = [policy.sighted(self._state.tracks, fused, stamp_ns)]
         births = plan.births
         if self._localization:
             status[births] = UNMAPPED

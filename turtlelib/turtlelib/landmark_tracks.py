@@ -1,4 +1,5 @@
-"""The records of EKF SLAM landmark slots: id, sightings, time of creation, where the sensor last viewed it,
+"""The records of EKF SLAM landmark slots: id, sightings (at most one per stamp), time of creation and of the
+last counted sighting, where the sensor last viewed it,
 confirmed or tentative, and the columns a strategy adds (first estimates: :mod:`turtlelib.linearization`).
 
 :class:`turtlelib.slam_state.SlamState` owns one and is its only writer of rows: it appends rows with its
@@ -22,6 +23,7 @@ class LandmarkTracks:
         self._ids = np.zeros(capacity, dtype=np.int64)
         self._seen = np.zeros(capacity, dtype=np.int64)
         self._born = np.zeros(capacity, dtype=np.int64)
+        self._sighted_ns = np.zeros(capacity, dtype=np.int64)
         self._last_view_xy = np.full((capacity, 2), np.inf)
         self._confirmed = np.zeros(capacity, dtype=bool)
         # the columns strategies add, by name
@@ -70,6 +72,7 @@ class LandmarkTracks:
         self._reserve(self._n + k)
         new = slice(self._n, self._n + k)
         self._ids[new], self._seen[new], self._born[new] = landmark_ids, 1, stamp_ns
+        self._sighted_ns[new] = stamp_ns
         self._last_view_xy[new] = np.inf
         self._confirmed[new] = confirmed
         for column in self._columns.values():
@@ -90,10 +93,12 @@ class LandmarkTracks:
             self._slot_of[int(self._ids[slot])] = slot
         self._n = last
 
-    def sighted(self, slots: NDArray[np.int64], confirm_count: int) -> NDArray[np.int64]:
-        """Count one sighting of each of the distinct ``slots``; returns the ids this confirms."""
-        tentative = slots[~self._confirmed[slots]]
+    def sighted(self, slots: NDArray[np.int64], confirm_count: int, stamp_ns: int) -> NDArray[np.int64]:
+        """Count one sighting at ``stamp_ns`` of each of the distinct tentative ``slots`` not yet sighted at
+        that stamp or later (copies of one scan count once); returns the ids this confirms."""
+        tentative = slots[~self._confirmed[slots] & (self._sighted_ns[slots] < stamp_ns)]
         self._seen[tentative] += 1
+        self._sighted_ns[tentative] = stamp_ns
         newly = tentative[self._seen[tentative] >= confirm_count]
         self._confirmed[newly] = True
         return np.sort(self._ids[newly])
@@ -116,6 +121,7 @@ class LandmarkTracks:
             self._ids,
             self._seen,
             self._born,
+            self._sighted_ns,
             self._last_view_xy,
             self._confirmed,
             *self._columns.values(),
@@ -131,5 +137,5 @@ class LandmarkTracks:
             array = np.zeros((capacity, *old.shape[1:]), dtype=old.dtype)
             array[: self._n] = old[: self._n]
             grown.append(array)
-        self._ids, self._seen, self._born, self._last_view_xy, self._confirmed = grown[:5]
-        self._columns = dict(zip(self._columns, grown[5:], strict=True))
+        self._ids, self._seen, self._born, self._sighted_ns, self._last_view_xy, self._confirmed = grown[:6]
+        self._columns = dict(zip(self._columns, grown[6:], strict=True))
