@@ -16,6 +16,13 @@ The heavy modules (rclpy, the nodes, matplotlib) are imported only once the argu
 
 from __future__ import annotations
 
+import os
+
+if __name__ == "__main__":
+    # One BLAS thread unless the caller says otherwise, set before numpy loads OpenBLAS (which reads it
+    # once), as the demo and the dataset command do: slam's small matrices gain nothing from threads.
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
 import argparse
 import sys
 from collections.abc import Sequence
