@@ -74,6 +74,7 @@ from nuturtle_tools.params import params_file, to_parameters
 from nuturtle_tools.player import spin_until, wait_until
 from nuturtle_tools.recorder import BagWriter, TeeSink, TopicRecorder
 from nuturtle_tools.relay_config import RelayConfig, check_port_free
+from nuturtle_tools.staged_run import run_staged
 from turtlelib import MODES, Transform2D, TwistNoise, normalize_angle
 from turtlelib.slam_map import load_map
 from turtlelib.validation import finite_real, integer, one_of, positive, store
@@ -390,36 +391,31 @@ def run_demo(options: DemoOptions, on_progress: ProgressCallback | None = None) 
         check_port_free(*options.foxglove)
     keep = [] if options.map_file is None else [options.map_file]
     folder = RunFolder(Path(options.out_dir), OUTPUTS, keep)
-    run = _DemoRun(options, folder.path)
-    try:
-        with StopSignals() as stop:
-            result = run.run(stop, on_progress)
-    except BaseException as error:
-        if run.started:
-            where = folder.keep_incomplete(f"the run failed: {error}")
-            error.add_note(f"the outputs written so far are in {where}/")
-        else:
-            folder.discard()
-        raise
-    if result.interrupted is None:
-        return replace(result, out_dir=folder.complete())
-    reason = (
-        f"interrupted by {result.interrupted} after {result.metrics.sim_seconds:.1f} of "
-        f"{options.duration_s:.1f} s of simulation"
+    run = _DemoRun(options)
+
+    def stopped_reason(result: DemoResult) -> str | None:
+        if result.interrupted is None:
+            return None
+        return (
+            f"interrupted by {result.interrupted} after {result.metrics.sim_seconds:.1f} of "
+            f"{options.duration_s:.1f} s of simulation"
+        )
+
+    result, where = run_staged(
+        folder, partial(run.run, on_progress=on_progress), lambda: run.started, stopped_reason, "the run"
     )
-    return replace(result, out_dir=folder.keep_incomplete(reason))
+    return replace(result, out_dir=where)
 
 
 class _DemoRun:
-    """One run of the system into ``out_dir`` (the staging folder); ``started`` once nusim steps."""
+    """One run of the system into a (staging) folder; ``started`` once nusim steps."""
 
-    def __init__(self, options: DemoOptions, out_dir: Path) -> None:
+    def __init__(self, options: DemoOptions) -> None:
         self.options = options
-        self.out_dir = out_dir
         self.started = False
 
-    def run(self, stop: StopSignals, on_progress: ProgressCallback | None) -> DemoResult:
-        options, out_dir = self.options, self.out_dir
+    def run(self, out_dir: Path, stop: StopSignals, on_progress: ProgressCallback | None) -> DemoResult:
+        options = self.options
         context = run_context(options.domain_id, signal_handler_options=SignalHandlerOptions.NO)
         executor = SingleThreadedExecutor(context=context)
         system: DemoSystem | None = None

@@ -90,6 +90,7 @@ from .player import (
 )
 from .recorder import BagWriter, TeeSink, TopicRecorder, TopicTap, absolute, message_class
 from .relay_config import RelayConfig, check_port_free
+from .staged_run import run_staged
 
 # The SLAM outputs: a rosbag2 bag directory in the output folder (slam/metadata.yaml + slam/slam.mcap)
 BAG_NAME = "slam"
@@ -413,20 +414,14 @@ class Replay:
             check_port_free(*self.options.foxglove)
         folder = RunFolder(out_dir, OUTPUTS)
         self.started = False
-        try:
-            with StopSignals() as stop:
-                result = self._run(folder.path, stop)
-        except BaseException as error:
-            if self.started:
-                where = folder.keep_incomplete(f"the replay failed: {error}")
-                error.add_note(f"the outputs written so far are in {where}/")
-            else:
-                folder.discard()
-            raise
-        if result.interrupted is None:
-            return replace(result, out_dir=folder.complete())
-        reason = f"interrupted by {result.interrupted}: the outputs cover the bag up to where it stopped"
-        return replace(result, out_dir=folder.keep_incomplete(reason))
+
+        def stopped_reason(result: ReplayResult) -> str | None:
+            if result.interrupted is None:
+                return None
+            return f"interrupted by {result.interrupted}: the outputs cover the bag up to where it stopped"
+
+        result, where = run_staged(folder, self._run, lambda: self.started, stopped_reason, "the replay")
+        return replace(result, out_dir=where)
 
     def _run(self, out_dir: Path, stop: StopSignals) -> ReplayResult:
         context = run_context(self.options.domain, signal_handler_options=SignalHandlerOptions.NO)
