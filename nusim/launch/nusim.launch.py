@@ -18,7 +18,7 @@ from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
-from nuturtle_description.model_argument import model_argument
+from nuturtle_description.launch_arguments import model_argument, switch_argument
 
 
 def _share(package, *parts):
@@ -33,12 +33,7 @@ def generate_launch_description() -> LaunchDescription:
             DeclareLaunchArgument(
                 "world", default_value=basic_world, description="nusim's parameter file (the world)"
             ),
-            DeclareLaunchArgument(
-                "rviz",
-                default_value="false",
-                choices=["true", "false"],
-                description="true: also RViz2 in nusim/world",
-            ),
+            switch_argument("rviz", False, "true: also RViz2 in nusim/world"),
             Node(
                 package="nusim",
                 executable="nusim",

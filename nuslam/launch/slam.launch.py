@@ -25,15 +25,21 @@ RViz shows the wheel odometry's path (blue) and SLAM's pose with its covariance,
 """
 
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, IncludeLaunchDescription, OpaqueFunction
+from launch.actions import IncludeLaunchDescription, OpaqueFunction
 from launch.conditions import IfCondition
 from launch.launch_description_sources import PythonLaunchDescriptionSource
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
-from nuslam.launch_nodes import SLAM_ARGUMENTS, landmarks_parameters, rviz_arguments, slam_parameters
-from nuturtle_control.launch_nodes import CMD_SOURCES
-from nuturtle_description.model_argument import model_argument
+from nuslam.launch_nodes import (
+    ASSOCIATION,
+    SLAM_ARGUMENTS,
+    landmarks_parameters,
+    rviz_arguments,
+    slam_parameters,
+)
+from nuturtle_control.launch_nodes import CMD_SRC
+from nuturtle_description.launch_arguments import declare_argument, model_argument, switch_argument
 from nuturtle_ros_common.ros_files import share_file
 
 
@@ -74,39 +80,11 @@ def generate_launch_description() -> LaunchDescription:
     return LaunchDescription(
         [
             model_argument(),
-            DeclareLaunchArgument(
-                "association",
-                default_value="unknown",
-                choices=["unknown", "known"],
-                description="unknown: LiDAR landmarks (landmarks node); known: nusim's fake_sensor",
-            ),
-            DeclareLaunchArgument(
-                "use_sim_time",
-                default_value="false",
-                choices=["true", "false"],
-                description="true: every node on /clock (the simulator)",
-            ),
-            DeclareLaunchArgument(
-                "cmd_src",
-                default_value="none",
-                choices=list(CMD_SOURCES),
-                description="what publishes cmd_vel (none: nothing moves the robot until asked)",
-            ),
-            DeclareLaunchArgument(
-                "rviz",
-                default_value="false",
-                choices=["true", "false"],
-                description="true: also RViz2 (slam.rviz)",
-            ),
-            *[
-                DeclareLaunchArgument(
-                    name,
-                    default_value=argument.default,
-                    description=argument.description,
-                    **({"choices": list(argument.choices)} if argument.choices else {}),
-                )
-                for name, argument in SLAM_ARGUMENTS.items()
-            ],
+            declare_argument("association", ASSOCIATION),
+            switch_argument("use_sim_time", False, "true: every node on /clock (the simulator)"),
+            declare_argument("cmd_src", CMD_SRC),
+            switch_argument("rviz", False, "true: also RViz2 (slam.rviz)"),
+            *[declare_argument(name, argument) for name, argument in SLAM_ARGUMENTS.items()],
             IncludeLaunchDescription(
                 PythonLaunchDescriptionSource(
                     str(share_file("nuturtle_control", "launch", "start_robot.launch.py"))

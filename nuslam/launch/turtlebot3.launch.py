@@ -26,13 +26,13 @@ constants from its `model` (nuturtle_description/config/models.yaml; `nuslam.lau
 """
 
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, OpaqueFunction
+from launch.actions import OpaqueFunction
 from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
 from nuslam.launch_nodes import SLAM_ARGUMENTS, landmarks_parameters, rviz_arguments, slam_parameters
-from nuturtle_description.model_argument import model_argument
+from nuturtle_description.launch_arguments import declare_argument, model_argument, switch_argument
 
 
 def _nodes(context):
@@ -67,27 +67,13 @@ def generate_launch_description() -> LaunchDescription:
     return LaunchDescription(
         [
             model_argument(),
-            *[
-                DeclareLaunchArgument(
-                    name,
-                    default_value=argument.default,
-                    description=argument.description,
-                    **({"choices": list(argument.choices)} if argument.choices else {}),
-                )
-                for name, argument in SLAM_ARGUMENTS.items()
-            ],
-            DeclareLaunchArgument(
+            *[declare_argument(name, argument) for name, argument in SLAM_ARGUMENTS.items()],
+            switch_argument(
                 "use_sim_time",
-                default_value="false",
-                choices=["true", "false"],
-                description="true: every node on /clock (a simulated robot, or a bag played with --clock)",
+                False,
+                "true: every node on /clock (a simulated robot, or a bag played with --clock)",
             ),
-            DeclareLaunchArgument(
-                "rviz",
-                default_value="false",
-                choices=["true", "false"],
-                description="true: also RViz2 (slam.rviz)",
-            ),
+            switch_argument("rviz", False, "true: also RViz2 (slam.rviz)"),
             OpaqueFunction(function=_nodes),
         ]
     )

@@ -7,22 +7,17 @@ Every list is the node's own defaults (config/<node>.yaml), then the launch argu
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import Any
 
 from nuslam.slam_node import MOTION_SOURCES
-from nuturtle_ros_common.launch_parameters import with_arguments
+from nuturtle_ros_common.launch_parameters import LaunchArgument, with_arguments
 from nuturtle_ros_common.ros_files import share_file
 from turtlelib import MODES
 
-
-class LaunchArgument(NamedTuple):
-    """A launch argument's ``default``, its ``choices`` (None: any value) and its ``description``."""
-
-    default: str
-    choices: tuple[str, ...] | None
-    description: str
-
-
+# slam's association (slam.launch.py, nusim_slam.launch.py)
+ASSOCIATION = LaunchArgument(
+    "unknown", ("unknown", "known"), "unknown: LiDAR landmarks (landmarks node); known: nusim's fake_sensor"
+)
 # slam's launch arguments besides association and use_sim_time
 SLAM_ARGUMENTS: dict[str, LaunchArgument] = {
     "motion_source": LaunchArgument(

@@ -19,18 +19,18 @@ wheels `cmd_timeout` (0.5 s) after the last cmd_vel.
 """
 
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, OpaqueFunction
+from launch.actions import OpaqueFunction
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
 from nuturtle_control.launch_nodes import (
-    CMD_SOURCES,
+    CMD_SRC,
     circle_parameters,
     odometry_parameters,
     robot_state_publisher_parameters,
     turtle_control_parameters,
 )
-from nuturtle_description.model_argument import model_argument
+from nuturtle_description.launch_arguments import declare_argument, model_argument, switch_argument
 
 
 def _nodes(context):
@@ -84,18 +84,8 @@ def generate_launch_description() -> LaunchDescription:
     return LaunchDescription(
         [
             model_argument(),
-            DeclareLaunchArgument(
-                "use_sim_time",
-                default_value="false",
-                choices=["true", "false"],
-                description="true: run on /clock (simulated robot)",
-            ),
-            DeclareLaunchArgument(
-                "cmd_src",
-                default_value="none",
-                choices=list(CMD_SOURCES),
-                description="what publishes cmd_vel (none: nothing moves the robot until asked)",
-            ),
+            switch_argument("use_sim_time", False, "true: run on /clock (simulated robot)"),
+            declare_argument("cmd_src", CMD_SRC),
             OpaqueFunction(function=_nodes),
         ]
     )

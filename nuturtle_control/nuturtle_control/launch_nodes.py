@@ -8,10 +8,12 @@ from typing import Any
 
 from nuturtle_description.robot_params import model_params
 from nuturtle_description.urdf import robot_urdf
-from nuturtle_ros_common.launch_parameters import with_arguments
+from nuturtle_ros_common.launch_parameters import LaunchArgument, with_arguments
 from nuturtle_ros_common.ros_files import share_file
 
-CMD_SOURCES = ("none", "circle", "teleop")
+CMD_SRC = LaunchArgument(
+    "none", ("none", "circle", "teleop"), "what publishes cmd_vel (none: nothing moves the robot until asked)"
+)
 
 
 def _robot_node(node: str, use_sim_time: bool, model: str) -> list[str | dict[str, Any]]:

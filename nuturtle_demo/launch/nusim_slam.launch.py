@@ -33,8 +33,10 @@ from launch.launch_description_sources import PythonLaunchDescriptionSource
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
+from nuslam.launch_nodes import ASSOCIATION
+from nuturtle_control.launch_nodes import CMD_SRC
 from nuturtle_demo.launch_nodes import world_to_map_arguments
-from nuturtle_description.model_argument import model_argument
+from nuturtle_description.launch_arguments import declare_argument, model_argument, switch_argument
 
 
 def _share(package, *parts):
@@ -58,30 +60,15 @@ def generate_launch_description() -> LaunchDescription:
     return LaunchDescription(
         [
             model_argument(),
-            DeclareLaunchArgument(
-                "association",
-                default_value="unknown",
-                choices=["unknown", "known"],
-                description="unknown: LiDAR landmarks (landmarks node); known: nusim's fake_sensor",
-            ),
+            declare_argument("association", ASSOCIATION),
             # none: the robot stays still until asked, so every node is up (and slam at the true start) first
-            DeclareLaunchArgument(
-                "cmd_src",
-                default_value="none",
-                choices=["none", "circle", "teleop"],
-                description="what publishes cmd_vel (none: nothing moves the robot until asked)",
-            ),
+            declare_argument("cmd_src", CMD_SRC),
             DeclareLaunchArgument(
                 "world",
                 default_value=_share("nusim", "config", "basic_world.yaml"),
                 description="nusim's parameter file (the world)",
             ),
-            DeclareLaunchArgument(
-                "rviz",
-                default_value="false",
-                choices=["true", "false"],
-                description="true: one RViz2 (slam.rviz) on the simulator's clock",
-            ),
+            switch_argument("rviz", False, "true: one RViz2 (slam.rviz) on the simulator's clock"),
             # declared here so that --show-args offers what this file does with it: always true
             DeclareLaunchArgument(
                 "use_sim_time",

@@ -11,7 +11,7 @@ from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
-from nuturtle_description.model_argument import model_argument
+from nuturtle_description.launch_arguments import model_argument, switch_argument
 from nuturtle_description.robot_params import model_params
 from nuturtle_description.urdf import robot_urdf
 
@@ -56,18 +56,8 @@ def generate_launch_description() -> LaunchDescription:
                 choices=["red", "green", "blue", "purple"],
                 description="the robot's colour, also its frame prefix <color>/",
             ),
-            DeclareLaunchArgument(
-                "use_jsp",
-                default_value="true",
-                choices=["true", "false"],
-                description="true: joint_state_publisher publishes the wheel joints",
-            ),
-            DeclareLaunchArgument(
-                "use_rviz",
-                default_value="false",
-                choices=["true", "false"],
-                description="true: also RViz2 showing the model",
-            ),
+            switch_argument("use_jsp", True, "true: joint_state_publisher publishes the wheel joints"),
+            switch_argument("use_rviz", False, "true: also RViz2 showing the model"),
             OpaqueFunction(function=_nodes),
         ]
     )

@@ -1,4 +1,4 @@
-"""The `parameters` lists launch files give their nodes.
+"""The `parameters` lists launch files give their nodes, and the record of a launch argument.
 
 A `parameters` list holds YAML parameter files and dicts; launch_ros passes each file as
 `--params-file` and writes each dict as a temporary `/**:` parameter file, in the list's order. rcl merges
@@ -13,8 +13,25 @@ No rclpy or launch here: the launch files import this.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+
+@dataclass(frozen=True)
+class LaunchArgument:
+    """A launch argument's ``default``, its ``choices`` (None: any value) and its ``description``
+    (``ros2 launch --show-args`` shows it: ValueError when empty, or when the default is not a choice)."""
+
+    default: str
+    choices: tuple[str, ...] | None
+    description: str
+
+    def __post_init__(self) -> None:
+        if not self.description.strip():
+            raise ValueError("a launch argument needs a description")
+        if self.choices is not None and self.default not in self.choices:
+            raise ValueError(f"default {self.default!r} is not one of {self.choices}")
 
 
 def with_arguments(files: Sequence[Path | str], arguments: Mapping[str, Any]) -> list[str | dict[str, Any]]:

@@ -170,12 +170,10 @@ def calls(tree: ast.AST, name: str) -> list[ast.Call]:
 
 
 def declares_rviz_false(tree: ast.AST) -> bool:
+    """``switch_argument("rviz", False, ...)``: rviz:=true|false, false by default."""
     return any(
-        ast.literal_eval(call.args[0]) == "rviz"
-        and {kw.arg: ast.literal_eval(kw.value) for kw in call.keywords if kw.arg != "description"}
-        == {"default_value": "false", "choices": ["true", "false"]}
-        for call in calls(tree, "DeclareLaunchArgument")
-        if call.args and isinstance(call.args[0], ast.Constant)
+        [ast.literal_eval(argument) for argument in call.args[:2]] == ["rviz", False]
+        for call in calls(tree, "switch_argument")
     )
 
 

@@ -43,9 +43,14 @@ def configuration_name(value: ast.expr | None) -> str | None:
     return None
 
 
+# What declares a launch argument: launch's own action and nuturtle_description.launch_arguments' helpers
+DECLARING = ("DeclareLaunchArgument", "declare_argument", "switch_argument")
+LAUNCH_ARGUMENTS_MODULE = ROOT / "nuturtle_description/nuturtle_description/launch_arguments.py"
+
+
 def declared(path: Path) -> set[str]:
     """The argument names ``path`` declares by name (model_argument(): ``model``)."""
-    arguments = (call.args[0] for call in calls(parsed(path), "DeclareLaunchArgument") if call.args)
+    arguments = (call.args[0] for name in DECLARING for call in calls(parsed(path), name) if call.args)
     names = {argument.value for argument in arguments if isinstance(argument, ast.Constant)}
     return names | ({"model"} if calls(parsed(path), "model_argument") else set())
 
@@ -71,14 +76,19 @@ def includes(path: Path) -> list[tuple[Path, dict[str, ast.expr]]]:
 
 @pytest.mark.parametrize("path", LAUNCH_FILES, ids=lambda p: p.name)
 def test_every_launch_argument_is_described(path):
-    sources = [path, ROOT / "nuturtle_description/nuturtle_description/model_argument.py"]
-    for source in sources:
+    # declare_argument's records (LaunchArgument) refuse an empty description when they are built
+    for source in [path, LAUNCH_ARGUMENTS_MODULE]:
         for call in calls(parsed(source), "DeclareLaunchArgument"):
             description = keyword(call, "description")
             name = ast.unparse(call.args[0]) if call.args else "?"
             assert description is not None, f"{source.name}: {name} has no description"
             if isinstance(description, ast.Constant):
                 assert description.value.strip(), f"{source.name}: {name} has an empty description"
+    for call in calls(parsed(path), "switch_argument"):
+        name, _, description = call.args
+        assert isinstance(description, ast.Constant) and description.value.strip(), (
+            f"{path.name}: {ast.unparse(name)} has no description"
+        )
 
 
 @pytest.mark.parametrize("path", [p for p in LAUNCH_FILES if includes(p)], ids=lambda p: p.name)

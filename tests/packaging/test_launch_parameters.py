@@ -6,14 +6,13 @@ YAML file under rcl's own merge rule."""
 
 from __future__ import annotations
 
-import re
 from pathlib import Path
 
 import pytest
 
 from nuslam.launch_nodes import SLAM_ARGUMENTS, landmarks_parameters, slam_parameters
 from nuturtle_control.launch_nodes import circle_parameters, odometry_parameters, turtle_control_parameters
-from nuturtle_ros_common.launch_parameters import with_arguments
+from nuturtle_ros_common.launch_parameters import LaunchArgument, with_arguments
 from nuturtle_ros_common.ros_files import share_file
 from rclpy_harness import launch_ros_arguments, rcl_parameters, served_parameters
 
@@ -129,8 +128,15 @@ def test_the_stock_turtlebot3_launch_drives_nothing_and_duplicates_no_odometry()
     for executable in ("turtle_control", "odometry", "circle", "teleop"):
         assert f'executable="{executable}"' not in text
     # and no launch starts the robot moving unless asked
-    for launch_file in ("nuslam/launch/slam.launch.py", "nuturtle_control/launch/start_robot.launch.py"):
-        assert re.search(r'"cmd_src",\s*default_value="none"', (ROOT / launch_file).read_text()), launch_file
+    from nuturtle_control.launch_nodes import CMD_SRC
+
+    assert CMD_SRC.default == "none"
+    for launch_file in (
+        "nuslam/launch/slam.launch.py",
+        "nuturtle_control/launch/start_robot.launch.py",
+        "nuturtle_demo/launch/nusim_slam.launch.py",
+    ):
+        assert 'declare_argument("cmd_src", CMD_SRC)' in (ROOT / launch_file).read_text(), launch_file
 
 
 def test_world_to_map_is_the_world_file_s_start_pose(tmp_path):
@@ -175,3 +181,12 @@ def test_robot_state_publisher_gets_the_urdf_with_the_lidar_mount_slam_uses():
     assert f'rpy="0 0 {robot.lidar_yaw:.12g}"' in scan_joint
     text = (ROOT / "nuturtle_control/launch/start_robot.launch.py").read_text()
     assert "parameters=robot_state_publisher_parameters(" in text
+
+
+@pytest.mark.parametrize(
+    ("fields", "message"),
+    [(("x", ("a", "b"), "an argument"), "not one of"), (("a", None, " "), "needs a description")],
+)
+def test_a_launch_argument_record_refuses_a_default_outside_its_choices_or_no_description(fields, message):
+    with pytest.raises(ValueError, match=message):
+        LaunchArgument(*fields)
