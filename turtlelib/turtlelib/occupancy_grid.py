@@ -271,13 +271,14 @@ class OccupancyGrid:
             math.floor(max(sx, ex.max())),
             math.floor(max(sy, ey.max())),
         )
-        rows, cols = _traversed_cells(sx - self.col0, sy - self.row0, ex - self.col0, ey - self.row0)
+        # cells in the map frame's cell units (independent of the grid's extent), then in the grid
+        rows, cols = _traversed_cells(sx, sy, ex, ey)
         width = self.log_odds.shape[1]
-        end_row = np.floor(ey).astype(np.int64) - self.row0
-        end_col = np.floor(ex).astype(np.int64) - self.col0
-        hit = (end_row * width + end_col)[returns]
-        traversed = rows * width + cols
-        start = (math.floor(sy) - self.row0) * width + (math.floor(sx) - self.col0)
+        offset = self.row0 * width + self.col0
+        end_row, end_col = np.floor(ey).astype(np.int64), np.floor(ex).astype(np.int64)
+        hit = (end_row * width + end_col)[returns] - offset
+        traversed = rows * width + cols - offset
+        start = math.floor(sy) * width + math.floor(sx) - offset
         # an end wins over a pass (a cell is updated once per scan)
         is_hit = self._hit_scratch
         is_hit[hit] = True
@@ -353,7 +354,7 @@ class OccupancyGrid:
 def _traversed_cells(
     sx: float, sy: float, ex: NDArray[np.float64], ey: NDArray[np.float64]
 ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-    """``(rows, cols)`` of the cells each segment from ``(sx, sy)`` to ``(ex_b, ey_b)`` (grid cell units)
+    """``(rows, cols)`` of the cells each segment from ``(sx, sy)`` to ``(ex_b, ey_b)`` (cell units: m / res)
     enters after leaving the start cell, end cells included, all segments back to back (module docstring);
     the start cell itself is not listed."""
     i0, j0 = math.floor(sx), math.floor(sy)

@@ -1,0 +1,239 @@
+"""OccupancyGrid: the cells a beam crosses, the log-odds update, no-return beams, growth, keyframes."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from turtlelib import Transform2D
+from turtlelib.occupancy_grid import (
+    GridConfig,
+    KeyframeConfig,
+    OccupancyGrid,
+    RangeScan,
+    ScanKeyframes,
+    log_odds,
+    probability,
+)
+
+RES = 0.1
+coordinate = st.floats(-1.5, 1.5, allow_nan=False)
+heading = st.floats(-math.pi, math.pi, allow_nan=False)
+
+
+def one_beam(range_m: float, angle_rad: float = 0.0, range_min: float = 0.05, range_max: float = 3.5):
+    return RangeScan(np.array([range_m]), angle_rad, 0.01, range_min, range_max)
+
+
+def observed_cells(grid: OccupancyGrid) -> dict[tuple[int, int], int]:
+    """{map-frame (floor(x / res), floor(y / res)): occupancy} of the observed cells."""
+    occupancy = grid.grid_map().occupancy
+    rows, cols = np.nonzero(grid.observed)
+    return {
+        (int(c + grid.col0), int(r + grid.row0)): int(occupancy[r, c])
+        for r, c in zip(rows, cols, strict=True)
+    }
+
+
+def touches(cell: tuple[int, int], start: np.ndarray, end: np.ndarray, slack_m: float = 1e-9) -> bool:
+    """Whether the segment from ``start`` to ``end`` (m) meets the cell's square, grown by ``slack_m`` (the
+    segment clipped to each axis' slab, Liang-Barsky)."""
+    t_low, t_high = 0.0, 1.0
+    for axis in (0, 1):
+        low, high = cell[axis] * RES - slack_m, (cell[axis] + 1) * RES + slack_m
+        d = end[axis] - start[axis]
+        if d == 0.0:
+            if not low <= start[axis] <= high:
+                return False
+            continue
+        t0, t1 = sorted(((low - start[axis]) / d, (high - start[axis]) / d))
+        t_low, t_high = max(t_low, t0), min(t_high, t1)
+    return t_low <= t_high
+
+
+def end_cell(point: np.ndarray) -> tuple[int, int]:
+    return tuple(np.floor(point / RES).astype(int).tolist())
+
+
+def test_one_beam_by_hand():
+    # sensor at (0.05, 0.05) facing +x, a return at 0.32 m ends at x = 0.37: cells 0, 1, 2 passed, 3 hit
+    grid = OccupancyGrid(GridConfig(resolution_m=RES, initial_size_m=1.0))
+    grid.insert_scan(one_beam(0.32), Transform2D(0.05, 0.05, 0.0))
+    assert observed_cells(grid) == {(0, 0): 40, (1, 0): 40, (2, 0): 40, (3, 0): 70}
+    grid_map = grid.grid_map()
+    assert grid_map.occupancy.shape == (10, 10) and grid_map.resolution_m == RES
+    assert (grid_map.origin.x, grid_map.origin.y, grid_map.origin.theta) == (-0.5, -0.5, 0.0)
+    # row-major, row 0 at the origin, +x columns, +y rows: map-frame cell (3, 0) is row 5, column 8
+    assert (
+        grid_map.occupancy[5, 8] == 70 and grid_map.occupancy[5, 5] == 40 and grid_map.occupancy[6, 8] == -1
+    )
+    # from (0.05, 0.02) at 135 deg for 0.14 sqrt(2) m: crosses x = 0 at y = 0.07 (into cell (-1, 0)), then
+    # y = 0.1 at x = -0.03 (into (-1, 1)), ends at (-0.09, 0.16) in (-1, 1)
+    grid = OccupancyGrid(GridConfig(resolution_m=RES, initial_size_m=1.0))
+    grid.insert_scan(one_beam(math.hypot(0.14, 0.14), 0.75 * math.pi), Transform2D(0.05, 0.02, 0.0))
+    assert observed_cells(grid) == {(0, 0): 40, (-1, 0): 40, (-1, 1): 70}
+
+
+@settings(max_examples=150, deadline=None)
+@given(coordinate, coordinate, st.floats(0.06, 3.0), heading)
+def test_a_beam_marks_its_end_occupied_and_the_cells_before_it_free(x, y, range_m, angle_rad):
+    T_map_scan = Transform2D(x, y, 0.0)
+    grid = OccupancyGrid(GridConfig(resolution_m=RES, initial_size_m=1.0))
+    grid.insert_scan(one_beam(range_m, angle_rad), T_map_scan)
+    start = np.array([x, y])
+    end = start + range_m * np.array([math.cos(angle_rad), math.sin(angle_rad)])
+    cells = observed_cells(grid)
+    hit = [cell for cell, value in cells.items() if value == 70]
+    assert len(hit) == 1 and touches(hit[0], end, end)
+    assert all(value in (40, 70) for value in cells.values())
+    # the cells the segment meets, each once: a 4-connected path of n = |di| + |dj| + 1 cells from the
+    # start's to the end's (a segment through a cell corner, to rounding, may get both or neither of the
+    # corner's side cells: n - 1 to n + 1)
+    assert all(touches(cell, start, end) for cell in cells)
+    start_cell = end_cell(start)
+    assert cells[start_cell] == (70 if hit[0] == start_cell else 40)
+    n = abs(hit[0][0] - start_cell[0]) + abs(hit[0][1] - start_cell[1]) + 1
+    assert n - 1 <= len(cells) <= n + 1
+
+
+@given(st.integers(1, 12), st.floats(0.5, 0.95, exclude_min=True), st.floats(0.15, 0.45))
+def test_repeated_scans_converge_to_the_clamps(n_scans, hit_probability, miss_probability):
+    config = GridConfig(
+        resolution_m=RES,
+        initial_size_m=1.0,
+        hit_probability=hit_probability,
+        miss_probability=miss_probability,
+    )
+    grid = OccupancyGrid(config)
+    for _ in range(n_scans):
+        grid.insert_scan(one_beam(0.32), Transform2D(0.05, 0.05, 0.0))
+    l_hit, l_miss = log_odds(hit_probability), log_odds(miss_probability)
+    occupied = min(n_scans * l_hit, log_odds(config.max_probability))
+    free = max(n_scans * l_miss, log_odds(config.min_probability))
+    np.testing.assert_allclose(grid.log_odds[5, 8], occupied, rtol=1e-5)
+    np.testing.assert_allclose(grid.log_odds[5, 5:8], free, rtol=1e-5)
+    assert observed_cells(grid)[(3, 0)] == round(100 * probability(occupied))
+
+
+def test_the_clamped_values_are_the_bounds():
+    grid = OccupancyGrid(GridConfig(resolution_m=RES, initial_size_m=1.0))
+    for _ in range(20):
+        grid.insert_scan(one_beam(0.32), Transform2D(0.05, 0.05, 0.0))
+    assert observed_cells(grid) == {(0, 0): 12, (1, 0): 12, (2, 0): 12, (3, 0): 97}
+
+
+no_return = st.sampled_from([0.0, math.nan, math.inf, 0.01, 5.0, -1.0])
+
+
+@settings(deadline=None)
+@given(st.lists(st.one_of(no_return, st.floats(0.1, 3.5)), min_size=1, max_size=40), coordinate, heading)
+def test_no_return_beams_never_mark_occupied_and_clear_up_to_the_bound(ranges, x, theta):
+    scan = RangeScan(np.array(ranges), -1.0, 0.05, 0.05, 3.5)
+    T_map_scan = Transform2D(x, 0.0, theta)
+    grid = OccupancyGrid(GridConfig(resolution_m=RES, initial_size_m=1.0, no_return_clear_m=0.6))
+    grid.insert_scan(scan, T_map_scan)
+    cells = observed_cells(grid)
+    returns = scan.returns()
+    angles = -1.0 + 0.05 * np.arange(len(ranges))
+    ends = [
+        T_map_scan @ (rho * np.array([math.cos(phi), math.sin(phi)]))
+        for rho, phi in zip(scan.ranges[returns], angles[returns], strict=True)
+    ]
+    # the occupied cells are the returns' end cells (to rounding on a border)
+    occupied = [cell for cell, value in cells.items() if value > 50]
+    assert len(occupied) <= len(ends)
+    assert all(any(touches(cell, end, end) for end in ends) for cell in occupied)
+    assert all(any(touches(cell, end, end) for cell in occupied) for end in ends)
+    # every no-return beam cleared the cell at 0.6 m (unless a return ended in it)
+    for phi in angles[~returns]:
+        end = T_map_scan @ (0.6 * np.array([math.cos(phi), math.sin(phi)]))
+        assert cells[end_cell(end)] == 40 or end_cell(end) in occupied
+
+
+def test_no_return_clearing_can_be_turned_off():
+    grid = OccupancyGrid(GridConfig(resolution_m=RES, initial_size_m=1.0, no_return_clear_m=0.0))
+    grid.insert_scan(RangeScan(np.array([math.inf, math.nan, 0.0]), 0.0, 0.5, 0.1, 3.5), Transform2D())
+    assert not grid.observed.any()
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.tuples(st.floats(-3.0, 3.0), st.floats(-3.0, 3.0), heading), min_size=1, max_size=4))
+def test_growing_keeps_every_cell_in_place(poses):
+    """A grid that starts small and grows holds the same value at every world cell as one that starts
+    large enough for everything."""
+    rng = np.random.default_rng(0)
+    scans = [RangeScan(rng.uniform(0.1, 2.0, 36), 0.0, 2 * math.pi / 36, 0.05, 3.5) for _ in poses]
+    small = OccupancyGrid(GridConfig(resolution_m=RES, initial_size_m=0.5, grow_margin_m=0.3))
+    large = OccupancyGrid(GridConfig(resolution_m=RES, initial_size_m=12.0))
+    for scan, pose in zip(scans, poses, strict=True):
+        small.insert_scan(scan, Transform2D(*pose))
+        large.insert_scan(scan, Transform2D(*pose))
+    assert large.log_odds.shape == (120, 120) and small.log_odds.shape != (120, 120)
+    assert observed_cells(small) == observed_cells(large)
+    x0, y0 = small.origin_m
+    assert (x0, y0) == (small.col0 * RES, small.row0 * RES)
+
+
+def test_a_scan_past_the_largest_grid_is_refused_and_changes_nothing():
+    grid = OccupancyGrid(GridConfig(resolution_m=RES, initial_size_m=1.0, max_size_m=3.0))
+    grid.insert_scan(one_beam(1.0), Transform2D())
+    before = grid.log_odds.copy(), grid.col0, grid.row0
+    with pytest.raises(ValueError, match=r"reaches past max_size_m = 3.0 m of grid in x"):
+        grid.insert_scan(one_beam(3.2), Transform2D(-0.2, 0.0, 0.0))
+    assert np.array_equal(grid.log_odds, before[0]) and (grid.col0, grid.row0) == before[1:]
+    grid.insert_scan(one_beam(2.0), Transform2D())  # 3 m wide at most: the margin gives way
+    assert grid.log_odds.shape[1] <= 30
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "message"),
+    [
+        ("resolution_m", 0.0, "resolution_m must be finite and > 0"),
+        ("hit_probability", 0.5, r"hit_probability must be in \(0.5, 1.0\)"),
+        ("miss_probability", 0.6, r"miss_probability must be in \(0.0, 0.5\)"),
+        ("min_probability", 0.45, r"min_probability must be in \(0.0, 0.4\]"),
+        ("max_probability", 1.0, r"max_probability must be in \[0.7, 1.0\)"),
+        ("no_return_clear_m", -1.0, "no_return_clear_m must be finite and >= 0"),
+        ("max_size_m", 1.0, "max_size_m must be >= initial_size_m"),
+        ("max_size_m", 5000.0, "must be <= 32768 cells a side"),
+    ],
+)
+def test_invalid_config_is_refused(field, value, message):
+    with pytest.raises(ValueError, match=message):
+        GridConfig(**{field: value})
+
+
+def test_invalid_scans_are_refused():
+    with pytest.raises(ValueError, match="ranges must be a non-empty 1-D array"):
+        RangeScan(np.zeros((0,)), 0.0, 0.1, 0.1, 3.5)
+    with pytest.raises(ValueError, match="angle_increment must be non-zero"):
+        RangeScan(np.ones(3), 0.0, 0.0, 0.1, 3.5)
+    with pytest.raises(ValueError, match="need range_min < range_max"):
+        RangeScan(np.ones(3), 0.0, 0.1, 3.5, 3.5)
+    with pytest.raises(ValueError, match="angle_min must be a finite number"):
+        RangeScan(np.ones(3), math.nan, 0.1, 0.1, 3.5)
+
+
+def test_keyframes_are_decimated_and_render_at_the_corrected_poses():
+    keyframes = ScanKeyframes(KeyframeConfig(keyframe_step_m=0.1, keyframe_turn_rad=0.5, max_keyframes=10))
+    scan = RangeScan(np.full(8, 0.8), 0.0, math.pi / 4, 0.05, 3.5)
+    for k in range(10):
+        keyframes.offer(k * 10**8, Transform2D(0.04 * k, 0.0, 0.0), scan)
+    assert keyframes.stamps_ns == [0, 3 * 10**8, 6 * 10**8, 9 * 10**8]
+
+    def corrected(stamp_ns: int) -> Transform2D | None:  # a loop closure moved the path by 0.3 m in y
+        return None if stamp_ns == 9 * 10**8 else Transform2D(0.04 * stamp_ns / 10**8, 0.3, 0.0)
+
+    T_body_scan = Transform2D(-0.03, 0.0, 0.0)
+    config = GridConfig(resolution_m=RES, initial_size_m=4.0)
+    rendered = keyframes.render(corrected, T_body_scan, config)
+    expected = OccupancyGrid(config)
+    for k in (0, 3, 6):
+        expected.insert_scan(scan, Transform2D(0.04 * k, 0.3, 0.0) @ T_body_scan)
+    assert np.array_equal(rendered.grid_map().occupancy, expected.grid_map().occupancy)
+    with pytest.raises(ValueError, match="keyframe_step_m must be finite and >= 0"):
+        KeyframeConfig(keyframe_step_m=-0.1)
