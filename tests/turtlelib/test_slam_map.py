@@ -330,11 +330,10 @@ def test_failed_save_keeps_the_old_file_and_leaves_no_temporary(tmp_path, monkey
     save_map(path, small_map(2))
     before = path.read_bytes()
 
-    def half_then_fail(document, stream, **kwargs):
-        stream.write(json.dumps(document, **kwargs)[:50])
+    def disk_full(fd):  # the written data does not reach the disk: ENOSPC shows at fsync
         raise OSError("disk full")
 
-    monkeypatch.setattr(json, "dump", half_then_fail)
+    monkeypatch.setattr(os, "fsync", disk_full)
     with pytest.raises(OSError, match="disk full"):
         save_map(path, small_map(3, seed=1))
     assert path.read_bytes() == before

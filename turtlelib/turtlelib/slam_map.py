@@ -62,7 +62,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import tempfile
 from dataclasses import dataclass, field
 from numbers import Integral, Real
 from pathlib import Path
@@ -70,13 +69,13 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from .atomic_files import replace_files
 from .validation import covariance, finite_array, integer, landmark_ids, names
 
 MAP_FORMAT = "nuturtle_slam_map"
 MAP_FORMAT_VERSION = 1
 _KEYS = ("format", "version", "frame_id", "stamp_ns", "landmarks", "covariance", "parameters")
 _LANDMARK_KEYS = ("id", "x", "y")
-_NEW_FILE_MODE = 0o644  # of a map file that did not exist before (an existing file keeps its mode)
 
 Parameter = bool | int | float | str
 
@@ -140,8 +139,9 @@ def save_map(path: str | os.PathLike, landmark_map: LandmarkMap) -> None:
     """Write ``landmark_map`` to ``path`` as the JSON document of the module docstring, atomically.
 
     Missing parent directories are created. The document goes to a temporary file ``.<name>.*.tmp`` in the
-    same directory, is flushed and fsynced, then renamed onto ``path`` (``os.replace``): an existing file
-    is replaced whole or left as it was. On any error the temporary file is removed and the error raised.
+    same directory, is flushed and fsynced, then renamed onto ``path`` (:func:`turtlelib.atomic_files.
+    replace_files`): an existing file is replaced whole or left as it was. On any error the temporary file
+    is removed and the error raised.
     """
     if not isinstance(landmark_map, LandmarkMap):
         raise ValueError(f"landmark_map must be a LandmarkMap, got {type(landmark_map).__name__}")
@@ -158,27 +158,8 @@ def save_map(path: str | os.PathLike, landmark_map: LandmarkMap) -> None:
         "covariance": landmark_map.covariance.tolist(),
         "parameters": dict(landmark_map.parameters),
     }
-    path.parent.mkdir(parents=True, exist_ok=True)
-    try:
-        mode = path.stat().st_mode & 0o7777
-    except FileNotFoundError:
-        mode = _NEW_FILE_MODE
-    fd, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as stream:
-            json.dump(document, stream, indent=2, allow_nan=False)
-            stream.write("\n")
-            stream.flush()
-            os.fchmod(stream.fileno(), mode)
-            os.fsync(stream.fileno())
-        os.replace(temporary, path)
-    except BaseException:
-        try:
-            os.unlink(temporary)
-        except FileNotFoundError:
-            pass
-        raise
-    _fsync_directory(path.parent)
+    text = json.dumps(document, indent=2, allow_nan=False) + "\n"
+    replace_files({path: text.encode("utf-8")})
 
 
 def load_map(path: str | os.PathLike) -> LandmarkMap:
@@ -303,17 +284,3 @@ def _parameters(parameters: object) -> dict[str, Parameter]:
 def _typed(parameters: dict[str, Parameter]) -> dict[str, tuple[type, Parameter]]:
     """``parameters`` with each value's type (``True == 1 == 1.0`` in Python, not bit for bit)."""
     return {name: (type(value), value) for name, value in parameters.items()}
-
-
-def _fsync_directory(directory: Path) -> None:
-    """Make the rename durable (POSIX); a no-op where directories cannot be opened."""
-    try:
-        fd = os.open(directory, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
