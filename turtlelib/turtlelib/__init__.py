@@ -1,4 +1,5 @@
-"""turtlelib: pure numpy SE(2) geometry, diff-drive kinematics, LiDAR landmark detection and EKF SLAM.
+"""turtlelib: pure numpy SE(2) geometry, diff-drive kinematics, LiDAR landmark detection, EKF SLAM and
+occupancy grid mapping.
 
 No ROS import, ever: the ROS nodes in nusim, nuturtle_control and nuslam are thin wrappers over this.
 """
@@ -16,6 +17,7 @@ from .detection import (
 )
 from .ekf_slam import MODES, Association, EkfSlam, ObservationStatus, SlamConfig
 from .geometry import Transform2D, Twist2D, integrate_twist, normalize_angle, normalize_angles
+from .grid_map_file import load_grid_map, save_grid_map
 from .kinematics import DiffDrive
 from .motion_models import (
     AckermannMotion,
@@ -26,6 +28,7 @@ from .motion_models import (
     UnicycleMotion,
 )
 from .motion_signals import HeldInputs, MotionSignal, OdometryPoses, WheelAngles
+from .occupancy_grid import GridConfig, GridMap, KeyframeConfig, OccupancyGrid, RangeScan, ScanKeyframes
 from .sample_gate import GateResult, SampleGate, SampleGateConfig, Verdict
 from .scan_model import LidarConfig, arena_walls, cast_beams, polygon_walls, simulate_scan
 from .slam_map import LandmarkMap, load_map, save_map
@@ -70,6 +73,14 @@ __all__ = [
     "EkfSlam",
     "ObservationStatus",
     "SlamConfig",
+    "GridConfig",
+    "GridMap",
+    "KeyframeConfig",
+    "OccupancyGrid",
+    "RangeScan",
+    "ScanKeyframes",
+    "load_grid_map",
+    "save_grid_map",
     "LandmarkMap",
     "load_map",
     "save_map",
