@@ -1,0 +1,188 @@
+"""Occupancy grid of the shared Gazebo recording at its recorded poses, with a figure.
+
+/work/shared/datasets/tb3_gazebo_burger (see its README): a Burger in Gazebo's turtlebot3_world for 27.7 s.
+Its /odom is Gazebo's true pose in the world frame, so each /scan is inserted at /odom's pose at the scan's
+stamp (turtlelib.pose_buffer interpolates between odometry messages) composed with the Burger's LiDAR
+mount: the grid mapping alone, against the world's known cylinders (nine of radius 0.15 m at x, y in
+{-1.1, 0, 1.1}).
+
+Per cylinder: the occupied cells (>= 65) within one cell of its outline, and whether it was in range;
+occupied cells far from every cylinder are the walls' (drawn in the figure).
+
+Usage: python bench/grid_gazebo.py [BAG] [--write]   (--write replaces the "## Occupancy grid: Gazebo
+recording" section of docs/benchmarks.md and draws docs/figures/grid_gazebo_burger.png).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT / "bench"))  # bench_docs
+
+from bench_docs import write_section  # noqa: E402
+
+from turtlelib import GridConfig, OccupancyGrid, RangeScan, Transform2D  # noqa: E402
+from turtlelib.pose_buffer import PoseBuffer  # noqa: E402
+
+HEADING = "## Occupancy grid: Gazebo recording"
+BAG = Path("/work/shared/datasets/tb3_gazebo_burger")
+CYLINDERS = np.array([[x, y] for x in (-1.1, 0.0, 1.1) for y in (-1.1, 0.0, 1.1)])
+RADIUS_M = 0.15
+FIGURE = ROOT / "docs" / "figures" / "grid_gazebo_burger.png"
+
+
+def stamp_ns(header) -> int:
+    return header.stamp.sec * 10**9 + header.stamp.nanosec
+
+
+def read(bag: Path) -> tuple[PoseBuffer, list[tuple[int, RangeScan]]]:
+    """The /odom poses (world frame) and the /scans with their stamps."""
+    from rosbags.typesys import Stores, get_typestore
+
+    from nuturtle_tools.bag_source import BagSource
+
+    typestore = get_typestore(Stores.ROS2_JAZZY)
+    poses = PoseBuffer(100_000)
+    scans = []
+    with BagSource(bag) as source:
+        for message in source.messages(["/odom", "/scan"]):
+            msg = typestore.deserialize_cdr(message.data, message.type_name)
+            if message.topic == "/odom":
+                q = msg.pose.pose.orientation
+                yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+                p = msg.pose.pose.position
+                poses.add(stamp_ns(msg.header), Transform2D(p.x, p.y, yaw))
+            else:
+                scan = RangeScan(msg.ranges, msg.angle_min, msg.angle_increment, msg.range_min, msg.range_max)
+                scans.append((stamp_ns(msg.header), scan))
+    return poses, scans
+
+
+def measure(bag: Path) -> dict:
+    from nuturtle_description.robot_params import burger_params
+
+    T_body_scan = burger_params().T_body_scan
+    poses, scans = read(bag)
+    grid = OccupancyGrid(GridConfig())
+    used, path, update_ns = 0, [], []
+    for stamp, scan in scans:
+        T_world_body = poses.at(stamp)
+        if T_world_body is None:
+            continue
+        start = time.process_time_ns()
+        grid.insert_scan(scan, T_world_body @ T_body_scan)
+        update_ns.append(time.process_time_ns() - start)
+        used += 1
+        path.append([T_world_body.x, T_world_body.y])
+    path = np.array(path)
+    occupancy = grid.grid_map().occupancy
+    res = grid.config.resolution_m
+    rows, cols = np.nonzero(occupancy >= 65)
+    x0, y0 = grid.origin_m
+    occupied = np.column_stack([x0 + (cols + 0.5) * res, y0 + (rows + 0.5) * res])
+    distance = np.linalg.norm(occupied[:, None, :] - CYLINDERS[None], axis=2)
+    # a cell centre is within one cell of a circle when | |c - m| - r | <= res (half a diagonal + slack)
+    on_outline = np.abs(distance - RADIUS_M) <= res
+    nearest_path = np.linalg.norm(path[:, None, :] - CYLINDERS[None], axis=2).min(axis=0)
+    return {
+        "scans": len(scans),
+        "used": used,
+        "median_ms": 1e-6 * float(np.median(update_ns)),
+        "cells_per_cylinder": on_outline.sum(axis=0),
+        "nearest_path_m": nearest_path,
+        "occupied": len(occupied),
+        "near_cylinders": int(on_outline.any(axis=1).sum()),
+        "inside_cylinders": int((distance < RADIUS_M - res).any(axis=1).sum()),
+        "grid": grid,
+        "path": path,
+    }
+
+
+def section(result: dict) -> str:
+    rows = [
+        f"| ({x:+.1f}, {y:+.1f}) | {d:.2f} | {n} |"
+        for (x, y), d, n in zip(
+            CYLINDERS, result["nearest_path_m"], result["cells_per_cylinder"], strict=True
+        )
+    ]
+    return "\n".join(
+        [
+            HEADING,
+            "",
+            "`python bench/grid_gazebo.py --write`: `turtlelib.OccupancyGrid` (0.05 m, default `GridConfig`)",
+            "on the shared Gazebo recording (`/work/shared/datasets/tb3_gazebo_burger`, 27.7 s in",
+            "turtlebot3_world), each `/scan` at `/odom`'s pose at its stamp (Gazebo's true pose) composed",
+            f"with the Burger's LiDAR mount ({result['used']} of {result['scans']} scans within the",
+            f"odometry's span), {1e3 * result['median_ms']:.0f} us of CPU per update (median).",
+            "",
+            f"{result['occupied']} occupied cells: {result['near_cylinders']} within one cell of a",
+            f"cylinder's outline, {result['inside_cylinders']} inside a cylinder (more than a cell within",
+            "its outline), the rest on the walls. Per cylinder (radius 0.15 m), the occupied cells on",
+            "its outline:",
+            "",
+            "| cylinder (m) | closest approach of the path (m) | occupied cells on the outline |",
+            "|---|---:|---:|",
+            *rows,
+            "",
+            "![occupancy grid of the Gazebo recording](figures/grid_gazebo_burger.png)",
+            "",
+        ]
+    )
+
+
+def figure(result: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    grid = result["grid"]
+    occupancy = grid.grid_map().occupancy
+    # map_saver's trinary colours: occupied black, free white, the rest (unknown, undecided) grey
+    shade = np.where(occupancy >= 65, 0.0, np.where((occupancy >= 0) & (occupancy <= 19), 1.0, 0.7))
+    x0, y0 = grid.origin_m
+    height, width = occupancy.shape
+    res = grid.config.resolution_m
+    fig, ax = plt.subplots(figsize=(6, 6))
+    ax.imshow(shade, cmap="gray", vmin=0, vmax=1, origin="lower",
+              extent=(x0, x0 + width * res, y0, y0 + height * res))  # fmt: skip
+    ax.plot(result["path"][:, 0], result["path"][:, 1], color="tab:blue", lw=1.2, label="path (/odom)")
+    for k, (x, y) in enumerate(CYLINDERS):
+        circle = plt.Circle((x, y), RADIUS_M, fill=False, color="tab:red", lw=1.0)
+        ax.add_patch(circle)
+        if k == 0:
+            circle.set_label("true cylinders")
+    ax.set_xlim(-2.8, 2.8)
+    ax.set_ylim(-2.8, 2.8)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m, world)")
+    ax.set_ylabel("y (m, world)")
+    ax.set_title("occupancy grid, 0.05 m, turtlebot3_world recording at /odom poses", fontsize=10)
+    ax.legend(loc="upper right", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("bag", nargs="?", type=Path, default=BAG)
+    parser.add_argument("--write", action="store_true", help="update docs/benchmarks.md and the figure")
+    arguments = parser.parse_args()
+    result = measure(arguments.bag)
+    text = section(result)
+    print(text)
+    if arguments.write:
+        write_section(HEADING, text, ROOT / "docs" / "benchmarks.md")
+        figure(result, FIGURE)
+
+
+if __name__ == "__main__":
+    main()
