@@ -254,6 +254,10 @@ class OccupancyGrid:
         The grid first grows if the scan reaches past it; ValueError (and no change) if it would then be
         larger than ``max_size_m``.
         """
+        if not isinstance(scan, RangeScan) or not isinstance(T_map_scan, Transform2D):
+            raise ValueError(
+                f"need a RangeScan and a Transform2D, got {type(scan).__name__}, {type(T_map_scan).__name__}"
+            )
         res = self.config.resolution_m
         returns = scan.returns()
         reach_m = np.where(returns, scan.ranges, min(self.config.no_return_clear_m, scan.range_max))
