@@ -39,15 +39,17 @@ are missed. Anything else (0, NaN, inf, out of the limits: what LiDARs write for
 cell up to ``min(no_return_clear_m, range_max)`` along its direction and marks nothing occupied
 (``no_return_clear_m = 0`` turns this off).
 
-The cells a segment from ``s`` to ``e`` crosses (in cell units, ``u = x / res - col0``) are found in closed
-form, all beams at once (the traversal of Amanatides & Woo, "A fast voxel traversal algorithm", 1987, with
-its steps counted instead of iterated): the segment crosses ``n_x = |floor(e_x) - floor(s_x)|`` vertical
-cell borders at ``t_x(k) = (f_x + k) / |d_x|``, ``k = 0 .. n_x - 1`` (``d = e - s``, ``f_x`` the distance
-from ``s_x`` to the first border in the direction of travel) and ``n_y`` horizontal ones at ``t_y(j)``
-alike. After its k-th vertical crossing the segment is in column ``floor(s_x) + sign(d_x) (k + 1)`` and in
-the row reached after the horizontal crossings before it, ``c = #{j: t_y(j) < t_x(k)} =
-clip(ceil(t_x(k) |d_y| - f_y), 0, n_y)`` (and the same for the horizontal crossings, a tie going to the
-vertical one): the cells entered are known without ordering the crossings, and the last is the end cell.
+The cells a segment from ``s`` to ``e`` crosses (in the map frame's cell units ``u = x / res``, so that the
+cells do not depend on the grid's current extent) are found in closed form, all beams at once (the
+traversal of Amanatides & Woo, "A fast voxel traversal algorithm", 1987, with its steps counted instead of
+iterated): the segment crosses ``n_x = |floor(e_x) - floor(s_x)|`` vertical cell borders at
+``t_x(k) = (f_x + k) / |d_x|``, ``k = 0 .. n_x - 1`` (``d = e - s``, ``f_x`` the distance from ``s_x`` to
+the first border in the direction of travel) and ``n_y`` horizontal ones at ``t_y(j)`` alike. After its
+k-th vertical crossing the segment is in column ``floor(s_x) + sign(d_x) (k + 1)`` and in the row reached
+after the horizontal crossings before it, ``c = #{j: t_y(j) < t_x(k)} = clip(ceil(t_x(k) |d_y| - f_y), 0,
+n_y)`` (and the same for the horizontal crossings, a tie going to the vertical one): the cells entered are
+known without ordering the crossings, and the last is the end cell. (Rounding can only matter where a
+segment passes within rounding of a cell corner: both or neither of the corner's side cells is then listed.)
 """
 
 from __future__ import annotations
