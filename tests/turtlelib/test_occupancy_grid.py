@@ -184,6 +184,18 @@ def test_growing_keeps_every_cell_in_place(poses):
         large.insert_scan(scan, Transform2D(*pose))
     assert large.log_odds.shape == (120, 120) and small.log_odds.shape != (120, 120)
     assert observed_cells(small) == observed_cells(large)
+    # a world point falls in the cell of the same value in both
+    p_map = np.random.default_rng(1).uniform(-2.0, 2.0, (50, 2))
+    (r_small, c_small), (r_large, c_large) = small.cell_of(p_map).T, large.cell_of(p_map).T
+    inside = (
+        (r_small >= 0)
+        & (r_small < small.log_odds.shape[0])
+        & (c_small >= 0)
+        & (c_small < small.log_odds.shape[1])
+    )
+    assert np.array_equal(
+        small.log_odds[r_small[inside], c_small[inside]], large.log_odds[r_large[inside], c_large[inside]]
+    )
     x0, y0 = small.origin_m
     assert (x0, y0) == (small.col0 * RES, small.row0 * RES)
 
