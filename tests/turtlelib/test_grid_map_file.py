@@ -154,6 +154,14 @@ def test_an_image_from_another_save_is_refused(tmp_path):
     (tmp_path / "a" / "map.pgm").write_bytes((tmp_path / "b" / "map.pgm").read_bytes())
     with pytest.raises(ValueError, match=r"map.yaml: map.pgm is not the image this yaml was saved with"):
         load_grid_map(tmp_path / "a" / "map.yaml")
+    # an image edited on purpose: without the hash line the pair loads
+    yaml_path = tmp_path / "a" / "map.yaml"
+    yaml_path.write_text(
+        "".join(line for line in yaml_path.read_text().splitlines(True) if "sha256" not in line)
+    )
+    assert np.array_equal(
+        load_grid_map(yaml_path).occupancy, load_grid_map(tmp_path / "b" / "map.yaml").occupancy
+    )
 
 
 @pytest.mark.parametrize(

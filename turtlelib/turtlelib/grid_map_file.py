@@ -30,7 +30,8 @@ map_saver's 0.65, but ``free_thresh`` to ROS 1 map_saver's 0.196, not nav2's 0.2
 of an unknown cell (``occ = 50 / 255 = 0.196``) reads back as FREE, so a planner would drive into
 unexplored space (slam_toolbox issue 587); with 0.196 it reads back as unknown and 254 as free. The yaml
 also carries a comment ``# image_sha256: <hex>``, the SHA-256 of the image's bytes (map_server ignores
-comments), which :func:`load_grid_map` checks when present.
+comments), which :func:`load_grid_map` checks when present (delete that line after editing the image by
+hand, e.g. to erase noise, as map users do).
 
 Reading (:func:`load_grid_map`): the yaml subset map_server files use (``key: value`` lines, ``#``
 comments, plain, single- or double-quoted scalars, ``[a, b, c]`` flow lists; nothing nested); PGM images
@@ -137,7 +138,8 @@ def load_grid_map(yaml_path: str | os.PathLike) -> GridMap:
     if image_hash is not None and hashlib.sha256(data).hexdigest() != image_hash:
         raise ValueError(
             f"{yaml_path}: {image_path.name} is not the image this yaml was saved with ({_HASH_COMMENT} "
-            "differs: a save interrupted between its two files?)"
+            "differs: a save interrupted between its two files? If the image was edited on purpose, delete "
+            f"the '# {_HASH_COMMENT}' line)"
         )
     try:
         values, maxval = _parse_pgm(data)
@@ -159,7 +161,8 @@ def _occupancy(shade: NDArray[np.float64], metadata: dict) -> NDArray[np.int8]:
     """map_io's loader, per mode (module docstring)."""
     occupied, free = metadata["occupied_thresh"], metadata["free_thresh"]
     if metadata["mode"] == "raw":
-        value = np.rint(255.0 * shade)
+        # std::round: halves away from zero
+        value = np.floor(255.0 * shade + 0.5)
         return np.where(value <= 100.0, value, UNKNOWN).astype(np.int8)
     occ = shade if metadata["negate"] else 1.0 - shade
     if metadata["mode"] == "scale":
