@@ -278,13 +278,12 @@ class OccupancyGrid:
             math.floor(max(sy, ey.max())),
         )
         # cells in the map frame's cell units (independent of the grid's extent), then in the grid
-        rows, cols = _traversed_cells(sx, sy, ex, ey)
         width = self.log_odds.shape[1]
         offset = self.row0 * width + self.col0
         end_row, end_col = np.floor(ey).astype(np.int64), np.floor(ex).astype(np.int64)
         hit = (end_row * width + end_col)[returns] - offset
-        traversed = rows * width + cols - offset
         start = math.floor(sy) * width + math.floor(sx) - offset
+        traversed = _traversed_cells(sx, sy, ex, ey, width) + start
         # an end wins over a pass (a cell is updated once per scan)
         is_hit = self._hit_scratch
         is_hit[hit] = True
@@ -358,40 +357,41 @@ class OccupancyGrid:
 
 
 def _traversed_cells(
-    sx: float, sy: float, ex: NDArray[np.float64], ey: NDArray[np.float64]
-) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-    """``(rows, cols)`` of the cells each segment from ``(sx, sy)`` to ``(ex_b, ey_b)`` (cell units: m / res)
-    enters after leaving the start cell, end cells included, all segments back to back (module docstring);
-    the start cell itself is not listed."""
+    sx: float, sy: float, ex: NDArray[np.float64], ey: NDArray[np.float64], width: int
+) -> NDArray[np.int64]:
+    """The cells each segment from ``(sx, sy)`` to ``(ex_b, ey_b)`` (cell units: m / res) enters after
+    leaving the start cell, end cells included, all segments back to back (module docstring), as offsets
+    ``d_row width + d_col`` from the start cell in a row-major grid ``width`` cells wide."""
     i0, j0 = math.floor(sx), math.floor(sy)
-    i1, j1 = np.floor(ex).astype(np.int64), np.floor(ey).astype(np.int64)
     dx, dy = ex - sx, ey - sy
-    step_x, step_y = np.where(dx > 0.0, 1, -1), np.where(dy > 0.0, 1, -1)
-    n_x, n_y = np.abs(i1 - i0), np.abs(j1 - j0)
+    n_x = np.abs(np.floor(ex) - i0)
+    n_y = np.abs(np.floor(ey) - j0)
+    # a step along x is one cell, along y one row of the grid
+    step_x = np.where(dx > 0.0, 1.0, -1.0)
+    step_y = np.where(dy > 0.0, float(width), -float(width))
     # distance from the start to the first border crossed, per axis, in cells
     f_x = np.where(dx > 0.0, i0 + 1 - sx, sx - i0)
     f_y = np.where(dy > 0.0, j0 + 1 - sy, sy - j0)
     abs_dx, abs_dy = np.abs(dx), np.abs(dy)
 
-    def crossings(n: NDArray[np.int64]) -> tuple[NDArray[np.intp], NDArray[np.int64]]:
+    def crossings(n: NDArray[np.float64]) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
         """The segment of each crossing and its number k along its axis."""
-        beam = np.repeat(np.arange(n.shape[0]), n)
+        counts = n.astype(np.intp)
+        beam = np.repeat(np.arange(counts.shape[0]), counts)
         first = np.cumsum(n) - n
-        return beam, np.arange(beam.shape[0]) - first[beam]
+        return beam, np.arange(beam.shape[0], dtype=np.float64) - first[beam]
 
     # vertical borders: t = (f_x + k) / |d_x|; the row is the number of horizontal crossings before t
     beam, k = crossings(n_x)
     t = (f_x[beam] + k) / abs_dx[beam]
-    before = np.clip(np.ceil(t * abs_dy[beam] - f_y[beam]), 0, n_y[beam]).astype(np.int64)
-    cols_x = i0 + step_x[beam] * (k + 1)
-    rows_x = j0 + step_y[beam] * before
+    before = np.minimum(np.maximum(np.ceil(t * abs_dy[beam] - f_y[beam]), 0.0), n_y[beam])
+    offsets_x = step_x[beam] * (k + 1.0) + step_y[beam] * before
     # horizontal borders: the column is the number of vertical crossings at or before t
     beam, k = crossings(n_y)
     t = (f_y[beam] + k) / abs_dy[beam]
-    before = np.clip(np.floor(t * abs_dx[beam] - f_x[beam]) + 1, 0, n_x[beam]).astype(np.int64)
-    rows_y = j0 + step_y[beam] * (k + 1)
-    cols_y = i0 + step_x[beam] * before
-    return np.concatenate((rows_x, rows_y)), np.concatenate((cols_x, cols_y))
+    before = np.minimum(np.maximum(np.floor(t * abs_dx[beam] - f_x[beam]) + 1.0, 0.0), n_x[beam])
+    offsets_y = step_y[beam] * (k + 1.0) + step_x[beam] * before
+    return np.concatenate((offsets_x, offsets_y)).astype(np.int64)
 
 
 @dataclass(frozen=True)
