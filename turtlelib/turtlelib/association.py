@@ -43,11 +43,24 @@ def mahalanobis_2d(
 
     Closed-form 2x2 inverse, vectorised: ``S^-1 = [[S11, -S01], [-S10, S00]] / det S``.
     """
+    d2, det = _d2_det(nu, S)
+    return d2, np.log(det)
+
+
+def mahalanobis_d2(nu: NDArray[np.float64], S: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``D2 = nu^T S^-1 nu`` of :func:`mahalanobis_2d` alone (the gates need no ``ln det S``)."""
+    return _d2_det(nu, S)[0]
+
+
+def _d2_det(
+    nu: NDArray[np.float64], S: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``(D2, det S)`` (...,) of :func:`mahalanobis_2d`."""
     det = S[..., 0, 0] * S[..., 1, 1] - S[..., 0, 1] * S[..., 1, 0]
     a, b = nu[..., 0], nu[..., 1]
     # D2 = (a^2 S11 - a b (S01 + S10) + b^2 S00) / det
     d2 = (a * a * S[..., 1, 1] - a * b * (S[..., 0, 1] + S[..., 1, 0]) + b * b * S[..., 0, 0]) / det
-    return d2, np.log(det)
+    return d2, det
 
 
 def mahalanobis_lower_bound(

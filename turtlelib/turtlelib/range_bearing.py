@@ -34,7 +34,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from .geometry import Transform2D, normalize_angles
+from .geometry import Transform2D
 
 
 def _sensor_position(
@@ -59,23 +59,23 @@ def predict_observations(
     p_sensor, dp_dtheta = _sensor_position(pose, T_body_sensor)
     # d = m - p_sensor
     d = p_map - p_sensor
-    rho2 = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]
+    d_x, d_y = d[:, 0], d[:, 1]
+    rho2 = d_x * d_x + d_y * d_y
     rho = np.sqrt(rho2)
     z_hat = np.empty_like(d)
     z_hat[:, 0] = rho
     # bearing = atan2(d_y, d_x) - theta - sphi
-    z_hat[:, 1] = np.arctan2(d[:, 1], d[:, 0]) - (pose[2] + T_body_sensor.theta)
+    z_hat[:, 1] = np.arctan2(d_y, d_x) - (pose[2] + T_body_sensor.theta)
 
-    # H_landmark = [[d_x/rho, d_y/rho], [-d_y/rho^2, d_x/rho^2]]
+    # H_landmark = [[d_x/rho, d_y/rho], [-d_y/rho^2, d_x/rho^2]] = [d / rho; J d / rho^2], J d = [-d_y, d_x]
     H_landmark = np.empty((len(d), 2, 2))
-    H_landmark[:, 0, 0] = d[:, 0] / rho
-    H_landmark[:, 0, 1] = d[:, 1] / rho
-    H_landmark[:, 1, 0] = -d[:, 1] / rho2
-    H_landmark[:, 1, 1] = d[:, 0] / rho2
+    np.divide(d, rho[:, None], out=H_landmark[:, 0])
+    np.divide(d[:, ::-1], rho2[:, None], out=H_landmark[:, 1])
+    H_landmark[:, 1, 0] *= -1.0
     # H_robot = [-H_landmark, -H_landmark t - [0, 1]]
     H_robot = np.empty((len(d), 2, 3))
-    H_robot[:, :, :2] = -H_landmark
-    H_robot[:, :, 2] = -(H_landmark @ dp_dtheta)
+    np.negative(H_landmark, out=H_robot[:, :, :2])
+    np.matmul(H_robot[:, :, :2], dp_dtheta, out=H_robot[:, :, 2])
     H_robot[:, 1, 2] -= 1.0
     return z_hat, H_robot, H_landmark
 
@@ -116,8 +116,14 @@ def residual(z: NDArray[np.float64], z_hat: NDArray[np.float64]) -> NDArray[np.f
     The only place where range-bearing residual angles are wrapped; ``z`` and ``z_hat`` broadcast.
     """
     nu = np.subtract(z, z_hat)
-    # nu_bearing <- wrap(b - b_hat)
-    nu[..., 1:] = normalize_angles(nu[..., 1:])
+    # nu_bearing <- wrap(b - b_hat), as normalize_angles does it (exact): the remainder by 2 pi, then one
+    # shift by 2 pi where it lies beyond pi (adding 0 elsewhere leaves it bit for bit)
+    bearing = nu[..., 1]
+    if not np.isfinite(bearing).all():
+        raise ValueError("angles must be finite")
+    np.fmod(bearing, math.tau, out=bearing)
+    bearing -= (bearing > math.pi) * math.tau
+    bearing += (bearing <= -math.pi) * math.tau
     return nu
 
 

@@ -71,6 +71,7 @@ once and copied.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -78,7 +79,7 @@ from numpy.typing import NDArray
 from scipy.linalg.blas import dsyrk
 from scipy.linalg.lapack import dpotrf, dtrtrs
 
-from .association import mahalanobis_2d
+from .association import mahalanobis_d2
 from .geometry import normalize_angle
 from .landmark_tracks import LandmarkTracks
 
@@ -89,6 +90,8 @@ MIRROR_BLOCK = 256  # rows per block when copying the upper triangle of P into t
 _STRICT_LOWER = np.tri(MIRROR_BLOCK, k=-1, dtype=bool)  # strictly-lower mask of a diagonal block
 _ROBOT_UPPER = np.triu_indices(ROBOT_DIM, 1)  # the strict upper triangle of the robot block
 J = np.array([[0.0, -1.0], [1.0, 0.0]])  # the derivative of a rotation: d/dphi R(phi) = J R(phi)
+_ROBOT_INDICES = np.arange(ROBOT_DIM)
+_LANDMARK_OFFSETS = ROBOT_DIM + np.arange(LANDMARK_DIM)  # the state indices of slot 0
 
 
 class SlamState:
@@ -320,18 +323,19 @@ class SlamState:
         rhs = np.zeros((m, width + 1), order="F")
         np.matmul(H, self._rows(cols), out=rhs[:, :dim])
         rhs[:, width] = nu.reshape(m)
-        # S = H P H^T + R; S is C-contiguous, so its (k, 2, k, 2) reshape is a view
+        # S = H P H^T + R; S is C-contiguous: its diagonal blocks by flat index
         S = rhs[:, cols] @ H.T
-        diagonal = np.arange(k)
-        blocks = S.reshape(k, LANDMARK_DIM, k, LANDMARK_DIM)
+        diagonal_blocks = _diagonal_block_indices(k)
+        S_flat = S.ravel()
+        S_ii = S_flat[diagonal_blocks] + R
         if gate < math.inf:
             # D2_i = nu_i^T S_i^-1 nu_i, S_i = (H P H^T)_ii + R_gate_i
-            d2, _ = mahalanobis_2d(nu, blocks[diagonal, :, diagonal, :] + (R if R_gate is None else R_gate))
+            d2 = mahalanobis_d2(nu, S_ii if R_gate is None else S_flat[diagonal_blocks] + R_gate)
             outside = ~(d2 < gate)
             if outside.any():
                 return 0.0, outside
         # add R_i to the diagonal block i
-        blocks[diagonal, :, diagonal, :] += R
+        S_flat[diagonal_blocks] = S_ii
         L, info = dpotrf(S, lower=1, clean=1, overwrite_a=1)
         if info != 0:
             raise np.linalg.LinAlgError("the innovation covariance S is not positive definite")
@@ -602,16 +606,11 @@ class SlamState:
         """
         k = len(slots)
         m = LANDMARK_DIM * k
-        width = ROBOT_DIM + m
-        cols = np.empty(width, dtype=np.int64)
-        cols[:ROBOT_DIM] = np.arange(ROBOT_DIM)
-        cols[ROBOT_DIM:] = (ROBOT_DIM + LANDMARK_DIM * np.asarray(slots)[:, None] + np.arange(2)).ravel()
-        H = np.zeros((m, width))
+        # [0, 1, 2, 3 + 2 s_0, 4 + 2 s_0, ...]
+        cols = np.concatenate((_ROBOT_INDICES, (LANDMARK_DIM * slots[:, None] + _LANDMARK_OFFSETS).ravel()))
+        H = np.zeros((m, ROBOT_DIM + m))
         H[:, :ROBOT_DIM] = H_robot.reshape(m, ROBOT_DIM)
-        # H[2i + a, 3 + 2i + b] = H_landmark[i, a, b], through the flat index of the C-ordered H
-        block = LANDMARK_DIM * np.arange(k)[:, None, None]
-        flat = (block + np.arange(2)[:, None]) * width + ROBOT_DIM + block + np.arange(2)
-        H.ravel()[flat] = H_landmark
+        H.ravel()[_landmark_block_indices(k)] = H_landmark
         return cols, H
 
     def _reserve(self, n_landmarks: int) -> None:
@@ -628,6 +627,28 @@ class SlamState:
         cov = np.zeros((capacity, capacity))
         cov[:dim, :dim] = self._cov[:dim, :dim]
         self._mean, self._cov = mean, cov
+
+
+@functools.cache
+def _landmark_block_indices(k: int) -> NDArray[np.int64]:
+    """Flat indices (k, 2, 2) into a C-ordered (2k, 3 + 2k) ``H`` of its block-diagonal landmark part:
+    ``H[2i + a, 3 + 2i + b]`` for block ``i`` (read-only, one array per ``k``)."""
+    width = ROBOT_DIM + LANDMARK_DIM * k
+    block = LANDMARK_DIM * np.arange(k)[:, None, None]
+    flat = (block + np.arange(LANDMARK_DIM)[:, None]) * width + ROBOT_DIM + block + np.arange(LANDMARK_DIM)
+    flat.flags.writeable = False
+    return flat
+
+
+@functools.cache
+def _diagonal_block_indices(k: int) -> NDArray[np.int64]:
+    """Flat indices (k, 2, 2) into a C-ordered (2k, 2k) matrix of its 2 x 2 diagonal blocks: ``[2i + a,
+    2i + b]`` for block ``i`` (read-only, one array per ``k``)."""
+    m = LANDMARK_DIM * k
+    rows = LANDMARK_DIM * np.arange(k)[:, None, None] + np.arange(LANDMARK_DIM)[:, None]
+    flat = rows * m + LANDMARK_DIM * np.arange(k)[:, None, None] + np.arange(LANDMARK_DIM)
+    flat.flags.writeable = False
+    return flat
 
 
 def _grown(n_landmarks: int) -> int:
