@@ -87,16 +87,16 @@ def nearest_neighbour(cost: NDArray[np.float64], compatible: NDArray[np.bool_]) 
     ``cost`` (K, n) is ``D2 + ln det S``; pairs are taken in increasing cost among ``compatible`` (K, n)
     ones, each observation and each landmark at most once.
     """
-    n_obs = cost.shape[0]
-    match = np.full(n_obs, -1, dtype=np.int64)
+    match = [-1] * cost.shape[0]
     obs_idx, lm_idx = np.nonzero(compatible)
+    order = np.argsort(cost[obs_idx, lm_idx], kind="stable")
     taken: set[int] = set()
-    for pair in np.argsort(cost[obs_idx, lm_idx], kind="stable"):
-        k, j = int(obs_idx[pair]), int(lm_idx[pair])
+    # the pairs in increasing cost, as Python ints
+    for k, j in zip(obs_idx[order].tolist(), lm_idx[order].tolist(), strict=True):
         if match[k] < 0 and j not in taken:
             match[k] = j
             taken.add(j)
-    return match
+    return np.array(match, dtype=np.int64)
 
 
 def joint_compatibility(

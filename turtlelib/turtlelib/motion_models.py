@@ -127,9 +127,12 @@ class DiffDriveMotion:
 
     def step(self, T_map_body: Transform2D, u: tuple) -> Step:
         dphi_left, dphi_right = u
-        # q' = q (+) exp([F dphi])  (DiffDrive.step raises ValueError for non-finite increments)
-        T_next = self.drive.step(T_map_body, dphi_left, dphi_right)
-        Q = wheel_slip_covariance(self.drive, T_map_body.theta, dphi_left, dphi_right, self.wheel_noise)
+        # q' = q (+) exp([F dphi])  (body_twist raises ValueError for non-finite increments)
+        twist = self.drive.body_twist(dphi_left, dphi_right)
+        T_next = T_map_body @ integrate_twist(twist)
+        Q = wheel_slip_covariance(
+            self.drive, T_map_body.theta, dphi_left, dphi_right, self.wheel_noise, twist=twist
+        )
         return _arc_step(T_map_body, T_next, Q)
 
 

@@ -212,15 +212,10 @@ class SlamState:
         the stored coordinates (for the filter's Jacobians)."""
         self._apply_pending()
         slots = np.arange(self._n) if slots is None else np.asarray(slots)
-        # the state indices [0, 1, 2, 3 + 2i, 4 + 2i] of each slot (k, 5); every entry from the upper
-        # triangle, P_ab at flat index min(a, b) * capacity + max(a, b), in one gather
-        indices = np.empty((len(slots), ROBOT_DIM + LANDMARK_DIM), dtype=np.int64)
-        indices[:, :ROBOT_DIM] = np.arange(ROBOT_DIM)
-        indices[:, ROBOT_DIM] = ROBOT_DIM + LANDMARK_DIM * slots
-        indices[:, ROBOT_DIM + 1] = indices[:, ROBOT_DIM] + 1
-        rows, columns = indices[:, :, None], indices[:, None, :]
-        flat = np.minimum(rows, columns) * self._cov.shape[0] + np.maximum(rows, columns)
-        return self._cov.ravel()[flat]
+        # every entry from the upper triangle, P_ab at flat index min(a, b) * capacity + max(a, b) for the
+        # state indices [0, 1, 2, 3 + 2i, 4 + 2i] of slot i: base + 2i step, in one gather
+        base, step = _pose_landmark_block_indices(self._cov.shape[0])
+        return self._cov.ravel()[base + LANDMARK_DIM * slots[:, None, None] * step]
 
     # --- the filter steps --------------------------------------------------------------------------------
 
@@ -629,7 +624,7 @@ class SlamState:
         self._mean, self._cov = mean, cov
 
 
-@functools.cache
+@functools.lru_cache(maxsize=128)
 def _landmark_block_indices(k: int) -> NDArray[np.int64]:
     """Flat indices (k, 2, 2) into a C-ordered (2k, 3 + 2k) ``H`` of its block-diagonal landmark part:
     ``H[2i + a, 3 + 2i + b]`` for block ``i`` (read-only, one array per ``k``)."""
@@ -640,7 +635,24 @@ def _landmark_block_indices(k: int) -> NDArray[np.int64]:
     return flat
 
 
-@functools.cache
+@functools.lru_cache(maxsize=128)
+def _pose_landmark_block_indices(capacity: int) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """``(base, step)`` (5, 5): the flat indices into the C-ordered (capacity, capacity) storage of the
+    upper-triangle entries ``P_ab`` of ``[x, y, theta, m_ix, m_iy]`` are ``base + 2i step`` for slot ``i``
+    (``base`` those of slot 0; ``step`` 0 between robot indices, 1 between a robot and a landmark index,
+    ``capacity + 1`` between landmark indices). Read-only, one pair per capacity."""
+    indices = np.arange(ROBOT_DIM + LANDMARK_DIM)
+    rows, columns = indices[:, None], indices[None, :]
+    base = np.minimum(rows, columns) * capacity + np.maximum(rows, columns)
+    landmark = indices >= ROBOT_DIM
+    step = np.where(
+        landmark[:, None] & landmark[None, :], capacity + 1, landmark[:, None] | landmark[None, :]
+    )
+    base.flags.writeable = step.flags.writeable = False
+    return base, step
+
+
+@functools.lru_cache(maxsize=128)
 def _diagonal_block_indices(k: int) -> NDArray[np.int64]:
     """Flat indices (k, 2, 2) into a C-ordered (2k, 2k) matrix of its 2 x 2 diagonal blocks: ``[2i + a,
     2i + b]`` for block ``i`` (read-only, one array per ``k``)."""

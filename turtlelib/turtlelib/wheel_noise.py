@@ -21,18 +21,26 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .arc_noise import arc_covariance
+from .geometry import Twist2D
 from .kinematics import DiffDrive
 
 
 def wheel_slip_covariance(
-    diff_drive: DiffDrive, theta_rad: float, dphi_left: float, dphi_right: float, wheel_noise: float
+    diff_drive: DiffDrive,
+    theta_rad: float,
+    dphi_left: float,
+    dphi_right: float,
+    wheel_noise: float,
+    twist: Twist2D | None = None,
 ) -> NDArray[np.float64]:
     """The (3, 3) covariance of ``[x, y, theta]`` added by a step ``dphi`` (rad) from heading ``theta_rad``.
 
-    See the module docstring for the model; ``wheel_noise`` in sqrt(rad), >= 0. ValueError for a step that
+    See the module docstring for the model; ``wheel_noise`` in sqrt(rad), >= 0; ``twist`` the step's
+    ``diff_drive.body_twist(dphi_left, dphi_right)`` if the caller has it. ValueError for a step that
     turns the body by more than ``arc_noise.MAX_STEP_TURN_RAD``.
     """
-    twist = diff_drive.body_twist(dphi_left, dphi_right)
+    if twist is None:
+        twist = diff_drive.body_twist(dphi_left, dphi_right)
     r, d = diff_drive.wheel_radius, diff_drive.track_width
     q_left, q_right = wheel_noise**2 * abs(dphi_left), wheel_noise**2 * abs(dphi_right)
     # Sigma = M Q_w M^T with M = [[r/2, r/2], [-r/d, r/d]]
