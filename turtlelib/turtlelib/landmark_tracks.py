@@ -96,6 +96,8 @@ class LandmarkTracks:
     def sighted(self, slots: NDArray[np.int64], confirm_count: int, stamp_ns: int) -> NDArray[np.int64]:
         """Count one sighting at ``stamp_ns`` of each of the distinct tentative ``slots`` not yet sighted at
         that stamp or later (copies of one scan count once); returns the ids this confirms."""
+        if self._confirmed[slots].all():  # the usual scan: only confirmed landmarks sighted
+            return np.zeros(0, dtype=np.int64)
         tentative = slots[~self._confirmed[slots] & (self._sighted_ns[slots] < stamp_ns)]
         self._seen[tentative] += 1
         self._sighted_ns[tentative] = stamp_ns
@@ -107,6 +109,8 @@ class LandmarkTracks:
         """Slots of tentative landmarks first seen ``timeout_ns`` or more before ``stamp_ns``, highest
         first."""
         n = self._n
+        if self._confirmed[:n].all():  # no tentative landmark
+            return np.zeros(0, dtype=np.int64)
         old = ~self._confirmed[:n] & (stamp_ns - self._born[:n] >= timeout_ns)
         return old.nonzero()[0][::-1]
 
