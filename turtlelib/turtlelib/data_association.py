@@ -270,18 +270,19 @@ class KnownIds:
             raise ValueError("known association needs the observations' landmark ids")
         usable = view.model.usable(z)
         slot_of = view.tracks.slot
-        # the slot of each observation's landmark, -1 for an id not in the map
-        slots = np.array([-1 if (slot := slot_of(i)) is None else slot for i in ids.tolist()], dtype=np.int64)
-        seen_before = usable & (slots >= 0)
-        if seen_before.all():  # the usual scan: every observation of a mapped landmark, no copies
-            rows, births = np.arange(len(z)), _NO_ROWS
+        # the slot of each observation's landmark, None for an id not in the map
+        found = [slot_of(i) for i in ids.tolist()]
+        if None not in found and usable.all():  # the usual scan: every observation of a mapped landmark
+            slots, rows, births = np.array(found, dtype=np.int64), np.arange(len(z)), _NO_ROWS
+            status, landmark_ids = np.full(len(z), MATCHED, dtype=np.int8), ids.copy()
         else:
-            rows, births = seen_before.nonzero()[0], (usable & (slots < 0)).nonzero()[0]
+            slots = np.array([-1 if slot is None else slot for slot in found], dtype=np.int64)
+            rows, births = (usable & (slots >= 0)).nonzero()[0], (usable & (slots < 0)).nonzero()[0]
             slots, z, R = slots[rows], z[rows], R[rows]
+            status, landmark_ids = _empty_plan(len(ids))
+            status[rows] = MATCHED
+            landmark_ids[rows] = ids[rows]
         z_hat, H_robot, H_landmark = view.observe(slots)
-        status, landmark_ids = _empty_plan(len(ids))
-        status[rows] = MATCHED
-        landmark_ids[rows] = ids[rows]
         # the fusion refuses an observation whose D2 = nu^T S^-1 nu against its landmark is beyond the gate
         return Plan(
             status,

@@ -116,9 +116,12 @@ def residual(z: NDArray[np.float64], z_hat: NDArray[np.float64]) -> NDArray[np.f
     The only place where range-bearing residual angles are wrapped; ``z`` and ``z_hat`` broadcast.
     """
     nu = np.subtract(z, z_hat)
-    # nu_bearing <- wrap(b - b_hat), as normalize_angles does it (exact): the remainder by 2 pi, then one
-    # shift by 2 pi where it lies beyond pi (adding 0 elsewhere leaves it bit for bit)
     bearing = nu[..., 1]
+    # nu_bearing <- wrap(b - b_hat): nothing to do if every |b - b_hat| < pi (the usual case; NaN is not)
+    if bearing.size and np.abs(bearing).max() < math.pi:
+        return nu
+    # else as normalize_angles does it (exact): the remainder by 2 pi, then one shift by 2 pi where it lies
+    # beyond pi (adding 0 elsewhere leaves it bit for bit)
     if not np.isfinite(bearing).all():
         raise ValueError("angles must be finite")
     np.fmod(bearing, math.tau, out=bearing)
