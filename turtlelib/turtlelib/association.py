@@ -56,10 +56,11 @@ def _d2_det(
     nu: NDArray[np.float64], S: NDArray[np.float64]
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """``(D2, det S)`` (...,) of :func:`mahalanobis_2d`."""
-    det = S[..., 0, 0] * S[..., 1, 1] - S[..., 0, 1] * S[..., 1, 0]
+    S00, S01, S10, S11 = S[..., 0, 0], S[..., 0, 1], S[..., 1, 0], S[..., 1, 1]
+    det = S00 * S11 - S01 * S10
     a, b = nu[..., 0], nu[..., 1]
     # D2 = (a^2 S11 - a b (S01 + S10) + b^2 S00) / det
-    d2 = (a * a * S[..., 1, 1] - a * b * (S[..., 0, 1] + S[..., 1, 0]) + b * b * S[..., 0, 0]) / det
+    d2 = (a * a * S11 - a * b * (S01 + S10) + b * b * S00) / det
     return d2, det
 
 

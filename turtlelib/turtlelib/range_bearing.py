@@ -117,14 +117,18 @@ def residual(z: NDArray[np.float64], z_hat: NDArray[np.float64]) -> NDArray[np.f
     """
     nu = np.subtract(z, z_hat)
     bearing = nu[..., 1]
-    # nu_bearing <- wrap(b - b_hat): nothing to do if every |b - b_hat| < pi (the usual case; NaN is not)
-    if bearing.size and np.abs(bearing).max() < math.pi:
+    # nu_bearing <- wrap(b - b_hat) as normalize_angles does it (exact): the remainder by 2 pi, then one
+    # shift by 2 pi where it lies beyond pi (adding 0 elsewhere leaves it bit for bit). The remainder
+    # leaves |b| < 2 pi as it is and takes 2 pi off 2 pi <= |b| < 3 pi exactly (Sterbenz), as the shift
+    # does: below 3 pi the shift alone gives the same, and below pi (the usual case) nothing changes.
+    # NaN and inf fail both bounds and are refused below.
+    largest = np.abs(bearing).max() if bearing.size else 0.0
+    if largest < math.pi:
         return nu
-    # else as normalize_angles does it (exact): the remainder by 2 pi, then one shift by 2 pi where it lies
-    # beyond pi (adding 0 elsewhere leaves it bit for bit)
-    if not np.isfinite(bearing).all():
-        raise ValueError("angles must be finite")
-    np.fmod(bearing, math.tau, out=bearing)
+    if not largest < 3.0 * math.pi:
+        if not np.isfinite(bearing).all():
+            raise ValueError("angles must be finite")
+        np.fmod(bearing, math.tau, out=bearing)
     bearing -= (bearing > math.pi) * math.tau
     bearing += (bearing <= -math.pi) * math.tau
     return nu
