@@ -88,7 +88,6 @@ LANDMARK_DIM = 2
 HEADING = 2  # index of theta in x
 MIRROR_BLOCK = 256  # rows per block when copying the upper triangle of P into the lower one (measured)
 _STRICT_LOWER = np.tri(MIRROR_BLOCK, k=-1, dtype=bool)  # strictly-lower mask of a diagonal block
-_ROBOT_UPPER = np.triu_indices(ROBOT_DIM, 1)  # the strict upper triangle of the robot block
 J = np.array([[0.0, -1.0], [1.0, 0.0]])  # the derivative of a rotation: d/dphi R(phi) = J R(phi)
 _ROBOT_INDICES = np.arange(ROBOT_DIM)
 _LANDMARK_OFFSETS = ROBOT_DIM + np.arange(LANDMARK_DIM)  # the state indices of slot 0
@@ -570,8 +569,8 @@ class SlamState:
 
     def _fill_robot_block(self) -> None:
         """``tril(P_qq, -1) <- triu(P_qq, 1)^T``."""
-        upper = _ROBOT_UPPER
-        self._cov[upper[1], upper[0]] = self._cov[upper]
+        P = self._cov
+        P[1, 0], P[2, 0], P[2, 1] = P[0, 1], P[0, 2], P[1, 2]
 
     def _rows(self, indices: NDArray[np.int64]) -> NDArray[np.float64]:
         """The rows ``P[indices, :N]`` (r, N), each whole: ``P_ij`` from ``P_ji`` where ``j < i``. O(N r)."""
