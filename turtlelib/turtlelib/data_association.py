@@ -252,7 +252,10 @@ _NO_ROWS.flags.writeable = False
 
 
 def _empty_plan(count: int) -> tuple[NDArray[np.int8], NDArray[np.int64]]:
-    return np.full(count, REJECTED, dtype=np.int8), np.full(count, -1, dtype=np.int64)
+    status, landmark_ids = np.empty(count, dtype=np.int8), np.empty(count, dtype=np.int64)
+    status.fill(REJECTED)
+    landmark_ids.fill(-1)
+    return status, landmark_ids
 
 
 class KnownIds:
@@ -331,8 +334,6 @@ class GatedTracks:
         usable = view.model.usable(z).nonzero()[0]
         z_usable, R_usable = (z, R) if len(usable) == len(z) else (z[usable], R[usable])
         status, landmark_ids = _empty_plan(len(z))
-        match = np.full(len(usable), -1, dtype=np.int64)
-        far_from_all = np.ones(len(usable), dtype=bool)
         if view.n_landmarks and len(usable):
             if view.n_landmarks >= PREFILTER_MIN_LANDMARKS:
                 gating = view.gate_near(z_usable, R_usable, self._gate_new)
@@ -347,11 +348,12 @@ class GatedTracks:
             status[usable[rows]] = MATCHED
             fused = (usable[rows], slots, gating.nu[rows, columns], gating.H_robot[columns])
             H_landmark = gating.H_landmark[columns]
-        else:
+            births = usable[(match < 0) & far_from_all]
+        else:  # nothing to match: every usable observation may start a landmark
             empty = np.zeros(0, dtype=np.int64)
             fused = (empty, empty, np.zeros((0, 2)), np.zeros((0, 2, ROBOT_DIM)))
             H_landmark = np.zeros((0, 2, 2))
-        births = usable[(match < 0) & far_from_all]
+            births = usable
         return Plan(
             status, landmark_ids, *fused, H_landmark, births, None, birth_confirmed=self._confirm_count == 1
         )
@@ -361,10 +363,12 @@ class GatedTracks:
         observations that no confirmed landmark is compatible with."""
         compatible = gating.d2 < self._gate_associate
         confirmed = view.tracks.confirmed[gating.slots]
+        if confirmed.all():  # no tentative landmark among them (the usual scan)
+            return self._matcher.match(gating, compatible, R, view)
         with_confirmed = compatible & confirmed
         match = self._matcher.match(gating, with_confirmed, R, view)
         unexplained = ~with_confirmed.any(axis=1)
-        if unexplained.any() and not confirmed.all():
+        if unexplained.any():
             to_tentative = compatible & ~confirmed & unexplained[:, None]
             match = np.where(unexplained, self._matcher.match(gating, to_tentative, R, view), match)
         return match
