@@ -213,7 +213,7 @@ def arc_covariance(
     Q_xx, Q_xy, Q_xt, Q_yy, Q_yt, Q_tt = _arc_covariance_entries(
         _Floats, theta_rad, omega, vx, vy, var_vx, cov_vx_omega, var_omega, var_vy
     )
-    return np.array([[Q_xx, Q_xy, Q_xt], [Q_xy, Q_yy, Q_yt], [Q_xt, Q_yt, Q_tt]])
+    return np.array([Q_xx, Q_xy, Q_xt, Q_xy, Q_yy, Q_yt, Q_xt, Q_yt, Q_tt]).reshape(3, 3)
 
 
 def arc_covariances(
@@ -289,7 +289,12 @@ def _arc_covariance_entries(
     q_yy = q_yy + var_omega * bb
     q_xt = var_omega * a1
     q_yt = var_omega * b1
-    if np.ndim(cov_vx_omega) or cov_vx_omega != 0.0:
+    # (a float first: np.ndim would convert it to an array)
+    if (
+        cov_vx_omega != 0.0
+        if isinstance(cov_vx_omega, float)
+        else np.ndim(cov_vx_omega) or cov_vx_omega != 0.0
+    ):
         # int a_vx a_w^T = [[int c A, int c B, int c], [-int s A, -int s B, -int s], [0, 0, 0]]
         i_c, i_s, cf, cg, sf, sg = i.cross()
         ca = vx * cg - vy * cf

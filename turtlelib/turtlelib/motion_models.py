@@ -85,11 +85,9 @@ class BatchMotionModel(MotionModel, Protocol):
 
 def _arc_step(T_map_body: Transform2D, T_next: Transform2D, Q: NDArray[np.float64]) -> Step:
     """``(q', G, Q)`` for a move to ``T_next`` along an arc: ``G = [[1, 0, -dy], [0, 1, dx], [0, 0, 1]]``."""
-    q_next = T_next.as_array()
-    G = np.eye(3)
-    G[0, 2] = -(q_next[1] - T_map_body.y)
-    G[1, 2] = q_next[0] - T_map_body.x
-    return q_next, G, Q
+    dx, dy = T_next.x - T_map_body.x, T_next.y - T_map_body.y
+    G = np.array([1.0, 0.0, -dy, 0.0, 1.0, dx, 0.0, 0.0, 1.0]).reshape(3, 3)
+    return T_next.as_array(), G, Q
 
 
 def _unpack(u: tuple, names: tuple[str, ...]) -> tuple:
