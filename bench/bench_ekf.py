@@ -150,7 +150,7 @@ def section(sizes: tuple[int, ...]) -> str:
         [
             HEADING,
             "",
-            f"`python bench/bench_ekf.py --write` (OPENBLAS_NUM_THREADS=1; {machine}).",
+            f"`.venv/bin/python -P bench/bench_ekf.py --write` (OPENBLAS_NUM_THREADS=1; {machine}).",
             "",
             "Wall time of one step = `predict` + an update with 10 observations of mapped landmarks (the",
             f"smallest of {ROUNDS} medians over 20-300 steps), with known association and with unknown",
