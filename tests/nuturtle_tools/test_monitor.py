@@ -87,7 +87,7 @@ def test_a_stream_replaces_a_sample_that_is_not_later_and_keeps_covariances():
 
 
 @pytest.mark.ros
-def test_the_live_slam_error_is_against_the_truth_interpolated_at_the_slam_stamp(ros):
+def test_the_live_slam_error_is_against_the_truth_interpolated_at_the_slam_stamp_in_batches(ros):
     from std_msgs.msg import Float64MultiArray
 
     from nuturtle_tools.monitor import ERROR_LABELS, SLAM_TOPIC, TRUTH_TOPIC, RunMonitor
@@ -115,5 +115,16 @@ def test_the_live_slam_error_is_against_the_truth_interpolated_at_the_slam_stamp
     assert heading_rad == pytest.approx(0.1, abs=1e-9)
     assert nees_value == pytest.approx(14.0, rel=1e-9)
     assert errors[0].layout.dim[0].label == ",".join(ERROR_LABELS)
+    # in batches: a sample the truth has passed waits for the truth to enter the next ERROR_BATCH_S period
+    slam.publish(odometry(2.1, 1.0, 2.0, 0.4, variances=(0.01, 0.04, 0.01)))
     ros.spin_for(0.2)
+    truth.publish(odometry(2.2, 1.2, 2.0, 0.4))  # passes 2.1 s, still in the period [2.0, 2.5)
+    ros.spin_for(0.3)
     assert len(errors) == 1
+    truth.publish(odometry(2.5, 1.6, 2.0, 0.4))
+    assert ros.spin_until(lambda: len(errors) == 2)
+    # truth at 2.1 s: (1.1, 2.0, 0.4), so e = (-0.1, 0, 0)
+    assert errors[1].data[0] == pytest.approx(0.1, abs=1e-9)
+    assert errors[1].data[1] == pytest.approx(0.0, abs=1e-9)
+    ros.spin_for(0.2)
+    assert len(errors) == 2
