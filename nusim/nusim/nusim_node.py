@@ -196,7 +196,9 @@ class NusimNode(Node):
         self.create_service(Empty, "~/reset", self._on_reset)
 
         start = self.sim_stamp()
-        self._clock_publisher.publish(ClockMsg(clock=start))
+        # one /clock message, restamped every step (publish serialises it at once)
+        self._clock_msg = ClockMsg(clock=start)
+        self._clock_publisher.publish(self._clock_msg)
         obstacles_publisher.publish(self._obstacle_markers(start))
         walls_publisher.publish(wall_markers(self.simulation.walls, start))
         # a steady (wall) clock, never the ROS clock: this node is what drives /clock
@@ -253,7 +255,8 @@ class NusimNode(Node):
             self.simulation.command_wheels(0.0, 0.0)
             self.get_logger().info("no wheel_cmd for cmd_timeout: wheels stopped")
         stamp = self.sim_stamp()
-        self._clock_publisher.publish(ClockMsg(clock=stamp))
+        self._clock_msg.clock = stamp
+        self._clock_publisher.publish(self._clock_msg)
         if self.timing.due(self.step_count, self.timing.joint_states_rate):
             self._publish_joint_states(stamp)
             self._publish_ground_truth(stamp)

@@ -33,7 +33,8 @@ contact, the smallest ``s`` in [0, 1] with ``p + s (p' - p)`` on the boundary of
 (:func:`contact_fraction`: the inflated cylinders, the walls' lines offset by ``R``, their corners as discs
 of radius ``R``); the heading still turns. So a robot pushing against a cylinder or a wall stays touching
 it while its wheels keep turning (and its encoders keep counting, as on the real robot), and it never
-passes through anything.
+passes through anything. Most steps are far from everything: a ball of free space (:class:`FreeBall`)
+around the last point where the clearance was measured answers those without a contact test.
 
 Sensors
 -------
@@ -64,6 +65,9 @@ from turtlelib import DiffDrive, Transform2D
 from turtlelib.scan_model import LidarConfig, arena_walls, polygon_walls, simulate_scan
 from turtlelib.validation import finite_real, in_range, integer, non_negative, one_of, positive, store
 
+# How much less than the measured clearance the free ball's radius is (m): far above the rounding of a
+# contact test, far below any distance that matters
+FREE_BALL_MARGIN_M = 1e-6
 # The default world: eight cylinders of the course's radius, 0.75 to 1.85 m from the centre. On any circle
 # of radius 0.5 to 1.0 m through the origin (centre (0, +-radius)) the robot's disc (0.11 m) clears every
 # cylinder by at least 0.1 m, and sees some of them within the fake sensor's 2 m.
@@ -397,6 +401,55 @@ def _wall_contact_fraction(
     return float(np.min(s[hits])) if np.any(hits) else 1.0
 
 
+def clearance_m(
+    p_world: NDArray[np.float64], circles: NDArray[np.float64], walls: NDArray[np.float64], radius_m: float
+) -> float:
+    """How far the centre of a disc of ``radius_m`` at ``p_world`` can move in any direction before contact:
+    ``min(min_j |p - c_j| - (radius_m + r_j), min_k dist(p, wall_k) - radius_m)`` (m; <= 0 at or past
+    contact; inf in an empty world). Inside the arena, any move shorter than that is free."""
+    nearest = math.inf
+    if circles.shape[0]:
+        nearest = float(np.min(np.hypot(*(p_world - circles[:, :2]).T) - circles[:, 2]))
+    if walls.shape[0]:
+        nearest = min(nearest, float(np.min(wall_distances(p_world, walls))))
+    return nearest - radius_m
+
+
+class FreeBall:
+    """A ball of free space for the robot's centre, so a step far from everything needs no contact test.
+
+    The ball is centred where the clearance (:func:`clearance_m`) was last measured, ``p0``, with radius
+    ``clearance(p0) - FREE_BALL_MARGIN_M``. A move ``p -> p + d`` with ``|p - p0| + |d|`` below that radius
+    stays inside it (triangle inequality), so no obstacle is within reach: its contact fraction is 1, as
+    :func:`contact_fraction` gives. Otherwise the ball is measured again at ``p`` and, if the move still
+    leaves it, :func:`contact_fraction` decides. Keyed on the position alone, so a teleport needs no
+    reset. In the default world the robot's centre stays 0.3 m or more clear of everything, and the
+    clearance is measured about once per 0.3 m of travel instead of a contact test per 10 ms step.
+    """
+
+    def __init__(self, circles: NDArray[np.float64], walls: NDArray[np.float64], radius_m: float) -> None:
+        self.circles = circles
+        self.walls = walls
+        self.radius_m = radius_m
+        self._centre = (math.nan, math.nan)
+        self._free_m = -math.inf
+
+    def contact_fraction(self, p_world: NDArray[np.float64], d_world: NDArray[np.float64]) -> float:
+        """:func:`contact_fraction` of the move ``p -> p + d``."""
+        reach_m = math.hypot(d_world[0], d_world[1])
+        if self._reaches_within(p_world, reach_m):
+            return 1.0
+        self._centre = (float(p_world[0]), float(p_world[1]))
+        self._free_m = clearance_m(p_world, self.circles, self.walls, self.radius_m) - FREE_BALL_MARGIN_M
+        if self._reaches_within(p_world, reach_m):
+            return 1.0
+        return contact_fraction(p_world, d_world, self.circles, self.walls, self.radius_m)
+
+    def _reaches_within(self, p_world: NDArray[np.float64], reach_m: float) -> bool:
+        # |p - p0| + |d| < clearance(p0) - margin (False while the ball is unmeasured: NaN compares False)
+        return math.hypot(p_world[0] - self._centre[0], p_world[1] - self._centre[1]) + reach_m < self._free_m
+
+
 @dataclass(frozen=True)
 class SimulatedScan:
     """One scan: its beam ``layout`` and the measured ``range_m`` (m), shape (layout.samples,)."""
@@ -426,6 +479,7 @@ class Simulation:
         self.drive: DiffDrive = config.robot.diff_drive()
         self.circles = config.obstacles.circles()
         self.walls = config.wall_segments
+        self._free_ball = FreeBall(self.circles, self.walls, config.robot.collision_radius)
         wheel_seq, slip_seq, lidar_seq, landmark_seq = np.random.SeedSequence(config.noise.seed).spawn(4)
         self._wheel_rng = np.random.default_rng(wheel_seq)
         self._slip_rng = np.random.default_rng(slip_seq)
@@ -482,9 +536,7 @@ class Simulation:
         # T' = T @ exp([F dphi])
         T_end = self.drive.step(T_start, dphi[0], dphi[1])
         d_world = T_end.translation - T_start.translation
-        s = contact_fraction(
-            T_start.translation, d_world, self.circles, self.walls, self.config.robot.collision_radius
-        )
+        s = self._free_ball.contact_fraction(T_start.translation, d_world)
         if s < 1.0:
             p_world = T_start.translation + s * d_world
             T_end = Transform2D(p_world[0], p_world[1], T_end.theta)

@@ -446,10 +446,11 @@ class _DemoRun:
                 while system.sim_time_s < options.duration_s and stop.received is None:
                     spin_once_guarded(executor, logger, timeout_sec=0.1)
                     writer.check()
-                    if on_progress is not None and system.nusim.step_count != reported_step:
+                    if system.nusim.step_count != reported_step:
                         reported_step = system.nusim.step_count
-                        on_progress(system, system.sim_time_s)
-                    progress.advance(system.sim_time_s)
+                        if on_progress is not None:
+                            on_progress(system, system.sim_time_s)
+                        progress.advance(system.sim_time_s)
             wall_seconds = time.monotonic() - wall_start
             sim_seconds = system.sim_time_s
             executor.remove_node(system.nusim)

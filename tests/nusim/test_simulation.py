@@ -18,12 +18,14 @@ from hypothesis import strategies as st
 from nusim.simulation import (
     LIDAR_MODELS,
     ArenaConfig,
+    FreeBall,
     LidarChoice,
     NoiseConfig,
     Obstacles,
     Simulation,
     SimulationConfig,
     Walls,
+    clearance_m,
     contact_fraction,
     default_lidar,
     first_collision,
@@ -331,6 +333,29 @@ def test_the_robot_never_overlaps_or_passes_through_anything(start, commands, dt
             for f in np.linspace(0.0, 1.0, 51):
                 assert wall_distances(p_previous + f * d, walls).min() >= R_ROBOT - 1e-9
             p_previous = p
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    start=st.tuples(st.floats(-1.4, 1.4), st.floats(-1.4, 1.4)),
+    moves=st.lists(
+        st.tuples(st.floats(-0.3, 0.3), st.floats(-0.3, 0.3), st.booleans()), min_size=1, max_size=30
+    ),
+)
+def test_the_free_ball_gives_the_contact_fraction_of_every_move(start, moves):
+    """FreeBall answers as contact_fraction, move after move (short and long, some jumping elsewhere as a
+    teleport does), among crowded cylinders and the walls of NOTCHED; and clearance_m is the distance to the
+    nearest inflated obstacle."""
+    circles, walls = np.array(crowded).T, polygon_walls(NOTCHED)
+    ball = FreeBall(circles, walls, R_ROBOT)
+    p = np.array(start)
+    for dx, dy, jump in moves:
+        d = np.array([dx, dy]) * (0.01 if not jump else 1.0)
+        assert ball.contact_fraction(p, d) == contact_fraction(p, d, circles, walls, R_ROBOT)
+        p = p + (d if jump else d * contact_fraction(p, d, circles, walls, R_ROBOT))
+    nearest = min(np.min(np.hypot(*(p - circles[:, :2]).T) - circles[:, 2]), wall_distances(p, walls).min())
+    assert clearance_m(p, circles, walls, R_ROBOT) == pytest.approx(nearest - R_ROBOT, abs=1e-12)
+    assert clearance_m(p, np.empty((0, 3)), np.empty((0, 4)), R_ROBOT) == math.inf
 
 
 # --- sensors --------------------------------------------------------------------------------------------
