@@ -37,6 +37,8 @@ Parameters
 
 Time: a wall-clock (steady) timer ticks at `rate * realtime_factor` Hz and each tick advances simulation
 time by `1 / rate` s, so the node needs no `use_sim_time` itself; every other node runs on its /clock.
+Built with ``stepped_by_owner``, it has no timer and its owner calls ``step()`` (the demo, in lockstep with
+its executor: nuturtle_demo.lockstep).
 A stream of `f` Hz is published after step k when ``floor(k f / rate)`` increases.
 """
 
@@ -154,7 +156,9 @@ def wall_markers(walls: NDArray[np.float64], stamp: Time) -> MarkerArray:
 
 
 class NusimNode(Node):
-    def __init__(self, **kwargs) -> None:
+    """The `nusim` node (module docstring); ``stepped_by_owner``: no timer, the owner calls ``step()``."""
+
+    def __init__(self, stepped_by_owner: bool = False, **kwargs) -> None:
         super().__init__("nusim", **kwargs)
         self.timing = declare_dataclass(self, NusimTiming)
         lidar_choice = declare_dataclass(self, LidarChoice)
@@ -201,12 +205,13 @@ class NusimNode(Node):
         self._clock_publisher.publish(self._clock_msg)
         obstacles_publisher.publish(self._obstacle_markers(start))
         walls_publisher.publish(wall_markers(self.simulation.walls, start))
-        # a steady (wall) clock, never the ROS clock: this node is what drives /clock
-        self.create_timer(
-            1.0 / (self.timing.rate * self.timing.realtime_factor),
-            self._on_tick,
-            clock=Clock(clock_type=ClockType.STEADY_TIME),
-        )
+        if not stepped_by_owner:
+            # a steady (wall) clock, never the ROS clock: this node is what drives /clock
+            self.create_timer(
+                1.0 / (self.timing.rate * self.timing.realtime_factor),
+                self.step,
+                clock=Clock(clock_type=ClockType.STEADY_TIME),
+            )
 
     def _sim_time_ns(self) -> int:
         """Simulation time ``step_count / rate`` in integer ns."""
@@ -248,7 +253,8 @@ class NusimNode(Node):
 
     # --- physics and outputs -----------------------------------------------------------------------------
 
-    def _on_tick(self) -> None:
+    def step(self) -> None:
+        """One physics step of ``1 / rate`` s, then /clock and every stream due after it."""
         self.simulation.step(1.0 / self.timing.rate)
         self.step_count += 1
         if self.watchdog.expired(self._sim_time_ns()):

@@ -10,9 +10,10 @@ The system (real rclpy nodes talking over DDS, all in one process and one Single
     recorder: every topic -> the rosbag2 bag run/ (metadata.yaml, run.mcap)
     with ``foxglove``, the recorder's subscriptions also feed a Foxglove WebSocket (docs/live.md)
 
-nusim runs on a steady wall timer at ``rate * realtime_factor`` Hz and publishes /clock; every other node
-uses simulation time. The executor runs whatever is ready after each physics step, so the estimators
-keep pace with the simulation whatever ``realtime_factor`` asks (a busy machine only slows the run).
+nusim publishes /clock; every other node uses simulation time. The run is in lockstep (lockstep.py): one
+executor cycle per physics step (a wait, the callbacks it found ready, nusim's step in its turn), at most
+``rate * realtime_factor`` cycles per wall second. So the estimators keep pace with the simulation
+whatever ``realtime_factor`` asks, and a seed gives the same run on any machine (a busy one only slows it).
 
 Frames: SLAM is started at the simulator's start pose ``(x0, y0, theta0)``, so ``map`` = ``nusim/world``;
 odometry starts at the identity of ``odom`` on that same pose, so ``T_world_odom = T_world_start``.
@@ -65,7 +66,6 @@ from nuturtle_eval.run_evaluation import (
 from nuturtle_eval.run_folder import RunFolder
 from nuturtle_ros_common.conversions import planar_covariance_6x6, pose_from_transform
 from nuturtle_ros_common.dds_domain import PRIVATE, DomainChoice, domain_choice, run_context
-from nuturtle_ros_common.node_main import spin_once_guarded
 from nuturtle_ros_common.ros_files import load_ros_parameters, share_file
 from nuturtle_ros_common.stop_signals import StopSignals
 from nuturtle_tools.foxglove_relay import FoxgloveRelay, StaticTransform, slam_view_transforms
@@ -80,6 +80,7 @@ from turtlelib.slam_map import load_map
 from turtlelib.validation import finite_real, integer, one_of, positive, store
 
 from .driver import FigureEightDriver, RouteConfig
+from .lockstep import Pace, run_cycle
 from .route_fit import fitted_route_radius
 from .slip_noise import matched_wheel_noise
 
@@ -220,7 +221,9 @@ class DemoSystem:
         world.update(seed=options.seed, realtime_factor=options.realtime_factor, model=options.model)
         if options.start is not None:
             world.update(zip(("x0", "y0", "theta0"), options.start, strict=True))
-        self.nusim = NusimNode(context=context, parameter_overrides=to_parameters(world))
+        self.nusim = NusimNode(
+            stepped_by_owner=True, context=context, parameter_overrides=to_parameters(world)
+        )
         # the route's loops fitted to the world unless a radius is given (route_fit.py)
         radius_m = options.route_radius
         if radius_m is None:
@@ -382,8 +385,8 @@ def run_demo(options: DemoOptions, on_progress: ProgressCallback | None = None) 
     ``OUT``. An error once the simulation ran (a full disk: OSError) leaves what was written there too;
     an error before (a port in use: OSError, a world nusim refuses: ValueError) leaves nothing.
 
-    ``on_progress(system, sim_time_s)``, if given, is called in the executor's thread after each executor
-    step that followed a new physics step, with the running :class:`DemoSystem` and the simulation time
+    ``on_progress(system, sim_time_s)``, if given, is called in the executor's thread after each physics
+    step and the callbacks it led to, with the running :class:`DemoSystem` and the simulation time
     it has reached (s): a hook to watch the nodes during the run (``bench/soak.py``). It must only read
     them. nusim steps on the same thread, so a slow hook costs wall time, never simulation time.
     """
@@ -441,16 +444,16 @@ class _DemoRun:
             executor.add_node(system.nusim)
             self.started = True
             wall_start = time.monotonic()
-            reported_step = system.nusim.step_count
+            pace = Pace(1.0 / (system.nusim.timing.rate * options.realtime_factor))
             with ProgressBar(options.duration_s, "sim", options.progress) as progress:
+                # lockstep (lockstep.py): one executor cycle per physics step
                 while system.sim_time_s < options.duration_s and stop.received is None:
-                    spin_once_guarded(executor, logger, timeout_sec=0.1)
+                    pace.wait()
+                    run_cycle(executor, system.nusim, system.nusim.step, logger)
                     writer.check()
-                    if system.nusim.step_count != reported_step:
-                        reported_step = system.nusim.step_count
-                        if on_progress is not None:
-                            on_progress(system, system.sim_time_s)
-                        progress.advance(system.sim_time_s)
+                    if on_progress is not None:
+                        on_progress(system, system.sim_time_s)
+                    progress.advance(system.sim_time_s)
             wall_seconds = time.monotonic() - wall_start
             sim_seconds = system.sim_time_s
             executor.remove_node(system.nusim)
