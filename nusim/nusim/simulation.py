@@ -423,8 +423,9 @@ class FreeBall:
     stays inside it (triangle inequality), so no obstacle is within reach: its contact fraction is 1, as
     :func:`contact_fraction` gives. Otherwise the ball is measured again at ``p`` and, if the move still
     leaves it, :func:`contact_fraction` decides. Keyed on the position alone, so a teleport needs no
-    reset. In the default world the robot's centre stays 0.3 m or more clear of everything, and the
-    clearance is measured about once per 0.3 m of travel instead of a contact test per 10 ms step.
+    reset. On the demo's figure eight in the default world (its centre 0.45 m or more clear of everything)
+    the clearance is measured about once per 0.5 m of travel (15 times in 60 s) instead of a contact test
+    per 10 ms step.
     """
 
     def __init__(self, circles: NDArray[np.float64], walls: NDArray[np.float64], radius_m: float) -> None:
