@@ -423,7 +423,7 @@ class FreeBall:
     stays inside it (triangle inequality), so no obstacle is within reach: its contact fraction is 1, as
     :func:`contact_fraction` gives. Otherwise the ball is measured again at ``p`` and, if the move still
     leaves it, :func:`contact_fraction` decides. Keyed on the position alone, so a teleport needs no
-    reset. On the demo's figure eight in the default world (its centre 0.45 m or more clear of everything)
+    reset. On the demo's figure eight in the default world (its disc about 0.45 m clear of every cylinder)
     the clearance is measured about once per 0.5 m of travel (15 times in 60 s) instead of a contact test
     per 10 ms step.
     """
