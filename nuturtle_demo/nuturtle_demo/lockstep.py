@@ -63,8 +63,9 @@ def run_cycle(
 
 
 class Pace:
-    """At most one cycle per ``period_s`` (> 0) of wall time: :meth:`wait` returns at ``previous +
-    period_s``, or at once when that is past (a slow stretch is not made up by running faster later)."""
+    """Cycles on a grid of ``period_s`` (> 0) of wall time: :meth:`wait` returns at the next grid point, at
+    once when it is past (a cycle late by less than a period is caught up on the next); when more than a
+    period behind, the grid starts again from now (a slow stretch is not made up by running faster)."""
 
     def __init__(self, period_s: float) -> None:
         if not period_s > 0.0:
@@ -76,5 +77,6 @@ class Pace:
         now_s = time.monotonic()
         if now_s < self._next_s:
             time.sleep(self._next_s - now_s)
-            now_s = self._next_s
-        self._next_s = now_s + self.period_s
+        elif now_s - self._next_s > self.period_s:
+            self._next_s = now_s
+        self._next_s += self.period_s
