@@ -32,6 +32,7 @@ setup(
         "console_scripts": [
             "landmarks = nuslam.landmarks_node:main",
             "slam = nuslam.slam_node:main",
+            "robot_side = nuslam.robot_side:main",
         ],
     },
 )

@@ -11,11 +11,9 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
 import rclpy
-import yaml
 from rcl_interfaces.msg import Log
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
@@ -94,19 +92,6 @@ def record_rosout(helper: Node) -> list[Log]:
     )
     helper.create_subscription(Log, "/rosout", logs.append, qos)
     return logs
-
-
-def launch_ros_arguments(parameters: list, folder: Path) -> list[str]:
-    """``--ros-args --params-file ...`` as launch_ros builds it from a Node's ``parameters`` list: each YAML
-    file as it is, each dict written (into ``folder``) as a ``/**`` parameter file, in the list's order."""
-    arguments = ["--ros-args"]
-    for k, entry in enumerate(parameters):
-        if isinstance(entry, dict):
-            path = folder / f"launch_params_{k}.yaml"
-            path.write_text(yaml.safe_dump({"/**": {"ros__parameters": entry}}))
-            entry = str(path)
-        arguments += ["--params-file", str(entry)]
-    return arguments
 
 
 def rcl_parameters(context: Context, node_name: str, arguments: list[str]) -> dict[str, Any]:

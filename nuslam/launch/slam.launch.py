@@ -12,6 +12,10 @@ Arguments
                                   slam's motion input, localization in a saved map (see turtlebot3.launch.py).
     rviz:=false|true              true: also RViz2 with nuslam's rviz/slam.rviz (fixed frame `map`, on the
                                   same clock as the nodes).
+    one_process:=false|true       true: turtle_control, odometry, slam and landmarks in one process
+                                  (`robot_side`: one executor, one /clock subscription; less CPU and
+                                  memory, docs/benchmarks.md "Robot-side nodes"); false (default): one
+                                  process each.
 
     ros2 launch nuslam slam.launch.py cmd_src:=teleop        # our control stack (wheel_cmd firmware)
     ros2 launch nuslam slam.launch.py rviz:=true             # ... and watch it in RViz2
@@ -28,13 +32,14 @@ from launch import LaunchDescription
 from launch.actions import IncludeLaunchDescription, OpaqueFunction
 from launch.conditions import IfCondition
 from launch.launch_description_sources import PythonLaunchDescriptionSource
-from launch.substitutions import LaunchConfiguration
+from launch.substitutions import LaunchConfiguration, PythonExpression
 from launch_ros.actions import Node
 
 from nuslam.launch_nodes import (
     ASSOCIATION,
     SLAM_ARGUMENTS,
     landmarks_parameters,
+    robot_side_parameters,
     rviz_arguments,
     slam_parameters,
 )
@@ -48,31 +53,22 @@ def _slam_nodes(context):
     use_sim_time = LaunchConfiguration("use_sim_time").perform(context) == "true"
     arguments = {name: LaunchConfiguration(name).perform(context) for name in SLAM_ARGUMENTS}
     model = LaunchConfiguration("model").perform(context)
-    nodes = [
-        Node(
-            package="nuslam",
-            executable="slam",
-            parameters=slam_parameters(association, use_sim_time, model, **arguments),
-            output="screen",
-        ),
-        Node(
-            package="rviz2",
-            executable="rviz2",
-            arguments=rviz_arguments(),
-            parameters=[{"use_sim_time": use_sim_time}],
-            condition=IfCondition(LaunchConfiguration("rviz")),
-            output="screen",
-        ),
-    ]
+    rviz = Node(
+        package="rviz2",
+        executable="rviz2",
+        arguments=rviz_arguments(),
+        parameters=[{"use_sim_time": use_sim_time}],
+        condition=IfCondition(LaunchConfiguration("rviz")),
+        output="screen",
+    )
+    if LaunchConfiguration("one_process").perform(context) == "true":
+        parameters = robot_side_parameters(association, use_sim_time, model, **arguments)
+        return [rviz, Node(package="nuslam", executable="robot_side", parameters=parameters, output="screen")]
+    parameters = slam_parameters(association, use_sim_time, model, **arguments)
+    nodes = [rviz, Node(package="nuslam", executable="slam", parameters=parameters, output="screen")]
     if association == "unknown":
-        nodes.append(
-            Node(
-                package="nuslam",
-                executable="landmarks",
-                parameters=landmarks_parameters(use_sim_time),
-                output="screen",
-            )
-        )
+        parameters = landmarks_parameters(use_sim_time)
+        nodes.append(Node(package="nuslam", executable="landmarks", parameters=parameters, output="screen"))
     return nodes
 
 
@@ -84,6 +80,7 @@ def generate_launch_description() -> LaunchDescription:
             switch_argument("use_sim_time", False, "true: every node on /clock (the simulator)"),
             declare_argument("cmd_src", CMD_SRC),
             switch_argument("rviz", False, "true: also RViz2 (slam.rviz)"),
+            switch_argument("one_process", False, "true: the robot-side nodes in one process (robot_side)"),
             *[declare_argument(name, argument) for name, argument in SLAM_ARGUMENTS.items()],
             IncludeLaunchDescription(
                 PythonLaunchDescriptionSource(
@@ -93,6 +90,10 @@ def generate_launch_description() -> LaunchDescription:
                     "model": LaunchConfiguration("model"),
                     "use_sim_time": LaunchConfiguration("use_sim_time"),
                     "cmd_src": LaunchConfiguration("cmd_src"),
+                    # with one_process, robot_side runs turtle_control and odometry
+                    "control_nodes": PythonExpression(
+                        ["'false' if '", LaunchConfiguration("one_process"), "' == 'true' else 'true'"]
+                    ),
                 }.items(),
             ),
             OpaqueFunction(function=_slam_nodes),

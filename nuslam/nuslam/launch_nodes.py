@@ -40,6 +40,23 @@ def slam_parameters(
     return with_arguments(files, values)
 
 
+def robot_side_parameters(
+    association: str, use_sim_time: bool, model: str, **arguments: Any
+) -> list[str | dict[str, Any]]:
+    """The `robot_side` process's list (``one_process:=true``): each node's own config file (its section
+    is keyed by its node name, so it reaches that node only), then the launch arguments as one ``/**``
+    entry: each node takes those it declares (``association``, ``mode``, ... only slam), so every node gets
+    what its own list gives it."""
+    files = [
+        share_file("nuturtle_control", "config", "turtle_control.yaml"),
+        share_file("nuturtle_control", "config", "odometry.yaml"),
+        share_file("nuslam", "config", "slam.yaml"),
+        share_file("nuslam", "config", "landmarks.yaml"),
+    ]
+    values = {"association": association, "use_sim_time": use_sim_time, "model": model, **arguments}
+    return with_arguments(files, values)
+
+
 def landmarks_parameters(use_sim_time: bool) -> list[str | dict[str, Any]]:
     """The `landmarks` node's list."""
     return with_arguments([share_file("nuslam", "config", "landmarks.yaml")], {"use_sim_time": use_sim_time})

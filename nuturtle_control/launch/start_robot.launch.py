@@ -8,6 +8,8 @@ Arguments
                                   pub`, or `ros2 run nuturtle_control circle`); circle: the `circle` node
                                   publishes cmd_vel (config/circle.yaml); teleop: teleop_twist_keyboard in
                                   its own terminal (xterm).
+    control_nodes:=true|false     false: turtle_control and odometry are not started here (nuslam's
+                                  slam.launch.py one_process:=true runs them in its robot_side process).
 
 The simulator is not started here (this package installs on the robot without it): the simulated system
 is `ros2 launch nuturtle_demo nusim_slam.launch.py`. Every node gets its own defaults from this package's
@@ -38,18 +40,6 @@ def _nodes(context):
     use_sim_time = LaunchConfiguration("use_sim_time").perform(context) == "true"
     model = LaunchConfiguration("model").perform(context)
     nodes = [
-        Node(
-            package="nuturtle_control",
-            executable="turtle_control",
-            parameters=turtle_control_parameters(use_sim_time, model),
-            output="screen",
-        ),
-        Node(
-            package="nuturtle_control",
-            executable="odometry",
-            parameters=odometry_parameters(use_sim_time, model),
-            output="screen",
-        ),
         # the one owner of base_footprint -> base_scan (and the wheel joints' TF)
         Node(
             package="robot_state_publisher",
@@ -58,6 +48,21 @@ def _nodes(context):
             output="screen",
         ),
     ]
+    if LaunchConfiguration("control_nodes").perform(context) == "true":
+        nodes += [
+            Node(
+                package="nuturtle_control",
+                executable="turtle_control",
+                parameters=turtle_control_parameters(use_sim_time, model),
+                output="screen",
+            ),
+            Node(
+                package="nuturtle_control",
+                executable="odometry",
+                parameters=odometry_parameters(use_sim_time, model),
+                output="screen",
+            ),
+        ]
     if cmd_src == "circle":
         nodes.append(
             Node(
@@ -86,6 +91,7 @@ def generate_launch_description() -> LaunchDescription:
             model_argument(),
             switch_argument("use_sim_time", False, "true: run on /clock (simulated robot)"),
             declare_argument("cmd_src", CMD_SRC),
+            switch_argument("control_nodes", True, "false: no turtle_control and odometry (run elsewhere)"),
             OpaqueFunction(function=_nodes),
         ]
     )

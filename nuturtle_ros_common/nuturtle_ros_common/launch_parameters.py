@@ -7,7 +7,8 @@ own YAML file loses to it (`association:=known` then ran unknown association), a
 wins. :func:`with_arguments` therefore puts the launch arguments last. The tests check this by parsing the
 exact command line with rcl itself (`tests/packaging/test_launch_parameters.py`).
 
-No rclpy or launch here: the launch files import this.
+:func:`ros_arguments` is that command line, for starting a node the way launch does without launch (the
+tests and bench/robot_nodes.py). No rclpy or launch here: the launch files import this.
 """
 
 from __future__ import annotations
@@ -38,3 +39,20 @@ def with_arguments(files: Sequence[Path | str], arguments: Mapping[str, Any]) ->
     """``[*files, arguments]``: the node's parameter files in order, then the launch arguments (a `/**`
     entry after the node's own keys), which win."""
     return [*(str(path) for path in files), dict(arguments)]
+
+
+def ros_arguments(parameters: Sequence[Path | str | Mapping[str, Any]], folder: Path) -> list[str]:
+    """``--ros-args --params-file ...`` as launch_ros builds it from a Node's ``parameters`` list: each YAML
+    file as it is, each dict written (into ``folder``, created if needed) as a ``/**`` parameter file, in
+    the list's order."""
+    import yaml
+
+    arguments = ["--ros-args"]
+    for k, entry in enumerate(parameters):
+        if isinstance(entry, Mapping):
+            folder.mkdir(parents=True, exist_ok=True)
+            path = folder / f"launch_params_{k}.yaml"
+            path.write_text(yaml.safe_dump({"/**": {"ros__parameters": dict(entry)}}))
+            entry = path
+        arguments += ["--params-file", str(entry)]
+    return arguments

@@ -13,7 +13,7 @@ from nuslam.slam_node import SlamNode
 from nuturtle_control.launch_nodes import odometry_parameters, robot_state_publisher_parameters
 from nuturtle_control.odometry import OdometryNode
 from nuturtle_description.robot_params import MODEL_ENV
-from rclpy_harness import launch_ros_arguments
+from nuturtle_ros_common.launch_parameters import ros_arguments
 from turtlelib import Transform2D
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -57,7 +57,7 @@ def test_the_launch_lists_give_the_model_and_keep_an_explicit_constant(ros, tmp_
     own = tmp_path / "own.yaml"
     own.write_text("slam:\n  ros__parameters:\n    track_width: 0.29\n")
     parameters = [*slam_parameters("known", False, "waffle", mode="mapping"), str(own)]
-    slam = ros.add(SlamNode(context=ros.context, cli_args=launch_ros_arguments(parameters, tmp_path)))
+    slam = ros.add(SlamNode(context=ros.context, cli_args=ros_arguments(parameters, tmp_path)))
     values = {
         name: slam.get_parameter(name).value for name in ("model", "track_width", "lidar_x", "wheel_noise")
     }
@@ -66,7 +66,7 @@ def test_the_launch_lists_give_the_model_and_keep_an_explicit_constant(ros, tmp_
     # odometry's list, and the URDF robot_state_publisher publishes: the same Waffle
     odometry = ros.add(
         OdometryNode(
-            context=ros.context, cli_args=launch_ros_arguments(odometry_parameters(False, "waffle"), tmp_path)
+            context=ros.context, cli_args=ros_arguments(odometry_parameters(False, "waffle"), tmp_path)
         )
     )
     assert odometry.get_parameter("track_width").value == 0.287

@@ -51,6 +51,17 @@ NODES = {
     "circle": ("nuturtle_control.circle", ["-r", "cmd_vel:=stops/circle_cmd_vel"]),
     "landmarks": ("nuslam.landmarks_node", []),
     "slam": ("nuslam.slam_node", []),
+    "robot_side": (
+        "nuslam.robot_side",
+        [
+            "-r",
+            "cmd_vel:=stops/cmd_vel",
+            "-r",
+            "wheel_cmd:=stops/robot_side/wheel_cmd",
+            "-p",
+            "cmd_timeout:=0.0",
+        ],
+    ),
     "driver": (
         "nuturtle_demo.driver",
         ["-r", "cmd_vel:=stops/driver_cmd_vel", "-p", "start_delay:=0.0", "-p", "feedback:=false"],
@@ -60,6 +71,7 @@ NODES = {
 # the topic each commanding node's last message is read on, and that message's type
 COMMANDS = {
     "turtle_control": ("stops/wheel_cmd", JointState),
+    "robot_side": ("stops/robot_side/wheel_cmd", JointState),
     "circle": ("stops/circle_cmd_vel", Twist),
     "driver": ("stops/driver_cmd_vel", Twist),
 }

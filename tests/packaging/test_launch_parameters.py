@@ -10,11 +10,11 @@ from pathlib import Path
 
 import pytest
 
-from nuslam.launch_nodes import SLAM_ARGUMENTS, landmarks_parameters, slam_parameters
+from nuslam.launch_nodes import SLAM_ARGUMENTS, landmarks_parameters, robot_side_parameters, slam_parameters
 from nuturtle_control.launch_nodes import circle_parameters, odometry_parameters, turtle_control_parameters
-from nuturtle_ros_common.launch_parameters import LaunchArgument, with_arguments
+from nuturtle_ros_common.launch_parameters import LaunchArgument, ros_arguments, with_arguments
 from nuturtle_ros_common.ros_files import share_file
-from rclpy_harness import launch_ros_arguments, rcl_parameters, served_parameters
+from rclpy_harness import rcl_parameters, served_parameters
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -38,9 +38,7 @@ def node_class(node_name: str) -> type:
 def resolved(ros, tmp_path, parameters: list, node_name: str, names: list[str]) -> dict:
     """``names`` as the real node ``node_name``, started with the command line launch_ros builds from
     ``parameters``, serves them."""
-    node = ros.add(
-        node_class(node_name)(context=ros.context, cli_args=launch_ros_arguments(parameters, tmp_path))
-    )
+    node = ros.add(node_class(node_name)(context=ros.context, cli_args=ros_arguments(parameters, tmp_path)))
     try:
         return served_parameters(ros, node, names)
     finally:
@@ -74,13 +72,36 @@ def test_the_map_and_motion_arguments_reach_slam_over_its_yaml(ros, tmp_path):
     assert list(defaults.values()) == [argument.default for argument in SLAM_ARGUMENTS.values()]
 
 
+def test_the_one_process_list_gives_each_node_what_its_own_list_gives_it(ros, tmp_path):
+    """robot_side's one command line, parsed by rcl for each node name: the values of the node's own
+    launch list, and beyond them only slam's arguments, which the other nodes do not declare."""
+    arguments = {"motion_source": "odom", "mode": "mapping", "map_file": "/tmp/m.json"}
+    one = ros_arguments(robot_side_parameters("unknown", True, "waffle_pi", **arguments), tmp_path / "one")
+    own_lists = {
+        "turtle_control": turtle_control_parameters(True, "waffle_pi"),
+        "odometry": odometry_parameters(True, "waffle_pi"),
+        "slam": slam_parameters("unknown", True, "waffle_pi", **arguments),
+        "landmarks": landmarks_parameters(True),
+    }
+    for name, own_list in own_lists.items():
+        own = rcl_parameters(ros.context, name, ros_arguments(own_list, tmp_path / name))
+        shared = rcl_parameters(ros.context, name, one)
+        assert {key: shared[key] for key in own} == own, name
+        extra = set(shared) - set(own)
+        assert extra <= {"association", "model", *SLAM_ARGUMENTS}, (name, extra)
+        if extra:
+            node = ros.add(node_class(name)(context=ros.context, cli_args=one))
+            assert not any(node.has_parameter(key) for key in extra), (name, extra)
+            ros.remove(node)
+
+
 def test_a_dict_before_the_yaml_loses_to_it(ros, tmp_path):
     # what went wrong: slam.yaml (association: unknown) after the argument wins
     # rcl's own rule, shown on a bare node that takes whatever rcl gives it
     slam_yaml = share_file("nuslam", "config", "slam.yaml")
 
     def association(parameters: list) -> str:
-        return rcl_parameters(ros.context, "slam", launch_ros_arguments(parameters, tmp_path))["association"]
+        return rcl_parameters(ros.context, "slam", ros_arguments(parameters, tmp_path))["association"]
 
     assert association([{"association": "known"}, slam_yaml]) == "unknown"
     assert association(with_arguments([slam_yaml], {"association": "known"})) == "known"
@@ -108,7 +129,10 @@ def test_every_node_list_is_files_then_arguments(ros, tmp_path, parameters, node
 @pytest.mark.parametrize(
     ("launch_file", "functions"),
     [
-        ("nuslam/launch/slam.launch.py", ["slam_parameters(", "landmarks_parameters("]),
+        (
+            "nuslam/launch/slam.launch.py",
+            ["slam_parameters(", "landmarks_parameters(", "robot_side_parameters("],
+        ),
         ("nuslam/launch/turtlebot3.launch.py", ["slam_parameters(", "landmarks_parameters("]),
         (
             "nuturtle_control/launch/start_robot.launch.py",
