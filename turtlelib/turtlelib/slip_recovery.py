@@ -65,7 +65,7 @@ from functools import partial
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import chi2
+from scipy.special import chdtri
 
 from .data_association import REJECTED
 from .ekf_slam import Association, CheckedObservations, EkfSlam
@@ -74,8 +74,9 @@ from .map_alignment import Alignment, Search, align_known, align_to_map, explain
 from .timebase import NS_PER_S
 from .validation import integer, non_negative, positive, store
 
-# chi2_3^-1(0.999): a correction outside this is not the filter's own uncertainty
-SIGNIFICANT_D2 = float(chi2.ppf(0.999, 3))
+# chi2_3^-1(0.999) (chdtri: the inverse of chi2's upper tail, without importing scipy.stats): a
+# correction outside this is not the filter's own uncertainty
+SIGNIFICANT_D2 = float(chdtri(3, 0.001))
 # consecutive held alignments differ by no more than the reported motion, plus 2 match radii and this (rad)
 AGREEMENT_SLACK_RAD = 0.1
 # longest run of held scans (s) before the filter takes scans again unconfirmed; an event lasting this long is
