@@ -109,6 +109,8 @@ def commands(
     from nuturtle_ros_common.launch_parameters import ros_arguments
 
     def python(name: str) -> list[str]:
+        if profile is not None:
+            profile.mkdir(parents=True, exist_ok=True)
         profiler = [] if profile is None else ["-m", "cProfile", "-o", str(profile / f"{name}.prof")]
         return [sys.executable, "-P", *profiler, "-m"]
 
@@ -168,10 +170,11 @@ class Feeder:
         self.executor.add_node(self.player)
 
     def wait_for_nodes(self, processes: dict[str, subprocess.Popen]) -> None:
-        """Until every input has its subscribers (and /clock on sim time) and slam/odom its publisher."""
+        """Until every input has its subscribers (and /clock on sim time: one per process, the nodes of one
+        process share theirs) and slam/odom its publisher."""
         from nuturtle_tools.player import spin_until
 
-        expected = dict(SUBSCRIBERS, **({"/clock": len(NODE_MODULES)} if self.use_sim_time else {}))
+        expected = dict(SUBSCRIBERS, **({"/clock": len(processes)} if self.use_sim_time else {}))
 
         def ready() -> bool:
             for name, process in processes.items():

@@ -8,6 +8,7 @@ Issue: one /clock message with a negative ``sec`` killed turtle_control, odometr
 
 from __future__ import annotations
 
+import os
 import signal
 import subprocess
 import sys
@@ -113,3 +114,20 @@ def test_spin_once_guarded_logs_a_callback_exception_and_the_node_goes_on(ros):
     ros.spin_for(0.2)
     (error,) = errors_of(logs, "odometry")
     assert "a callback raised ValueError" in error and "Seconds value must not be negative" in error
+
+
+@pytest.mark.parametrize(("given", "expected"), [(None, "1"), ("3", "3")])
+@pytest.mark.parametrize("package", ["nuslam", "nuturtle_control", "nusim"])
+def test_every_node_package_loads_numpy_with_one_blas_thread_unless_told(package, given, expected, tmp_path):
+    """OPENBLAS_NUM_THREADS as OpenBLAS reads it when numpy loads: a node's package (imported before its
+    node module) sets one thread first, and a value the user set wins."""
+    env = {key: value for key, value in os.environ.items() if key != "OPENBLAS_NUM_THREADS"}
+    if given is not None:
+        env["OPENBLAS_NUM_THREADS"] = given
+    # numpy not loaded yet: the value is the one OpenBLAS will read
+    probe = f"import os, sys, {package}; assert 'numpy' not in sys.modules; "
+    probe += "print(os.environ['OPENBLAS_NUM_THREADS'])"
+    result = subprocess.run(
+        [sys.executable, "-P", "-c", probe], cwd=tmp_path, env=env, capture_output=True, text=True
+    )
+    assert result.stdout.strip() == expected, result.stderr[-2000:]
