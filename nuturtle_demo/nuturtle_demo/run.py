@@ -66,7 +66,9 @@ from nuturtle_eval.run_evaluation import (
 from nuturtle_eval.run_folder import RunFolder
 from nuturtle_ros_common.conversions import planar_covariance_6x6, pose_from_transform
 from nuturtle_ros_common.dds_domain import PRIVATE, DomainChoice, domain_choice, run_context
+from nuturtle_ros_common.qos_events import drop_qos_event_handlers
 from nuturtle_ros_common.ros_files import load_ros_parameters, share_file
+from nuturtle_ros_common.shared_clock import share_clock
 from nuturtle_ros_common.stop_signals import StopSignals
 from nuturtle_tools.foxglove_relay import FoxgloveRelay, StaticTransform, slam_view_transforms
 from nuturtle_tools.monitor import RunMonitor
@@ -238,6 +240,11 @@ class DemoSystem:
         # one subscription per topic for both: a second tap node would slow every executor step
         sink = writer if self.relay is None else TeeSink(writer, self.relay)
         self.recorder = TopicRecorder(sink, context=context, parameter_overrides=sim_time)
+        # all of them ours, in one process: no QoS event handlers, and one /clock subscription for the
+        # nodes on sim time (every one but nusim, which makes the clock) (qos_events, shared_clock)
+        for node in self.nodes:
+            drop_qos_event_handlers(node)
+        share_clock([node for node in self.nodes if node is not self.nusim])
 
     @property
     def nodes(self) -> list[Node]:

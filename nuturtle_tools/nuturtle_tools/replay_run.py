@@ -16,7 +16,8 @@ until no callback is ready (``player.run_until_idle``), so a scan's landmarks re
 step goes out: as fast as the nodes go (default) or paced at ``rate`` x real time, and no message is
 dropped either way (no queue ever holds more than one played message). Within a step each node hears /clock
 first (its time source subscribed first), and slam hears the step's joint_states before the landmarks the
-step's scan gives, as in the live run.
+step's scan gives, as in the live run. The four share one /clock subscription (landmarks', the first of them
+the executor spins) and have no QoS event handlers (``nuturtle_ros_common.qos_events``).
 
 Motion: slam's ``motion_source`` (the option, else the params file's, else the node's default) decides
 which motion topic the bag must have and which is played: ``joint_states`` (the wheels; the bag's odom is
@@ -67,7 +68,9 @@ from nuturtle_eval.run_evaluation import (
 from nuturtle_eval.run_folder import RunFolder
 from nuturtle_ros_common.conversions import stamp_nanoseconds, transform_from_pose
 from nuturtle_ros_common.dds_domain import ENVIRONMENT, PRIVATE, DomainChoice, domain_choice, run_context
+from nuturtle_ros_common.qos_events import drop_qos_event_handlers
 from nuturtle_ros_common.ros_files import flatten
+from nuturtle_ros_common.shared_clock import share_clock
 from nuturtle_ros_common.stop_signals import StopSignals
 from turtlelib import Transform2D
 from turtlelib.slam_map import save_map
@@ -487,7 +490,13 @@ class Replay:
             sink, exclude=self._played_names(), context=context, parameter_overrides=sim_time
         )
         self.monitor = RunMonitor(context=context, parameter_overrides=sim_time)
-        return [self.landmarks, self.slam, self.recorder, self.monitor]
+        nodes = [self.landmarks, self.slam, self.recorder, self.monitor]
+        # all of them ours, in one process: no QoS event handlers, one /clock subscription (qos_events,
+        # shared_clock; the player's handlers go too)
+        for node in [self.player, *nodes]:
+            drop_qos_event_handlers(node)
+        share_clock(nodes)
+        return nodes
 
     def _played_names(self) -> list[str]:
         return [absolute(ROLES[role][0]) for role in self.topics] + ["/clock"]
@@ -505,7 +514,7 @@ class Replay:
         """Until every played topic has its in-process subscribers and the recorder hears slam's outputs."""
         # the in-process subscribers of each played topic: landmarks (scan), slam (its motion source and,
         # with joint_states motion, odom for map -> odom; the observations), the monitor (odom, truth)
-        expected = {self.motion_source: 1, "odom": 2, TRUTH_PLAYED_AS: 1, "/clock": 4}
+        expected = {self.motion_source: 1, "odom": 2, TRUTH_PLAYED_AS: 1, "/clock": 1}
         expected["fake_sensor" if self.association == "known" else "scan"] = 1
         required = {"/slam/odom", "/slam/path", "/slam/map"} | (
             {"/landmarks"} if self.association == "unknown" else set()

@@ -16,12 +16,15 @@ def sim_time_node(ros, name: str, use_sim_time: bool = True):
 
 def test_the_nodes_of_one_process_follow_one_clock_subscription(ros):
     nodes = [sim_time_node(ros, f"shared_{k}") for k in range(3)]
+    recorded: list[Clock] = []
+    nodes[1].create_subscription(Clock, "/clock", recorded.append, 10)
     helper = ros.node("clock_feeder")
     clock = helper.create_publisher(Clock, "/clock", 10)
-    assert ros.spin_until(lambda: clock.get_subscription_count() == 3, 10.0), "each node's own subscription"
+    assert ros.spin_until(lambda: clock.get_subscription_count() == 4, 10.0), "each node's own, and one more"
     share_clock(nodes)
     ros.spin_for(1.0)
-    assert clock.get_subscription_count() == 1
+    assert clock.get_subscription_count() == 2, "the first node's and the one a node made for itself"
+    assert next(iter(nodes[0].subscriptions)).topic_name == "/clock", "the first node's own, still its first"
     fired = []
     nodes[2].create_timer(0.5, lambda: fired.append(nodes[2].get_clock().now().nanoseconds))
     for sec in (7, 8):
@@ -31,6 +34,7 @@ def test_the_nodes_of_one_process_follow_one_clock_subscription(ros):
         ), [node.get_clock().now().nanoseconds for node in nodes]
     ros.spin_for(0.2)
     assert fired and fired[0] == 8 * 10**9, "a timer of another node runs on the shared sim time"
+    assert [m.clock.sec for m in recorded] == [7, 8], "a node's own /clock subscription is kept"
 
 
 def test_nodes_on_different_clocks_are_refused(ros):
