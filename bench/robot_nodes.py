@@ -284,6 +284,21 @@ def table(rows: Sequence[tuple[str, str, float, list[ProcessUse], int]]) -> str:
     return "\n".join(lines)
 
 
+def feed_description(bag: Path) -> str:
+    """What was played: the recording's length and each played topic's rate."""
+    from nuturtle_tools.bag_source import BagSource
+
+    with BagSource(bag).open() as source:
+        seconds = (source.end_ns - source.start_ns) / 1e9
+        rates = ", ".join(
+            f"`{name}` {source.topics[name].message_count / seconds:.0f} Hz"
+            for name in [*INPUTS, "/clock"]
+            if name in source.topics
+        )
+    played = f"`{bag.parent.name}/{bag.name}` ({seconds:.0f} s)"
+    return f"Fed {played} at real time: {rates} (/clock on sim time only)."
+
+
 def write_section(text: str) -> None:
     """Replace (or append) the section ``SECTION`` of docs/benchmarks.md."""
     doc = DOCS.read_text()
@@ -339,7 +354,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         header = (
             f"{SECTION}\n\n`.venv/bin/python -P bench/robot_nodes.py --write` "
             f"(x86_64, {os.cpu_count()} cores, "
-            f"Python {sys.version.split()[0]}, {time.strftime('%Y-%m-%d')}).\n\n"
+            f"Python {sys.version.split()[0]}, {time.strftime('%Y-%m-%d')}). {feed_description(bag)}\n\n"
         )
         write_section(header + text + "\n")
     return 0
