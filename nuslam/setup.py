@@ -33,6 +33,7 @@ setup(
             "landmarks = nuslam.landmarks_node:main",
             "slam = nuslam.slam_node:main",
             "robot_side = nuslam.robot_side:main",
+            "slam_side = nuslam.slam_side:main",
         ],
     },
 )

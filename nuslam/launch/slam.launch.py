@@ -62,13 +62,31 @@ def _slam_nodes(context):
         output="screen",
     )
     if LaunchConfiguration("one_process").perform(context) == "true":
-        parameters = robot_side_parameters(association, use_sim_time, model, **arguments)
-        return [rviz, Node(package="nuslam", executable="robot_side", parameters=parameters, output="screen")]
-    parameters = slam_parameters(association, use_sim_time, model, **arguments)
-    nodes = [rviz, Node(package="nuslam", executable="slam", parameters=parameters, output="screen")]
+        robot_side = Node(
+            package="nuslam",
+            executable="robot_side",
+            parameters=robot_side_parameters(association, use_sim_time, model, **arguments),
+            output="screen",
+        )
+        return [rviz, robot_side]
+    nodes = [
+        rviz,
+        Node(
+            package="nuslam",
+            executable="slam",
+            parameters=slam_parameters(association, use_sim_time, model, **arguments),
+            output="screen",
+        ),
+    ]
     if association == "unknown":
-        parameters = landmarks_parameters(use_sim_time)
-        nodes.append(Node(package="nuslam", executable="landmarks", parameters=parameters, output="screen"))
+        nodes.append(
+            Node(
+                package="nuslam",
+                executable="landmarks",
+                parameters=landmarks_parameters(use_sim_time),
+                output="screen",
+            )
+        )
     return nodes
 
 

@@ -14,6 +14,9 @@ Arguments
     map_file:=PATH                     the map loaded at start-up (if there) and written by slam/save_map
     use_sim_time:=false|true           true: every node on /clock (Gazebo, or `ros2 bag play --clock`)
     rviz:=false|true                   true: also RViz2 with nuslam's rviz/slam.rviz (fixed frame `map`)
+    one_process:=false|true            true: landmarks and slam in one process (`slam_side`: one executor,
+                                       one /clock subscription; less CPU and memory, docs/robot.md "CPU
+                                       and memory"); false (default): one process each.
 
     ros2 launch nuslam turtlebot3.launch.py      # on the laptop, same ROS_DOMAIN_ID as the robot
     ros2 launch nuslam turtlebot3.launch.py rviz:=true
@@ -31,7 +34,13 @@ from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
-from nuslam.launch_nodes import SLAM_ARGUMENTS, landmarks_parameters, rviz_arguments, slam_parameters
+from nuslam.launch_nodes import (
+    SLAM_ARGUMENTS,
+    landmarks_parameters,
+    rviz_arguments,
+    slam_parameters,
+    slam_side_parameters,
+)
 from nuturtle_description.launch_arguments import declare_argument, model_argument, switch_argument
 
 
@@ -39,7 +48,24 @@ def _nodes(context):
     arguments = {name: LaunchConfiguration(name).perform(context) for name in SLAM_ARGUMENTS}
     model = LaunchConfiguration("model").perform(context)
     use_sim_time = LaunchConfiguration("use_sim_time").perform(context) == "true"
+    rviz = Node(
+        package="rviz2",
+        executable="rviz2",
+        arguments=rviz_arguments(),
+        parameters=[{"use_sim_time": use_sim_time}],
+        condition=IfCondition(LaunchConfiguration("rviz")),
+        output="screen",
+    )
+    if LaunchConfiguration("one_process").perform(context) == "true":
+        slam_side = Node(
+            package="nuslam",
+            executable="slam_side",
+            parameters=slam_side_parameters("unknown", use_sim_time, model, **arguments),
+            output="screen",
+        )
+        return [rviz, slam_side]
     return [
+        rviz,
         Node(
             package="nuslam",
             executable="landmarks",
@@ -50,14 +76,6 @@ def _nodes(context):
             package="nuslam",
             executable="slam",
             parameters=slam_parameters("unknown", use_sim_time, model, **arguments),
-            output="screen",
-        ),
-        Node(
-            package="rviz2",
-            executable="rviz2",
-            arguments=rviz_arguments(),
-            parameters=[{"use_sim_time": use_sim_time}],
-            condition=IfCondition(LaunchConfiguration("rviz")),
             output="screen",
         ),
     ]
@@ -74,6 +92,7 @@ def generate_launch_description() -> LaunchDescription:
                 "true: every node on /clock (a simulated robot, or a bag played with --clock)",
             ),
             switch_argument("rviz", False, "true: also RViz2 (slam.rviz)"),
+            switch_argument("one_process", False, "true: landmarks and slam in one process (slam_side)"),
             OpaqueFunction(function=_nodes),
         ]
     )

@@ -40,21 +40,28 @@ def slam_parameters(
     return with_arguments(files, values)
 
 
+def slam_side_parameters(
+    association: str, use_sim_time: bool, model: str, **arguments: Any
+) -> list[str | dict[str, Any]]:
+    """The `slam_side` process's list (turtlebot3.launch.py ``one_process:=true``): each node's own config
+    file (its section is keyed by its node name, so it reaches that node only), then the launch arguments
+    as one ``/**`` entry: each node takes those it declares (``association``, ``mode``, ... only slam), so
+    every node gets what its own list gives it."""
+    files = [share_file("nuslam", "config", "slam.yaml"), share_file("nuslam", "config", "landmarks.yaml")]
+    values = {"association": association, "use_sim_time": use_sim_time, "model": model, **arguments}
+    return with_arguments(files, values)
+
+
 def robot_side_parameters(
     association: str, use_sim_time: bool, model: str, **arguments: Any
 ) -> list[str | dict[str, Any]]:
-    """The `robot_side` process's list (``one_process:=true``): each node's own config file (its section
-    is keyed by its node name, so it reaches that node only), then the launch arguments as one ``/**``
-    entry: each node takes those it declares (``association``, ``mode``, ... only slam), so every node gets
-    what its own list gives it."""
+    """The `robot_side` process's list (slam.launch.py ``one_process:=true``): turtle_control's and
+    odometry's config files, then :func:`slam_side_parameters`'s list."""
     files = [
         share_file("nuturtle_control", "config", "turtle_control.yaml"),
         share_file("nuturtle_control", "config", "odometry.yaml"),
-        share_file("nuslam", "config", "slam.yaml"),
-        share_file("nuslam", "config", "landmarks.yaml"),
     ]
-    values = {"association": association, "use_sim_time": use_sim_time, "model": model, **arguments}
-    return with_arguments(files, values)
+    return [*map(str, files), *slam_side_parameters(association, use_sim_time, model, **arguments)]
 
 
 def landmarks_parameters(use_sim_time: bool) -> list[str | dict[str, Any]]:

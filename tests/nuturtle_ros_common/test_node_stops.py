@@ -51,6 +51,7 @@ NODES = {
     "circle": ("nuturtle_control.circle", ["-r", "cmd_vel:=stops/circle_cmd_vel"]),
     "landmarks": ("nuslam.landmarks_node", []),
     "slam": ("nuslam.slam_node", []),
+    "slam_side": ("nuslam.slam_side", []),
     "robot_side": (
         "nuslam.robot_side",
         [

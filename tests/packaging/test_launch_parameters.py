@@ -10,7 +10,13 @@ from pathlib import Path
 
 import pytest
 
-from nuslam.launch_nodes import SLAM_ARGUMENTS, landmarks_parameters, robot_side_parameters, slam_parameters
+from nuslam.launch_nodes import (
+    SLAM_ARGUMENTS,
+    landmarks_parameters,
+    robot_side_parameters,
+    slam_parameters,
+    slam_side_parameters,
+)
 from nuturtle_control.launch_nodes import circle_parameters, odometry_parameters, turtle_control_parameters
 from nuturtle_ros_common.launch_parameters import LaunchArgument, ros_arguments, with_arguments
 from nuturtle_ros_common.ros_files import share_file
@@ -72,18 +78,29 @@ def test_the_map_and_motion_arguments_reach_slam_over_its_yaml(ros, tmp_path):
     assert list(defaults.values()) == [argument.default for argument in SLAM_ARGUMENTS.values()]
 
 
-def test_the_one_process_list_gives_each_node_what_its_own_list_gives_it(ros, tmp_path):
-    """robot_side's one command line, parsed by rcl for each node name: the values of the node's own
-    launch list, and beyond them only slam's arguments, which the other nodes do not declare."""
+@pytest.mark.parametrize(
+    ("one_process", "names"),
+    [
+        (robot_side_parameters, ["turtle_control", "odometry", "slam", "landmarks"]),
+        (slam_side_parameters, ["slam", "landmarks"]),
+    ],
+)
+def test_the_one_process_list_gives_each_node_what_its_own_list_gives_it(ros, tmp_path, one_process, names):
+    """robot_side's (slam_side's) one command line, parsed by rcl for each node name: the values of the
+    node's own launch list, and beyond them only slam's arguments, which the other nodes do not declare."""
     arguments = {"motion_source": "odom", "mode": "mapping", "map_file": "/tmp/m.json"}
-    one = ros_arguments(robot_side_parameters("unknown", True, "waffle_pi", **arguments), tmp_path / "one")
+    one = ros_arguments(one_process("unknown", True, "waffle_pi", **arguments), tmp_path / "one")
     own_lists = {
         "turtle_control": turtle_control_parameters(True, "waffle_pi"),
         "odometry": odometry_parameters(True, "waffle_pi"),
         "slam": slam_parameters("unknown", True, "waffle_pi", **arguments),
         "landmarks": landmarks_parameters(True),
     }
-    for name, own_list in own_lists.items():
+    assert rcl_parameters(ros.context, "turtle_control", one).get("cmd_timeout") == (
+        0.5 if "turtle_control" in names else None
+    ), "a node's file only in the list of the process that runs it"
+    for name in names:
+        own_list = own_lists[name]
         own = rcl_parameters(ros.context, name, ros_arguments(own_list, tmp_path / name))
         shared = rcl_parameters(ros.context, name, one)
         assert {key: shared[key] for key in own} == own, name
@@ -133,7 +150,10 @@ def test_every_node_list_is_files_then_arguments(ros, tmp_path, parameters, node
             "nuslam/launch/slam.launch.py",
             ["slam_parameters(", "landmarks_parameters(", "robot_side_parameters("],
         ),
-        ("nuslam/launch/turtlebot3.launch.py", ["slam_parameters(", "landmarks_parameters("]),
+        (
+            "nuslam/launch/turtlebot3.launch.py",
+            ["slam_parameters(", "landmarks_parameters(", "slam_side_parameters("],
+        ),
         (
             "nuturtle_control/launch/start_robot.launch.py",
             ["turtle_control_parameters(", "odometry_parameters(", "circle_parameters("],
