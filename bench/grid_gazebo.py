@@ -116,7 +116,8 @@ def section(result: dict) -> str:
         [
             HEADING,
             "",
-            "`python bench/grid_gazebo.py --write`: `turtlelib.OccupancyGrid` (0.05 m, default `GridConfig`)",
+            "`.venv/bin/python -P bench/grid_gazebo.py --write`: `turtlelib.OccupancyGrid` (0.05 m, default "
+            "`GridConfig`)",
             "on the shared Gazebo recording (`/work/shared/datasets/tb3_gazebo_burger`, 27.7 s in",
             "turtlebot3_world), each `/scan` at `/odom`'s pose at its stamp (Gazebo's true pose) composed",
             f"with the Burger's LiDAR mount ({result['used']} of {result['scans']} scans within the",

@@ -193,7 +193,8 @@ def section(results: list[dict]) -> str:
         [
             HEADING,
             "",
-            f"`python bench/grid_update.py --write` (OPENBLAS_NUM_THREADS={threads}; {machine}).",
+            "`.venv/bin/python -P bench/grid_update.py --write` "
+            f"(OPENBLAS_NUM_THREADS={threads}; {machine}).",
             "",
             "`turtlelib.OccupancyGrid` (docs/maps.md) on the demo's world scanned by a simulated",
             "LDS-01 (360 beams, 1 cm noise and resolution) at 5 Hz for 120 s along the demo's figure",
