@@ -9,6 +9,7 @@ logged and counted in `callback_failures` instead of ending the test, so that fu
 
 from __future__ import annotations
 
+import gc
 import time
 from collections.abc import Callable
 from typing import Any
@@ -92,6 +93,21 @@ def record_rosout(helper: Node) -> list[Log]:
     )
     helper.create_subscription(Log, "/rosout", logs.append, qos)
     return logs
+
+
+def refused_at_construction(build: Callable[[], Node], message: str) -> str:
+    """The ValueError ``build()`` raises (matching ``message``), as text. The half-built node is then
+    collected at once: left to a later garbage collection, inside another test, its finalization
+    unregisters its logger name from /rosout under that test's node of the same name, whose warnings then
+    vanish (a slam test lost its warning that way)."""
+    import pytest
+
+    with pytest.raises(ValueError, match=message) as error:
+        build()
+    text = str(error.value)
+    del error
+    gc.collect()
+    return text
 
 
 def rcl_parameters(context: Context, node_name: str, arguments: list[str]) -> dict[str, Any]:

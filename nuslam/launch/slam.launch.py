@@ -32,7 +32,7 @@ from launch import LaunchDescription
 from launch.actions import IncludeLaunchDescription, OpaqueFunction
 from launch.conditions import IfCondition
 from launch.launch_description_sources import PythonLaunchDescriptionSource
-from launch.substitutions import LaunchConfiguration, PythonExpression
+from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
 from nuslam.launch_nodes import (
@@ -109,9 +109,7 @@ def generate_launch_description() -> LaunchDescription:
                     "use_sim_time": LaunchConfiguration("use_sim_time"),
                     "cmd_src": LaunchConfiguration("cmd_src"),
                     # with one_process, robot_side runs turtle_control and odometry
-                    "control_nodes": PythonExpression(
-                        ["'false' if '", LaunchConfiguration("one_process"), "' == 'true' else 'true'"]
-                    ),
+                    "one_process": LaunchConfiguration("one_process"),
                 }.items(),
             ),
             OpaqueFunction(function=_slam_nodes),

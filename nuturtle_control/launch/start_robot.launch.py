@@ -8,8 +8,9 @@ Arguments
                                   pub`, or `ros2 run nuturtle_control circle`); circle: the `circle` node
                                   publishes cmd_vel (config/circle.yaml); teleop: teleop_twist_keyboard in
                                   its own terminal (xterm).
-    control_nodes:=true|false     false: turtle_control and odometry are not started here (nuslam's
-                                  slam.launch.py one_process:=true runs them in its robot_side process).
+    one_process:=false|true       true: turtle_control and odometry are not started here: they run in
+                                  nuslam's robot_side process with slam and landmarks (what
+                                  slam.launch.py one_process:=true starts).
 
 The simulator is not started here (this package installs on the robot without it): the simulated system
 is `ros2 launch nuturtle_demo nusim_slam.launch.py`. Every node gets its own defaults from this package's
@@ -48,7 +49,7 @@ def _nodes(context):
             output="screen",
         ),
     ]
-    if LaunchConfiguration("control_nodes").perform(context) == "true":
+    if LaunchConfiguration("one_process").perform(context) == "false":
         nodes += [
             Node(
                 package="nuturtle_control",
@@ -91,7 +92,9 @@ def generate_launch_description() -> LaunchDescription:
             model_argument(),
             switch_argument("use_sim_time", False, "true: run on /clock (simulated robot)"),
             declare_argument("cmd_src", CMD_SRC),
-            switch_argument("control_nodes", True, "false: no turtle_control and odometry (run elsewhere)"),
+            switch_argument(
+                "one_process", False, "true: turtle_control and odometry run in nuslam's robot_side instead"
+            ),
             OpaqueFunction(function=_nodes),
         ]
     )

@@ -26,7 +26,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from nusim.nusim_node import NusimNode
 from nuslam.landmarks_node import LandmarksNode
-from rclpy_harness import matched, record_rosout, warnings_of
+from rclpy_harness import matched, record_rosout, refused_at_construction, warnings_of
 from turtlelib import DetectorConfig, LidarConfig, Transform2D, arena_walls, simulate_scan
 
 pytestmark = pytest.mark.ros
@@ -389,8 +389,9 @@ def invalid(name: str, value, message: str):
     ],
 )
 def test_an_invalid_parameter_raises_value_error_at_construction(ros, parameter, message):
-    with pytest.raises(ValueError, match=message):
-        LandmarksNode(context=ros.context, parameter_overrides=[parameter])
+    refused_at_construction(
+        lambda: LandmarksNode(context=ros.context, parameter_overrides=[parameter]), message
+    )
 
 
 def test_diagnostics_are_an_error_when_no_scan_arrives(ros):

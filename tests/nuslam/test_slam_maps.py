@@ -21,6 +21,7 @@ from test_slam_node import LANDMARKS, R_WHEEL, Rig, S, close_pose, mapped, pose_
 
 from nuslam.slam_node import SlamNode
 from nuturtle_ros_common.conversions import pose_from_transform
+from rclpy_harness import refused_at_construction
 from turtlelib import Transform2D
 from turtlelib.slam_map import load_map
 
@@ -218,9 +219,10 @@ def test_a_bad_map_file_stops_the_node_at_start_up_with_a_clear_message(ros, tmp
     from rclpy.parameter import Parameter
 
     overrides = [Parameter("map_file", value=str(path))]
-    with pytest.raises(ValueError, match=message) as error:
-        SlamNode(context=ros.context, parameter_overrides=overrides)
-    assert str(path) in str(error.value)
+    text = refused_at_construction(
+        lambda: SlamNode(context=ros.context, parameter_overrides=overrides), message
+    )
+    assert str(path) in text
 
 
 @pytest.mark.parametrize(("map_file", "message"), [("missing.json", "missing.json"), ("", "needs map_file")])
@@ -230,5 +232,4 @@ def test_localization_without_a_map_file_stops_the_node(ros, tmp_path, map_file,
 
     path = str(tmp_path / map_file) if map_file else ""
     overrides = [Parameter("map_file", value=path), Parameter("mode", value="localization")]
-    with pytest.raises(ValueError, match=message):
-        SlamNode(context=ros.context, parameter_overrides=overrides)
+    refused_at_construction(lambda: SlamNode(context=ros.context, parameter_overrides=overrides), message)

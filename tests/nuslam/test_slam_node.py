@@ -31,7 +31,7 @@ from nuslam.landmarks_node import LandmarksNode
 from nuslam.slam_node import SlamNode
 from nuturtle_description.robot_params import burger_params
 from nuturtle_ros_common.conversions import covariance_from_6x6, odometry_message, yaw_from_quaternion
-from rclpy_harness import matched, record_rosout, rosout_matched, warnings_of
+from rclpy_harness import matched, record_rosout, refused_at_construction, rosout_matched, warnings_of
 from turtlelib import (
     DiffDriveMotion,
     EkfSlam,
@@ -698,8 +698,7 @@ def invalid(name: str, value, message: str):
     ],
 )
 def test_an_invalid_parameter_raises_value_error_at_construction(ros, parameter, message):
-    with pytest.raises(ValueError, match=message):
-        SlamNode(context=ros.context, parameter_overrides=[parameter])
+    refused_at_construction(lambda: SlamNode(context=ros.context, parameter_overrides=[parameter]), message)
 
 
 def test_the_default_parameters(ros):
@@ -746,8 +745,9 @@ def test_the_filter_parameters_reach_the_filter(ros, linearization):
 
 def test_the_invariant_filter_in_localization_is_refused_at_start_up(ros):
     overrides = [Parameter("mode", value="localization"), Parameter("linearization", value="invariant")]
-    with pytest.raises(ValueError, match="'invariant' is for mapping"):
-        SlamNode(context=ros.context, parameter_overrides=overrides)
+    refused_at_construction(
+        lambda: SlamNode(context=ros.context, parameter_overrides=overrides), "'invariant' is for mapping"
+    )
 
 
 def test_the_filter_s_sensor_mount_is_the_robot_s_lidar_mount(ros):
