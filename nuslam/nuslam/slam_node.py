@@ -14,6 +14,10 @@ Maps (`map_file`, `mode`)
     localization` it must, and its landmarks stay fixed (a Schmidt update: only the pose is estimated,
     detections of unmapped landmarks are counted, not added); in `mapping` SLAM goes on from it. A
     corrupt, wrong-version, non-finite or other-frame file stops the node at start-up with the reason.
+Occupancy grid (`grid.*`, `nuslam.grid_mapping`)
+    Each `scan` placed at slam's pose at its stamp and the robot's LiDAR mount builds an occupancy grid
+    (published on `map`); `~/save_map` writes it beside `map_file` as `<stem>.yaml` + `<stem>.pgm`
+    (map_server's format); in localization the grid saved there is loaded and published instead.
 
 Subscribes
     `joint_states` (sensor_msgs/JointState, with `motion_source: joint_states`): wheel angles (rad) of
@@ -21,6 +25,8 @@ Subscribes
     `odom` (nav_msgs/Odometry, `odom_id` -> `body_id`): the odometry source's pose (the `odometry` node's,
         or the robot's own), for `map -> odom` and (`motion_source: odom`) as the motion; gated like
         joint_states (`nuturtle_ros_common.odom_stream`: time and speed bounds, a reset source restarts).
+    `scan` (sensor_msgs/LaserScan, frame `sensor_id` or `body_id`, sensor-data QoS; with `grid.enabled`
+        and no grid loaded): the occupancy grid's input.
     `initialpose` (geometry_msgs/PoseWithCovarianceStamped in `map_id`, RViz's "2D Pose Estimate"):
         relocalization: pose and (x, y, yaw) covariance (finite, symmetric, positive definite, else refused
         with a warning) replace the filter's at its time; the map is kept, independent of the new pose.
@@ -39,6 +45,9 @@ Publishes
         reliable + transient local, REP 2003, so a late RViz or Foxglove gets the last one):
         DELETEALL, then per confirmed landmark a green CYLINDER (ns `landmarks`, id = landmark id, diameter
         2 `landmark_radius`) and its 2-sigma ellipse (ns `covariance`).
+    `map` (nav_msgs/OccupancyGrid, frame `map_id`) and `map_metadata` (nav_msgs/MapMetaData), reliable +
+        transient local (with `grid.enabled`): the occupancy grid, at most once per `grid.publish_period_s`
+        of scan time while scans are added (`nuslam.grid_mapping`).
     `/diagnostics` (diagnostic_msgs/DiagnosticArray, 1 Hz): `slam: <motion_source>` and `slam: <observation
         topic>` (rates; ERROR after `STALE_S` of the node's clock without a message), `slam: filter`
         (mode, landmarks mapped and tentative, observations fused, rejected and (localization) unmapped,
@@ -54,7 +63,8 @@ Publishes
         `map -> odom`). Not broadcast until `odom` covers a pose's stamp.
 Services (std_srvs/Trigger)
     `~/save_map`: writes the confirmed landmarks, their joint covariance, the frame, the filter's time and
-        this node's parameters to `map_file` (atomically: a temporary file renamed over it).
+        this node's parameters to `map_file` (atomically: a temporary file renamed over it), and the
+        occupancy grid beside it (`<stem>.yaml` + `<stem>.pgm`, re-rendered from its keyframes).
     `~/reset`: back to the start pose (x0, y0, theta0) and the map loaded at start-up (or none).
 Parameters
     `SlamNodeConfig` (association, motion_source, x0, y0, theta0, frame ids, fake_sensor_std,
@@ -68,7 +78,9 @@ Parameters
     `turtlelib.slip_recovery.SlipRecoveryConfig` (slip_recovery, slip_min_matches, slip_match_radius,
     slip_confirm_scans, slip_margin_m, slip_margin_rad, slip_stall_tolerance, slip_report_s), `model`, then
     `RobotParams` (that model's constants by default), `WheelJoints`, `PathTrailConfig`,
-    `turtlelib.SampleGateConfig` (speed_margin, max_sample_gap, max_bridged_gap, restart_samples). Defaults
+    `turtlelib.SampleGateConfig` (speed_margin, max_sample_gap, max_bridged_gap, restart_samples),
+    `nuslam.grid_mapping.GridTopicConfig`, `turtlelib.GridConfig` and `turtlelib.KeyframeConfig` prefixed
+    `grid.` (grid.enabled, grid.publish_period_s, grid.resolution_m, ...). Defaults
     in config/slam.yaml. The filter's sensor mount (`SlamConfig.sensor_x/y/theta`) is the robot's `lidar_x`,
     `lidar_y`, `lidar_yaw`. Invalid values stop the node at start-up with a message.
 
@@ -103,6 +115,7 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
+from nuslam.grid_mapping import GridMapping
 from nuturtle_description.robot_declaration import declare_robot
 from nuturtle_ros_common.conversions import (
     odometry_message,
@@ -278,6 +291,15 @@ class SlamNode(Node):
         self._odom_publisher = self.create_publisher(Odometry, "~/odom", 10)
         # REP 2003: maps are reliable and transient local, so a late subscriber (RViz, Foxglove) gets one
         self._map_publisher = self.create_publisher(MarkerArray, "~/map", MAP_QOS)
+        self.grid = GridMapping(
+            self,
+            T_body_scan,
+            (frames.map_id, frames.body_id, frames.sensor_id),
+            self._warnings,
+            MAP_QOS,
+            frames.map_file,
+            self.config.mode == "localization",
+        )
         self._tf = OptionalTfBroadcaster(self)
         self._odom_poses = PoseBuffer(ODOM_BUFFER_SAMPLES)
         # the newest pose not yet paired with odom for map -> odom: (t_ns, T_map_body, stamp)
@@ -365,6 +387,7 @@ class SlamNode(Node):
             start = time.perf_counter()
             applied = self.timeline.add_observations(t_ns, z, R, ids)
             self._count_applied(applied, start)
+            self._correct_grid(applied)
         except (ValueError, np.linalg.LinAlgError) as error:
             self._warnings.warn("fake_sensor", f"fake_sensor skipped: {error}")
             self._counts["skipped"] += 1
@@ -383,6 +406,7 @@ class SlamNode(Node):
             start = time.perf_counter()
             applied = self.timeline.add_observations(t_ns, z)
             self._count_applied(applied, start)
+            self._correct_grid(applied)
         except (ValueError, np.linalg.LinAlgError) as error:
             self._warnings.warn("landmarks", f"landmarks skipped: {error}")
             self._counts["skipped"] += 1
@@ -451,8 +475,17 @@ class SlamNode(Node):
             response.success, response.message = False, f"could not save the map to {path}: {error}"
             self.get_logger().error(response.message)
             return response
-        response.success = True
         response.message = f"saved {len(self.slam.landmark_ids)} landmarks to {path}"
+        try:
+            grid_saved = self.grid.save()
+        except (OSError, ValueError) as error:
+            response.success = False
+            response.message += f"; could not save the occupancy grid: {error}"
+            self.get_logger().error(response.message)
+            return response
+        response.success = True
+        if grid_saved:
+            response.message += f" and {grid_saved}"
         self.get_logger().info(response.message)
         return response
 
@@ -464,6 +497,8 @@ class SlamNode(Node):
         else:
             self.slam.load_map(self._start_map, T_map_body0)
         self.recovery.forget(T_map_body0)
+        if self.grid.mapping:
+            self.grid.reset()
         count = 0 if self._start_map is None else self._start_map.n_landmarks
         response.success, response.message = True, f"reset to the start pose with {count} landmarks"
         self.get_logger().info(response.message)
@@ -502,6 +537,12 @@ class SlamNode(Node):
             return False
         self.get_logger().debug("observation before the first joint_states: dropped")
         return True
+
+    def _correct_grid(self, applied: list) -> None:
+        """When the filter sits at the stamp of the scan it just applied, its pose is the posterior at that
+        stamp: the pose a save places that scan's keyframe at (`nuslam.grid_mapping`)."""
+        if applied and self.timeline.filter_time_ns == applied[-1][0]:
+            self.grid.corrected(applied[-1][0], self.slam.pose)
 
     def _count_applied(self, applied: list, start: float) -> None:
         """Count the observations of ``applied`` scans and time the call that applied them; warn when
@@ -605,6 +646,7 @@ class SlamNode(Node):
             self._map_to_odom_pending = (stamp_nanoseconds(stamp), T_map_body, stamp)
             self._send_map_to_odom()
         self.path.add(T_map_body, odom)
+        self.grid.add_pose(stamp_nanoseconds(stamp), T_map_body)
 
     def _publish_map(self, stamp: Time) -> None:
         map_id = self.node_config.map_id

@@ -138,12 +138,16 @@ class Rig:
         # the odometry source's odom (odom -> base_footprint), for map -> odom
         self.odom = helper.create_publisher(Odometry, "odom", 10)
         self.initial = helper.create_publisher(PoseWithCovarianceStamped, "initialpose", 10)
+        # the occupancy grid's input (slam subscribes unless the grid is off or loaded for localization)
+        self.scans = helper.create_publisher(LaserScan, "scan", qos_profile_sensor_data)
+        maps_scans = any(s.topic_name == "/scan" for s in self.node.subscriptions)
         # with motion_source odom nobody listens to joint_states
         endpoints = [
             *([self.joint_states] if parameters.get("motion_source") != "odom" else []),
             self.observations,
             self.odom,
             self.initial,
+            *([self.scans] if maps_scans else []),
             helper.create_subscription(Odometry, "slam/odom", self.odoms.append, 100),
             helper.create_subscription(MarkerArray, "slam/map", self.maps.append, 100),
             helper.create_subscription(Path, "slam/path", self.paths.append, 100),

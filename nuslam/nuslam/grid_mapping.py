@@ -1,0 +1,274 @@
+"""slam's occupancy grid: LiDAR scans placed at slam's poses, published on `map`, saved beside the
+landmark map in map_server's format (a thin owner over `turtlelib.occupancy_grid`).
+
+Mapping (``mode: mapping``): each `scan` (sensor_msgs/LaserScan, frame ``sensor_id`` or ``body_id``) is
+inserted into a `turtlelib.OccupancyGrid` at ``T_map_scan = T_map_body(t_s) T_body_scan``: the body pose
+slam published for the scan's own stamp ``t_s`` (slam's poses on ``~/odom`` at each motion sample, read
+between two samples along one constant twist: `turtlelib.pose_buffer.PoseBuffer`) composed with the
+LiDAR mount of the robot model (``T_body_scan``: ``lidar_x``, ``lidar_y``, ``lidar_yaw``; identity for a
+scan in ``body_id``). A scan newer than slam's newest pose waits (up to ``MAX_WAITING_SCANS``) for the
+motion sample that reaches it. Every scan is also offered to `turtlelib.ScanKeyframes` (one kept per
+``grid.keyframe_step_m`` or ``grid.keyframe_turn_rad`` of motion).
+
+Poses at save: an EKF estimates the current pose, not the past ones, so no later scan moves an earlier
+pose. What a save can improve is the pose of each keyframe's own scan: the grid is built live at the pose
+slam had when the scan arrived (predicted from the motion, before the landmarks seen in that same scan
+were fused); when slam applies that scan's landmarks at once (the filter then sits at the scan's stamp),
+the posterior pose at that stamp replaces the keyframe's (:meth:`GridMapping.corrected`). ``~/save_map``
+re-renders the keyframes at these poses (`ScanKeyframes.render`) and writes ``<stem>.yaml`` +
+``<stem>.pgm`` beside ``map_file`` (`turtlelib.grid_map_file.save_grid_map`: map_server's trinary format,
+each file written atomically).
+
+Localization (``mode: localization``): the grid saved beside ``map_file`` is loaded at start-up, if there,
+and published once; no scan is mapped. A malformed grid file stops the node at start-up with the reason.
+
+Publishes (reliable + transient local, depth 1, REP 2003: a late RViz, nav2 or Foxglove gets the last)
+    `map` (nav_msgs/OccupancyGrid, frame ``map_id``): -1 unknown, 0..100 per cent occupied, at most once
+        per ``grid.publish_period_s`` of scan time and only when scans were added, stamped with the newest
+        inserted scan's stamp.
+    `map_metadata` (nav_msgs/MapMetaData): its ``info``.
+
+Bad input (a scan in another frame, a scan `turtlelib.RangeScan` refuses, one reaching past
+``grid.max_size_m``, one older than slam's kept poses) is skipped with a throttled warning; the grid is
+unchanged.
+"""
+
+from __future__ import annotations
+
+from array import array
+from collections import deque
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from nav_msgs.msg import MapMetaData
+from nav_msgs.msg import OccupancyGrid as OccupancyGridMsg
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, qos_profile_sensor_data
+from sensor_msgs.msg import LaserScan
+
+from nuturtle_ros_common.conversions import pose_from_transform, stamp_from_nanoseconds, stamp_nanoseconds
+from nuturtle_ros_common.ros_params import declare_dataclass
+from nuturtle_ros_common.throttle import SourceWarnings
+from turtlelib import GridConfig, KeyframeConfig, OccupancyGrid, RangeScan, ScanKeyframes, Transform2D
+from turtlelib.grid_map_file import load_grid_map, save_grid_map
+from turtlelib.occupancy_grid import GridMap
+from turtlelib.pose_buffer import PoseBuffer
+from turtlelib.timebase import NS_PER_S
+from turtlelib.validation import positive, store
+
+# slam's poses kept to place scans (20 s of joint_states at 20 Hz: scans arrive well within that)
+POSE_BUFFER_SAMPLES = 400
+# scans waiting for the motion sample that reaches their stamp (1 s of an LDS-01's 5 Hz)
+MAX_WAITING_SCANS = 5
+PREFIX = "grid."
+# the map files' suffixes: the landmark map must be neither, or a save would write over it
+GRID_SUFFIXES = (".yaml", ".pgm")
+
+
+@dataclass(frozen=True)
+class GridTopicConfig:
+    """The grid's own node parameters (prefixed ``grid.``; ValueError for invalid values):
+
+    * ``enabled``: build, publish and save the occupancy grid (false: slam neither subscribes to `scan`
+      nor publishes `map`);
+    * ``publish_period_s`` (s of scan time, > 0): the shortest time between two publications of `map`.
+    """
+
+    enabled: bool = True
+    publish_period_s: float = 1.0
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.enabled, bool):
+            raise ValueError(f"enabled must be a bool, got {self.enabled!r}")
+        store(self, ("publish_period_s",), positive)
+
+
+def grid_yaml_path(map_file: str) -> Path:
+    """``<stem>.yaml`` beside the landmark map ``map_file`` (its image is ``<stem>.pgm``); ValueError for
+    a ``map_file`` that is itself a ``.yaml`` or ``.pgm`` (a save would write over it)."""
+    path = Path(map_file)
+    if path.suffix in GRID_SUFFIXES:
+        raise ValueError(
+            f"map_file {map_file!r}: the occupancy grid is saved beside it as {path.stem}.yaml + "
+            f"{path.stem}.pgm, so the landmark map must not end in .yaml or .pgm (use .json)"
+        )
+    return path.with_suffix(".yaml")
+
+
+def grid_message(grid_map: GridMap, frame_id: str, stamp_ns: int) -> OccupancyGridMsg:
+    """``nav_msgs/OccupancyGrid`` of ``grid_map`` (data row-major, row 0 at ``info.origin``), no Python
+    loop over the cells."""
+    msg = OccupancyGridMsg()
+    msg.header.frame_id = frame_id
+    msg.header.stamp = stamp_from_nanoseconds(stamp_ns)
+    msg.info.map_load_time = msg.header.stamp
+    msg.info.resolution = float(grid_map.resolution_m)
+    msg.info.width, msg.info.height = grid_map.width, grid_map.height
+    msg.info.origin = pose_from_transform(grid_map.origin)
+    msg.data = array("b", grid_map.occupancy.tobytes())
+    return msg
+
+
+class GridMapping:
+    """slam's occupancy grid (module docstring): declares the ``grid.*`` parameters on ``node``, owns the
+    grid, the keyframes and the `map` publishers.
+
+    ``T_body_scan`` is the LiDAR mount; ``frames`` the node's ``(map_id, body_id, sensor_id)``;
+    ``map_file`` slam's landmark map (empty: none), ``localization``: load the grid beside it instead of
+    mapping. ValueError for invalid parameters, a ``map_file`` ending in ``.yaml`` or ``.pgm``, or a
+    malformed grid file beside it in localization.
+    """
+
+    def __init__(
+        self,
+        node: Node,
+        T_body_scan: Transform2D,
+        frames: tuple[str, str, str],
+        warnings: SourceWarnings,
+        map_qos: QoSProfile,
+        map_file: str,
+        localization: bool,
+    ) -> None:
+        self.topic_config = declare_dataclass(node, GridTopicConfig, prefix=PREFIX)
+        self.config = declare_dataclass(node, GridConfig, prefix=PREFIX)
+        self.keyframe_config = declare_dataclass(node, KeyframeConfig, prefix=PREFIX)
+        enabled = self.topic_config.enabled
+        self.yaml_path = grid_yaml_path(map_file) if enabled and map_file else None
+        loaded = None
+        if localization and self.yaml_path is not None and self.yaml_path.exists():
+            loaded = load_grid_map(self.yaml_path)
+            node.get_logger().info(f"loaded the {loaded.width} x {loaded.height} cell grid {self.yaml_path}")
+        self._map_id, body_id, sensor_id = frames
+        self._T_body_from = {sensor_id: T_body_scan, body_id: Transform2D()}
+        self._T_body_scan = T_body_scan
+        self._warnings = warnings
+        self._period_ns = round(self.topic_config.publish_period_s * NS_PER_S)
+        self.grid = OccupancyGrid(self.config)
+        self.keyframes = ScanKeyframes(self.keyframe_config)
+        # the pose each keyframe's scan is rendered at by a save: T_map_body by stamp (ns)
+        self._keyframe_poses: dict[int, Transform2D] = {}
+        self._poses = PoseBuffer(POSE_BUFFER_SAMPLES)
+        self._waiting: deque[tuple[int, RangeScan, Transform2D]] = deque()
+        self._newest_ns: int | None = None
+        self._published_ns: int | None = None
+        self.scans_inserted = 0
+        self.loaded = loaded
+        if not self.topic_config.enabled:
+            return
+        self._grid_publisher = node.create_publisher(OccupancyGridMsg, "map", map_qos)
+        self._metadata_publisher = node.create_publisher(MapMetaData, "map_metadata", map_qos)
+        if loaded is not None:
+            self._publish(loaded, node.get_clock().now().nanoseconds)
+        else:
+            node.create_subscription(LaserScan, "scan", self.on_scan, qos_profile_sensor_data)
+
+    @property
+    def mapping(self) -> bool:
+        """True when scans are mapped (enabled, no grid loaded for localization)."""
+        return self.topic_config.enabled and self.loaded is None
+
+    def on_scan(self, msg: LaserScan) -> None:
+        """Queue the scan for slam's pose at its stamp (inserted now if slam's poses already reach it)."""
+        try:
+            T_body_scan = self._T_body_from.get(msg.header.frame_id)
+            if T_body_scan is None:
+                raise ValueError(
+                    f"it is in frame {msg.header.frame_id!r}, expected one of {sorted(self._T_body_from)}"
+                )
+            scan = RangeScan(
+                np.asarray(msg.ranges, dtype=np.float64),
+                msg.angle_min,
+                msg.angle_increment,
+                msg.range_min,
+                msg.range_max,
+            )
+        except ValueError as error:
+            self._warnings.warn("scan", f"scan skipped by the occupancy grid: {error}")
+            return
+        self._waiting.append((stamp_nanoseconds(msg.header.stamp), scan, T_body_scan))
+        if len(self._waiting) > MAX_WAITING_SCANS:
+            t_ns, _, _ = self._waiting.popleft()
+            self._warnings.warn(
+                "scan",
+                f"scan at {t_ns} ns skipped by the occupancy grid: no slam pose reached its stamp while "
+                f"{MAX_WAITING_SCANS} newer scans came (are joint_states / odom arriving?)",
+            )
+        self._insert_reached()
+
+    def add_pose(self, t_ns: int, T_map_body: Transform2D) -> None:
+        """slam's pose at ``t_ns``: insert the scans it reaches. A pose not after the newest (a restarted
+        clock) starts the pose buffer again."""
+        if not self.mapping:
+            return
+        latest = self._poses.latest_time_ns
+        if latest is not None and t_ns <= latest:
+            self._poses.clear()
+        self._poses.add(t_ns, T_map_body)
+        self._insert_reached()
+
+    def corrected(self, t_ns: int, T_map_body: Transform2D) -> None:
+        """slam's posterior pose at ``t_ns`` (after fusing the landmarks of the scan stamped ``t_ns``):
+        the pose a save renders that scan's keyframe at, if it is one."""
+        if t_ns in self._keyframe_poses:
+            self._keyframe_poses[t_ns] = T_map_body
+
+    def render(self) -> GridMap:
+        """The grid of the keyframes at their poses (module docstring); the loaded one in localization."""
+        if self.loaded is not None:
+            return self.loaded
+        return self.keyframes.render(self._keyframe_poses.get, self._T_body_scan, self.config).grid_map()
+
+    def save(self) -> str:
+        """Write :meth:`render` beside ``map_file`` (``<stem>.yaml`` + ``<stem>.pgm``, atomically); a
+        one-line account of it ('' when the grid is off). OSError or ValueError when it cannot be written."""
+        if self.yaml_path is None:
+            return ""
+        grid_map = self.render()
+        save_grid_map(self.yaml_path, grid_map)
+        source = "loaded" if self.loaded is not None else f"of {len(self.keyframes)} keyframes"
+        return f"the {grid_map.width} x {grid_map.height} cell grid {source} to {self.yaml_path}"
+
+    def reset(self) -> None:
+        """Forget every scan (slam's ~/reset): an empty grid, no keyframes."""
+        self.grid = OccupancyGrid(self.config)
+        self.keyframes.clear()
+        self._keyframe_poses.clear()
+        self._waiting.clear()
+        self._newest_ns = self._published_ns = None
+
+    # --- helpers -----------------------------------------------------------------------------------------
+
+    def _insert_reached(self) -> None:
+        """Insert, oldest first, the waiting scans slam's poses reach; drop those older than them."""
+        latest = self._poses.latest_time_ns
+        while self._waiting and latest is not None and self._waiting[0][0] <= latest:
+            t_ns, scan, T_body_scan = self._waiting.popleft()
+            T_map_body = self._poses.at(t_ns)
+            if T_map_body is None:
+                self._warnings.warn("scan", f"scan at {t_ns} ns skipped: older than slam's kept poses")
+                continue
+            try:
+                self.grid.insert_scan(scan, T_map_body @ T_body_scan)
+            except ValueError as error:
+                self._warnings.warn("scan", f"scan skipped by the occupancy grid: {error}")
+                continue
+            self.scans_inserted += 1
+            if self.keyframes.offer(t_ns, T_map_body, scan):
+                self._keyframe_poses[t_ns] = T_map_body
+                if len(self._keyframe_poses) > len(self.keyframes):
+                    kept = set(self.keyframes.stamps_ns)
+                    self._keyframe_poses = {t: T for t, T in self._keyframe_poses.items() if t in kept}
+            self._newest_ns = t_ns
+        if self._newest_ns is not None and (
+            self._published_ns is None
+            or self._newest_ns < self._published_ns
+            or self._newest_ns - self._published_ns >= self._period_ns
+        ):
+            self._publish(self.grid.grid_map(), self._newest_ns)
+
+    def _publish(self, grid_map: GridMap, stamp_ns: int) -> None:
+        msg = grid_message(grid_map, self._map_id, stamp_ns)
+        self._grid_publisher.publish(msg)
+        self._metadata_publisher.publish(msg.info)
+        self._published_ns = stamp_ns
