@@ -1,0 +1,177 @@
+"""slam's occupancy grid (real rclpy): scans placed at slam's pose at their own stamps and the robot's
+LiDAR mount, `map` and `map_metadata` latched for late subscribers, ~/save_map writing map_server's pair
+beside the landmark map, localization publishing the saved grid, malformed grid files stopping the node.
+
+Expected grids come from turtlelib (`OccupancyGrid`, `ScanKeyframes`) fed the same scans at the TRUE
+poses (noise-free wheels: slam's dead-reckoned pose is the true one), never from the node. The grid's
+own properties are tested in tests/turtlelib/test_occupancy_grid.py.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from nav_msgs.msg import MapMetaData
+from nav_msgs.msg import OccupancyGrid as OccupancyGridMsg
+from rclpy.parameter import Parameter
+from ros_test_messages import stamp
+from sensor_msgs.msg import LaserScan
+from test_slam_maps import call, good_document, stop
+from test_slam_node import Arc, Rig, S
+
+from nuslam.slam_node import MAP_QOS, SlamNode
+from turtlelib import (
+    GridConfig,
+    KeyframeConfig,
+    LidarConfig,
+    OccupancyGrid,
+    RangeScan,
+    ScanKeyframes,
+    Transform2D,
+    arena_walls,
+    simulate_scan,
+)
+from turtlelib.grid_map_file import load_grid_map
+
+pytestmark = pytest.mark.ros
+
+# a LiDAR far off the axle and turned, so that a grid ignoring the mount is metres off
+MOUNT = {"lidar_x": 0.25, "lidar_y": -0.1, "lidar_yaw": 0.5}
+T_BODY_SCAN = Transform2D(0.25, -0.1, 0.5)
+LIDAR = LidarConfig(noise=0.01, resolution=0.01)
+WALLS = arena_walls(3.0, 2.5)
+CIRCLES = np.array([[0.8, 0.5, 0.1], [-0.7, -0.4, 0.1]])
+SCANS = 7
+
+
+def scan_message(T_map_body: Transform2D, t_ns: int, rng: np.random.Generator) -> LaserScan:
+    msg = LaserScan(angle_min=LIDAR.angle_min, angle_increment=LIDAR.angle_increment)
+    msg.angle_max = LIDAR.angle_min + (LIDAR.samples - 1) * LIDAR.angle_increment
+    msg.range_min, msg.range_max = LIDAR.range_min, LIDAR.range_max
+    msg.header.stamp, msg.header.frame_id = stamp(t_ns), "base_scan"
+    msg.ranges = simulate_scan(T_map_body @ T_BODY_SCAN, CIRCLES, WALLS, LIDAR, rng).tolist()
+    return msg
+
+
+def range_scan(msg: LaserScan) -> RangeScan:
+    return RangeScan(np.array(msg.ranges), msg.angle_min, msg.angle_increment, msg.range_min, msg.range_max)
+
+
+def drive_and_scan(rig: Rig) -> list[tuple[int, Transform2D, LaserScan]]:
+    """Drive an arc with joint_states every 0.2 s and a scan stamped half-way between two of them (slam
+    must read its pose between samples); returns (stamp, true body pose, scan) of each."""
+    arc = Arc(Transform2D(), S, vx=0.15, omega=0.8)
+    rng = np.random.default_rng(5)
+    scans = []
+    rig.wheels(S, arc.angles(S))
+    for k in range(1, SCANS + 1):
+        t_ns = S + k * S // 5
+        rig.wheels(t_ns, arc.angles(t_ns))
+        t_scan = t_ns - S // 10
+        msg = scan_message(arc.pose(t_scan), t_scan, rng)
+        rig.scans.publish(msg)
+        scans.append((t_scan, arc.pose(t_scan), msg))
+    return scans
+
+
+def latched(rig: Rig, message_type, topic: str):
+    """The message a subscriber created now (late) gets on ``topic`` (transient local)."""
+    received = []
+    rig.helper.create_subscription(message_type, topic, received.append, MAP_QOS)
+    assert rig.ros.spin_until(lambda: received, 5.0), f"no {topic} for a late subscriber"
+    return received[-1]
+
+
+def assert_grid(msg: OccupancyGridMsg, expected) -> None:
+    """``msg`` is ``expected`` (a turtlelib GridMap) in frame map."""
+    assert msg.header.frame_id == "map"
+    assert msg.info.resolution == pytest.approx(expected.resolution_m, rel=1e-7)
+    assert (msg.info.width, msg.info.height) == (expected.width, expected.height)
+    assert (msg.info.origin.position.x, msg.info.origin.position.y) == pytest.approx(
+        (expected.origin.x, expected.origin.y), abs=1e-9
+    )
+    assert np.array_equal(np.array(msg.data, dtype=np.int8), expected.occupancy.ravel())
+
+
+def test_scans_at_slams_pose_and_the_lidar_mount_make_the_latched_grid(ros):
+    rig = Rig(ros, observation_timeout=100.0, **{"grid.publish_period_s": 0.3}, **MOUNT)
+    published = []
+    rig.helper.create_subscription(OccupancyGridMsg, "map", published.append, MAP_QOS)
+    scans = drive_and_scan(rig)
+    # the last scan's grid goes out: 0.3 s of scan time after the one before
+    assert ros.spin_until(lambda: published and published[-1].header.stamp == stamp(scans[-1][0]), 5.0)
+    expected = OccupancyGrid(GridConfig())
+    for _, T_map_body, msg in scans:
+        expected.insert_scan(range_scan(msg), T_map_body @ T_BODY_SCAN)
+    grid = latched(rig, OccupancyGridMsg, "map")
+    assert_grid(grid, expected.grid_map())
+    assert [m.header.stamp for m in published] == [stamp(scans[k][0]) for k in (0, 2, 4, 6)], "every 0.3 s"
+    assert latched(rig, MapMetaData, "map_metadata") == grid.info
+    assert np.count_nonzero(np.array(grid.data) >= 65) > 100, "walls and cylinders"
+    assert rig.warnings() == []
+
+
+def test_save_writes_the_grid_beside_the_map_and_localization_publishes_it(ros, tmp_path):
+    path = tmp_path / "lab.json"
+    rig = Rig(ros, observation_timeout=100.0, map_file=str(path), **MOUNT)
+    scans = drive_and_scan(rig)
+    response = call(rig, "save_map")
+    assert response.success and f"to {tmp_path / 'lab.yaml'}" in response.message, response.message
+    keyframes = ScanKeyframes(KeyframeConfig())
+    for t_ns, T_map_body, msg in scans:
+        keyframes.offer(t_ns, T_map_body, range_scan(msg))
+    true_poses = {t_ns: T for t_ns, T, _ in scans}
+    expected = keyframes.render(true_poses.get, T_BODY_SCAN, GridConfig()).grid_map()
+    saved = load_grid_map(tmp_path / "lab.yaml")
+    assert (tmp_path / "lab.pgm").is_file() and not list(tmp_path.glob("*.tmp"))
+    assert saved.resolution_m == expected.resolution_m and saved.origin == expected.origin
+    # trinary: occupied >= 65, free <= 19, the rest unknown
+    trinary = np.where(
+        expected.occupancy >= 65, 100, np.where((expected.occupancy >= 0) & (expected.occupancy <= 19), 0, -1)
+    )
+    assert np.array_equal(saved.occupancy, trinary)
+    stop(ros, rig)
+    rig = Rig(ros, observation_timeout=100.0, map_file=str(path), mode="localization", **MOUNT)
+    assert not any(s.topic_name == "/scan" for s in rig.node.subscriptions), "localization maps no scan"
+    assert_grid(latched(rig, OccupancyGridMsg, "map"), saved)
+
+
+@pytest.mark.parametrize(
+    ("edit", "message"),
+    [
+        (lambda text: text.replace("resolution: 0.05\n", ""), "resolution"),
+        (lambda text: text.replace("image: lab.pgm", "image: missing.pgm"), "missing.pgm"),
+        (lambda text: text.replace("origin: [", "origin: [nan, "), "origin"),
+    ],
+    ids=["no resolution", "no image", "bad origin"],
+)
+def test_a_malformed_grid_file_stops_localization_at_start_up_with_the_reason(ros, tmp_path, edit, message):
+    path = tmp_path / "lab.json"
+    path.write_text(json.dumps(good_document()))
+    text = "image: lab.pgm\nmode: trinary\nresolution: 0.05\norigin: [0.0, 0.0, 0.0]\nnegate: 0\n"
+    (tmp_path / "lab.yaml").write_text(edit(text + "occupied_thresh: 0.65\nfree_thresh: 0.196\n"))
+    (tmp_path / "lab.pgm").write_bytes(b"P5\n2 1\n255\n\x00\xfe")
+    overrides = [Parameter("map_file", value=str(path)), Parameter("mode", value="localization")]
+    with pytest.raises(ValueError, match=message) as error:
+        SlamNode(context=ros.context, parameter_overrides=overrides)
+    assert str(tmp_path) in str(error.value), "the message names the file"
+
+
+@pytest.mark.parametrize("name", ["lab.yaml", "lab.pgm"])
+def test_a_landmark_map_named_like_the_grid_files_stops_the_node(ros, tmp_path, name):
+    overrides = [Parameter("map_file", value=str(tmp_path / name))]
+    with pytest.raises(ValueError, match="must not end in .yaml or .pgm"):
+        SlamNode(context=ros.context, parameter_overrides=overrides)
+
+
+def test_a_scan_in_an_unknown_frame_is_skipped_with_a_warning(ros):
+    rig = Rig(ros, observation_timeout=100.0)
+    rig.wheels(S, (0.0, 0.0))
+    msg = scan_message(Transform2D(), S // 2, np.random.default_rng(0))
+    msg.header.frame_id = "camera"
+    rig.scans.publish(msg)
+    warnings = rig.warnings(at_least=1)
+    assert len(warnings) == 1 and "frame 'camera'" in warnings[0]
+    assert rig.node.grid.scans_inserted == 0
