@@ -15,17 +15,25 @@ through, sampled every 1 mm) with an occupied cell (>= 65) within one cell (the 
 free cells (inside the arena, centre more than 1.5 cells from every boundary) marked occupied, and those
 known to be free (<= 19).
 
-Usage: python bench/grid_update.py [--write] [--figure]   (--write replaces the "## Occupancy grid"
-section of docs/benchmarks.md; --figure draws docs/figures/grid_demo_world.png). Run with
+At SLAM poses (``--slam-seeds``): the demo itself (``python -P -m nuturtle_demo --duration 120 --seed S``,
+its default world and unknown association, in a child process: bench/demo_cpu.py's ``run_once``) maps
+with slam's grid; its ``map.yaml`` + ``map.pgm`` (the keyframes re-rendered at slam's poses, in
+map_server's trinary values) are measured the same way.
+
+Usage: python bench/grid_update.py [--write] [--figure] [--slam-seeds 0 1 2]   (--write replaces the
+"## Occupancy grid" section of docs/benchmarks.md; --figure draws docs/figures/grid_demo_world.png and,
+with --slam-seeds, copies the first seed's grid.png to docs/figures/grid_demo_slam.png). Run with
 OPENBLAS_NUM_THREADS=1.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
 import platform
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -36,9 +44,11 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "bench"))  # bench_docs
 
 from bench_docs import write_section  # noqa: E402
+from demo_cpu import run_once  # noqa: E402
 
 from turtlelib import (  # noqa: E402
     GridConfig,
+    GridMap,
     KeyframeConfig,
     LidarConfig,
     OccupancyGrid,
@@ -111,16 +121,22 @@ def boundary_points() -> np.ndarray:
     return np.concatenate(walls + rims)
 
 
-def accuracy(grid: OccupancyGrid) -> dict[str, float]:
+def accuracy(grid_map: GridMap) -> dict[str, float]:
+    """The issue's measures of a grid (a GridMap: an OccupancyGrid's or one loaded from map_server's files)
+    against the demo world's true geometry (module docstring)."""
     from scipy.ndimage import maximum_filter
 
-    occupancy = grid.grid_map().occupancy
-    res = grid.config.resolution_m
+    occupancy = grid_map.occupancy
+    res = grid_map.resolution_m
+    x0, y0 = grid_map.origin.x, grid_map.origin.y
     occupied_near = maximum_filter((occupancy >= 65).astype(np.uint8), size=3).astype(bool)
-    cells = np.unique(grid.cell_of(boundary_points()), axis=0)
-    found = occupied_near[cells[:, 0], cells[:, 1]]
+    # (row, col) of each boundary point; a grid that does not reach a point has not found it
+    points = boundary_points()
+    cells = np.unique(np.floor((points[:, ::-1] - [y0, x0]) / res).astype(np.int64), axis=0)
+    inside = (cells >= 0).all(axis=1) & (cells < occupancy.shape).all(axis=1)
+    found = np.zeros(len(cells), dtype=bool)
+    found[inside] = occupied_near[cells[inside, 0], cells[inside, 1]]
     rows, cols = np.indices(occupancy.shape)
-    x0, y0 = grid.origin_m
     centres = np.column_stack([(x0 + (cols.ravel() + 0.5) * res), (y0 + (rows.ravel() + 0.5) * res)])
     h = 0.5 * ARENA_M
     wall_distance = h - np.abs(centres).max(axis=1)
@@ -165,14 +181,53 @@ def measure(resolution_m: float) -> dict[str, float]:
         "shape": grid.log_odds.shape,
         "keyframes": len(keyframes),
         "render_ms": render_ms,
-        **accuracy(grid),
-        "rendered": accuracy(rendered),
+        **accuracy(grid.grid_map()),
+        "rendered": accuracy(rendered.grid_map()),
         "grid": grid,
         "poses": poses,
     }
 
 
-def section(results: list[dict]) -> str:
+def measure_slam(seed: int, out_dir: Path) -> dict:
+    """The demo's grid at SLAM poses after its two minutes (module docstring), with its SLAM errors."""
+    from turtlelib.grid_map_file import load_grid_map
+
+    run_dir = out_dir / f"seed{seed}"
+    run_once(None, seed, DURATION_S, "unknown", run_dir)
+    metrics = json.loads((run_dir / "metrics.json").read_text(encoding="utf-8"))
+    grid_map = load_grid_map(run_dir / "map.yaml")
+    return {
+        "seed": seed,
+        "ate_m": metrics["ate_rmse_slam_m"],
+        "final_m": metrics["final_position_error_slam_m"],
+        "shape": grid_map.occupancy.shape,
+        "figure": run_dir / "grid.png",
+        **accuracy(grid_map),
+    }
+
+
+def slam_section(results: list[dict]) -> list[str]:
+    rows = [
+        f"| {r['seed']} | {r['ate_m']:.4f} / {r['final_m']:.4f} | {r['shape'][1]} x {r['shape'][0]} "
+        f"| {100 * r['boundary_found']:.1f} % of {r['boundary_cells']} "
+        f"| {100 * r['free_marked_occupied']:.2f} % "
+        f"| {100 * r['free_known_free']:.1f} % of {r['free_cells']} |"
+        for r in results
+    ]
+    return [
+        "At SLAM poses (`--slam-seeds`): the demo's own run (`python -P -m nuturtle_demo --duration 120",
+        "--seed S`, unknown association), its `map.yaml` + `map.pgm` (slam's keyframes re-rendered at its",
+        "poses at save, map_server's trinary values) against the same true geometry.",
+        "",
+        "| seed | SLAM ATE / final error (m) | grid (cells) | boundary found | free marked occupied "
+        "| free known free |",
+        "|---:|---:|---:|---:|---:|---:|",
+        *rows,
+        "",
+    ]
+
+
+def section(results: list[dict], slam_results: list[dict]) -> str:
     threads = os.environ.get("OPENBLAS_NUM_THREADS", "unset")
     versions = f"Python {platform.python_version()}, numpy {np.__version__}"
     machine = f"{platform.machine()}, {os.cpu_count()} cores, {versions}"
@@ -219,6 +274,7 @@ def section(results: list[dict]) -> str:
             "|---:|---:|---:|---:|---:|",
             *quality,
             "",
+            *(slam_section(slam_results) if slam_results else []),
         ]
     )
 
@@ -258,14 +314,19 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--write", action="store_true", help="update docs/benchmarks.md")
     parser.add_argument("--figure", action="store_true", help="draw docs/figures/grid_demo_world.png")
+    parser.add_argument("--slam-seeds", type=int, nargs="*", default=[], help="demo seeds at SLAM poses")
+    parser.add_argument("--out", type=Path, default=Path("out/grid_slam"), help="the demo runs' folder")
     arguments = parser.parse_args()
     results = [measure(0.05), measure(0.025)]
-    text = section(results)
+    slam_results = [measure_slam(seed, arguments.out) for seed in arguments.slam_seeds]
+    text = section(results, slam_results)
     print(text)
     if arguments.write:
         write_section(HEADING, text, ROOT / "docs" / "benchmarks.md")
     if arguments.figure:
         figure(results[0], ROOT / "docs" / "figures" / "grid_demo_world.png")
+        if slam_results:
+            shutil.copyfile(slam_results[0]["figure"], ROOT / "docs" / "figures" / "grid_demo_slam.png")
 
 
 if __name__ == "__main__":

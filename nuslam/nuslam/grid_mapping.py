@@ -213,6 +213,11 @@ class GridMapping:
         if t_ns in self._keyframe_poses:
             self._keyframe_poses[t_ns] = T_map_body
 
+    @property
+    def has_grid(self) -> bool:
+        """True when there is a grid to save: enabled, and loaded or made of at least one keyframe."""
+        return self.topic_config.enabled and (self.loaded is not None or len(self.keyframes) > 0)
+
     def render(self) -> GridMap:
         """The grid of the keyframes at their poses (module docstring); the loaded one in localization."""
         if self.loaded is not None:

@@ -55,6 +55,7 @@ from nuturtle_control.turtle_control import TurtleControlNode
 from nuturtle_description.robot_params import resolve_model
 from nuturtle_eval.metrics import RunMetrics, odom_in_world
 from nuturtle_eval.run_evaluation import (
+    GRID_OUTPUTS,
     ProgressBar,
     RunRecord,
     evaluate_and_plot,
@@ -92,7 +93,9 @@ SLAM_SERVICE_TIMEOUT_S = 10.0
 # The recording: a rosbag2 bag directory in the output folder
 BAG_NAME = "run"
 # Everything a run writes into its output folder (nuturtle_eval.run_folder)
-OUTPUTS = ("metrics.json", "trajectory.png", "errors.png", "covariance.png", "config.yaml", BAG_NAME)
+OUTPUTS = (
+    "metrics.json", "trajectory.png", "errors.png", "covariance.png", *GRID_OUTPUTS, "config.yaml", BAG_NAME,
+)  # fmt: skip
 # Wall time to wait for the recorder to subscribe to every topic before the simulation starts (s)
 DISCOVERY_TIMEOUT_S = 10.0
 # Wall time to let the last messages arrive after the simulation stops (s)

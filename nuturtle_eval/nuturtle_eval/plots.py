@@ -14,6 +14,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from turtlelib.occupancy_grid import GridMap
+
 from .metrics import PoseSeries, pose_errors
 
 TRUTH_COLOR = "tab:red"
@@ -103,6 +105,39 @@ def plot_trajectory(
     axes.set_ylabel("y (m)")
     axes.set_title("Trajectories and map")
     axes.grid(True, alpha=0.3)
+    axes.legend(loc="upper right", fontsize="small")
+    figure.savefig(path)
+
+
+def plot_grid(
+    path: str | Path, grid: GridMap, path_xy: NDArray[np.float64], landmarks_xy: NDArray[np.float64]
+) -> None:
+    """grid.png: the occupancy grid (black occupied, white free, grey unknown: map_server's image) with the
+    SLAM path ``path_xy`` (K, 2) and the mapped landmarks (n, 2) over it, in the map frame (m)."""
+    figure = new_figure(7.0, 7.0)
+    axes = figure.add_subplot()
+    occupancy = grid.occupancy.astype(np.float64)
+    # shade: 1 - p for observed cells (white free, black occupied), 205/255 for unknown as map_saver's
+    shade = np.where(occupancy < 0, 205.0 / 255.0, 1.0 - occupancy / 100.0)
+    x0, y0, res = grid.origin.x, grid.origin.y, grid.resolution_m
+    extent = (x0, x0 + grid.width * res, y0, y0 + grid.height * res)
+    axes.imshow(
+        shade, cmap="gray", vmin=0.0, vmax=1.0, origin="lower", extent=extent, interpolation="nearest"
+    )
+    path_xy = np.asarray(path_xy, dtype=np.float64).reshape(-1, 2)
+    landmarks_xy = np.asarray(landmarks_xy, dtype=np.float64).reshape(-1, 2)
+    axes.plot(*path_xy.T, color=SLAM_COLOR, linewidth=1.0, label="SLAM path")
+    axes.plot(*landmarks_xy.T, "+", color="tab:orange", markersize=9, mew=2, label="mapped landmarks")
+    observed = np.argwhere(grid.occupancy >= 0)
+    if observed.size:
+        (row_low, col_low), (row_high, col_high) = observed.min(axis=0), observed.max(axis=0) + 1
+        margin = 0.2
+        axes.set_xlim(x0 + col_low * res - margin, x0 + col_high * res + margin)
+        axes.set_ylim(y0 + row_low * res - margin, y0 + row_high * res + margin)
+    axes.set_aspect("equal")
+    axes.set_xlabel("x (m), map")
+    axes.set_ylabel("y (m)")
+    axes.set_title(f"Occupancy grid ({res:g} m cells)")
     axes.legend(loc="upper right", fontsize="small")
     figure.savefig(path)
 

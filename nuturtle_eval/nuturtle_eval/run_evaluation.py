@@ -23,12 +23,18 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from turtlelib.grid_map_file import save_grid_map
+from turtlelib.occupancy_grid import GridMap
+
 from . import plots
 from .metrics import PoseSeries, RunData, RunMetrics, evaluate_run
 
 # Landmarks closer than this to a true cylinder count as that cylinder (m)
 LANDMARK_GATE_M = 0.2
 METRICS_FILE = "metrics.json"
+# the occupancy grid in map_server's format (GRID_YAML + its .pgm) and its figure
+GRID_YAML, GRID_FIGURE = "map.yaml", "grid.png"
+GRID_OUTPUTS = (GRID_YAML, "map.pgm", GRID_FIGURE)
 
 # (metrics.json key, label, format, target text, check) of the printed table
 TARGETS = (
@@ -52,20 +58,26 @@ TARGETS = (
 @dataclass(frozen=True)
 class SlamSnapshot:
     """The filter's final state: ``covariance`` (N, N) of ``[x, y, theta, m_0x, m_0y, ...]``,
-    ``landmarks_xy`` (n, 2) and their ``landmark_covariances`` (n, 2, 2)."""
+    ``landmarks_xy`` (n, 2) and their ``landmark_covariances`` (n, 2, 2); slam's occupancy ``grid`` as a
+    save writes it (None: no grid, e.g. no scan)."""
 
     covariance: np.ndarray
     landmarks_xy: np.ndarray
     landmark_covariances: np.ndarray
+    grid: GridMap | None = None
 
 
 def slam_snapshot(slam_node: Any) -> SlamSnapshot:
-    """Read the final state straight from the in-process slam node's filter (its ``slam`` attribute)."""
+    """Read the final state straight from the in-process slam node's filter (its ``slam`` attribute) and
+    its occupancy grid (its ``grid`` attribute: ``nuslam.grid_mapping.GridMapping``, re-rendered as a save
+    would)."""
     ekf = slam_node.slam
+    grid_mapping = slam_node.grid
     return SlamSnapshot(
         covariance=np.array(ekf.covariance),
         landmarks_xy=np.array(ekf.landmarks).reshape(-1, 2),
         landmark_covariances=np.array(ekf.landmark_covariances).reshape(-1, 2, 2),
+        grid=grid_mapping.render() if grid_mapping.has_grid else None,
     )
 
 
@@ -126,7 +138,8 @@ def evaluate_and_plot(
     out_dir: Path, record: RunRecord, sim_seconds: float, wall_seconds: float
 ) -> RunMetrics | None:
     """Write the figures of ``record`` into ``out_dir`` and return its metrics: ``trajectory.png`` (once
-    SLAM published a pose) and ``covariance.png``; with the truth, odometry and SLAM poses also the metrics
+    SLAM published a pose) and ``covariance.png``; with a grid, ``map.yaml`` + ``map.pgm`` (map_server's
+    format) and ``grid.png`` (:func:`write_grid`); with the truth, odometry and SLAM poses also the metrics
     (:func:`metrics.evaluate_run`, landmarks paired within ``LANDMARK_GATE_M``) and ``errors.png``, else
     None. ValueError from evaluate_run (``errors.png`` is then not written)."""
     odom = record.odom if record.odom is not None and len(record.odom) else None
@@ -137,6 +150,8 @@ def evaluate_and_plot(
             snapshot.landmarks_xy, snapshot.landmark_covariances, record.walls,
         )  # fmt: skip
     plots.plot_covariance(out_dir / "covariance.png", snapshot.covariance)
+    if snapshot.grid is not None:
+        write_grid(out_dir, snapshot.grid, record.slam.xy, snapshot.landmarks_xy)
     if record.truth is None or odom is None or not len(record.slam):
         return None
     circles = np.asarray(record.circles, dtype=np.float64).reshape(-1, 3)
@@ -154,6 +169,15 @@ def evaluate_and_plot(
     metrics = evaluate_run(data, sim_seconds=sim_seconds, wall_seconds=wall_seconds)
     plots.plot_slam_errors(out_dir / "errors.png", record.slam, record.slam_covariances, record.truth)
     return metrics
+
+
+def write_grid(
+    out_dir: Path, grid: GridMap, path_xy: NDArray[np.float64], landmarks_xy: NDArray[np.float64]
+) -> None:
+    """``map.yaml`` + ``map.pgm`` (:func:`turtlelib.grid_map_file.save_grid_map`) and ``grid.png``: the
+    grid with the SLAM path ``path_xy`` (K, 2) and the landmarks (n, 2) over it, all in the map frame."""
+    save_grid_map(out_dir / GRID_YAML, grid)
+    plots.plot_grid(out_dir / GRID_FIGURE, grid, path_xy, landmarks_xy)
 
 
 def json_value(value: Any) -> Any:

@@ -2,6 +2,7 @@
 
 What it shows
     * a 3D panel in ``map`` (display and fixed frame, the camera follows nothing), seen from above:
+      ``/map`` (slam's occupancy grid, nav_msgs/OccupancyGrid, drawn behind the rest in map colours),
       ``/scan`` (LaserScan, frame ``base_scan``), ``/landmarks`` (the LiDAR's cylinder detections),
       ``/slam/map`` (SLAM's landmarks and their 2-sigma ellipses), the paths ``/slam/path`` (green),
       ``/odometry/path`` (blue) and ``/nusim/path`` (red, the simulator's ground truth), ``/slam/odom`` (the
@@ -47,6 +48,7 @@ ODOM_COLOR = "#1f77b4"
 TRUTH_COLOR = "#d62728"
 SCAN_COLOR = "#ffffff"
 PATH_LINE_WIDTH = 0.03  # m
+GRID_ALPHA = 0.7  # the occupancy grid under the paths and markers
 CAMERA_DISTANCE = 8.0  # m, from above: a basic world of a few metres fills the panel
 HEADING_AXIS = "heading"
 
@@ -64,6 +66,9 @@ def _markers(visible: bool = True) -> fl.BaseRendererRosMarkerTopicSettings:
 def _scene_topics() -> dict[str, fl.BaseRendererTopicSettings]:
     """The 3D panel's topics and how each is drawn."""
     return {
+        "/map": fl.BaseRendererRosOccupancyGridTopicSettings(
+            visible=True, color_mode="map", draw_behind=True, alpha=GRID_ALPHA
+        ),
         "/scan": fl.BaseRendererLaserScanTopicSettings(
             visible=True, point_size=3, color_mode="flat", flat_color=SCAN_COLOR
         ),

@@ -57,6 +57,7 @@ from rclpy.signals import SignalHandlerOptions
 from nuturtle_description.robot_params import resolve_model
 from nuturtle_eval.metrics import PoseSeries, odom_in_world
 from nuturtle_eval.run_evaluation import (
+    GRID_OUTPUTS,
     ProgressBar,
     RunRecord,
     evaluate_and_plot,
@@ -99,7 +100,8 @@ from .staged_run import run_staged
 BAG_NAME = "slam"
 # Everything a replay writes into its output folder (nuturtle_eval.run_folder)
 OUTPUTS = (
-    "metrics.json", "trajectory.png", "errors.png", "covariance.png", "map.json", "config.yaml", BAG_NAME,
+    "metrics.json", "trajectory.png", "errors.png", "covariance.png", "map.json", *GRID_OUTPUTS,
+    "config.yaml", BAG_NAME,
 )  # fmt: skip
 TRUTH_PLAYED_AS = "nusim/ground_truth"
 # a recording of nusim (the demo's): its pass/fail targets apply

@@ -11,10 +11,12 @@ import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 import yaml
 
 from bag_reading import read_bag
+from turtlelib.grid_map_file import load_grid_map
 
 DURATION_S = 40.0
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
@@ -67,8 +69,10 @@ def test_demo_meets_targets_and_records_every_topic(tmp_path):
     assert metrics["landmarks_duplicate"] == 0 and metrics["landmarks_spurious"] == 0
     assert metrics["landmark_rmse_m"] <= 0.02
     assert metrics["nees_pose_within_95_fraction"] >= 0.9
-    for name in ("trajectory.png", "errors.png", "covariance.png"):
+    for name in ("trajectory.png", "errors.png", "covariance.png", "grid.png"):
         assert (out / name).read_bytes().startswith(PNG_MAGIC), name
+    grid = load_grid_map(out / "map.yaml")
+    assert grid.resolution_m == 0.05 and np.count_nonzero(grid.occupancy == 100) > 100, "walls, cylinders"
     config = yaml.safe_load((out / "config.yaml").read_text())
     # the run went up to 20x real time, but the recorded world runs at real time when reused
     assert config["nusim"]["ros__parameters"]["realtime_factor"] == 1.0

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from nuturtle_demo.run import DemoOptions, run_demo
+from turtlelib.grid_map_file import load_grid_map
 from turtlelib.slam_map import load_map
 
 MAP_S = 20.0
@@ -42,6 +43,9 @@ def test_mapping_saves_a_map_that_localization_keeps_bit_for_bit(tmp_path):
     assert saved.frame_id == "map"
     assert len(saved.ids) == mapping.metrics.landmarks_mapped >= 3
     assert mapping.metrics.landmarks_spurious == 0
+    # the grid beside the landmarks, as the run's own map.yaml (both re-rendered from the same keyframes)
+    grid = load_grid_map(tmp_path / "map.yaml")
+    assert np.array_equal(grid.occupancy, load_grid_map(tmp_path / "map" / "map.yaml").occupancy)
 
     # localize with a copy, saved again at the end: the fixed map must come back unchanged
     relocalized_file = tmp_path / "localize" / "map.json"

@@ -27,10 +27,10 @@ DEMO_TOPICS = frozenset({
     "/clock", "/fake_sensor", "/joint_states", "/nusim/ground_truth", "/nusim/obstacles", "/nusim/path",
     "/nusim/walls", "/parameter_events", "/rosout", "/scan", "/cmd_vel", "/diagnostics", "/landmarks",
     "/landmarks/clusters", "/odom", "/odometry/path", "/slam/map", "/slam/odom", "/slam/path", "/wheel_cmd",
-    "/tf", "/tf_static", "/demo_monitor/slam_error",
+    "/tf", "/tf_static", "/demo_monitor/slam_error", "/map", "/map_metadata",
 })  # fmt: skip
 SCENE_TOPICS = {
-    "/scan", "/landmarks", "/slam/map", "/slam/path", "/odometry/path", "/nusim/path", "/slam/odom",
+    "/map", "/scan", "/landmarks", "/slam/map", "/slam/path", "/odometry/path", "/nusim/path", "/slam/odom",
     "/nusim/obstacles", "/nusim/walls", "/fake_sensor",
 }  # fmt: skip
 LAUNCH_FILES_STARTING_RVIZ = ("nuslam/launch/slam.launch.py", "nuslam/launch/turtlebot3.launch.py")
@@ -141,7 +141,7 @@ def test_the_rviz_config_shows_slam_in_map():
     expected = {
         "/scan": "LaserScan", "/landmarks": "MarkerArray", "/slam/map": "MarkerArray",
         "/nusim/obstacles": "MarkerArray", "/nusim/walls": "MarkerArray", "/slam/path": "Path",
-        "/odometry/path": "Path", "/slam/odom": "Odometry",
+        "/odometry/path": "Path", "/slam/odom": "Odometry", "/map": "Map",
     }  # fmt: skip
     for topic, display_class in expected.items():
         assert displays[topic]["Class"] == f"rviz_default_plugins/{display_class}", topic
@@ -150,7 +150,7 @@ def test_the_rviz_config_shows_slam_in_map():
     assert displays["/scan"]["Topic"]["Reliability Policy"] == "Best Effort"
     assert displays["/slam/odom"]["Covariance"]["Value"] is True
     # published once or latched (REP 2003): a volatile subscriber would show nothing
-    for latched in ("/slam/map", "/nusim/obstacles", "/nusim/walls"):
+    for latched in ("/slam/map", "/map", "/nusim/obstacles", "/nusim/walls"):
         assert displays[latched]["Topic"]["Durability Policy"] == "Transient Local", latched
 
 

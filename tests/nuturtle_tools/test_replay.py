@@ -29,6 +29,7 @@ from nuturtle_tools.bag_source import BagError, BagSource
 from nuturtle_tools.foxglove_relay import tf2_msgs_installed
 from nuturtle_tools.replay import main
 from nuturtle_tools.replay_run import ReplayOptions, run_replay
+from turtlelib.grid_map_file import load_grid_map
 from turtlelib.slam_map import load_map
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
@@ -154,8 +155,9 @@ def test_replay_applies_every_scan_and_matches_the_live_accuracy(live, tmp_path,
     assert metrics["landmarks_mapped"] == live_metrics["landmarks_mapped"]
     assert metrics["landmarks_duplicate"] == metrics["landmarks_spurious"] == 0
 
-    for name in ("trajectory.png", "errors.png", "covariance.png"):
+    for name in ("trajectory.png", "errors.png", "covariance.png", "grid.png"):
         assert (out / name).read_bytes().startswith(PNG_MAGIC), name
+    assert np.count_nonzero(load_grid_map(out / "map.yaml").occupancy == 100) > 100, "map_server's pair"
     assert load_map(out / "map.json").n_landmarks == metrics["landmarks_mapped"], "a map slam can load"
     with BagSource(out / "slam") as outputs:
         assert outputs.storage == "mcap"
