@@ -9,14 +9,21 @@ mount: the grid mapping alone, against the world's known cylinders (nine of radi
 Per cylinder: the occupied cells (>= 65) within one cell of its outline, and whether it was in range;
 occupied cells far from every cylinder are the walls' (drawn in the figure).
 
-Usage: python bench/grid_gazebo.py [BAG] [--write]   (--write replaces the "## Occupancy grid: Gazebo
-recording" section of docs/benchmarks.md and draws docs/figures/grid_gazebo_burger.png).
+At SLAM poses (``--replay DIR``): the grid slam made in a replay of the recording (``python -P -m
+nuturtle_tools.replay BAG --truth-topic /odom --params nusim/config/turtlebot3_world.yaml --out DIR``:
+each scan at slam's pose at its stamp, re-rendered from its keyframes), read from ``DIR/map.yaml``, counted
+the same way.
+
+Usage: python bench/grid_gazebo.py [BAG] [--replay DIR] [--write]   (--write replaces the "## Occupancy
+grid: Gazebo recording" section of docs/benchmarks.md, draws docs/figures/grid_gazebo_burger.png and, with
+--replay, copies DIR/grid.png to docs/figures/grid_gazebo_slam.png).
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -28,7 +35,7 @@ sys.path.insert(0, str(ROOT / "bench"))  # bench_docs
 
 from bench_docs import write_section  # noqa: E402
 
-from turtlelib import GridConfig, OccupancyGrid, RangeScan, Transform2D  # noqa: E402
+from turtlelib import GridConfig, GridMap, OccupancyGrid, RangeScan, Transform2D  # noqa: E402
 from turtlelib.pose_buffer import PoseBuffer  # noqa: E402
 
 HEADING = "## Occupancy grid: Gazebo recording"
@@ -36,6 +43,7 @@ BAG = Path("/work/shared/datasets/tb3_gazebo_burger")
 CYLINDERS = np.array([[x, y] for x in (-1.1, 0.0, 1.1) for y in (-1.1, 0.0, 1.1)])
 RADIUS_M = 0.15
 FIGURE = ROOT / "docs" / "figures" / "grid_gazebo_burger.png"
+SLAM_FIGURE = ROOT / "docs" / "figures" / "grid_gazebo_slam.png"
 
 
 def stamp_ns(header) -> int:
@@ -82,36 +90,56 @@ def measure(bag: Path) -> dict:
         used += 1
         path.append([T_world_body.x, T_world_body.y])
     path = np.array(path)
-    occupancy = grid.grid_map().occupancy
-    res = grid.config.resolution_m
-    rows, cols = np.nonzero(occupancy >= 65)
-    x0, y0 = grid.origin_m
-    occupied = np.column_stack([x0 + (cols + 0.5) * res, y0 + (rows + 0.5) * res])
-    distance = np.linalg.norm(occupied[:, None, :] - CYLINDERS[None], axis=2)
-    # a cell centre is within one cell of a circle when | |c - m| - r | <= res (half a diagonal + slack)
-    on_outline = np.abs(distance - RADIUS_M) <= res
     nearest_path = np.linalg.norm(path[:, None, :] - CYLINDERS[None], axis=2).min(axis=0)
     return {
         "scans": len(scans),
         "used": used,
         "median_ms": 1e-6 * float(np.median(update_ns)),
-        "cells_per_cylinder": on_outline.sum(axis=0),
         "nearest_path_m": nearest_path,
-        "occupied": len(occupied),
-        "near_cylinders": int(on_outline.any(axis=1).sum()),
-        "inside_cylinders": int((distance < RADIUS_M - res).any(axis=1).sum()),
+        **outline_counts(grid.grid_map()),
         "grid": grid,
         "path": path,
     }
 
 
-def section(result: dict) -> str:
+def outline_counts(grid_map: GridMap) -> dict:
+    """Occupied cells (>= 65) of ``grid_map``: in all, within one cell of a cylinder's outline (in all and
+    per cylinder), inside a cylinder."""
+    res = grid_map.resolution_m
+    rows, cols = np.nonzero(grid_map.occupancy >= 65)
+    x0, y0 = grid_map.origin.x, grid_map.origin.y
+    occupied = np.column_stack([x0 + (cols + 0.5) * res, y0 + (rows + 0.5) * res])
+    distance = np.linalg.norm(occupied[:, None, :] - CYLINDERS[None], axis=2)
+    # a cell centre is within one cell of a circle when | |c - m| - r | <= res (half a diagonal + slack)
+    on_outline = np.abs(distance - RADIUS_M) <= res
+    return {
+        "cells_per_cylinder": on_outline.sum(axis=0),
+        "occupied": len(occupied),
+        "near_cylinders": int(on_outline.any(axis=1).sum()),
+        "inside_cylinders": int((distance < RADIUS_M - res).any(axis=1).sum()),
+    }
+
+
+def section(result: dict, slam: dict | None) -> str:
+    slam_counts = slam["cells_per_cylinder"] if slam is not None else [None] * len(CYLINDERS)
     rows = [
-        f"| ({x:+.1f}, {y:+.1f}) | {d:.2f} | {n} |"
-        for (x, y), d, n in zip(
-            CYLINDERS, result["nearest_path_m"], result["cells_per_cylinder"], strict=True
+        f"| ({x:+.1f}, {y:+.1f}) | {d:.2f} | {n} |" + (f" {m} |" if slam is not None else "")
+        for (x, y), d, n, m in zip(
+            CYLINDERS, result["nearest_path_m"], result["cells_per_cylinder"], slam_counts, strict=True
         )
     ]
+    slam_text = []
+    if slam is not None:
+        slam_text = [
+            "At SLAM poses (`--replay DIR`: the grid slam saved in `python -P -m nuturtle_tools.replay",
+            "tb3_gazebo_burger/ --truth-topic /odom --params nusim/config/turtlebot3_world.yaml`, its",
+            f"keyframes at slam's poses): {slam['occupied']} occupied cells, {slam['near_cylinders']} within",
+            f"one cell of a cylinder's outline, {slam['inside_cylinders']} inside a cylinder (last column",
+            "above; the figure below).",
+            "",
+            "![occupancy grid of the Gazebo recording at SLAM poses](figures/grid_gazebo_slam.png)",
+            "",
+        ]
     return "\n".join(
         [
             HEADING,
@@ -128,12 +156,14 @@ def section(result: dict) -> str:
             "its outline), the rest on the walls. Per cylinder (radius 0.15 m), the occupied cells on",
             "its outline:",
             "",
-            "| cylinder (m) | closest approach of the path (m) | occupied cells on the outline |",
-            "|---|---:|---:|",
+            "| cylinder (m) | closest approach of the path (m) | occupied cells on the outline |"
+            + (" at SLAM poses |" if slam is not None else ""),
+            "|---|---:|---:|" + ("---:|" if slam is not None else ""),
             *rows,
             "",
             "![occupancy grid of the Gazebo recording](figures/grid_gazebo_burger.png)",
             "",
+            *slam_text,
         ]
     )
 
@@ -175,14 +205,22 @@ def figure(result: dict, path: Path) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("bag", nargs="?", type=Path, default=BAG)
+    parser.add_argument("--replay", type=Path, help="a replay's output folder (its map.yaml, grid.png)")
     parser.add_argument("--write", action="store_true", help="update docs/benchmarks.md and the figure")
     arguments = parser.parse_args()
     result = measure(arguments.bag)
-    text = section(result)
+    slam = None
+    if arguments.replay is not None:
+        from turtlelib.grid_map_file import load_grid_map
+
+        slam = outline_counts(load_grid_map(arguments.replay / "map.yaml"))
+    text = section(result, slam)
     print(text)
     if arguments.write:
         write_section(HEADING, text, ROOT / "docs" / "benchmarks.md")
         figure(result, FIGURE)
+        if arguments.replay is not None:
+            shutil.copyfile(arguments.replay / "grid.png", SLAM_FIGURE)
 
 
 if __name__ == "__main__":

@@ -130,9 +130,11 @@ def accuracy(grid_map: GridMap) -> dict[str, float]:
     res = grid_map.resolution_m
     x0, y0 = grid_map.origin.x, grid_map.origin.y
     occupied_near = maximum_filter((occupancy >= 65).astype(np.uint8), size=3).astype(bool)
-    # (row, col) of each boundary point; a grid that does not reach a point has not found it
+    # (row, col) of each boundary point as the grid numbers cells (floor(p / res) less the origin's cell);
+    # a grid that does not reach a point has not found it
     points = boundary_points()
-    cells = np.unique(np.floor((points[:, ::-1] - [y0, x0]) / res).astype(np.int64), axis=0)
+    origin_cell = np.rint(np.array([y0, x0]) / res).astype(np.int64)
+    cells = np.unique(np.floor(points[:, ::-1] / res).astype(np.int64) - origin_cell, axis=0)
     inside = (cells >= 0).all(axis=1) & (cells < occupancy.shape).all(axis=1)
     found = np.zeros(len(cells), dtype=bool)
     found[inside] = occupied_near[cells[inside, 0], cells[inside, 1]]

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from turtlelib.grid_map_file import FREE_PIXEL, FREE_THRESH, OCCUPIED_PIXEL, OCCUPIED_THRESH, UNKNOWN_PIXEL
 from turtlelib.occupancy_grid import GridMap
 
 from .metrics import PoseSeries, pose_errors
@@ -112,13 +113,15 @@ def plot_trajectory(
 def plot_grid(
     path: str | Path, grid: GridMap, path_xy: NDArray[np.float64], landmarks_xy: NDArray[np.float64]
 ) -> None:
-    """grid.png: the occupancy grid (black occupied, white free, grey unknown: map_server's image) with the
-    SLAM path ``path_xy`` (K, 2) and the mapped landmarks (n, 2) over it, in the map frame (m)."""
+    """grid.png: the occupancy grid as map_saver's trinary image shows it (occupied >= 65 black, free <= 19
+    white, the rest grey: :mod:`turtlelib.grid_map_file`) with the SLAM path ``path_xy`` (K, 2) and the
+    mapped landmarks (n, 2) over it, in the map frame (m)."""
     figure = new_figure(7.0, 7.0)
     axes = figure.add_subplot()
-    occupancy = grid.occupancy.astype(np.float64)
-    # shade: 1 - p for observed cells (white free, black occupied), 205/255 for unknown as map_saver's
-    shade = np.where(occupancy < 0, 205.0 / 255.0, 1.0 - occupancy / 100.0)
+    occupancy = grid.occupancy
+    shade = np.full(occupancy.shape, UNKNOWN_PIXEL / 255.0)
+    shade[(occupancy >= 0) & (occupancy <= round(100.0 * FREE_THRESH))] = FREE_PIXEL / 255.0
+    shade[occupancy >= round(100.0 * OCCUPIED_THRESH)] = OCCUPIED_PIXEL / 255.0
     x0, y0, res = grid.origin.x, grid.origin.y, grid.resolution_m
     extent = (x0, x0 + grid.width * res, y0, y0 + grid.height * res)
     axes.imshow(

@@ -151,7 +151,8 @@ def summary(result: Any) -> str:
     if hint is not None:
         lines.append(hint)
     if "observation_arrays_applied" in metrics:
-        lines.append(f"outputs in {result.out_dir}/: metrics.json trajectory.png map.json covariance.png "
+        grid = "map.yaml map.pgm grid.png " if (Path(result.out_dir) / "map.yaml").exists() else ""
+        lines.append(f"outputs in {result.out_dir}/: metrics.json trajectory.png map.json {grid}covariance.png "
                      f"{'errors.png ' if result.accuracy else ''}slam/ config.yaml")  # fmt: skip
     else:
         lines.append(f"outputs in {result.out_dir}/: metrics.json")
