@@ -152,8 +152,9 @@ def summary(result: Any) -> str:
         lines.append(hint)
     if "observation_arrays_applied" in metrics:
         grid = "map.yaml map.pgm grid.png " if (Path(result.out_dir) / "map.yaml").exists() else ""
-        lines.append(f"outputs in {result.out_dir}/: metrics.json trajectory.png map.json {grid}covariance.png "
-                     f"{'errors.png ' if result.accuracy else ''}slam/ config.yaml")  # fmt: skip
+        errors = "errors.png " if result.accuracy else ""
+        lines.append(f"outputs in {result.out_dir}/: metrics.json trajectory.png map.json {grid}"
+                     f"covariance.png {errors}slam/ config.yaml")  # fmt: skip
     else:
         lines.append(f"outputs in {result.out_dir}/: metrics.json")
     return "\n".join(lines)

@@ -159,11 +159,21 @@ def test_a_malformed_grid_file_stops_localization_at_start_up_with_the_reason(ro
     assert str(tmp_path) in str(error.value), "the message names the file"
 
 
-@pytest.mark.parametrize("name", ["lab.yaml", "lab.pgm"])
-def test_a_landmark_map_named_like_the_grid_files_stops_the_node(ros, tmp_path, name):
-    overrides = [Parameter("map_file", value=str(tmp_path / name))]
-    with pytest.raises(ValueError, match="must not end in .yaml or .pgm"):
-        SlamNode(context=ros.context, parameter_overrides=overrides)
+@pytest.mark.parametrize(
+    ("name", "value", "message"),
+    [
+        ("map_file", "lab.yaml", "must not end in .yaml or .pgm"),
+        ("map_file", "lab.pgm", "must not end in .yaml or .pgm"),
+        ("grid.hit_probability", 0.3, "hit_probability"),
+        ("grid.publish_period_s", 0.0, "publish_period_s"),
+    ],
+)
+def test_a_map_file_named_like_the_grid_files_or_a_bad_grid_parameter_stops_the_node(
+    ros, tmp_path, name, value, message
+):
+    value = str(tmp_path / value) if name == "map_file" else value
+    with pytest.raises(ValueError, match=message):
+        SlamNode(context=ros.context, parameter_overrides=[Parameter(name, value=value)])
 
 
 def test_a_scan_in_an_unknown_frame_is_skipped_with_a_warning(ros):
