@@ -154,7 +154,7 @@ class GridMapping:
         self._published_ns: int | None = None
         self.scans_inserted = 0
         self.loaded = loaded
-        if not self.topic_config.enabled:
+        if not enabled:
             return
         self._grid_publisher = node.create_publisher(OccupancyGridMsg, "map", map_qos)
         self._metadata_publisher = node.create_publisher(MapMetaData, "map_metadata", map_qos)
