@@ -131,8 +131,9 @@ def section(result: dict, slam: dict | None) -> str:
     slam_text = []
     if slam is not None:
         slam_text = [
-            "At SLAM poses (`--replay DIR`: the grid slam saved in `python -P -m nuturtle_tools.replay",
-            "tb3_gazebo_burger/ --truth-topic /odom --params nusim/config/turtlebot3_world.yaml`, its",
+            "At SLAM poses (`--replay DIR`: the grid slam saved in",
+            "`.venv/bin/python -P -m nuturtle_tools.replay tb3_gazebo_burger/ --truth-topic /odom --params",
+            "nusim/config/turtlebot3_world.yaml --out DIR`, its",
             f"keyframes at slam's poses): {slam['occupied']} occupied cells, {slam['near_cylinders']} within",
             f"one cell of a cylinder's outline, {slam['inside_cylinders']} inside a cylinder (last column",
             "above; the figure below).",
@@ -144,8 +145,8 @@ def section(result: dict, slam: dict | None) -> str:
         [
             HEADING,
             "",
-            "`.venv/bin/python -P bench/grid_gazebo.py --write`: `turtlelib.OccupancyGrid` (0.05 m, default "
-            "`GridConfig`)",
+            "`.venv/bin/python -P bench/grid_gazebo.py --replay DIR --write`: `turtlelib.OccupancyGrid`",
+            "(0.05 m, default `GridConfig`)",
             "on the shared Gazebo recording (`/work/shared/datasets/tb3_gazebo_burger`, 27.7 s in",
             "turtlebot3_world), each `/scan` at `/odom`'s pose at its stamp (Gazebo's true pose) composed",
             f"with the Burger's LiDAR mount ({result['used']} of {result['scans']} scans within the",

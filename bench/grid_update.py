@@ -217,9 +217,10 @@ def slam_section(results: list[dict]) -> list[str]:
         for r in results
     ]
     return [
-        "At SLAM poses (`--slam-seeds`): the demo's own run (`python -P -m nuturtle_demo --duration 120",
-        "--seed S`, unknown association), its `map.yaml` + `map.pgm` (slam's keyframes re-rendered at its",
-        "poses at save, map_server's trinary values) against the same true geometry.",
+        "At SLAM poses (`--slam-seeds`): the demo's own run",
+        "(`.venv/bin/python -P -m nuturtle_demo --duration 120 --seed S`, unknown association), its",
+        "`map.yaml` + `map.pgm` (slam's keyframes re-rendered at its poses at save, map_server's trinary",
+        "values) against the same true geometry.",
         "",
         "| seed | SLAM ATE / final error (m) | grid (cells) | boundary found | free marked occupied "
         "| free known free |",
@@ -250,7 +251,7 @@ def section(results: list[dict], slam_results: list[dict]) -> str:
         [
             HEADING,
             "",
-            "`.venv/bin/python -P bench/grid_update.py --write` "
+            "`.venv/bin/python -P bench/grid_update.py --write --figure --slam-seeds 0 1 2`",
             f"(OPENBLAS_NUM_THREADS={threads}; {machine}).",
             "",
             "`turtlelib.OccupancyGrid` (docs/maps.md) on the demo's world scanned by a simulated",
