@@ -29,8 +29,9 @@ Publishes (reliable + transient local, depth 1, REP 2003: a late RViz, nav2 or F
     `map_metadata` (nav_msgs/MapMetaData): its ``info``.
 
 Bad input (a scan in another frame, a scan `turtlelib.RangeScan` refuses, one reaching past
-``grid.max_size_m``, one older than slam's kept poses) is skipped with a throttled warning; the grid is
-unchanged.
+``grid.max_size_m``, one older than slam's kept poses) is skipped with a throttled warning and counted; the
+grid is unchanged. `/diagnostics` gets `slam: occupancy grid` (:meth:`GridMapping.status`): scans mapped
+and skipped, keyframes, the grid's size; WARN when scans were skipped since the last report.
 """
 
 from __future__ import annotations
@@ -41,6 +42,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticStatus
 from nav_msgs.msg import MapMetaData
 from nav_msgs.msg import OccupancyGrid as OccupancyGridMsg
 from rclpy.node import Node
@@ -48,6 +50,7 @@ from rclpy.qos import QoSProfile, qos_profile_sensor_data
 from sensor_msgs.msg import LaserScan
 
 from nuturtle_ros_common.conversions import pose_from_transform, stamp_from_nanoseconds, stamp_nanoseconds
+from nuturtle_ros_common.diagnostics import OK, WARN, status
 from nuturtle_ros_common.ros_params import declare_dataclass
 from nuturtle_ros_common.throttle import SourceWarnings
 from turtlelib import GridConfig, KeyframeConfig, OccupancyGrid, RangeScan, ScanKeyframes, Transform2D
@@ -152,7 +155,7 @@ class GridMapping:
         self._waiting: deque[tuple[int, RangeScan, Transform2D]] = deque()
         self._newest_ns: int | None = None
         self._published_ns: int | None = None
-        self.scans_inserted = 0
+        self.scans_inserted = self.scans_skipped = self._skipped_reported = 0
         self.loaded = loaded
         if not enabled:
             return
@@ -184,17 +187,40 @@ class GridMapping:
                 msg.range_max,
             )
         except ValueError as error:
-            self._warnings.warn("scan", f"scan skipped by the occupancy grid: {error}")
+            self._skip(f"scan skipped by the occupancy grid: {error}")
             return
         self._waiting.append((stamp_nanoseconds(msg.header.stamp), scan, T_body_scan))
         if len(self._waiting) > MAX_WAITING_SCANS:
             t_ns, _, _ = self._waiting.popleft()
-            self._warnings.warn(
-                "scan",
+            self._skip(
                 f"scan at {t_ns} ns skipped by the occupancy grid: no slam pose reached its stamp while "
                 f"{MAX_WAITING_SCANS} newer scans came (are joint_states / odom arriving?)",
             )
         self._insert_reached()
+
+    def status(self) -> DiagnosticStatus | None:
+        """`slam: occupancy grid` for /diagnostics (None when the grid is off): WARN when scans were
+        skipped since the last report."""
+        if not self.topic_config.enabled:
+            return None
+        if self.loaded is not None:
+            grid_map = self.loaded
+            message = f"localization: the {grid_map.width} x {grid_map.height} cell grid {self.yaml_path}"
+            return status("slam: occupancy grid", "slam", OK, message, {"loaded": str(self.yaml_path)})
+        skipped = self.scans_skipped - self._skipped_reported
+        self._skipped_reported = self.scans_skipped
+        height, width = self.grid.log_odds.shape
+        message = f"{self.scans_inserted} scans mapped into {width} x {height} cells"
+        if skipped:
+            message += f"; {skipped} skipped since the last report"
+        values = {
+            "scans_mapped": self.scans_inserted,
+            "scans_skipped": self.scans_skipped,
+            "keyframes": len(self.keyframes),
+            "width": width,
+            "height": height,
+        }
+        return status("slam: occupancy grid", "slam", WARN if skipped else OK, message, values)
 
     def add_pose(self, t_ns: int, T_map_body: Transform2D) -> None:
         """slam's pose at ``t_ns``: insert the scans it reaches. A pose not after the newest (a restarted
@@ -251,12 +277,12 @@ class GridMapping:
             t_ns, scan, T_body_scan = self._waiting.popleft()
             T_map_body = self._poses.at(t_ns)
             if T_map_body is None:
-                self._warnings.warn("scan", f"scan at {t_ns} ns skipped: older than slam's kept poses")
+                self._skip(f"scan at {t_ns} ns skipped by the occupancy grid: older than slam's kept poses")
                 continue
             try:
                 self.grid.insert_scan(scan, T_map_body @ T_body_scan)
             except ValueError as error:
-                self._warnings.warn("scan", f"scan skipped by the occupancy grid: {error}")
+                self._skip(f"scan skipped by the occupancy grid: {error}")
                 continue
             self.scans_inserted += 1
             if self.keyframes.offer(t_ns, T_map_body, scan):
@@ -271,6 +297,10 @@ class GridMapping:
             or self._newest_ns - self._published_ns >= self._period_ns
         ):
             self._publish(self.grid.grid_map(), self._newest_ns)
+
+    def _skip(self, text: str) -> None:
+        self.scans_skipped += 1
+        self._warnings.warn("scan", text)
 
     def _publish(self, grid_map: GridMap, stamp_ns: int) -> None:
         msg = grid_message(grid_map, self._map_id, stamp_ns)

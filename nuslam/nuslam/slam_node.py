@@ -52,7 +52,9 @@ Publishes
         topic>` (rates; ERROR after `STALE_S` of the node's clock without a message), `slam: filter`
         (mode, landmarks mapped and tentative, observations fused, rejected and (localization) unmapped,
         time per applied scan; WARN when
-        observations were rejected or skipped since the last report), `slam: motion vs LiDAR`
+        observations were rejected or skipped since the last report), `slam: occupancy grid`
+        (`nuslam.grid_mapping`: scans mapped and skipped; WARN when scans were skipped since the last
+        report), `slam: motion vs LiDAR`
         (`turtlelib.slip_recovery`: WARN naming the cause while scans contradict the wheels' motion (slip,
         bump) and for `slip_report_s` after each relocalization against the map, ERROR when they keep
         coming; scans held and relocalizations so far).
@@ -590,11 +592,13 @@ class SlamNode(Node):
         }
         slip = self.recovery.status
         slip_values = {"scans_held": slip.held, "relocalizations": slip.relocalized}
+        grid = self.grid.status()
         return [
             self._motion_input.status("slam", now_ns),
             self._observation_input.status("slam", now_ns),
             status("slam: filter", "slam", WARN if skipped or rejected else OK, message, values),
             status("slam: motion vs LiDAR", "slam", SLIP_LEVELS[slip.level], slip.message, slip_values),
+            *([grid] if grid is not None else []),
         ]
 
     def _check_observations_arrive(self, t_ns: int, sample: tuple[float, ...]) -> None:

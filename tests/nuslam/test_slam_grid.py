@@ -13,12 +13,13 @@ import json
 
 import numpy as np
 import pytest
+from diagnostic_msgs.msg import DiagnosticStatus
 from nav_msgs.msg import MapMetaData
 from nav_msgs.msg import OccupancyGrid as OccupancyGridMsg
 from rclpy.parameter import Parameter
 from ros_test_messages import stamp
 from sensor_msgs.msg import LaserScan
-from test_slam_maps import call, good_document, stop
+from test_slam_maps import call, diagnostics, diagnostics_values, good_document, stop
 from test_slam_node import Arc, Rig, S
 
 from nuslam.slam_node import MAP_QOS, SlamNode
@@ -184,4 +185,7 @@ def test_a_scan_in_an_unknown_frame_is_skipped_with_a_warning(ros):
     rig.scans.publish(msg)
     warnings = rig.warnings(at_least=1)
     assert len(warnings) == 1 and "frame 'camera'" in warnings[0]
-    assert rig.node.grid.scans_inserted == 0
+    grid_status = diagnostics(rig, "slam: occupancy grid")
+    assert grid_status.level == DiagnosticStatus.WARN and "1 skipped" in grid_status.message
+    values = diagnostics_values(rig, "slam: occupancy grid")
+    assert (values["scans_mapped"], values["scans_skipped"]) == ("0", "1")

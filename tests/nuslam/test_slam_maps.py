@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from diagnostic_msgs.msg import DiagnosticArray
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from ros_test_messages import cylinder_array, stamp
 from std_srvs.srv import Trigger
@@ -28,13 +28,17 @@ from turtlelib.slam_map import load_map
 pytestmark = pytest.mark.ros
 
 
-def diagnostics_values(rig: Rig) -> dict[str, str]:
-    """The values of slam's `slam: filter` status, as /diagnostics gets them."""
+def diagnostics(rig: Rig, name: str) -> DiagnosticStatus:
+    """slam's first status ``name`` on /diagnostics."""
     arrays: list[DiagnosticArray] = []
     rig.helper.create_subscription(DiagnosticArray, "/diagnostics", arrays.append, 10)
-    assert rig.ros.spin_until(lambda: any(s.name == "slam: filter" for a in arrays for s in a.status), 5.0)
-    status = next(s for a in arrays for s in a.status if s.name == "slam: filter")
-    return {pair.key: pair.value for pair in status.values}
+    assert rig.ros.spin_until(lambda: any(s.name == name for a in arrays for s in a.status), 5.0), name
+    return next(s for a in arrays for s in a.status if s.name == name)
+
+
+def diagnostics_values(rig: Rig, name: str = "slam: filter") -> dict[str, str]:
+    """The values of slam's status ``name``, as /diagnostics gets them."""
+    return {pair.key: pair.value for pair in diagnostics(rig, name).values}
 
 
 def call(rig: Rig, service: str) -> Trigger.Response:
