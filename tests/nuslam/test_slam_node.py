@@ -869,9 +869,13 @@ def test_diagnostics_report_the_inputs_and_an_error_when_observations_stop(ros):
 
     drive(1.5, observe=True)
     statuses = latest()
-    assert set(statuses) == {"slam: joint_states", "slam: landmarks", "slam: filter", "slam: motion vs LiDAR"}
+    assert set(statuses) == {
+        "slam: joint_states", "slam: landmarks", "slam: filter", "slam: occupancy grid",
+        "slam: motion vs LiDAR",
+    }  # fmt: skip
     assert statuses["slam: joint_states"].level == DiagnosticStatus.OK
     assert statuses["slam: motion vs LiDAR"].level == DiagnosticStatus.OK
+    assert statuses["slam: occupancy grid"].level == DiagnosticStatus.OK
     assert statuses["slam: landmarks"].level == DiagnosticStatus.OK
     values = {pair.key: pair.value for pair in statuses["slam: filter"].values}
     assert int(values["observations_fused"]) > 0 and "landmarks_mapped" in values
