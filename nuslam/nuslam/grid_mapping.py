@@ -174,6 +174,7 @@ class GridMapping:
     def on_scan(self, msg: LaserScan) -> None:
         """Queue the scan for slam's pose at its stamp (inserted now if slam's poses already reach it)."""
         try:
+            t_ns = stamp_nanoseconds(msg.header.stamp)
             T_body_scan = self._T_body_from.get(msg.header.frame_id)
             if T_body_scan is None:
                 raise ValueError(
@@ -189,12 +190,12 @@ class GridMapping:
         except ValueError as error:
             self._skip(f"scan skipped by the occupancy grid: {error}")
             return
-        self._waiting.append((stamp_nanoseconds(msg.header.stamp), scan, T_body_scan))
+        self._waiting.append((t_ns, scan, T_body_scan))
         if len(self._waiting) > MAX_WAITING_SCANS:
-            t_ns, _, _ = self._waiting.popleft()
+            dropped_ns, _, _ = self._waiting.popleft()
             self._skip(
-                f"scan at {t_ns} ns skipped by the occupancy grid: no slam pose reached its stamp while "
-                f"{MAX_WAITING_SCANS} newer scans came (are joint_states / odom arriving?)",
+                f"scan at {dropped_ns} ns skipped by the occupancy grid: no slam pose reached its stamp "
+                f"while {MAX_WAITING_SCANS} newer scans came (are joint_states / odom arriving?)",
             )
         self._insert_reached()
 

@@ -595,6 +595,7 @@ def slam_rig(ros: RosHarness, association: str, name: str, with_odometry: bool =
     rig.publish_to("odom", Odometry)
     rig.publish_to(topic, MarkerArray)
     rig.publish_to("initialpose", PoseWithCovarianceStamped)  # slam's (and odometry's) relocalization
+    rig.publish_to("scan", LaserScan)  # slam's occupancy grid
     rig.record("slam/odom", Odometry)
     rig.record("slam/map", MarkerArray, valid_stamps=False)  # stamped with an observation's stamp
     rig.record("slam/path", Path)
@@ -610,6 +611,7 @@ SLAM_BATCHES = batches(
     # "observations": the association's topic (landmarks or fake_sensor)
     hostile_marker_arrays(("base_scan", "base_footprint"), T_REF_NS, "observations"),
     hostile_marker_arrays(("base_scan", "base_footprint"), T_REF_NS, "observations"),
+    hostile_scans(T_REF_NS),
 )
 # explicit examples, run every time: 10,000 joints and 10,000 markers
 HUGE_ARRAYS = [
