@@ -120,7 +120,9 @@ class GridMapping:
     ``T_body_scan`` is the LiDAR mount; ``frames`` the node's ``(map_id, body_id, sensor_id)``;
     ``map_file`` slam's landmark map (empty: none), ``localization``: load the grid beside it instead of
     mapping. ValueError for invalid parameters, a ``map_file`` ending in ``.yaml`` or ``.pgm``, or a
-    malformed grid file beside it in localization.
+    malformed grid file beside it in localization. The topics come with :meth:`connect`, once the node
+    has checked everything else (a node that fails at start-up must not hold subscriptions: their
+    callbacks keep it alive).
     """
 
     def __init__(
@@ -129,7 +131,6 @@ class GridMapping:
         T_body_scan: Transform2D,
         frames: tuple[str, str, str],
         warnings: SourceWarnings,
-        map_qos: QoSProfile,
         map_file: str,
         localization: bool,
     ) -> None:
@@ -157,12 +158,16 @@ class GridMapping:
         self._published_ns: int | None = None
         self.scans_inserted = self.scans_skipped = self._skipped_reported = 0
         self.loaded = loaded
-        if not enabled:
+
+    def connect(self, node: Node, map_qos: QoSProfile) -> None:
+        """Create `map`, `map_metadata` (``map_qos``) and, when mapping, the `scan` subscription; publish
+        the loaded grid. Nothing when the grid is off."""
+        if not self.topic_config.enabled:
             return
         self._grid_publisher = node.create_publisher(OccupancyGridMsg, "map", map_qos)
         self._metadata_publisher = node.create_publisher(MapMetaData, "map_metadata", map_qos)
-        if loaded is not None:
-            self._publish(loaded, node.get_clock().now().nanoseconds)
+        if self.loaded is not None:
+            self._publish(self.loaded, node.get_clock().now().nanoseconds)
         else:
             node.create_subscription(LaserScan, "scan", self.on_scan, qos_profile_sensor_data)
 

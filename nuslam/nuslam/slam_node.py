@@ -272,6 +272,16 @@ class SlamNode(Node):
         self._start_map = self._load_start_map()
         if self._start_map is not None:
             self.slam.load_map(self._start_map, self.node_config.T_map_body0)
+        self._warnings = SourceWarnings(self.get_logger())
+        frames = self.node_config
+        self.grid = GridMapping(
+            self,
+            T_body_scan,
+            (frames.map_id, frames.body_id, frames.sensor_id),
+            self._warnings,
+            frames.map_file,
+            self.config.mode == "localization",
+        )
         self.timeline = SlamTimeline(self.slam, signal, timeline_config, recovery=self.recovery)
         # T_sensor_frame for the frames observations may come in
         T_body_sensor = self.config.T_body_sensor
@@ -283,9 +293,7 @@ class SlamNode(Node):
         self._observation_topic = "fake_sensor" if self.node_config.association == "known" else "landmarks"
         # the stamp and value of the first motion sample since the last observation
         self._observed_at: tuple[int, tuple[float, ...]] | None = None
-        self._warnings = SourceWarnings(self.get_logger())
         self._wheels = declare_wheel_stream(self, self.joints, robot, self._warnings)
-        frames = self.node_config
         self._odom = OdomStream(
             frames.odom_id, frames.body_id, robot, self._wheels.gate.config, self._warnings
         )
@@ -293,15 +301,7 @@ class SlamNode(Node):
         self._odom_publisher = self.create_publisher(Odometry, "~/odom", 10)
         # REP 2003: maps are reliable and transient local, so a late subscriber (RViz, Foxglove) gets one
         self._map_publisher = self.create_publisher(MarkerArray, "~/map", MAP_QOS)
-        self.grid = GridMapping(
-            self,
-            T_body_scan,
-            (frames.map_id, frames.body_id, frames.sensor_id),
-            self._warnings,
-            MAP_QOS,
-            frames.map_file,
-            self.config.mode == "localization",
-        )
+        self.grid.connect(self, MAP_QOS)
         self._tf = OptionalTfBroadcaster(self)
         self._odom_poses = PoseBuffer(ODOM_BUFFER_SAMPLES)
         # the newest pose not yet paired with odom for map -> odom: (t_ns, T_map_body, stamp)
