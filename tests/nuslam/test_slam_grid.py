@@ -9,7 +9,6 @@ own properties are tested in tests/turtlelib/test_occupancy_grid.py.
 
 from __future__ import annotations
 
-import gc
 import json
 
 import numpy as np
@@ -24,6 +23,7 @@ from test_slam_maps import call, diagnostics, diagnostics_values, good_document,
 from test_slam_node import Arc, Rig, S
 
 from nuslam.slam_node import MAP_QOS, SlamNode
+from rclpy_harness import refused_at_construction
 from turtlelib import (
     GridConfig,
     KeyframeConfig,
@@ -156,7 +156,10 @@ def test_a_malformed_grid_file_stops_localization_at_start_up_with_the_reason(ro
     (tmp_path / "lab.yaml").write_text(edit(text + "occupied_thresh: 0.65\nfree_thresh: 0.196\n"))
     (tmp_path / "lab.pgm").write_bytes(b"P5\n2 1\n255\n\x00\xfe")
     overrides = [Parameter("map_file", value=str(path)), Parameter("mode", value="localization")]
-    assert str(tmp_path) in refused_at_start_up(ros, overrides, message), "the message names the file"
+    text = refused_at_construction(
+        lambda: SlamNode(context=ros.context, parameter_overrides=overrides), message
+    )
+    assert str(tmp_path) in text, "the message names the file"
 
 
 @pytest.mark.parametrize(
@@ -172,19 +175,8 @@ def test_a_map_file_named_like_the_grid_files_or_a_bad_grid_parameter_stops_the_
     ros, tmp_path, name, value, message
 ):
     value = str(tmp_path / value) if name == "map_file" else value
-    refused_at_start_up(ros, [Parameter(name, value=value)], message)
-
-
-def refused_at_start_up(ros, overrides: list[Parameter], message: str) -> str:
-    """The ValueError SlamNode raises at start-up (matching ``message``). The half-built node is then
-    collected at once: left to a later garbage collection, inside another test, its finalization would
-    unregister the logger name `slam` from /rosout under that test's slam, whose warnings would vanish."""
-    with pytest.raises(ValueError, match=message) as error:
-        SlamNode(context=ros.context, parameter_overrides=overrides)
-    text = str(error.value)
-    del error
-    gc.collect()
-    return text
+    overrides = [Parameter(name, value=value)]
+    refused_at_construction(lambda: SlamNode(context=ros.context, parameter_overrides=overrides), message)
 
 
 def test_a_scan_in_an_unknown_frame_is_skipped_with_a_warning(ros):
