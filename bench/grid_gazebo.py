@@ -170,24 +170,16 @@ def section(result: dict, slam: dict | None) -> str:
 
 
 def figure(result: dict, path: Path) -> None:
-    import matplotlib
+    from matplotlib.patches import Circle
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from nuturtle_eval.plots import draw_grid, new_figure
 
-    grid = result["grid"]
-    occupancy = grid.grid_map().occupancy
-    # map_saver's trinary colours: occupied black, free white, the rest (unknown, undecided) grey
-    shade = np.where(occupancy >= 65, 0.0, np.where((occupancy >= 0) & (occupancy <= 19), 1.0, 0.7))
-    x0, y0 = grid.origin_m
-    height, width = occupancy.shape
-    res = grid.config.resolution_m
-    fig, ax = plt.subplots(figsize=(6, 6))
-    ax.imshow(shade, cmap="gray", vmin=0, vmax=1, origin="lower",
-              extent=(x0, x0 + width * res, y0, y0 + height * res))  # fmt: skip
+    fig = new_figure(6.0, 6.0)
+    ax = fig.add_subplot()
+    draw_grid(ax, result["grid"].grid_map())
     ax.plot(result["path"][:, 0], result["path"][:, 1], color="tab:blue", lw=1.2, label="path (/odom)")
     for k, (x, y) in enumerate(CYLINDERS):
-        circle = plt.Circle((x, y), RADIUS_M, fill=False, color="tab:red", lw=1.0)
+        circle = Circle((x, y), RADIUS_M, fill=False, color="tab:red", lw=1.0)
         ax.add_patch(circle)
         if k == 0:
             circle.set_label("true cylinders")
@@ -198,9 +190,7 @@ def figure(result: dict, path: Path) -> None:
     ax.set_ylabel("y (m, world)")
     ax.set_title("occupancy grid, 0.05 m, turtlebot3_world recording at /odom poses", fontsize=10)
     ax.legend(loc="upper right", fontsize=8)
-    fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def main() -> None:

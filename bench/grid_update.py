@@ -283,21 +283,13 @@ def section(results: list[dict], slam_results: list[dict]) -> str:
 
 
 def figure(result: dict, path: Path) -> None:
-    import matplotlib
+    from nuturtle_eval.plots import draw_grid, new_figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    grid = result["grid"]
-    occupancy = grid.grid_map().occupancy
-    # map_saver's trinary colours: occupied black, free white, the rest (unknown, undecided) grey
-    shade = np.where(occupancy >= 65, 0.0, np.where((occupancy >= 0) & (occupancy <= 19), 1.0, 0.7))
-    x0, y0 = grid.origin_m
-    height, width = occupancy.shape
-    res = grid.config.resolution_m
-    fig, ax = plt.subplots(figsize=(6, 6))
-    ax.imshow(shade, cmap="gray", vmin=0, vmax=1, origin="lower",
-              extent=(x0, x0 + width * res, y0, y0 + height * res))  # fmt: skip
+    fig = new_figure(6.0, 6.0)
+    ax = fig.add_subplot()
+    grid_map = result["grid"].grid_map()
+    draw_grid(ax, grid_map)
+    res = grid_map.resolution_m
     path_xy = np.array([[T.x, T.y] for T in result["poses"]])
     ax.plot(path_xy[:, 0], path_xy[:, 1], color="tab:blue", lw=0.8, label="path (true)")
     ax.scatter(CYLINDERS[:, 0], CYLINDERS[:, 1], s=60, facecolors="none", edgecolors="tab:red",
@@ -308,9 +300,7 @@ def figure(result: dict, path: Path) -> None:
     ax.set_ylabel("y (m)")
     ax.set_title(f"occupancy grid, {res} m cells, demo world, 120 s at true poses")
     ax.legend(loc="upper right", fontsize=8)
-    fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def main() -> None:

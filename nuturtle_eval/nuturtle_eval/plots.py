@@ -118,16 +118,8 @@ def plot_grid(
     mapped landmarks (n, 2) over it, in the map frame (m)."""
     figure = new_figure(7.0, 7.0)
     axes = figure.add_subplot()
-    occupancy = grid.occupancy
-    shade = np.full(occupancy.shape, UNKNOWN_PIXEL, dtype=np.uint8)
-    shade[(occupancy >= 0) & (occupancy <= round(100.0 * FREE_THRESH))] = FREE_PIXEL
-    shade[occupancy >= round(100.0 * OCCUPIED_THRESH)] = OCCUPIED_PIXEL
+    draw_grid(axes, grid)
     x0, y0, res = grid.origin.x, grid.origin.y, grid.resolution_m
-    # one quad per cell (pcolormesh: imshow would resample the grid to the figure's pixels as floats,
-    # 36 MB and twice the CPU for the demo's grid)
-    x_edges = x0 + res * np.arange(grid.width + 1)
-    y_edges = y0 + res * np.arange(grid.height + 1)
-    axes.pcolormesh(x_edges, y_edges, shade, cmap="gray", vmin=0, vmax=255)
     path_xy = np.asarray(path_xy, dtype=np.float64).reshape(-1, 2)
     landmarks_xy = np.asarray(landmarks_xy, dtype=np.float64).reshape(-1, 2)
     axes.plot(*path_xy.T, color=SLAM_COLOR, linewidth=1.0, label="SLAM path")
@@ -144,6 +136,21 @@ def plot_grid(
     axes.set_title(f"Occupancy grid ({res:g} m cells)")
     axes.legend(loc="upper right", fontsize="small")
     figure.savefig(path)
+
+
+def draw_grid(axes: Any, grid: GridMap) -> None:
+    """``grid`` on matplotlib ``axes`` in the map frame (m), as map_saver's trinary image shows it
+    (occupied >= 65 black, free <= 19 white, the rest grey: :mod:`turtlelib.grid_map_file`)."""
+    occupancy = grid.occupancy
+    shade = np.full(occupancy.shape, UNKNOWN_PIXEL, dtype=np.uint8)
+    shade[(occupancy >= 0) & (occupancy <= round(100.0 * FREE_THRESH))] = FREE_PIXEL
+    shade[occupancy >= round(100.0 * OCCUPIED_THRESH)] = OCCUPIED_PIXEL
+    x0, y0, res = grid.origin.x, grid.origin.y, grid.resolution_m
+    # one quad per cell (pcolormesh: imshow would resample the grid to the figure's pixels as floats,
+    # 36 MB and twice the CPU for the demo's grid)
+    x_edges = x0 + res * np.arange(grid.width + 1)
+    y_edges = y0 + res * np.arange(grid.height + 1)
+    axes.pcolormesh(x_edges, y_edges, shade, cmap="gray", vmin=0, vmax=255)
 
 
 def plot_slam_errors(
