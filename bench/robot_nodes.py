@@ -307,7 +307,7 @@ def write_section(text: str) -> None:
         doc = doc.rstrip("\n") + "\n\n" + text
     else:
         end = doc.find("\n## ", start + len(SECTION))
-        doc = doc[:start] + text + (doc[end + 1 :] if end >= 0 else "")
+        doc = doc[:start] + text + ("\n" + doc[end + 1 :] if end >= 0 else "")
     DOCS.write_text(doc)
 
 
@@ -352,7 +352,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(text)
     if args.write:
         header = (
-            f"{SECTION}\n\n`.venv/bin/python -P bench/robot_nodes.py --write` "
+            f"{SECTION}\n\n`.venv/bin/python -P bench/robot_nodes.py {' '.join(sys.argv[1:])}` "
             f"(x86_64, {os.cpu_count()} cores, "
             f"Python {sys.version.split()[0]}, {time.strftime('%Y-%m-%d')}). {feed_description(bag)}\n\n"
         )
