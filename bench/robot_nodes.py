@@ -299,18 +299,6 @@ def feed_description(bag: Path) -> str:
     return f"Fed {played} at real time: {rates} (/clock on sim time only)."
 
 
-def write_section(text: str) -> None:
-    """Replace (or append) the section ``SECTION`` of docs/benchmarks.md."""
-    doc = DOCS.read_text()
-    start = doc.find(SECTION)
-    if start < 0:
-        doc = doc.rstrip("\n") + "\n\n" + text
-    else:
-        end = doc.find("\n## ", start + len(SECTION))
-        doc = doc[:start] + text + ("\n" + doc[end + 1 :] if end >= 0 else "")
-    DOCS.write_text(doc)
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
@@ -356,7 +344,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"(x86_64, {os.cpu_count()} cores, "
             f"Python {sys.version.split()[0]}, {time.strftime('%Y-%m-%d')}). {feed_description(bag)}\n\n"
         )
-        write_section(header + text + "\n")
+        sys.path.insert(0, str(ROOT / "bench"))  # bench_docs
+        from bench_docs import write_section
+
+        write_section(SECTION, header + text, DOCS)
     return 0
 
 
