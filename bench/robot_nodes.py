@@ -14,12 +14,12 @@ with ``--time sim`` the recorded /clock (nusim's 100 Hz), every node on sim time
 /clock. Everything runs in a DDS domain of its own (discovery on localhost only). It subscribes to
 ``slam/odom`` only, to check that slam ran (a navigation stack's one input from slam).
 
-Measured per node process, between the first and the last message played: CPU (user + system time from
-/proc/PID/stat) per robot second played; at the end the resident memory (VmRSS), the proportional share
-(Pss: shared library pages divided among the processes that map them, so the Pss of several processes
-adds up to what they take together) and the peak (VmHWM).
+Measured per node process, from just before the first message played to 0.5 s after the last (its work):
+CPU (user + system time from /proc/PID/stat) per robot second played; at the end the resident memory
+(VmRSS), the proportional share (Pss: shared library pages divided among the processes that map them,
+so the Pss of several processes adds up to what they take together) and the peak (VmHWM).
 
-Usage: python -P bench/robot_nodes.py [--bag RUN] [--time sim|wall] [--layout separate|one|both]
+Usage: .venv/bin/python -P bench/robot_nodes.py [--bag RUN] [--time sim|wall] [--layout separate|one|both]
        [--repeat N] [--write]
 Without --bag a 60 s demo (seed 0, unknown association) is recorded first into a temporary folder.
 """
@@ -42,9 +42,10 @@ ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs" / "benchmarks.md"
 SECTION = "## Robot-side nodes"
 CLOCK_TICK_S = 1.0 / os.sysconf("SC_CLK_TCK")
-# The played topics (bag name -> played name) and how many subscriptions of each the nodes hold
+# The played topics (bag name -> played name) and how many subscriptions of each the nodes hold (scan:
+# landmarks and slam's occupancy grid; joint_states: odometry and slam)
 INPUTS = {"/scan": "scan", "/joint_states": "joint_states", "/cmd_vel": "cmd_vel"}
-SUBSCRIBERS = {"scan": 1, "joint_states": 2, "cmd_vel": 1}
+SUBSCRIBERS = {"scan": 2, "joint_states": 2, "cmd_vel": 1}
 NODE_MODULES = {
     "landmarks": "nuslam.landmarks_node",
     "slam": "nuslam.slam_node",
@@ -108,9 +109,10 @@ def commands(
     cProfile, which writes ``profile/<name>.prof`` when the process exits."""
     from nuturtle_ros_common.launch_parameters import ros_arguments
 
+    if profile is not None:
+        profile.mkdir(parents=True, exist_ok=True)
+
     def python(name: str) -> list[str]:
-        if profile is not None:
-            profile.mkdir(parents=True, exist_ok=True)
         profiler = [] if profile is None else ["-m", "cProfile", "-o", str(profile / f"{name}.prof")]
         return [sys.executable, "-P", *profiler, "-m"]
 
@@ -237,8 +239,10 @@ def run_layout(
     try:
         for name, argv in commands(layout, use_sim_time, model, folder, profile).items():
             (folder / name).mkdir(parents=True, exist_ok=True)
-            log = (folder / f"{name}.log").open("w")
-            processes[name] = subprocess.Popen(argv, env=env, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT)
+            with (folder / f"{name}.log").open("w") as log:
+                processes[name] = subprocess.Popen(
+                    argv, env=env, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT
+                )
         feeder = Feeder(bag, lease.domain_id, use_sim_time)
         feeder.wait_for_nodes(processes)
         before = {name: cpu_seconds(p.pid) for name, p in processes.items()}
