@@ -162,7 +162,6 @@ map never grows past ``max_landmarks``: what matters is the memory and time of `
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from enum import IntEnum
@@ -189,7 +188,7 @@ from .data_association import (
 from .geometry import Transform2D
 from .linearization import LINEARIZATIONS
 from .measurement_models import MeasurementModel, RangeBearing, range_bearing_noise
-from .motion_models import BatchMotionModel, MotionModel
+from .motion_models import MotionModel, composed_steps, finite_step
 from .slam_map import LandmarkMap
 from .slam_state import ROBOT_DIM, SlamState
 from .timebase import NS_PER_S
@@ -455,7 +454,7 @@ class EkfSlam:
         ValueError (filter unchanged) for an input the model refuses (non-finite values, ...) or turns into
         a non-finite pose, Jacobian or noise (an overflowing step).
         """
-        q_next, G, Q = _finite_step(self._motion.step(self.pose, u))
+        q_next, G, Q = finite_step(self._motion.step(self.pose, u))
         # P_qq' = G P_qq G^T + Q,  P_qm' = G P_qm
         self._state.predict(q_next, self._linearization.propagation_jacobian(self._state, G), Q)
         self._linearization.predicted(q_next)
@@ -474,12 +473,9 @@ class EkfSlam:
         """
         if len(inputs) == 0:
             return np.zeros((0, ROBOT_DIM))
-        if isinstance(self._motion, BatchMotionModel):
-            poses, G, Q = self._motion.steps(self.pose, inputs)
-        else:
-            poses, G, Q = _composed_steps(self._motion, self.pose, inputs)
+        poses, G, Q = composed_steps(self._motion, self.pose, inputs)
         # a non-finite pose anywhere carries on to the last one (the poses accumulate)
-        q_next, G, Q = _finite_step((poses[-1].copy(), G, Q))
+        q_next, G, Q = finite_step((poses[-1].copy(), G, Q))
         # P_qq' = G P_qq G^T + Q,  P_qm' = G P_qm
         self._state.predict(q_next, self._linearization.propagation_jacobian(self._state, G), Q)
         self._linearization.predicted(q_next)
@@ -497,7 +493,7 @@ class EkfSlam:
         T_map_body = self.pose
         P_qq = self._state.pose_covariance.copy()
         for step, u in enumerate(inputs):
-            q_next, G, Q = _finite_step(self._motion.step(T_map_body, u))
+            q_next, G, Q = finite_step(self._motion.step(T_map_body, u))
             # the first step from the filter's pose as predict takes it; the later ones start at their prior
             G = self._linearization.propagation_jacobian(self._state, G) if step == 0 else G
             # P_qq' = G P_qq G^T + Q
@@ -868,30 +864,3 @@ def _observations(
     if R is None:
         return z, model.noise(z)
     return z, covariance("R", R, (len(z), 2, 2), definite=True)
-
-
-def _finite_step(
-    step: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]],
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """A motion model's ``(q', G, Q)``, checked finite: ValueError otherwise (a step so large it overflows
-    would make ``P`` NaN for good)."""
-    q_next, G, Q = step
-    if not all(map(math.isfinite, [*q_next.tolist(), *G.ravel().tolist(), *Q.ravel().tolist()])):
-        raise ValueError("the motion step gives a non-finite pose, Jacobian or noise (an implausible input)")
-    return step
-
-
-def _composed_steps(
-    motion: MotionModel, T_map_body: Transform2D, inputs: Sequence[tuple]
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """``(poses (n, 3), G, Q)`` of consecutive ``inputs``, one ``motion.step`` each (see
-    :meth:`EkfSlam.predict_along`)."""
-    poses = np.empty((len(inputs), ROBOT_DIM))
-    G, Q = np.eye(ROBOT_DIM), np.zeros((ROBOT_DIM, ROBOT_DIM))
-    for k, u in enumerate(inputs):
-        q_k, G_k, Q_k = _finite_step(motion.step(T_map_body, u))
-        # G <- G_k G,  Q <- G_k Q G_k^T + Q_k
-        G, Q = G_k @ G, G_k @ Q @ G_k.T + Q_k
-        poses[k] = q_k
-        T_map_body = Transform2D(*q_k)
-    return poses, G, Q

@@ -83,6 +83,36 @@ class BatchMotionModel(MotionModel, Protocol):
     def steps(self, T_map_body: Transform2D, inputs: Sequence[tuple]) -> Steps: ...
 
 
+def finite_step(step: Step) -> Step:
+    """A motion model's ``(q', G, Q)``, checked finite: ValueError otherwise (a step so large it overflows
+    would make a filter's covariance NaN for good)."""
+    q_next, G, Q = step
+    if not all(map(math.isfinite, [*q_next.tolist(), *G.ravel().tolist(), *Q.ravel().tolist()])):
+        raise ValueError("the motion step gives a non-finite pose, Jacobian or noise (an implausible input)")
+    return step
+
+
+def composed_steps(motion: MotionModel, T_map_body: Transform2D, inputs: Sequence[tuple]) -> Steps:
+    """``(poses (n, 3), G, Q)`` of consecutive ``inputs`` from ``T_map_body`` as one composite step
+    (:class:`BatchMotionModel`): the model's own ``steps`` if it has them, else one checked ``step`` each::
+
+        G <- G_k G,   Q <- G_k Q G_k^T + Q_k
+
+    From the identity, ``poses[-1]`` is the motion ``T_start_end`` and ``Q`` its covariance in the start's
+    frame. ValueError for an input the model refuses or a non-finite step."""
+    if isinstance(motion, BatchMotionModel):
+        return motion.steps(T_map_body, inputs)
+    poses = np.empty((len(inputs), 3))
+    G, Q = np.eye(3), np.zeros((3, 3))
+    for k, u in enumerate(inputs):
+        q_k, G_k, Q_k = finite_step(motion.step(T_map_body, u))
+        # G <- G_k G,  Q <- G_k Q G_k^T + Q_k
+        G, Q = G_k @ G, G_k @ Q @ G_k.T + Q_k
+        poses[k] = q_k
+        T_map_body = Transform2D(*q_k)
+    return poses, G, Q
+
+
 def _arc_step(T_map_body: Transform2D, T_next: Transform2D, Q: NDArray[np.float64]) -> Step:
     """``(q', G, Q)`` for a move to ``T_next`` along an arc: ``G = [[1, 0, -dy], [0, 1, dx], [0, 0, 1]]``."""
     dx, dy = T_next.x - T_map_body.x, T_next.y - T_map_body.y

@@ -23,6 +23,7 @@ Signals:
 
 from __future__ import annotations
 
+import bisect
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol
@@ -97,3 +98,39 @@ class HeldInputs:
         if dt_ns == 0:
             return None
         return (*s_from, dt_ns)
+
+
+def signal_at(signal: MotionSignal, times: Sequence[int], samples: Sequence[Sample], t_ns: int) -> Sample:
+    """The signal's value at ``t_ns`` (``times[0] <= t_ns``; held after ``times[-1]``) from its samples
+    ``samples`` at increasing ``times``: the newest sample of equal time, else ``at`` between the samples
+    around it."""
+    k = bisect.bisect_right(times, t_ns) - 1
+    if k == len(times) - 1 or times[k] == t_ns:
+        return samples[k]
+    t0, t1 = times[k], times[k + 1]
+    return signal.at(samples[k], samples[k + 1], (t_ns - t0) / (t1 - t0))
+
+
+def signal_pieces(
+    signal: MotionSignal,
+    times: Sequence[int],
+    samples: Sequence[Sample],
+    t_from: int,
+    s_from: Sample,
+    t_to: int,
+) -> list[tuple[int, Sample, tuple | None]]:
+    """The motion from the value ``s_from`` at ``t_from`` to ``t_to`` (``t_from <= t_to``), one piece per
+    sample interval: ``(t_end, s_end, u)`` for every sample time in ``(t_from, t_to]`` and then ``t_to``
+    itself (its value from :func:`signal_at`), ``u`` the input over the piece or None where nothing moves.
+
+    A motion model must not take two intervals as one step: the motion (the arc's twist) changes at the
+    samples."""
+    first = bisect.bisect_right(times, t_from)
+    last = bisect.bisect_right(times, t_to)
+    ends = [(times[k], samples[k]) for k in range(first, last)]
+    ends.append((t_to, signal_at(signal, times, samples, t_to)))
+    pieces = []
+    for t_end, s_end in ends:
+        pieces.append((t_end, s_end, signal.input(s_from, s_end, t_end - t_from)))
+        t_from, s_from = t_end, s_end
+    return pieces

@@ -45,7 +45,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .ekf_slam import Association, CheckedObservations, EkfSlam
 from .geometry import Transform2D
-from .motion_signals import MotionSignal, Sample, timed_sample
+from .motion_signals import MotionSignal, Sample, signal_pieces, timed_sample
 from .slip_recovery import SlipRecovery
 from .timebase import NS_PER_S
 from .validation import integer, non_negative, positive, store
@@ -276,32 +276,22 @@ class SlamTimeline:
         handed to the filter together (:meth:`EkfSlam.predict_along`); if it refuses them, one by one, so
         that the filter stops right before the refused input.
         """
-        first = bisect.bisect_right(self._times, self._t_f)
-        last = bisect.bisect_right(self._times, t_ns)
-        ends = [(self._times[k], self._samples[k]) for k in range(first, last)]
-        ends.append((t_ns, self._sample_at(t_ns)))
-        stamps, inputs, moves = [], [], []
-        t_from, s_from = self._t_f, self._s_f
-        for t_to, s_to in ends:
-            u = self.signal.input(s_from, s_to, t_to - t_from)
-            moves.append(u is not None)
-            if u is not None:
-                stamps.append(t_to)
-                inputs.append(u)
-            t_from, s_from = t_to, s_to
+        pieces = signal_pieces(self.signal, self._times, self._samples, self._t_f, self._s_f, t_ns)
+        stamps = [t_to for t_to, _, u in pieces if u is not None]
+        inputs = [u for _, _, u in pieces if u is not None]
         try:
             self._keep_track(stamps, self.slam.predict_along(inputs))
         except ValueError:
             # one by one: the refused input raises again, with the filter right before it
             poses = []
             try:
-                for (t_to, s_to), moved in zip(ends, moves, strict=True):
+                for t_to, s_to, u in pieces:
                     self._predict_to(t_to, s_to)
-                    if moved:
+                    if u is not None:
                         poses.append(self.slam.pose.as_array())
             finally:
                 self._keep_track(stamps[: len(poses)], np.array(poses).reshape(-1, 3))
-        self._t_f, self._s_f = ends[-1]
+        self._t_f, self._s_f = pieces[-1][:2]
         # keep the last sample at or before t_f: interpolation from t_f needs it
         first_kept = bisect.bisect_right(self._times, t_ns) - 1
         if first_kept > 0:
@@ -317,11 +307,3 @@ class SlamTimeline:
         if u is not None:
             self.slam.predict(u)
         self._t_f, self._s_f = t_ns, sample
-
-    def _sample_at(self, t_ns: int) -> Sample:
-        """The signal's value at ``t_ns`` between the samples around it (the newest sample of equal time)."""
-        k = bisect.bisect_right(self._times, t_ns) - 1
-        if k == len(self._times) - 1 or self._times[k] == t_ns:
-            return self._samples[k]
-        t0, t1 = self._times[k], self._times[k + 1]
-        return self.signal.at(self._samples[k], self._samples[k + 1], (t_ns - t0) / (t1 - t0))
