@@ -99,7 +99,9 @@ class ExperimentResult:
     (at every motion sample and scan stamp), ``track`` (T, 3) at ``track_t_ns`` (T,); the final map
     (``landmark_ids`` (n,), ``landmarks`` (n, 2), ``landmark_covariances`` (n, 2, 2)); per observation
     status counts; CPU seconds of the whole run and the wall time (ms) of every timeline call that applied
-    a scan (its prediction up to the stamp and its update)."""
+    a scan (its prediction up to the stamp and its update); the filter's association of the applied scans
+    (``scans[first_scan:]``, in order): ``observation_landmark_ids`` (their K rows,) the landmark each
+    observation joined or started (-1: unused)."""
 
     t_ns: NDArray[np.int64]
     poses: NDArray[np.float64]
@@ -112,6 +114,8 @@ class ExperimentResult:
     status_counts: dict[str, int]
     cpu_seconds: float
     update_ms: NDArray[np.float64]
+    first_scan: int
+    observation_landmark_ids: NDArray[np.int64]
 
 
 def run_experiment(experiment: Experiment, progress: Callable[[int], None] | None = None) -> ExperimentResult:
@@ -131,7 +135,7 @@ def run_experiment(experiment: Experiment, progress: Callable[[int], None] | Non
     # samples of their stamp
     first_scan = int(np.searchsorted(scans.t_ns, t_motion[0], side="left"))
     scan_after = np.searchsorted(t_motion, scans.t_ns, side="right")
-    t_est, poses, covariances, update_ms = [], [], [], []
+    t_est, poses, covariances, update_ms, associated = [], [], [], [], []
     counts = {"matched": 0, "new": 0, "rejected": 0}
 
     def keep(applied: list, elapsed_ms: float) -> None:
@@ -139,6 +143,7 @@ def run_experiment(experiment: Experiment, progress: Callable[[int], None] | Non
             t_est.append(t_ns)
             poses.append(slam.pose.as_array())
             covariances.append(slam.pose_covariance)
+            associated.append(association.landmark_ids)
             tally = association.counts
             for status in counts:
                 counts[status] += tally[status]
@@ -177,4 +182,6 @@ def run_experiment(experiment: Experiment, progress: Callable[[int], None] | Non
         status_counts=counts,
         cpu_seconds=cpu_seconds,
         update_ms=np.array(update_ms),
+        first_scan=first_scan,
+        observation_landmark_ids=np.concatenate([np.zeros(0, dtype=np.int64), *associated]),
     )
