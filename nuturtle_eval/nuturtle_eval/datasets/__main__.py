@@ -30,8 +30,10 @@ from ..run_evaluation import write_metrics
 from ..run_folder import RunFolder, check_replaceable, error_line
 from .experiment import ASSOCIATIONS, Experiment, ExperimentResult, run_experiment
 
-# what a run writes into --out (the folder is replaced as a whole, nuturtle_eval.run_folder)
+# what a run writes into --out (the folder is replaced as a whole, nuturtle_eval.run_folder); --smooth adds
+# the side-by-side figures of filter and smoother
 OUTPUTS = ("metrics.json", "params.yaml", "trajectory.png", "errors.png", "nees.png")
+SMOOTHED_OUTPUTS = ("smoothed.png", "smoothed_errors.png")
 # the calibrate command's default window (docs/real_data.md: chosen on MRCLAM robot 1)
 WINDOW_S = 10.0
 
@@ -59,6 +61,11 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         command.add_argument("--params", type=Path, default=None, help="YAML with noise: and slam: overrides")
         command.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
         command.add_argument("--no-plots", dest="plots", action="store_false", help="metrics.json only")
+        command.add_argument(
+            "--smooth",
+            action="store_true",
+            help="also smooth the whole run (poses, map, associations) and report it beside the filter",
+        )
     calibrate = commands.add_parser(
         "calibrate", help="fit MRCLAM motion and measurement noise to its Vicon truth"
     )
@@ -90,14 +97,21 @@ def _write_run(
     """Run ``experiment`` with a progress bar, evaluate it and write the outputs into ``args.out``."""
     import yaml
 
-    from .figures import plot_errors, plot_nees, plot_trajectory
+    from .figures import plot_error_comparison, plot_errors, plot_nees, plot_side_by_side, plot_trajectory
 
     with _progress(len(experiment.motion_t_ns), args.progress, experiment.name) as bar:
         result = run_experiment(experiment, bar.update)
     evaluation = evaluate(experiment, result)
     metrics = {"run": experiment.name, **evaluation.metrics}
+    if args.smooth:
+        from .smoothing import smooth_run
+
+        print(f"{experiment.name}: smoothing {len(result.t_ns)} poses", file=sys.stderr)
+        smoothed, decisions = smooth_run(experiment, result, revise=experiment.scans.ids is None)
+        smoothed_evaluation = evaluate(experiment, smoothed)
+        metrics["smoothed"] = {**smoothed_evaluation.metrics, **decisions}
     # written into a staging folder that replaces args.out only once every file is there
-    folder = RunFolder(args.out, OUTPUTS)
+    folder = RunFolder(args.out, OUTPUTS + SMOOTHED_OUTPUTS)
     try:
         write_metrics(folder.path, metrics)
         (folder.path / "params.yaml").write_text(
@@ -107,6 +121,11 @@ def _write_run(
             plot_trajectory(folder.path / "trajectory.png", evaluation, experiment.name)
             plot_errors(folder.path / "errors.png", evaluation)
             plot_nees(folder.path / "nees.png", evaluation)
+            if args.smooth:
+                plot_side_by_side(
+                    folder.path / "smoothed.png", evaluation, smoothed_evaluation, experiment.name
+                )
+                plot_error_comparison(folder.path / "smoothed_errors.png", evaluation, smoothed_evaluation)
     except BaseException:
         folder.discard()
         raise
@@ -114,27 +133,33 @@ def _write_run(
     return metrics
 
 
+SUMMARY_KEYS = (
+    "ate_rmse_m",
+    "ate_rmse_aligned_m",
+    "landmark_rmse_m",
+    "landmark_rmse_aligned_m",
+    "landmark_nees_mean",
+    "landmarks_true",
+    "landmarks_mapped",
+    "landmarks_mapped_once",
+    "landmarks_spurious",
+    "landmarks_merged",
+    "nees_pose_mean",
+    "nees_pose_within_95_fraction",
+    "cpu_seconds",
+    "update_ms_median",
+    "update_ms_p99",
+)
+
+
 def summary(metrics: dict) -> str:
-    keys = (
-        "ate_rmse_m",
-        "ate_rmse_aligned_m",
-        "landmark_rmse_m",
-        "landmark_rmse_aligned_m",
-        "landmarks_true",
-        "landmarks_mapped",
-        "landmarks_mapped_once",
-        "landmarks_spurious",
-        "landmarks_merged",
-        "nees_pose_mean",
-        "nees_pose_within_95_fraction",
-        "cpu_seconds",
-        "update_ms_median",
-        "update_ms_p99",
-    )
-    lines = [metrics["run"]]
-    for key in keys:
-        value = metrics.get(key)
-        lines.append(f"  {key:32s} {value:.4g}" if isinstance(value, float) else f"  {key:32s} {value}")
+    """The main figures, one line each; with a smoothed run, filter and smoother side by side."""
+    smoothed = metrics.get("smoothed")
+    lines = [metrics["run"] if smoothed is None else f"{metrics['run']:41s}{'filter':>12s}{'smoother':>12s}"]
+    for key in SUMMARY_KEYS:
+        values = [metrics.get(key)] + ([] if smoothed is None else [smoothed.get(key)])
+        shown = "".join(f"{v:>12.4g}" if isinstance(v, float) else f"{v!s:>12s}" for v in values)
+        lines.append(f"  {key:32s}{shown}")
     return "\n".join(lines)
 
 
@@ -150,7 +175,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             from .mrclam import load_mrclam
 
             args.out = args.out or Path("results") / f"mrclam_robot{args.robot}_{args.association}"
-            check_replaceable(args.out, OUTPUTS)
+            check_replaceable(args.out, OUTPUTS + SMOOTHED_OUTPUTS)
             params = load_params(mrclam_params(args.association), args.params)
             recording = load_mrclam(args.data, args.robot)
             experiment = mrclam_experiment(recording, params, args.association)
@@ -160,7 +185,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             from .victoria import load_victoria
 
             args.out = args.out or Path("results") / "victoria_park"
-            check_replaceable(args.out, OUTPUTS)
+            check_replaceable(args.out, OUTPUTS + SMOOTHED_OUTPUTS)
             params = load_params(VICTORIA_PARAMS, args.params)
             recording = load_victoria(args.data)
             experiment = victoria_experiment(recording, params)

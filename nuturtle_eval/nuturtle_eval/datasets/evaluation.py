@@ -57,7 +57,7 @@ class Evaluation:
     ``error_labels``; ``nees`` (S,) with ``nees_dof``; the reference track
     ``reference_track`` (R, 2) and the estimate's track ``estimate_track`` (E, 2); the map (in the map frame)
     and the true landmarks (or None); ``T_align`` the rigid motion that best fits the estimate to the
-    reference; ``metrics``."""
+    reference and the position errors after it ``aligned_errors_m`` (S,); ``metrics``."""
 
     t_s: NDArray[np.float64]
     errors: NDArray[np.float64]
@@ -72,32 +72,38 @@ class Evaluation:
     landmark_covariances: NDArray[np.float64]
     true_landmarks: NDArray[np.float64] | None
     T_align: Transform2D
+    aligned_errors_m: NDArray[np.float64]
     metrics: dict
 
 
 def _trajectory_metrics(
     estimate_xy: NDArray[np.float64], reference_xy: NDArray[np.float64], nees: NDArray[np.float64], dof: int
-) -> tuple[dict, Transform2D]:
-    """ATE raw and after the best rigid alignment (returned), and the NEES statistics of one run."""
+) -> tuple[dict, Transform2D, NDArray[np.float64]]:
+    """ATE raw and after the best rigid alignment (returned, with the aligned errors (S,)), and the NEES
+    statistics of one run."""
     error_m = np.linalg.norm(estimate_xy - reference_xy, axis=1)
     T_align = align_se2(estimate_xy, reference_xy)
     aligned_error_m = np.linalg.norm(T_align @ estimate_xy - reference_xy, axis=1)
     low, high = chi2_bounds(dof, 1, NEES_PROB)
     finite = nees[np.isfinite(nees)]
-    return {
-        "ate_rmse_m": float(np.sqrt(np.mean(error_m**2))),
-        "ate_rmse_aligned_m": float(np.sqrt(np.mean(aligned_error_m**2))),
-        "ate_max_m": float(error_m.max()),
-        "alignment_rotation_rad": T_align.theta,
-        "nees_pose_mean": float(np.mean(finite)) if finite.size else float("nan"),
-        "nees_pose_median": float(np.median(finite)) if finite.size else float("nan"),
-        "nees_pose_within_95_fraction": float(np.mean((finite >= low) & (finite <= high)))
-        if finite.size
-        else 0.0,
-        "nees_dof": dof,
-        "nees_band_95": [low, high],
-        "evaluated_samples": int(len(error_m)),
-    }, T_align
+    return (
+        {
+            "ate_rmse_m": float(np.sqrt(np.mean(error_m**2))),
+            "ate_rmse_aligned_m": float(np.sqrt(np.mean(aligned_error_m**2))),
+            "ate_max_m": float(error_m.max()),
+            "alignment_rotation_rad": T_align.theta,
+            "nees_pose_mean": float(np.mean(finite)) if finite.size else float("nan"),
+            "nees_pose_median": float(np.median(finite)) if finite.size else float("nan"),
+            "nees_pose_within_95_fraction": float(np.mean((finite >= low) & (finite <= high)))
+            if finite.size
+            else 0.0,
+            "nees_dof": dof,
+            "nees_band_95": [low, high],
+            "evaluated_samples": int(len(error_m)),
+        },
+        T_align,
+        aligned_error_m,
+    )
 
 
 def _nees(errors: NDArray[np.float64], covariances: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -164,8 +170,13 @@ def _landmark_metrics(
         values["landmark_rmse_m"] = float(np.sqrt(np.mean(np.sum((p - q) ** 2, axis=1))))
         aligned = align_se2(p, q) @ p
         values["landmark_rmse_aligned_m"] = float(np.sqrt(np.mean(np.sum((aligned - q) ** 2, axis=1))))
+        # map frame: the start ties it to the Vicon frame, and each marginal holds that frame's uncertainty
+        values["landmark_nees_mean"] = float(
+            np.mean(pose_nees(p - q, result.landmark_covariances[mapped_index]))
+        )
     else:
         values["landmark_rmse_m"] = values["landmark_rmse_aligned_m"] = float("nan")
+        values["landmark_nees_mean"] = float("nan")
     return values
 
 
@@ -185,7 +196,7 @@ def evaluate_mrclam(
     errors = poses - truth
     errors[:, 2] = normalize_angles(errors[:, 2])
     nees = _nees(errors, P)
-    metrics, T_align = _trajectory_metrics(poses[:, :2], truth[:, :2], nees, 3)
+    metrics, T_align, aligned_errors_m = _trajectory_metrics(poses[:, :2], truth[:, :2], nees, 3)
     metrics.update(_landmark_metrics(result, recording, experiment.scans.ids is not None, T_align, gate_m))
     metrics.update(_timing_metrics(experiment, result))
     in_run = (recording.truth_t_ns >= t0) & (recording.truth_t_ns <= experiment.motion_t_ns[-1])
@@ -203,6 +214,7 @@ def evaluate_mrclam(
         landmark_covariances=result.landmark_covariances,
         true_landmarks=recording.landmark_xy,
         T_align=T_align,
+        aligned_errors_m=aligned_errors_m,
         metrics=metrics,
     )
 
@@ -223,7 +235,7 @@ def evaluate_victoria(
     covariance = np.column_stack([np.interp(t_rel, t_est, flat[:, i]) for i in range(4)]).reshape(-1, 2, 2)
     errors = estimate - gps
     nees = _nees(errors, covariance)
-    metrics, T_align = _trajectory_metrics(estimate, gps, nees, 2)
+    metrics, T_align, aligned_errors_m = _trajectory_metrics(estimate, gps, nees, 2)
     metrics.update(
         {
             "gps_fixes_used": int(covered.sum()),
@@ -234,6 +246,7 @@ def evaluate_victoria(
             "landmarks_merged": None,
             "landmark_rmse_m": None,
             "landmark_rmse_aligned_m": None,
+            "landmark_nees_mean": None,
         }
     )
     metrics.update(_timing_metrics(experiment, result))
@@ -251,5 +264,6 @@ def evaluate_victoria(
         landmark_covariances=result.landmark_covariances,
         true_landmarks=None,
         T_align=T_align,
+        aligned_errors_m=aligned_errors_m,
         metrics=metrics,
     )

@@ -31,6 +31,38 @@ def plot_trajectory(path: str | Path, evaluation: Evaluation, title: str) -> Non
     figure.savefig(path)
 
 
+def plot_side_by_side(path: str | Path, filtered: Evaluation, smoothed: Evaluation, title: str) -> None:
+    """smoothed.png: the filter's run (left) and the smoothed run (right), each after its own rigid
+    alignment to the reference, with their maps and 2-sigma ellipses."""
+    figure = new_figure(14.0, 7.0)
+    for axes, evaluation, label in zip(
+        figure.subplots(1, 2), (filtered, smoothed), ("filter", "smoother"), strict=True
+    ):
+        _draw_run(axes, evaluation, evaluation.T_align)
+        ate = evaluation.metrics["ate_rmse_aligned_m"]
+        axes.set_title(f"{title}: {label}, aligned (ATE {ate:.3f} m)")
+    figure.savefig(path)
+
+
+def plot_error_comparison(path: str | Path, filtered: Evaluation, smoothed: Evaluation) -> None:
+    """smoothed_errors.png: the position error against the reference over time, filter and smoother, in
+    the map frame (top) and after each one's rigid alignment (bottom)."""
+    figure = new_figure(9.0, 5.5)
+    top, bottom = figure.subplots(2, 1, sharex=True)
+    for evaluation, label, color in ((filtered, "filter", SLAM_COLOR), (smoothed, "smoother", "black")):
+        top.plot(evaluation.t_s, np.linalg.norm(evaluation.errors[:, :2], axis=1), color=color,
+                 linewidth=0.7, label=label)  # fmt: skip
+        bottom.plot(evaluation.t_s, evaluation.aligned_errors_m, color=color, linewidth=0.7, label=label)
+    top.set_ylabel("position error (m)")
+    bottom.set_ylabel("aligned error (m)")
+    bottom.set_xlabel("time since start (s)")
+    top.set_title(f"Position error against {filtered.reference_label}")
+    for axes in (top, bottom):
+        axes.grid(True, alpha=0.3)
+        axes.legend(loc="upper right", fontsize="small")
+    figure.savefig(path)
+
+
 def _draw_run(axes, evaluation: Evaluation, T: Transform2D) -> None:
     """The reference, the estimate and the map moved by ``T`` on ``axes``."""
     style = "-" if evaluation.true_landmarks is not None else "."

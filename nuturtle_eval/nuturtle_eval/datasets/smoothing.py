@@ -25,6 +25,10 @@ from turtlelib.smoothing_problem import SmoothingProblem, relative_motions, view
 
 from .experiment import Experiment, ExperimentResult
 
+# the smoother's defaults, chosen on MRCLAM Dataset 7 robot 1 (docs/real_data.md, "Smoother"): a narrow
+# kernel, since the camera's errors have heavy tails (barcode misreads, tubes hiding each other)
+SMOOTHER = SmootherConfig(kernel_width=1.0)
+REVISION = RevisionConfig()
 # (m, rad) added to each motion factor's standard deviations: keeps a standing robot's factor invertible,
 # far below every sensor's resolution
 MIN_MOTION_STD = 1e-4
@@ -93,16 +97,17 @@ def _noise_model(config: SlamConfig, poses: np.ndarray) -> Callable[[SmoothingPr
 def smooth_run(
     experiment: Experiment,
     result: ExperimentResult,
-    config: SmootherConfig | None = None,
-    revision: RevisionConfig | None = None,
+    revise: bool,
+    config: SmootherConfig = SMOOTHER,
+    revision: RevisionConfig = REVISION,
 ) -> tuple[ExperimentResult, dict]:
     """The smoothed run as an :class:`ExperimentResult` (module docstring; ``cpu_seconds`` the smoother's,
-    building the factors included) and what it decided: with ``revision``, the filter's associations are
-    revised (:func:`turtlelib.smoothed_association.revise_associations`)."""
+    building the factors included) and what it decided: with ``revise`` (unknown association), the filter's
+    associations are revised (:func:`turtlelib.smoothed_association.revise_associations`)."""
     cpu_start = time.process_time()
     problem, poses, landmark_ids, landmarks, noise = smoothing_problem(experiment, result)
     smoother = Smoother(experiment.config.measurement_model(), config)
-    if revision is None:
+    if not revise:
         smoothed = smoother.solve(problem, poses, landmark_ids, landmarks)
         decisions = {}
     else:
