@@ -42,7 +42,7 @@ class RevisionConfig:
     an observation's squared Mahalanobis distance makes it an inlier (both in (0, 1)); ``min_support`` the
     inlier observations a landmark needs (>= 1); ``max_rounds`` smoothings at most (>= 1)."""
 
-    merge_gate: float = 0.99
+    merge_gate: float = 0.999
     inlier_gate: float = 0.99
     min_support: int = 3
     max_rounds: int = 20
@@ -89,8 +89,8 @@ def revise_associations(
     created: list[int] = []
     # new landmarks get ids above every id of the run
     next_id = int(landmark_ids.max(initial=-1)) + 1
-    for _ in range(config.max_rounds):
-        run = smoother.solve(problem, poses, landmark_ids, landmarks)
+    for round_ in range(config.max_rounds):
+        run = smoother.solve(problem, poses, landmark_ids, landmarks, near_optimum=round_ > 0)
         poses, landmarks = run.poses, run.landmarks
         pairs = compatible_pairs(run, problem, config.merge_gate)
         if pairs:
@@ -133,7 +133,7 @@ def revise_associations(
             ),
             noise,
         )
-    run = smoother.solve(problem, poses, landmark_ids, landmarks)
+    run = smoother.solve(problem, poses, landmark_ids, landmarks, near_optimum=True)
     outliers = int((run.mahalanobis2 >= chdtri(2, 1.0 - config.inlier_gate)).sum())
     return Revision(run, problem, merged, np.array(removed, dtype=np.int64), created, outliers)
 

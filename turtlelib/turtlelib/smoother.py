@@ -61,7 +61,7 @@ class SmootherConfig:
 
     kernel_width: float = 3.0
     max_iterations: int = 50
-    tolerance: float = 1e-9
+    tolerance: float = 1e-6
 
     def __post_init__(self) -> None:
         store(self, ("kernel_width", "tolerance"), positive)
@@ -115,9 +115,13 @@ class Smoother:
         poses: NDArray[np.float64],
         landmark_ids: NDArray[np.int64],
         landmarks: NDArray[np.float64],
+        *,
+        near_optimum: bool = False,
     ) -> SmoothedRun:
         """The optimum from the warm start ``poses`` (P, 3) and ``landmarks`` (n, 2) of ``landmark_ids`` (n,)
-        (every observed id among them). ValueError for a warm start that does not fit the problem."""
+        (every observed id among them); ``near_optimum`` (a warm start that is a previous optimum of a
+        slightly changed problem) skips the least-squares stage. ValueError for a warm start that does not
+        fit the problem."""
         poses = np.array(poses, dtype=np.float64)
         landmarks = np.array(landmarks, dtype=np.float64).reshape(-1, 2)
         landmark_ids = np.asarray(landmark_ids, dtype=np.int64)
@@ -132,7 +136,8 @@ class Smoother:
         system = _System(problem, self._measurement, slot, len(landmark_ids))
         x = np.concatenate([poses.ravel(), landmarks.ravel()])
         iterations = 0
-        for width in (np.inf, self._config.kernel_width):
+        widths = (self._config.kernel_width,) if near_optimum else (np.inf, self._config.kernel_width)
+        for width in widths:
             x, used = system.minimise(x, width, self._config.max_iterations, self._config.tolerance)
             iterations += used
         lin = system.linearise(x, self._config.kernel_width)
