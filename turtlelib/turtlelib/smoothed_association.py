@@ -227,13 +227,15 @@ def _observed_points(
     run: SmoothedRun, problem: SmoothingProblem, measurement: MeasurementModel
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Every observation's map point ``p_j = g(q_k, z_j)`` (K, 2) from the smoothed poses and its covariance
-    ``G_z R_j G_z^T`` (K, 2, 2)."""
-    points, covariances = np.empty((len(problem.z), 2)), np.empty((len(problem.z), 2, 2))
-    for k in np.unique(problem.observation_pose):
-        rows = np.flatnonzero(problem.observation_pose == k)
-        points[rows], _, G_z = measurement.inverse(run.poses[k], problem.z[rows])
-        covariances[rows] = G_z @ problem.R[rows] @ np.swapaxes(G_z, 1, 2)
-    return points, covariances
+    ``G_z R_j G_z^T`` (K, 2, 2), through the relative model: ``g(q, z) = p + R(theta) g(0, z)`` and
+    ``G_z(q) = R(theta) G_z(0)``."""
+    q = run.poses[problem.observation_pose]
+    p_body, _, G_z0 = measurement.inverse(np.zeros(3), problem.z)
+    c, s = np.cos(q[:, 2]), np.sin(q[:, 2])
+    R = np.stack([np.column_stack([c, -s]), np.column_stack([s, c])], axis=1)
+    G_z = R @ G_z0
+    points = q[:, :2] + np.einsum("kij,kj->ki", R, p_body)
+    return points, G_z @ problem.R @ np.swapaxes(G_z, 1, 2)
 
 
 def _relabelled(

@@ -179,11 +179,6 @@ class _System:
         self.U_prior = _whitening(problem.prior_covariance[None])[0]
         self.U_motion = _whitening(problem.motion_covariance)
         self.U_obs = _whitening(problem.R)
-        # observations grouped by pose (stable), for one measurement-model call per pose
-        self.obs_order = np.argsort(problem.observation_pose, kind="stable")
-        pose_of = problem.observation_pose[self.obs_order]
-        self.groups = np.flatnonzero(np.r_[True, pose_of[1:] != pose_of[:-1]]) if len(pose_of) else []
-        self.group_ends = np.r_[self.groups[1:], len(pose_of)].astype(int) if len(pose_of) else []
         self.slot = slot
         n_motion = problem.n_poses - 1
         self.motion_row0 = 3
@@ -232,17 +227,24 @@ class _System:
         block(self.U_motion @ A, motion_rows, 3 * np.arange(len(q0)))
         block(self.U_motion @ B, motion_rows, 3 * np.arange(1, len(q0) + 1))
 
-        # observations: r = z (-) h(q, m), dr/dq = -H_robot, dr/dm = -H_landmark
-        K = len(problem.z)
-        r_obs, H_q, H_m = np.empty((K, 2)), np.empty((K, 2, 3)), np.empty((K, 2, 2))
-        for first, end in zip(self.groups, self.group_ends, strict=True):
-            j = self.obs_order[first:end]
-            k = problem.observation_pose[j[0]]
-            z_hat, H_q[j], H_m[j] = self.measurement.predict(q[k], m[self.slot[j]])
-            r_obs[j] = self.measurement.residual(problem.z[j], z_hat)
+        # observations: r = z (-) h(q, m), dr/dq = -dh/dq, dr/dm = -dh/dm, all at once through the relative
+        # model: h(q, m) = h(0, p) with p = R(theta)^T (m - p_body) the landmark in the body frame, so
+        # dh/dm = H_0 R^T, dh/dp_body = -H_0 R^T, dh/dtheta = H_0 dp/dtheta = H_0 (-J p) = H_0 [p_y, -p_x]
+        q_obs = q[problem.observation_pose]
+        cos_obs, sin_obs = np.cos(q_obs[:, 2]), np.sin(q_obs[:, 2])
+        R_t = np.empty((len(q_obs), 2, 2))
+        R_t[:, 0, 0], R_t[:, 0, 1], R_t[:, 1, 0], R_t[:, 1, 1] = cos_obs, sin_obs, -sin_obs, cos_obs
+        p_body = np.einsum("kij,kj->ki", R_t, m[self.slot] - q_obs[:, :2])
+        z_hat, _, H_0 = self.measurement.predict(np.zeros(3), p_body)
+        r_obs = self.measurement.residual(problem.z, z_hat)
+        H_m = H_0 @ R_t
+        H_q = np.empty((len(q_obs), 2, 3))
+        H_q[:, :, :2] = -H_m
+        H_q[:, :, 2] = np.einsum("kij,kj->ki", H_0, np.column_stack([p_body[:, 1], -p_body[:, 0]]))
         e_obs = np.einsum("kij,kj->ki", self.U_obs, r_obs)
         s_obs = np.einsum("ki,ki->k", e_obs, e_obs)
         # IRLS: rows scaled by sqrt(w), w = rho'(s) = 1 / (1 + s / c^2)
+        K = len(problem.z)
         weights = np.ones(K) if np.isinf(width) else 1.0 / (1.0 + s_obs / width**2)
         root_w = np.sqrt(weights)[:, None]
         obs_rows = self.obs_row0 + 2 * np.arange(K)
