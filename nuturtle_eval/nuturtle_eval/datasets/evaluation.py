@@ -96,7 +96,7 @@ def _trajectory_metrics(
             "nees_pose_median": float(np.median(finite)) if finite.size else float("nan"),
             "nees_pose_within_95_fraction": float(np.mean((finite >= low) & (finite <= high)))
             if finite.size
-            else 0.0,
+            else float("nan"),
             "nees_dof": dof,
             "nees_band_95": [low, high],
             "evaluated_samples": int(len(error_m)),

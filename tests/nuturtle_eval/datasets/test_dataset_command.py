@@ -85,6 +85,37 @@ def test_mrclam_excerpt_end_to_end(tmp_path, association, capsys):
     assert metrics["scans_applied"] > 0
 
 
+@pytest.mark.parametrize("association", ["known", "unknown"])
+def test_smooth_reports_the_smoother_beside_the_unchanged_filter(tmp_path, association, capsys):
+    argv = [
+        "mrclam",
+        "--data",
+        str(DATA / "mrclam7_robot1_60s"),
+        "--robot",
+        "1",
+        "--association",
+        association,
+    ]
+    assert main([*argv, "--out", str(tmp_path / "filter"), "--no-progress"]) == 0
+    capsys.readouterr()
+    assert main([*argv, "--out", str(tmp_path / "both"), "--no-progress", "--smooth"]) == 0
+    assert "smoother" in capsys.readouterr().out
+    alone, both = _outputs(tmp_path / "filter"), _outputs(tmp_path / "both")
+    for name in ("smoothed.png", "smoothed_errors.png"):
+        assert (tmp_path / "both" / name).read_bytes()[:8] == PNG_MAGIC
+    smoothed = both.pop("smoothed")
+    # the filter's figures are those of the run without --smooth (its CPU time aside)
+    for metrics in (alone, both):
+        metrics.pop("cpu_seconds"), metrics.pop("update_ms_median"), metrics.pop("update_ms_p99")
+    assert both == alone
+    assert REQUIRED_KEYS <= set(smoothed)
+    # the smoother re-estimates the past: no pose covariance, an aligned track at least as good
+    assert smoothed["nees_pose_mean"] is None and smoothed["cpu_seconds"] > 0.0
+    assert smoothed["ate_rmse_aligned_m"] <= alone["ate_rmse_aligned_m"]
+    assert smoothed["landmarks_true"] == 15 and smoothed["landmarks_mapped"] >= 1
+    assert ("landmarks_merged_by_smoother" in smoothed) == (association == "unknown")
+
+
 def test_victoria_excerpt_end_to_end(tmp_path):
     out = tmp_path / "run"
     assert main(["victoria", "--data", str(DATA / "victoria_30s"), "--out", str(out), "--no-progress"]) == 0
