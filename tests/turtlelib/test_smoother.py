@@ -185,7 +185,7 @@ def revision_case(labels_of):
 
 def revise(poses, problem, ids, landmark_xy):
     smoother = Smoother(MEASUREMENT, ROBUST)
-    return revise_associations(smoother, problem, poses, ids, landmark_xy, lambda p: p.R)
+    return revise_associations(smoother, problem, poses, ids, landmark_xy, lambda p: np.ones(len(p.z)))
 
 
 def test_a_duplicate_is_merged():
@@ -221,6 +221,7 @@ def test_an_unsupported_landmark_is_removed():
         observation_landmark=np.insert(problem.observation_landmark, spurious, 77),
         z=np.insert(problem.z, spurious, [1.0, 0.0], axis=0),
         R=np.insert(problem.R, spurious, problem.R[0], axis=0),
+        noise_scale=np.ones(len(problem.z) + 1),
     )
     T_map_sensor = Transform2D(*poses[4]) @ SENSOR
     xy = np.vstack([landmarks, T_map_sensor @ np.array([1.0, 0.0])])

@@ -46,6 +46,7 @@ from numpy.typing import ArrayLike, NDArray
 from .ekf_slam import Association, CheckedObservations, EkfSlam
 from .geometry import Transform2D
 from .motion_signals import MotionSignal, Sample, signal_pieces, timed_sample
+from .run_history import RunHistory
 from .slip_recovery import SlipRecovery
 from .timebase import NS_PER_S
 from .validation import integer, non_negative, positive, store
@@ -88,7 +89,10 @@ class SlamTimeline:
     offline run) is saved, and a refused sample leaves the filter where the refusal stopped it: for runs
     that end on the first error (recorded data). With ``recovery`` the scans go through it
     (:class:`turtlelib.slip_recovery.SlipRecovery`: motion the LiDAR contradicts is detected and the filter
-    relocalized against its map) instead of straight to the filter.
+    relocalized against its map) instead of straight to the filter. With ``keep_history`` the timeline
+    records the run for a smoother (:attr:`history`, :class:`turtlelib.run_history.RunHistory`; it grows
+    with the run), starting again at each :meth:`restart`, relocalization by ``recovery`` and
+    :meth:`break_history` (for a filter moved from outside: a reset, a new initial pose).
     """
 
     def __init__(
@@ -100,6 +104,7 @@ class SlamTimeline:
         keep_track: bool = False,
         check_motion: bool = True,
         recovery: SlipRecovery | None = None,
+        keep_history: bool = False,
     ) -> None:
         self.slam = slam
         self.recovery = recovery
@@ -115,6 +120,7 @@ class SlamTimeline:
         self._s_f: Sample = ()
         self._pending: list[_Observation] = []
         self._track: list[tuple[NDArray[np.int64], NDArray[np.float64]]] | None = [] if keep_track else None
+        self.history: RunHistory | None = RunHistory() if keep_history else None
 
     @property
     def filter_time_ns(self) -> int | None:
@@ -146,6 +152,7 @@ class SlamTimeline:
         if t_w is None:
             self._times, self._samples = [t_ns], [sample]
             self._t_f, self._s_f = t_ns, sample
+            self._begin_history(t_ns, sample)
             return []
         if t_ns < t_w:
             raise ValueError(f"time went backwards: motion sample at {t_ns} ns after one at {t_w} ns")
@@ -154,6 +161,8 @@ class SlamTimeline:
         released = [o.t_ns for o in self._pending if o.t_ns <= t_ns]
         self._times.append(t_ns)
         self._samples.append(sample)
+        if self.history is not None:
+            self.history.add_motion(t_ns, sample)
         applied = [self._apply(self._pending.pop(0)) for _ in released]
         if t_ns - self._delay_ns > self._t_f:
             self._advance_to(t_ns - self._delay_ns)
@@ -216,6 +225,18 @@ class SlamTimeline:
         self._times, self._samples = [t_ns], [sample]
         self._t_f, self._s_f = t_ns, sample
         self._pending.clear()
+        self._begin_history(t_ns, sample)
+
+    def break_history(self) -> None:
+        """Start the kept history again from the filter as it is now (at ``t_f``): for a filter whose
+        estimate was moved from outside the timeline (a reset, a new initial pose); nothing without
+        ``keep_history`` or before the first motion sample."""
+        if self._t_f is None or self.history is None:
+            return
+        self._begin_history(self._t_f, self._s_f)
+        for t_ns, sample in zip(self._times, self._samples, strict=True):
+            if t_ns > self._t_f:
+                self.history.add_motion(t_ns, sample)
 
     def take_track(self) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
         """The filter's pose mean after every prediction since the last call, as stamps (m,) (ns) and poses
@@ -262,11 +283,25 @@ class SlamTimeline:
 
     def _apply(self, observation: _Observation) -> tuple[int, Association]:
         self._advance_to(observation.t_ns)
+        checked = observation.observations
         if self.recovery is None:
-            return observation.t_ns, self.slam.update(observation.observations, stamp_ns=observation.t_ns)
-        return observation.t_ns, self.recovery.update(
-            self.slam, observation.observations, stamp_ns=observation.t_ns
-        )
+            association = self.slam.update(checked, stamp_ns=observation.t_ns)
+            relocalized = False
+        else:
+            before = self.recovery.status.relocalized
+            association = self.recovery.update(self.slam, checked, stamp_ns=observation.t_ns)
+            relocalized = self.recovery.status.relocalized != before
+        if relocalized:
+            self.break_history()
+        elif self.history is not None:
+            self.history.add_scan(
+                observation.t_ns, checked.z, checked.R, association.landmark_ids, self.slam.pose.as_array()
+            )
+        return observation.t_ns, association
+
+    def _begin_history(self, t_ns: int, sample: Sample) -> None:
+        if self.history is not None:
+            self.history.begin(t_ns, sample, self.slam.pose.as_array(), self.slam.pose_covariance)
 
     def _advance_to(self, t_ns: int) -> None:
         """Predict the filter from ``t_f`` to ``t_ns`` (``t_f <= t_ns <= t_w``) and drop older samples.

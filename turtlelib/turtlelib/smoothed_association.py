@@ -76,12 +76,12 @@ def revise_associations(
     poses: NDArray[np.float64],
     landmark_ids: NDArray[np.int64],
     landmarks: NDArray[np.float64],
-    noise: Callable[[SmoothingProblem], NDArray[np.float64]],
+    rescale: Callable[[SmoothingProblem], NDArray[np.float64]],
     config: RevisionConfig | None = None,
 ) -> Revision:
     """Smooth, merge, remove, smooth again (module docstring) from the warm start ``poses``, ``landmarks`` of
-    ``landmark_ids``. ``noise(problem)`` gives the observations' ``R`` (K, 2, 2) of a problem's labelling
-    (correlated errors depend on which views belong together)."""
+    ``landmark_ids``. ``rescale(problem)`` gives the observations' ``noise_scale`` (K,) of a problem's
+    labelling (correlated errors depend on which views belong together)."""
     config = RevisionConfig() if config is None else config
     landmark_ids = np.asarray(landmark_ids, dtype=np.int64)
     merged: list[tuple[int, int]] = []
@@ -99,7 +99,7 @@ def revise_associations(
                 labels[labels == gone] = kept
             keep = ~np.isin(landmark_ids, [gone for _, gone in pairs])
             landmark_ids, landmarks = landmark_ids[keep], landmarks[keep]
-            problem = _relabelled(replace(problem, observation_landmark=labels), noise)
+            problem = _relabelled(replace(problem, observation_landmark=labels), rescale)
             merged += pairs
             continue
         inliers = run.mahalanobis2 < chdtri(2, 1.0 - config.inlier_gate)
@@ -118,7 +118,7 @@ def revise_associations(
                 landmark_ids, landmarks = np.r_[landmark_ids, next_id], np.vstack([landmarks, xy])
                 created.append(next_id)
                 next_id += 1
-            problem = _relabelled(replace(problem, observation_landmark=labels), noise)
+            problem = _relabelled(replace(problem, observation_landmark=labels), rescale)
             continue
         removed += landmark_ids[weak].tolist()
         kept_obs = ~weak[slot]
@@ -130,8 +130,9 @@ def revise_associations(
                 observation_landmark=problem.observation_landmark[kept_obs],
                 z=problem.z[kept_obs],
                 R=problem.R[kept_obs],
+                noise_scale=problem.noise_scale[kept_obs],
             ),
-            noise,
+            rescale,
         )
     run = smoother.solve(problem, poses, landmark_ids, landmarks, near_optimum=True)
     outliers = int((run.mahalanobis2 >= chdtri(2, 1.0 - config.inlier_gate)).sum())
@@ -235,11 +236,11 @@ def _observed_points(
     R = np.stack([np.column_stack([c, -s]), np.column_stack([s, c])], axis=1)
     G_z = R @ G_z0
     points = q[:, :2] + np.einsum("kij,kj->ki", R, p_body)
-    return points, G_z @ problem.R @ np.swapaxes(G_z, 1, 2)
+    return points, G_z @ problem.observation_covariance @ np.swapaxes(G_z, 1, 2)
 
 
 def _relabelled(
-    problem: SmoothingProblem, noise: Callable[[SmoothingProblem], NDArray[np.float64]]
+    problem: SmoothingProblem, rescale: Callable[[SmoothingProblem], NDArray[np.float64]]
 ) -> SmoothingProblem:
-    """``problem`` with the noise of its (new) labelling."""
-    return replace(problem, R=noise(problem))
+    """``problem`` with the noise scales of its (new) labelling."""
+    return replace(problem, noise_scale=rescale(problem))

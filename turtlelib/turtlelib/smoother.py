@@ -178,7 +178,7 @@ class _System:
         # whitening L^-1 of every factor's covariance S = L L^T
         self.U_prior = _whitening(problem.prior_covariance[None])[0]
         self.U_motion = _whitening(problem.motion_covariance)
-        self.U_obs = _whitening(problem.R)
+        self.U_obs = _whitening(problem.observation_covariance)
         self.slot = slot
         n_motion = problem.n_poses - 1
         self.motion_row0 = 3

@@ -39,9 +39,11 @@ from .motion_signals import MotionSignal, Sample, signal_at, signal_pieces
 class SmoothingProblem:
     """The factors of a run (module docstring): ``pose_t_ns`` (P,) increasing pose stamps; the start prior
     ``prior_mean`` (3,) and ``prior_covariance`` (3, 3) on pose 0; ``motion_delta`` (P-1, 3) and
-    ``motion_covariance`` (P-1, 3, 3) between consecutive poses; observations ``z`` (K, 2) with noise ``R``
-    (K, 2, 2), made from pose ``observation_pose`` (K,) (indices) of landmark ``observation_landmark`` (K,)
-    (ids). ValueError for inconsistent shapes."""
+    ``motion_covariance`` (P-1, 3, 3) between consecutive poses; observations ``z`` (K, 2) with their own
+    noise ``R`` (K, 2, 2), made from pose ``observation_pose`` (K,) (indices) of landmark
+    ``observation_landmark`` (K,) (ids); each observation's factor has the covariance ``noise_scale R``
+    (``noise_scale`` (K,), default ones: the viewpoint scale of correlated errors, which depends on the
+    labelling). ValueError for inconsistent shapes."""
 
     pose_t_ns: NDArray[np.int64]
     prior_mean: NDArray[np.float64]
@@ -52,9 +54,12 @@ class SmoothingProblem:
     observation_landmark: NDArray[np.int64]
     z: NDArray[np.float64]
     R: NDArray[np.float64]
+    noise_scale: NDArray[np.float64] | None = None
 
     def __post_init__(self) -> None:
         n_poses, n_obs = len(self.pose_t_ns), len(self.z)
+        if self.noise_scale is None:
+            object.__setattr__(self, "noise_scale", np.ones(n_obs))
         if n_poses < 1 or np.any(np.diff(self.pose_t_ns) <= 0):
             raise ValueError("pose stamps must be at least one, strictly increasing")
         shapes = {
@@ -66,6 +71,7 @@ class SmoothingProblem:
             "observation_landmark": (self.observation_landmark, (n_obs,)),
             "z": (self.z, (n_obs, 2)),
             "R": (self.R, (n_obs, 2, 2)),
+            "noise_scale": (self.noise_scale, (n_obs,)),
         }
         for name, (value, shape) in shapes.items():
             if np.shape(value) != shape:
@@ -76,6 +82,11 @@ class SmoothingProblem:
     @property
     def n_poses(self) -> int:
         return len(self.pose_t_ns)
+
+    @property
+    def observation_covariance(self) -> NDArray[np.float64]:
+        """(K, 2, 2) ``noise_scale R``: each observation factor's covariance."""
+        return self.R * self.noise_scale[:, None, None]
 
 
 def relative_motions(

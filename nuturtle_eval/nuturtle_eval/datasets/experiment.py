@@ -30,6 +30,7 @@ from turtlelib import (
     TimelineConfig,
     Transform2D,
 )
+from turtlelib.run_history import RunHistory
 from turtlelib.timebase import NS_PER_S
 
 # data association: landmark ids given with the observations (known) or found by the filter (unknown)
@@ -99,9 +100,8 @@ class ExperimentResult:
     (at every motion sample and scan stamp), ``track`` (T, 3) at ``track_t_ns`` (T,); the final map
     (``landmark_ids`` (n,), ``landmarks`` (n, 2), ``landmark_covariances`` (n, 2, 2)); per observation
     status counts; CPU seconds of the whole run and the wall time (ms) of every timeline call that applied
-    a scan (its prediction up to the stamp and its update); the filter's association of the applied scans
-    (``scans[first_scan:]``, in order): ``observation_landmark_ids`` (their K rows,) the landmark each
-    observation joined or started (-1: unused)."""
+    a scan (its prediction up to the stamp and its update); the run's ``history`` for a smoother (the
+    motion samples, each applied scan's observations, associations and pose)."""
 
     t_ns: NDArray[np.int64]
     poses: NDArray[np.float64]
@@ -114,8 +114,7 @@ class ExperimentResult:
     status_counts: dict[str, int]
     cpu_seconds: float
     update_ms: NDArray[np.float64]
-    first_scan: int
-    observation_landmark_ids: NDArray[np.int64]
+    history: RunHistory
 
 
 def run_experiment(experiment: Experiment, progress: Callable[[int], None] | None = None) -> ExperimentResult:
@@ -129,13 +128,15 @@ def run_experiment(experiment: Experiment, progress: Callable[[int], None] | Non
     # predicted as one batch (SlamTimeline, EkfSlam.predict_along)
     hold = TimelineConfig(max_observation_delay=(int(t_motion[-1]) - int(t_motion[0])) / NS_PER_S)
     # recorded data: a refused sample ends the run, so the timeline need not check samples ahead
-    timeline = SlamTimeline(slam, experiment.signal, hold, keep_track=True, check_motion=False)
+    timeline = SlamTimeline(
+        slam, experiment.signal, hold, keep_track=True, check_motion=False, keep_history=True
+    )
     scans = experiment.scans
     # scans before the first motion sample cannot be placed in time; the others go after the motion
     # samples of their stamp
     first_scan = int(np.searchsorted(scans.t_ns, t_motion[0], side="left"))
     scan_after = np.searchsorted(t_motion, scans.t_ns, side="right")
-    t_est, poses, covariances, update_ms, associated = [], [], [], [], []
+    t_est, poses, covariances, update_ms = [], [], [], []
     counts = {"matched": 0, "new": 0, "rejected": 0}
 
     def keep(applied: list, elapsed_ms: float) -> None:
@@ -143,7 +144,6 @@ def run_experiment(experiment: Experiment, progress: Callable[[int], None] | Non
             t_est.append(t_ns)
             poses.append(slam.pose.as_array())
             covariances.append(slam.pose_covariance)
-            associated.append(association.landmark_ids)
             tally = association.counts
             for status in counts:
                 counts[status] += tally[status]
@@ -182,6 +182,5 @@ def run_experiment(experiment: Experiment, progress: Callable[[int], None] | Non
         status_counts=counts,
         cpu_seconds=cpu_seconds,
         update_ms=np.array(update_ms),
-        first_scan=first_scan,
-        observation_landmark_ids=np.concatenate([np.zeros(0, dtype=np.int64), *associated]),
+        history=timeline.history,
     )

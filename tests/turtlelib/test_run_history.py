@@ -1,0 +1,91 @@
+"""The run history a timeline keeps for a smoother (turtlelib.run_history): what it records, where it
+starts again, and the smoothing problem it gives."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from turtlelib import EkfSlam, SlamConfig, SlamTimeline, TimelineConfig, Transform2D
+from turtlelib.motion_models import TwistNoise, UnicycleMotion
+from turtlelib.motion_signals import HeldInputs
+from turtlelib.range_bearing import predict_observations
+from turtlelib.run_history import RunHistory
+
+MOTION = UnicycleMotion(TwistNoise(forward_m2_per_m=1e-3, heading_rad2_per_rad=1e-3, lateral_m2_per_m=1e-4))
+CONFIG = SlamConfig(range_std=0.02, bearing_std=0.01, confirm_count=1)
+LANDMARKS = np.array([[2.0, 1.0], [1.0, -1.5]])
+MS = 1_000_000
+
+
+def timeline() -> SlamTimeline:
+    slam = EkfSlam(CONFIG, MOTION, Transform2D(0.5, 0.0, 0.1))
+    return SlamTimeline(slam, HeldInputs(), TimelineConfig(max_observation_delay=0.0), keep_history=True)
+
+
+def scan_of(slam: EkfSlam) -> np.ndarray:
+    return predict_observations(slam.pose.as_array(), LANDMARKS, CONFIG.T_body_sensor)[0]
+
+
+def drive(line: SlamTimeline, t_ms: range, scan_every: int = 2) -> list[np.ndarray]:
+    """Motion samples every 10 ms of ``t_ms`` (0.2 m/s, 0.1 rad/s), an observation of both landmarks at every
+    ``scan_every``-th sample's stamp; the filter's pose after each scan."""
+    poses = []
+    for k, t in enumerate(t_ms):
+        line.add_motion(t * MS, (0.2, 0.1))
+        if k % scan_every == 0:
+            assert line.add_observations(t * MS, scan_of(line.slam), ids=[0, 1])
+            poses.append(line.slam.pose.as_array())
+    return poses
+
+
+def test_the_timeline_records_the_run():
+    line = timeline()
+    start = line.slam.pose.as_array()
+    scan_poses = drive(line, range(0, 200, 10))
+    history = line.history
+    assert history.n_scans == 10
+    np.testing.assert_array_equal(history.start_pose, start)
+    assert history.motion_t_ns == [t * MS for t in range(0, 200, 10)]
+    problem, poses, rescale = history.smoothing_problem(MOTION, HeldInputs(), CONFIG, np.array([0, 1]))
+    # the first scan shares the start's stamp: it is pose 0, whose prior is the filter's start
+    np.testing.assert_array_equal(problem.pose_t_ns, np.arange(0, 200, 20) * MS)
+    np.testing.assert_array_equal(problem.prior_mean, start)
+    np.testing.assert_allclose(problem.prior_covariance, CONFIG.initial_pose_covariance())
+    np.testing.assert_array_equal(problem.observation_pose, np.repeat(np.arange(10), 2))
+    np.testing.assert_array_equal(problem.observation_landmark, np.tile([0, 1], 10))
+    np.testing.assert_array_equal(poses, scan_poses)
+    # 20 ms at 0.2 m/s along a 0.1 rad/s arc between scans
+    np.testing.assert_allclose(problem.motion_delta[:, 0], 0.004, rtol=1e-4)
+    np.testing.assert_allclose(problem.motion_delta[:, 2], 0.002)
+    np.testing.assert_array_equal(rescale(problem), np.ones(20))  # independent errors (the default)
+
+
+def test_only_landmarks_of_the_final_map_are_kept():
+    line = timeline()
+    drive(line, range(0, 100, 10))
+    problem, _, _ = line.history.smoothing_problem(MOTION, HeldInputs(), CONFIG, np.array([1]))
+    np.testing.assert_array_equal(problem.observation_landmark, np.ones(5, dtype=int))
+
+
+def test_history_starts_again_after_a_restart_and_a_break():
+    line = timeline()
+    drive(line, range(0, 100, 10))
+    line.restart(5_000 * MS, (0.2, 0.1))
+    assert line.history.n_scans == 0 and line.history.motion_t_ns == [5_000 * MS]
+    np.testing.assert_array_equal(line.history.start_pose, line.slam.pose.as_array())
+    drive(line, range(5_010, 5_100, 10))
+    # a relocalization from outside: the history starts at the filter's time, from the new pose
+    t_f = line.filter_time_ns
+    line.slam.reset(Transform2D(3.0, 2.0, 1.0), np.eye(3) * 0.01, keep_map=True)
+    line.break_history()
+    assert line.history.motion_t_ns[0] == t_f and line.history.n_scans == 0
+    np.testing.assert_array_equal(line.history.start_pose, [3.0, 2.0, 1.0])
+    np.testing.assert_allclose(line.history.start_covariance, np.eye(3) * 0.01)
+
+
+def test_no_history_unless_asked_and_no_problem_before_the_start():
+    slam = EkfSlam(CONFIG, MOTION)
+    assert SlamTimeline(slam, HeldInputs()).history is None
+    with pytest.raises(ValueError, match="not started"):
+        RunHistory().smoothing_problem(MOTION, HeldInputs(), CONFIG, np.array([0]))
