@@ -242,11 +242,13 @@ def pose_nees(errors: NDArray[np.float64], covariances: NDArray[np.float64]) -> 
     """``eps_k = e_k^T P_k^-1 e_k`` (K,) for errors (K, d) and covariances (K, d, d).
 
     A sample whose covariance is not positive definite (smallest eigenvalue <= ``MIN_EIGENVALUE``, e.g.
-    the exactly known start pose before the robot moves) has no NEES: NaN.
+    the exactly known start pose before the robot moves) or unknown (NaN: a smoothed pose) has no NEES: NaN.
     """
-    if errors.shape[0] == 0:
-        return np.zeros(0)
-    return nees(errors, covariances, atol=MIN_EIGENVALUE)
+    known = ~np.isnan(covariances).any(axis=(1, 2))
+    result = np.full(errors.shape[0], np.nan)
+    if known.any():
+        result[known] = nees(errors[known], covariances[known], atol=MIN_EIGENVALUE)
+    return result
 
 
 def nees_band(prob: float = NEES_BAND_PROB) -> tuple[float, float]:

@@ -106,13 +106,6 @@ def _trajectory_metrics(
     )
 
 
-def _nees(errors: NDArray[np.float64], covariances: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Each sample's NEES, NaN for an estimate without a covariance (a smoothed run's poses)."""
-    if np.isnan(covariances).all():
-        return np.full(len(errors), np.nan)
-    return pose_nees(errors, covariances)
-
-
 def _timing_metrics(experiment: Experiment, result: ExperimentResult) -> dict:
     duration_s = (experiment.motion_t_ns[-1] - experiment.motion_t_ns[0]) * 1e-9
     return {
@@ -195,7 +188,7 @@ def evaluate_mrclam(
     truth = interpolate_poses(recording.truth_t_ns, recording.truth_poses, t_ns)
     errors = poses - truth
     errors[:, 2] = normalize_angles(errors[:, 2])
-    nees = _nees(errors, P)
+    nees = pose_nees(errors, P)
     metrics, T_align, aligned_errors_m = _trajectory_metrics(poses[:, :2], truth[:, :2], nees, 3)
     metrics.update(_landmark_metrics(result, recording, experiment.scans.ids is not None, T_align, gate_m))
     metrics.update(_timing_metrics(experiment, result))
@@ -234,7 +227,7 @@ def evaluate_victoria(
     flat = point_covariances.reshape(-1, 4)
     covariance = np.column_stack([np.interp(t_rel, t_est, flat[:, i]) for i in range(4)]).reshape(-1, 2, 2)
     errors = estimate - gps
-    nees = _nees(errors, covariance)
+    nees = pose_nees(errors, covariance)
     metrics, T_align, aligned_errors_m = _trajectory_metrics(estimate, gps, nees, 2)
     metrics.update(
         {

@@ -4,8 +4,8 @@ The factors come from the run's history (:class:`turtlelib.run_history.RunHistor
 timeline): poses at the start and at every applied scan, the motion between them from the experiment's
 motion model and signal (as the filter predicted it), and the observations the filter associated with a
 landmark of its final map, with the filter's noise model (correlated errors included). :func:`smooth_run`
-solves them from the filter's estimates (:class:`turtlelib.smoother.Smoother`; with unknown association the
-associations are revised, :func:`turtlelib.smoothed_association.revise_associations`) and gives an
+solves them from the filter's estimates (:func:`turtlelib.run_smoothing.smooth_history`; with unknown
+association the associations are revised) and gives an
 :class:`~nuturtle_eval.datasets.experiment.ExperimentResult` that the evaluation and the figures take as they
 take the filter's: the smoothed poses at the scans (no pose covariance: NaN) and the smoothed map with the
 covariance of the information matrix.
@@ -18,8 +18,9 @@ import time
 
 import numpy as np
 
-from turtlelib.smoothed_association import RevisionConfig, revise_associations
-from turtlelib.smoother import Smoother, SmootherConfig
+from turtlelib.run_smoothing import smooth_history
+from turtlelib.smoothed_association import RevisionConfig
+from turtlelib.smoother import SmootherConfig
 
 from .experiment import Experiment, ExperimentResult
 
@@ -40,25 +41,18 @@ def smooth_run(
     building the factors included) and what it decided: with ``revise`` (unknown association), the filter's
     associations are revised."""
     cpu_start = time.process_time()
-    problem, poses, rescale = result.history.smoothing_problem(
-        experiment.motion, experiment.signal, experiment.config, result.landmark_ids
+    outcome = smooth_history(
+        result.history,
+        experiment.motion,
+        experiment.signal,
+        experiment.config,
+        result.landmark_ids,
+        result.landmarks,
+        revise,
+        config,
+        revision,
     )
-    smoother = Smoother(experiment.config.measurement_model(), config)
-    decisions = {}
-    if revise:
-        revised = revise_associations(
-            smoother, problem, poses, result.landmark_ids, result.landmarks, rescale, revision
-        )
-        smoothed, problem = revised.run, revised.problem
-        decisions = {
-            "landmarks_merged_by_smoother": len(revised.merged),
-            "landmarks_removed_by_smoother": int(len(revised.removed)),
-            "landmarks_created_by_smoother": len(revised.created),
-            "observations_outliers": revised.outliers,
-        }
-    else:
-        smoothed = smoother.solve(problem, poses, result.landmark_ids, result.landmarks)
-    decisions.update({"smoother_iterations": smoothed.iterations, "observations_used": int(len(problem.z))})
+    smoothed, problem = outcome.run, outcome.problem
     cpu_seconds = time.process_time() - cpu_start
     # the poses at the scans' stamps (the start's pose is the first unless a scan shares its stamp)
     scan_poses = smoothed.poses[np.searchsorted(problem.pose_t_ns, result.t_ns)]
@@ -73,4 +67,4 @@ def smooth_run(
         landmark_covariances=smoothed.landmark_covariances,
         cpu_seconds=cpu_seconds,
         update_ms=np.zeros(0),
-    ), decisions
+    ), outcome.decisions()
