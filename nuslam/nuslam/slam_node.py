@@ -161,6 +161,7 @@ from turtlelib import (
 from turtlelib.pose_buffer import PoseBuffer
 from turtlelib.pose_twist import PoseTwist
 from turtlelib.range_bearing import observations_from_points
+from turtlelib.run_smoothing import SmoothingOutcome, smooth_history
 from turtlelib.sample_gate import GateResult, Verdict
 from turtlelib.slam_map import LandmarkMap, load_map, save_map
 from turtlelib.slip_recovery import SlipRecovery, SlipRecoveryConfig, lost_wheel_turn_per_m
@@ -204,7 +205,11 @@ class SlamNodeConfig:
     * ``map_file``: path of the map file (:mod:`turtlelib.slam_map`, JSON): loaded at start-up when it
       exists (it must, with ``mode: localization``), written by ``~/save_map``; empty for none;
     * ``observation_timeout`` (s, > 0): the wheels turning this long (joint_states time) without an
-      observation arriving gives a (throttled) warning: slam is only dead-reckoning.
+      observation arriving gives a (throttled) warning: slam is only dead-reckoning;
+    * ``smooth_saved_map``: keep the run's history (since start-up, the last reset or relocalization;
+      memory grows with the run) and have ``~/save_map`` save the landmark map of the whole run smoothed
+      (:mod:`turtlelib.run_smoothing`; the call blocks the node while it smooths, seconds for a long
+      run); mapping only.
     """
 
     association: str = "unknown"
@@ -221,6 +226,7 @@ class SlamNodeConfig:
     wheel_noise: float = WHEEL_NOISE
     map_file: str = ""
     observation_timeout: float = 3.0
+    smooth_saved_map: bool = False
 
     def __post_init__(self) -> None:
         one_of("association", self.association, ASSOCIATIONS)
@@ -282,7 +288,15 @@ class SlamNode(Node):
             frames.map_file,
             self.config.mode == "localization",
         )
-        self.timeline = SlamTimeline(self.slam, signal, timeline_config, recovery=self.recovery)
+        if self.node_config.smooth_saved_map and self.config.mode == "localization":
+            raise ValueError("smooth_saved_map needs mode mapping: in localization the map is fixed")
+        self.timeline = SlamTimeline(
+            self.slam,
+            signal,
+            timeline_config,
+            recovery=self.recovery,
+            keep_history=self.node_config.smooth_saved_map,
+        )
         # T_sensor_frame for the frames observations may come in
         T_body_sensor = self.config.T_body_sensor
         self._T_sensor_from = {
@@ -459,25 +473,48 @@ class SlamNode(Node):
             T_map_body = transform_from_pose(msg.pose.pose)
             self.slam.reset(T_map_body, positive_definite_pose_covariance(msg.pose.covariance), keep_map=True)
             self.recovery.forget(T_map_body)
+            self.timeline.break_history()
         except ValueError as error:
             self._warnings.warn("initialpose", f"initialpose skipped: {error}")
             return
         self.get_logger().info(f"relocalized at {T_map_body} from initialpose")
 
+    def smooth_run(self) -> SmoothingOutcome:
+        """The run so far smoothed as a whole (``smooth_saved_map``: the history is kept); ValueError
+        without a history or before the first motion sample."""
+        if self.timeline.history is None:
+            raise ValueError("no run history: smooth_saved_map is false")
+        return smooth_history(
+            self.timeline.history,
+            self.slam.motion,
+            self.timeline.signal,
+            self.config,
+            self.slam.landmark_ids,
+            self.slam.landmarks,
+            revise=self.node_config.association == "unknown",
+        )
+
     def _on_save_map(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
-        """Write the map (confirmed landmarks, joint covariance, the parameters) to ``map_file``."""
+        """Write the map (confirmed landmarks, joint covariance, the parameters) to ``map_file``: the
+        filter's, or with ``smooth_saved_map`` that of the smoothed run."""
         path = self.node_config.map_file
         if not path:
             response.success, response.message = False, "map_file is not set: nowhere to save the map"
             return response
         stamp_ns = self.timeline.filter_time_ns or 0
+        frame, parameters = self.node_config.map_id, self.map_parameters()
         try:
-            save_map(path, self.slam.landmark_map(self.node_config.map_id, stamp_ns, self.map_parameters()))
+            if self.node_config.smooth_saved_map:
+                landmark_map = self.smooth_run().landmark_map(frame, stamp_ns, parameters)
+            else:
+                landmark_map = self.slam.landmark_map(frame, stamp_ns, parameters)
+            save_map(path, landmark_map)
         except (OSError, ValueError) as error:
             response.success, response.message = False, f"could not save the map to {path}: {error}"
             self.get_logger().error(response.message)
             return response
-        response.message = f"saved {len(self.slam.landmark_ids)} landmarks to {path}"
+        smoothed = " (smoothed run)" if self.node_config.smooth_saved_map else ""
+        response.message = f"saved {landmark_map.n_landmarks} landmarks{smoothed} to {path}"
         try:
             grid_saved = self.grid.save()
         except (OSError, ValueError) as error:
@@ -499,6 +536,7 @@ class SlamNode(Node):
         else:
             self.slam.load_map(self._start_map, T_map_body0)
         self.recovery.forget(T_map_body0)
+        self.timeline.break_history()
         if self.grid.mapping:
             self.grid.reset()
         count = 0 if self._start_map is None else self._start_map.n_landmarks

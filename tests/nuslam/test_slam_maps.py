@@ -237,3 +237,39 @@ def test_localization_without_a_map_file_stops_the_node(ros, tmp_path, map_file,
     path = str(tmp_path / map_file) if map_file else ""
     overrides = [Parameter("map_file", value=path), Parameter("mode", value="localization")]
     refused_at_construction(lambda: SlamNode(context=ros.context, parameter_overrides=overrides), message)
+
+
+def test_smooth_saved_map_saves_the_smoothed_run_and_starts_again_at_a_reset(ros, tmp_path):
+    path = tmp_path / "lab.json"
+    rig = Rig(ros, association="known", map_file=str(path), smooth_saved_map=True)
+    drive_and_observe(rig, 10 * S, Transform2D(), 6)
+    response = call(rig, "save_map")
+    assert (
+        response.success and f"saved {len(LANDMARKS)} landmarks (smoothed run) to {path}" in response.message
+    )
+    saved = load_map(path)
+    # what the node's smoother gives for its run (deterministic), with the covariance of the information
+    assert saved.equals(rig.node.smooth_run().landmark_map("map", saved.stamp_ns, saved.parameters))
+    assert saved.ids.tolist() == sorted(LANDMARKS) and saved.parameters["smooth_saved_map"] is True
+    np.testing.assert_allclose(saved.xy, [LANDMARKS[i] for i in sorted(LANDMARKS)], atol=1e-6)
+    assert np.all(np.linalg.eigvalsh(saved.covariance) > 0.0)
+    history = rig.node.timeline.history
+    assert history.n_scans == 6
+    assert call(rig, "reset").success
+    assert history.n_scans == 0 and np.array_equal(history.start_pose, [0.0, 0.0, 0.0])
+
+
+def test_smooth_saved_map_in_localization_stops_the_node(ros, tmp_path):
+    from rclpy.parameter import Parameter
+
+    path, rig = mapped_then_saved(ros, tmp_path)
+    stop(ros, rig)
+    overrides = [
+        Parameter("map_file", value=str(path)),
+        Parameter("mode", value="localization"),
+        Parameter("smooth_saved_map", value=True),
+    ]
+    refused_at_construction(
+        lambda: SlamNode(context=ros.context, parameter_overrides=overrides),
+        "smooth_saved_map needs mode mapping",
+    )

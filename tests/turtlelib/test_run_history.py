@@ -51,7 +51,7 @@ def test_the_timeline_records_the_run():
     # the first scan shares the start's stamp: it is pose 0, whose prior is the filter's start
     np.testing.assert_array_equal(problem.pose_t_ns, np.arange(0, 200, 20) * MS)
     np.testing.assert_array_equal(problem.prior_mean, start)
-    np.testing.assert_allclose(problem.prior_covariance, CONFIG.initial_pose_covariance())
+    np.testing.assert_allclose(problem.prior_covariance, CONFIG.initial_pose_covariance(), atol=1e-8)
     np.testing.assert_array_equal(problem.observation_pose, np.repeat(np.arange(10), 2))
     np.testing.assert_array_equal(problem.observation_landmark, np.tile([0, 1], 10))
     np.testing.assert_array_equal(poses, scan_poses)

@@ -7,7 +7,8 @@ each with (-1: unused) and the filter's pose after the update. :meth:`RunHistory
 into the factors of :mod:`turtlelib.smoothing_problem` with the filter's own models:
 
 * poses at the start and at every scan stamp (scans of one stamp share a pose; a scan at the start's
-  stamp is pose 0, on which the prior lies as the state before any update);
+  stamp is pose 0, on which the prior lies as the state before any update; its covariance floored at
+  ``MIN_FACTOR_STD``, as the motion factors', so that an exactly known start stays invertible);
 * the motion between them from the motion model and signal
   (:func:`~turtlelib.smoothing_problem.relative_motions`);
 * the observations of the landmarks that are in the final map (those of tentative landmarks that were
@@ -31,9 +32,9 @@ from .motion_models import MotionModel
 from .motion_signals import MotionSignal, Sample
 from .smoothing_problem import SmoothingProblem, relative_motions, viewpoint_scales
 
-# (m, rad) added to each motion factor's standard deviations: keeps a standing robot's factor invertible,
-# far below every sensor's resolution
-MIN_MOTION_STD = 1e-4
+# (m, rad) added to the standard deviations of each motion factor and of the start prior: keeps the factor
+# of a standing robot and of an exactly known start invertible, far below every sensor's resolution
+MIN_FACTOR_STD = 1e-4
 
 
 class RunHistory:
@@ -103,7 +104,7 @@ class RunHistory:
         if self.n_scans:
             poses[scan_pose] = np.array(self._scan_poses)
         delta, Q = relative_motions(
-            motion, signal, self.motion_t_ns, self.motion_samples, pose_t_ns, MIN_MOTION_STD
+            motion, signal, self.motion_t_ns, self.motion_samples, pose_t_ns, MIN_FACTOR_STD
         )
         per_scan = [len(z) for z in self._z]
         observation_pose = np.repeat(scan_pose, per_scan)
@@ -114,7 +115,7 @@ class RunHistory:
         problem = SmoothingProblem(
             pose_t_ns=pose_t_ns,
             prior_mean=self.start_pose,
-            prior_covariance=self.start_covariance,
+            prior_covariance=self.start_covariance + MIN_FACTOR_STD**2 * np.eye(3),
             motion_delta=delta,
             motion_covariance=Q,
             observation_pose=observation_pose[kept],
