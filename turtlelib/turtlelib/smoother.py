@@ -31,8 +31,9 @@ distant warm start does not mark good observations as outliers.
 Covariance
 ----------
 The Laplace approximation at the optimum, ``Sigma = (J^T W J)^-1`` (the weights of the outliers as
-found): the landmarks' joint block is solved from the factorisation for their ``2n`` unit columns, never by
-an inverse. Pose 0's prior fixes the gauge (the map frame), so ``J^T W J`` is positive definite.
+found): the joint block of the last pose and the landmarks is solved from the factorisation for their
+``3 + 2n`` unit columns, never by an inverse. Pose 0's prior fixes the gauge (the map frame), so
+``J^T W J`` is positive definite.
 """
 
 from __future__ import annotations
@@ -71,7 +72,8 @@ class SmootherConfig:
 @dataclass(frozen=True)
 class SmoothedRun:
     """The optimum: ``poses`` (P, 3) ``T_map_body`` at the problem's stamps; ``landmark_ids`` (n,),
-    ``landmarks`` (n, 2), their joint covariance ``landmark_covariance`` (2n, 2n); ``weights`` (K,) the
+    ``landmarks`` (n, 2); ``final_covariance`` (3 + 2n, 3 + 2n) the joint covariance of the last pose and
+    the landmarks, laid out as the filter's state ``[x, y, theta, m_0x, m_0y, ...]``; ``weights`` (K,) the
     kernel's weight of each observation at the optimum (1: an inlier, small: an outlier) and
     ``mahalanobis2`` (K,) its squared Mahalanobis distance ``s = r^T R^-1 r`` there; the final cost
     ``F`` and the linearisations used."""
@@ -79,11 +81,16 @@ class SmoothedRun:
     poses: NDArray[np.float64]
     landmark_ids: NDArray[np.int64]
     landmarks: NDArray[np.float64]
-    landmark_covariance: NDArray[np.float64]
+    final_covariance: NDArray[np.float64]
     weights: NDArray[np.float64]
     mahalanobis2: NDArray[np.float64]
     cost: float
     iterations: int
+
+    @property
+    def landmark_covariance(self) -> NDArray[np.float64]:
+        """(2n, 2n) the landmarks' joint covariance."""
+        return self.final_covariance[3:, 3:]
 
     @property
     def landmark_covariances(self) -> NDArray[np.float64]:
@@ -145,7 +152,7 @@ class Smoother:
             poses=x[: system.n_pose_vars].reshape(-1, 3),
             landmark_ids=landmark_ids,
             landmarks=x[system.n_pose_vars :].reshape(-1, 2),
-            landmark_covariance=system.landmark_covariance(lin),
+            final_covariance=system.final_covariance(lin),
             weights=lin.weights,
             mahalanobis2=lin.mahalanobis2,
             cost=lin.cost,
@@ -292,18 +299,17 @@ class _System:
         moved[2 : self.n_pose_vars : 3] = normalize_angles(moved[2 : self.n_pose_vars : 3])
         return moved
 
-    def landmark_covariance(self, lin: _Linearisation) -> NDArray[np.float64]:
-        """The landmarks' joint block of ``(J^T W J)^-1`` (2n, 2n), by columns from one factorisation."""
-        n_landmark_vars = self.n_vars - self.n_pose_vars
-        if n_landmark_vars == 0:
-            return np.zeros((0, 0))
+    def final_covariance(self, lin: _Linearisation) -> NDArray[np.float64]:
+        """The block of ``(J^T W J)^-1`` (3 + 2n, 3 + 2n) of the last pose and the landmarks, by columns
+        from one factorisation."""
+        variables = np.r_[self.n_pose_vars - 3 : self.n_vars]
         factor = _factorise((lin.J.T @ lin.J).tocsc())
-        covariance = np.empty((n_landmark_vars, n_landmark_vars))
-        for first in range(0, n_landmark_vars, _COLUMNS_PER_SOLVE):
-            columns = np.arange(first, min(first + _COLUMNS_PER_SOLVE, n_landmark_vars))
+        covariance = np.empty((len(variables), len(variables)))
+        for first in range(0, len(variables), _COLUMNS_PER_SOLVE):
+            columns = np.arange(first, min(first + _COLUMNS_PER_SOLVE, len(variables)))
             rhs = np.zeros((self.n_vars, len(columns)))
-            rhs[self.n_pose_vars + columns, np.arange(len(columns))] = 1.0
-            covariance[:, columns] = factor.solve(rhs)[self.n_pose_vars :]
+            rhs[variables[columns], np.arange(len(columns))] = 1.0
+            covariance[:, columns] = factor.solve(rhs)[variables]
         return 0.5 * (covariance + covariance.T)
 
 
