@@ -82,6 +82,9 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--wait-for-subscribers", type=float, default=5.0, metavar="S",
                         help="with --play-only: wait up to S wall seconds for a subscriber on every played "
                         "topic before playing")  # fmt: skip
+    parser.add_argument("--smooth", action="store_true",
+                        help="also smooth slam's whole run at the end and write it beside the filter's "
+                        "outputs (OUT/smoothed/, metrics.json 'smoothed')")  # fmt: skip
     parser.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     parser.add_argument("--check", action="store_true",
                         help="exit status 1 when a target of the results table fails (a nusim recording) "
@@ -133,6 +136,8 @@ def summary(result: Any) -> str:
         lines += ["", results_table(run_metrics(metrics), targets=metrics["nusim_recording"]), ""]
         if not metrics["nusim_recording"]:
             lines.append("(not a nusim recording: the demo's targets do not apply)")
+    if "smoothed" in metrics:
+        lines += smoothed_rows(metrics) + [""]
     rows = ["| count | value |", "|---|---:|"]
     for topic, count in metrics["messages_played"].items():
         rows.append(f"| messages played, {topic} | {count} |")
@@ -153,11 +158,39 @@ def summary(result: Any) -> str:
     if "observation_arrays_applied" in metrics:
         grid = "map.yaml map.pgm grid.png " if (Path(result.out_dir) / "map.yaml").exists() else ""
         errors = "errors.png " if result.accuracy else ""
+        smoothed = " smoothed/" if "smoothed" in metrics else ""
         lines.append(f"outputs in {result.out_dir}/: metrics.json trajectory.png map.json {grid}"
-                     f"covariance.png {errors}slam/ config.yaml")  # fmt: skip
+                     f"covariance.png {errors}slam/ config.yaml{smoothed}")  # fmt: skip
     else:
         lines.append(f"outputs in {result.out_dir}/: metrics.json")
     return "\n".join(lines)
+
+
+# (metrics.json key, label) compared between the filter and the smoothed run
+SMOOTHED_ROWS = (
+    ("ate_rmse_slam_m", "ATE RMSE (m)"),
+    ("final_position_error_slam_m", "final position error (m)"),
+    ("final_heading_error_slam_rad", "final heading error (rad)"),
+    ("landmark_rmse_m", "landmark RMSE (m)"),
+    ("landmarks_mapped", "landmarks mapped"),
+    ("landmarks_spurious", "landmarks spurious"),
+)
+
+
+def smoothed_rows(metrics: dict[str, Any]) -> list[str]:
+    """The filter and the smoothed run side by side (the figures both have), then the smoother's CPU."""
+    smoothed = metrics["smoothed"]
+    rows = ["| | filter | smoother |", "|---|---:|---:|"]
+    for key, label in SMOOTHED_ROWS:
+        if key in metrics and key in smoothed:
+            values = [metrics[key], smoothed[key]]
+            rows.append(
+                f"| {label} | "
+                + " | ".join(f"{v:.4f}" if isinstance(v, float) else str(v) for v in values)
+                + " |"
+            )
+    rows.append(f"| smoother CPU (s) | | {smoothed['smoother_cpu_seconds']:.2f} |")
+    return rows
 
 
 def recording_params(bag: Path) -> Path | None:
@@ -196,6 +229,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             progress=not args.no_progress,
             foxglove=foxglove,
             domain_id=getattr(args, "domain_id", None),
+            smooth=args.smooth,
         )
         for path in unfinished_runs(options.out_dir):
             print(f"note: {path}/ holds a replay that was killed (INCOMPLETE)", file=sys.stderr)

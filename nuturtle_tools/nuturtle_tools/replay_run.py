@@ -60,6 +60,7 @@ from nuturtle_eval.run_evaluation import (
     GRID_OUTPUTS,
     ProgressBar,
     RunRecord,
+    SlamSnapshot,
     evaluate_and_plot,
     sensor_range_m,
     slam_snapshot,
@@ -98,10 +99,12 @@ from .staged_run import run_staged
 
 # The SLAM outputs: a rosbag2 bag directory in the output folder (slam/metadata.yaml + slam/slam.mcap)
 BAG_NAME = "slam"
+# With --smooth: the smoothed run's outputs, in a folder of their own beside the filter's
+SMOOTHED_DIR = "smoothed"
 # Everything a replay writes into its output folder (nuturtle_eval.run_folder)
 OUTPUTS = (
     "metrics.json", "trajectory.png", "errors.png", "covariance.png", "map.json", *GRID_OUTPUTS,
-    "config.yaml", BAG_NAME,
+    "config.yaml", BAG_NAME, SMOOTHED_DIR,
 )  # fmt: skip
 TRUTH_PLAYED_AS = "nusim/ground_truth"
 # a recording of nusim (the demo's): its pass/fail targets apply
@@ -137,7 +140,8 @@ class ReplayOptions:
     with ``rate`` 1 it plays at robot speed); ``domain_id`` the run's DDS world: ``"private"`` (no other
     ROS program hears it), ``"env"`` (the shell's ROS_DOMAIN_ID) or a domain id 0-232
     (:mod:`nuturtle_ros_common.dds_domain`; None: private, or env with ``play_only``, whose listeners are
-    the user's nodes)."""
+    the user's nodes); ``smooth`` also smooths slam's whole run at the end (its ``smooth_saved_map``) and
+    writes it beside the filter's outputs, in ``smoothed/``."""
 
     bag: Path
     out_dir: Path = Path("out/replay")
@@ -160,8 +164,11 @@ class ReplayOptions:
     progress: bool = True
     foxglove: tuple[str, int] | None = None
     domain_id: DomainChoice | None = None
+    smooth: bool = False
 
     def __post_init__(self) -> None:
+        if self.smooth and self.play_only:
+            raise ValueError("smoothing needs the slam node, which --play-only does not run")
         if self.domain_id is not None:
             store(self, ("domain_id",), domain_choice)
         if self.foxglove is not None:
@@ -394,6 +401,8 @@ class Replay:
         self.slam_values = dict(slam_file)
         self.slam_values["association"] = self.association
         self.slam_values["motion_source"] = self.motion_source
+        if options.smooth:
+            self.slam_values["smooth_saved_map"] = True
         if options.model is not None:
             self.slam_values["model"] = options.model
         self.landmarks_values = node_parameters_from_file(options.params, "landmarks")
@@ -637,6 +646,8 @@ class Replay:
                 metrics = None
             accuracy = metrics is not None
             values = {**(metrics.as_dict() if metrics is not None else {}), **values}
+            if self.options.smooth:
+                values["smoothed"] = self._write_smoothed(out_dir / SMOOTHED_DIR, bag_seconds)
         write_metrics(out_dir, values)
         return ReplayResult(values, out_dir, accuracy, interrupted)
 
@@ -680,6 +691,38 @@ class Replay:
                 lidar_range_m=self.facts.range_max,
             ),
         )
+
+    def _write_smoothed(self, folder: Path, sim_seconds: float) -> dict[str, Any]:
+        """``folder``: slam's whole run smoothed (:meth:`nuslam.slam_node.SlamNode.smooth_run`) as a replay's
+        outputs: map.json (the smoothed map), trajectory.png and covariance.png (of the last pose and the
+        landmarks) and, with ground truth, errors.png; returns its metrics (the smoothed poses have no
+        covariance: no NEES), what the smoother decided and its CPU and wall time."""
+        folder.mkdir()
+        cpu_start, wall_start = time.process_time(), time.monotonic()
+        outcome = self.slam.smooth_run()
+        cpu_seconds, wall_seconds = time.process_time() - cpu_start, time.monotonic() - wall_start
+        slam, run = self.slam, outcome.run
+        stamp_ns = slam.timeline.filter_time_ns or 0
+        save_map(
+            folder / "map.json",
+            outcome.landmark_map(slam.node_config.map_id, stamp_ns, slam.map_parameters()),
+        )
+        record = replace(
+            self._run_record(),
+            slam=PoseSeries(outcome.problem.pose_t_ns / NS_PER_S, run.poses),
+            slam_covariances=np.full((len(run.poses), 3, 3), np.nan),
+            snapshot=SlamSnapshot(run.final_covariance, run.landmarks, run.landmark_covariances),
+        )
+        try:
+            metrics = evaluate_and_plot(folder, record, sim_seconds=sim_seconds, wall_seconds=wall_seconds)
+        except ValueError as error:
+            self.logger.warning(f"no accuracy metrics for the smoothed run: {error}")
+            metrics = None
+        return {
+            **(metrics.as_dict() if metrics is not None else {}),
+            **outcome.decisions(),
+            "smoother_cpu_seconds": cpu_seconds,
+        }
 
     def _write_map(self, out_dir: Path) -> None:
         """map.json: the final map in the slam node's own map file format (:mod:`turtlelib.slam_map`: ids,

@@ -233,6 +233,20 @@ def test_an_unreadable_path_is_a_clear_error(tmp_path, capsys, kind):
     assert not (tmp_path / "out").exists()
 
 
+def test_smoothing_without_the_slam_node_is_a_clear_error(live, tmp_path, capsys):
+    argv = [
+        str(live.out / BAG_NAME),
+        "--out",
+        str(tmp_path / "out"),
+        "--no-progress",
+        "--play-only",
+        "--smooth",
+    ]
+    assert main(argv) == 2
+    assert "smoothing needs the slam node" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
+
+
 def test_play_only_feeds_nodes_in_another_process(live, tmp_path, ros):
     """--play-only: just the player, here in a child process, heard over DDS by a node of this one: every
     reliable joint_states message arrives (acknowledged before the next), with /clock."""

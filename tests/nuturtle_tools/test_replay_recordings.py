@@ -21,6 +21,7 @@ from rosbags.typesys import Stores, get_typestore
 
 from nuturtle_tools.bag_source import BagSource
 from nuturtle_tools.replay import main, no_landmarks_hint
+from turtlelib.slam_map import load_map
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -88,9 +89,10 @@ def test_a_ros1_bag_reads_as_the_rosbag2_recording_it_was_written_from(tmp_path)
 def test_a_gazebo_recording_maps_every_cylinder_in_range_against_its_odom_truth(tmp_path, capsys):
     """The Burger's defaults, joint_states motion, /odom played as both odometry and truth (one bag topic,
     two roles): every cylinder that came within range (and in sight) mapped once, none spurious,
-    ATE <= 2 cm; the table without the demo's targets (not a nusim recording)."""
+    ATE <= 2 cm; the table without the demo's targets (not a nusim recording). Smoothed at the end
+    (--smooth): the same landmarks, the map a file slam loads, no worse than the filter."""
     code, metrics, stdout, err = replay(
-        capsys, RECORDING, tmp_path / "out", "--truth-topic", "/odom", "--params", str(WORLD)
+        capsys, RECORDING, tmp_path / "out", "--truth-topic", "/odom", "--params", str(WORLD), "--smooth"
     )
     assert code == 0, err
     assert metrics["messages_played"] == {"/joint_states": ODOMS, "/odom": ODOMS, "/scan": SCANS}
@@ -109,6 +111,18 @@ def test_a_gazebo_recording_maps_every_cylinder_in_range_against_its_odom_truth(
     assert "✓" not in stdout and "✗" not in stdout
     assert "the demo's targets do not apply" in stdout
     assert "no landmarks" not in stdout
+    smoothed = metrics["smoothed"]
+    assert smoothed["landmarks_mapped"] == metrics["landmarks_mapped"]
+    assert smoothed["landmarks_duplicate"] == smoothed["landmarks_spurious"] == 0
+    assert smoothed["ate_rmse_slam_m"] <= metrics["ate_rmse_slam_m"]
+    assert smoothed["landmark_rmse_m"] <= metrics["landmark_rmse_m"]
+    assert smoothed["nees_pose_mean"] is None, "smoothed poses have no covariance"
+    assert smoothed["landmarks_merged_by_smoother"] == smoothed["landmarks_created_by_smoother"] == 0
+    saved = load_map(tmp_path / "out" / "smoothed" / "map.json")
+    assert saved.n_landmarks == metrics["landmarks_mapped"] and saved.parameters["smooth_saved_map"] is True
+    for name in ("trajectory.png", "errors.png", "covariance.png"):
+        assert (tmp_path / "out" / "smoothed" / name).read_bytes()[:4] == b"\x89PNG", name
+    assert "| ATE RMSE (m) |" in stdout and "smoothed/" in stdout
 
 
 @pytest.mark.parametrize("topics", ["joint_states and odom", "odom only, ROS 1 .bag"])
