@@ -38,6 +38,7 @@ from __future__ import annotations
 
 from array import array
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -250,18 +251,25 @@ class GridMapping:
         """True when there is a grid to save: enabled, and loaded or made of at least one keyframe."""
         return self.topic_config.enabled and (self.loaded is not None or len(self.keyframes) > 0)
 
-    def render(self) -> GridMap:
-        """The grid of the keyframes at their poses (module docstring); the loaded one in localization."""
+    def render(self, pose_at: Callable[[int], Transform2D | None] | None = None) -> GridMap:
+        """The grid of the keyframes at their poses (module docstring), or at ``pose_at(stamp_ns)`` where
+        that gives one (a smoothed run's poses); the loaded one in localization."""
         if self.loaded is not None:
             return self.loaded
-        return self.keyframes.render(self._keyframe_poses.get, self._T_body_scan, self.config).grid_map()
 
-    def save(self) -> str:
-        """Write :meth:`render` beside ``map_file`` (``<stem>.yaml`` + ``<stem>.pgm``, atomically); a
-        one-line account of it ('' when the grid is off). OSError or ValueError when it cannot be written."""
+        def keyframe_pose(t_ns: int) -> Transform2D | None:
+            T_map_body = None if pose_at is None else pose_at(t_ns)
+            return self._keyframe_poses.get(t_ns) if T_map_body is None else T_map_body
+
+        return self.keyframes.render(keyframe_pose, self._T_body_scan, self.config).grid_map()
+
+    def save(self, pose_at: Callable[[int], Transform2D | None] | None = None) -> str:
+        """Write :meth:`render` (with ``pose_at``) beside ``map_file`` (``<stem>.yaml`` + ``<stem>.pgm``,
+        atomically); a one-line account of it ('' when the grid is off). OSError or ValueError when it
+        cannot be written."""
         if self.yaml_path is None:
             return ""
-        grid_map = self.render()
+        grid_map = self.render(pose_at)
         save_grid_map(self.yaml_path, grid_map)
         source = "loaded" if self.loaded is not None else f"of {len(self.keyframes)} keyframes"
         return f"the {grid_map.width} x {grid_map.height} cell grid {source} to {self.yaml_path}"

@@ -208,8 +208,8 @@ class SlamNodeConfig:
       observation arriving gives a (throttled) warning: slam is only dead-reckoning;
     * ``smooth_saved_map``: keep the run's history (since start-up, the last reset or relocalization;
       memory grows with the run) and have ``~/save_map`` save the landmark map of the whole run smoothed
-      (:mod:`turtlelib.run_smoothing`; the call blocks the node while it smooths, seconds for a long
-      run); mapping only.
+      and the occupancy grid of its keyframes at the smoothed poses (:mod:`turtlelib.run_smoothing`; the
+      call blocks the node while it smooths, seconds for a long run); mapping only.
     """
 
     association: str = "unknown"
@@ -495,17 +495,20 @@ class SlamNode(Node):
         )
 
     def _on_save_map(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
-        """Write the map (confirmed landmarks, joint covariance, the parameters) to ``map_file``: the
-        filter's, or with ``smooth_saved_map`` that of the smoothed run."""
+        """Write the map (confirmed landmarks, joint covariance, the parameters) to ``map_file`` and the grid
+        beside it: the filter's, or with ``smooth_saved_map`` those of the smoothed run."""
         path = self.node_config.map_file
         if not path:
             response.success, response.message = False, "map_file is not set: nowhere to save the map"
             return response
         stamp_ns = self.timeline.filter_time_ns or 0
         frame, parameters = self.node_config.map_id, self.map_parameters()
+        # the grid's keyframes at the smoothed poses of their scans (else at the filter's)
+        pose_at = None
         try:
             if self.node_config.smooth_saved_map:
-                landmark_map = self.smooth_run().landmark_map(frame, stamp_ns, parameters)
+                outcome = self.smooth_run()
+                landmark_map, pose_at = outcome.landmark_map(frame, stamp_ns, parameters), outcome.pose_at
             else:
                 landmark_map = self.slam.landmark_map(frame, stamp_ns, parameters)
             save_map(path, landmark_map)
@@ -516,7 +519,7 @@ class SlamNode(Node):
         smoothed = " (smoothed run)" if self.node_config.smooth_saved_map else ""
         response.message = f"saved {landmark_map.n_landmarks} landmarks{smoothed} to {path}"
         try:
-            grid_saved = self.grid.save()
+            grid_saved = self.grid.save(pose_at)
         except (OSError, ValueError) as error:
             response.success = False
             response.message += f"; could not save the occupancy grid: {error}"

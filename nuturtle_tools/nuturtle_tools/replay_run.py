@@ -695,7 +695,8 @@ class Replay:
     def _write_smoothed(self, folder: Path, sim_seconds: float) -> dict[str, Any]:
         """``folder``: slam's whole run smoothed (:meth:`nuslam.slam_node.SlamNode.smooth_run`) as a replay's
         outputs: map.json (the smoothed map), trajectory.png and covariance.png (of the last pose and the
-        landmarks) and, with ground truth, errors.png; returns its metrics (the smoothed poses have no
+        landmarks), the grid of slam's keyframes at the smoothed poses (map.yaml, map.pgm, grid.png) and,
+        with ground truth, errors.png; returns its metrics (the smoothed poses have no
         covariance: no NEES), what the smoother decided and its CPU and wall time."""
         folder.mkdir()
         cpu_start, wall_start = time.process_time(), time.monotonic()
@@ -711,7 +712,12 @@ class Replay:
             self._run_record(),
             slam=PoseSeries(outcome.problem.pose_t_ns / NS_PER_S, run.poses),
             slam_covariances=np.full((len(run.poses), 3, 3), np.nan),
-            snapshot=SlamSnapshot(run.final_covariance, run.landmarks, run.landmark_covariances),
+            snapshot=SlamSnapshot(
+                run.final_covariance,
+                run.landmarks,
+                run.landmark_covariances,
+                slam.grid.render(outcome.pose_at) if slam.grid.has_grid else None,
+            ),
         )
         try:
             metrics = evaluate_and_plot(folder, record, sim_seconds=sim_seconds, wall_seconds=wall_seconds)

@@ -21,6 +21,7 @@ from rosbags.typesys import Stores, get_typestore
 
 from nuturtle_tools.bag_source import BagSource
 from nuturtle_tools.replay import main, no_landmarks_hint
+from turtlelib.grid_map_file import load_grid_map
 from turtlelib.slam_map import load_map
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
@@ -120,8 +121,11 @@ def test_a_gazebo_recording_maps_every_cylinder_in_range_against_its_odom_truth(
     assert smoothed["landmarks_merged_by_smoother"] == smoothed["landmarks_created_by_smoother"] == 0
     saved = load_map(tmp_path / "out" / "smoothed" / "map.json")
     assert saved.n_landmarks == metrics["landmarks_mapped"] and saved.parameters["smooth_saved_map"] is True
-    for name in ("trajectory.png", "errors.png", "covariance.png"):
+    for name in ("trajectory.png", "errors.png", "covariance.png", "grid.png"):
         assert (tmp_path / "out" / "smoothed" / name).read_bytes()[:4] == b"\x89PNG", name
+    # the grid of the same keyframes at the smoothed poses: the same size of map
+    filtered, smoothed_grid = (load_grid_map(tmp_path / "out" / d / "map.yaml") for d in (".", "smoothed"))
+    assert abs(smoothed_grid.width - filtered.width) <= 2 and abs(smoothed_grid.height - filtered.height) <= 2
     assert "| ATE RMSE (m) |" in stdout and "smoothed/" in stdout
 
 

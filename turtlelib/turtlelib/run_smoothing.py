@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .ekf_slam import SlamConfig
+from .geometry import Transform2D
 from .motion_models import MotionModel
 from .motion_signals import MotionSignal
 from .run_history import RunHistory
@@ -48,6 +49,14 @@ class SmoothingOutcome:
                 }
             )
         return values
+
+    def pose_at(self, stamp_ns: int) -> Transform2D | None:
+        """The smoothed ``T_map_body`` at a pose stamp of the problem (a scan's), None at any other time."""
+        stamps = self.problem.pose_t_ns
+        k = int(np.searchsorted(stamps, stamp_ns))
+        if k == len(stamps) or stamps[k] != stamp_ns:
+            return None
+        return Transform2D(*self.run.poses[k])
 
     def landmark_map(self, frame_id: str, stamp_ns: int, parameters: dict | None = None) -> LandmarkMap:
         """The smoothed map as :class:`turtlelib.slam_map.LandmarkMap` (ids ascending, the joint covariance
