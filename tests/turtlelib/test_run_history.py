@@ -47,7 +47,9 @@ def test_the_timeline_records_the_run():
     assert history.n_scans == 10
     np.testing.assert_array_equal(history.start_pose, start)
     assert history.motion_t_ns == [t * MS for t in range(0, 200, 10)]
-    problem, poses, rescale = history.smoothing_problem(MOTION, HeldInputs(), CONFIG, np.array([0, 1]))
+    problem, poses, rescale, unassigned = history.smoothing_problem(
+        MOTION, HeldInputs(), CONFIG, np.array([0, 1])
+    )
     # the first scan shares the start's stamp: it is pose 0, whose prior is the filter's start
     np.testing.assert_array_equal(problem.pose_t_ns, np.arange(0, 200, 20) * MS)
     np.testing.assert_array_equal(problem.prior_mean, start)
@@ -59,13 +61,17 @@ def test_the_timeline_records_the_run():
     np.testing.assert_allclose(problem.motion_delta[:, 0], 0.004, rtol=1e-4)
     np.testing.assert_allclose(problem.motion_delta[:, 2], 0.002)
     np.testing.assert_array_equal(rescale(problem), np.ones(20))  # independent errors (the default)
+    assert len(unassigned.z) == 0
 
 
 def test_only_landmarks_of_the_final_map_are_kept():
     line = timeline()
     drive(line, range(0, 100, 10))
-    problem, _, _ = line.history.smoothing_problem(MOTION, HeldInputs(), CONFIG, np.array([1]))
+    problem, _, _, unassigned = line.history.smoothing_problem(MOTION, HeldInputs(), CONFIG, np.array([1]))
     np.testing.assert_array_equal(problem.observation_landmark, np.ones(5, dtype=int))
+    # landmark 0's observations wait as unassigned, from the same poses
+    np.testing.assert_array_equal(unassigned.observation_pose, problem.observation_pose)
+    assert len(unassigned.z) == 5 and unassigned.z[0, 0] == pytest.approx(np.hypot(2.0 - 0.5, 1.0))
 
 
 def test_history_starts_again_after_a_restart_and_a_break():

@@ -15,14 +15,15 @@ from turtlelib.measurement_models import RangeBearing
 from turtlelib.motion_models import TwistNoise, UnicycleMotion
 from turtlelib.motion_signals import HeldInputs
 from turtlelib.range_bearing import predict_observations
-from turtlelib.smoothed_association import RevisionConfig, revise_associations
+from turtlelib.smoothed_association import RevisionConfig, Unassigned, revise_associations
 from turtlelib.smoother import Smoother, SmootherConfig, _System
 from turtlelib.smoothing_problem import SmoothingProblem, relative_motions, viewpoint_scales
 
 SENSOR = Transform2D(0.1, -0.05, 0.02)
 MEASUREMENT = RangeBearing(SENSOR, range_std=0.02, bearing_std=0.01)
-PLAIN = SmootherConfig(kernel_width=1e6)  # a kernel so wide that the cost is least squares
-ROBUST = SmootherConfig(kernel_width=1.0)
+PLAIN = SmootherConfig(kernel_width=1e6, tolerance=1e-10)  # a kernel so wide that the cost is least squares
+# converged far below the noise, so that the tests compare optima, not stopping points
+ROBUST = SmootherConfig(kernel_width=1.0, tolerance=1e-10)
 
 
 def world(n_poses: int = 12, rng: np.random.Generator | None = None):
@@ -122,7 +123,7 @@ def test_robust_kernel_down_weights_a_gross_outlier():
     z = clean.z.copy()
     z[7] += [1.5, 0.3]  # a wrong association: 1.5 m and 0.3 rad off
     ids = np.arange(4) * 10
-    robust_smoother = Smoother(MEASUREMENT, SmootherConfig(kernel_width=1.0))
+    robust_smoother = Smoother(MEASUREMENT, ROBUST)
     robust = robust_smoother.solve(dataclasses.replace(clean, z=z), poses, ids, landmarks)
     plain = Smoother(MEASUREMENT, PLAIN).solve(dataclasses.replace(clean, z=z), poses, ids, landmarks)
     reference = robust_smoother.solve(clean, poses, ids, landmarks)
@@ -183,9 +184,10 @@ def revision_case(labels_of):
     return poses, landmarks, dataclasses.replace(problem, observation_landmark=labels), reference
 
 
-def revise(poses, problem, ids, landmark_xy):
+def revise(poses, problem, ids, landmark_xy, unassigned=None):
     smoother = Smoother(MEASUREMENT, ROBUST)
-    return revise_associations(smoother, problem, poses, ids, landmark_xy, lambda p: np.ones(len(p.z)))
+    ones = lambda p: np.ones(len(p.z))  # noqa: E731
+    return revise_associations(smoother, problem, poses, ids, landmark_xy, ones, unassigned=unassigned)
 
 
 def test_a_duplicate_is_merged():
@@ -229,6 +231,24 @@ def test_an_unsupported_landmark_is_removed():
     np.testing.assert_array_equal(revised.removed, [77])
     np.testing.assert_array_equal(revised.run.landmark_ids, [0, 10, 20, 30])
     assert 77 not in revised.problem.observation_landmark
+    np.testing.assert_allclose(revised.run.landmarks, reference.landmarks, atol=1e-3)
+
+
+def test_unassigned_observations_join_the_landmark_that_explains_them():
+    # the filter left landmark 30's views from pose 6 on unassigned (rejected between its gates)
+    poses, landmarks, problem, reference = revision_case(lambda p, ids: ids)
+    later = (problem.observation_landmark == 30) & (problem.observation_pose >= 6)
+    unassigned = Unassigned(problem.observation_pose[later], problem.z[later], problem.R[later])
+    labelled = dataclasses.replace(
+        problem,
+        observation_pose=problem.observation_pose[~later],
+        observation_landmark=problem.observation_landmark[~later],
+        z=problem.z[~later],
+        R=problem.R[~later],
+        noise_scale=None,
+    )
+    revised = revise(poses, labelled, np.arange(4) * 10, landmarks, unassigned)
+    assert revised.adopted == later.sum() == 6 and revised.unassigned == 0
     np.testing.assert_allclose(revised.run.landmarks, reference.landmarks, atol=1e-3)
 
 

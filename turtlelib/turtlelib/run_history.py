@@ -30,6 +30,7 @@ from numpy.typing import NDArray
 from .ekf_slam import SlamConfig
 from .motion_models import MotionModel
 from .motion_signals import MotionSignal, Sample
+from .smoothed_association import Unassigned
 from .smoothing_problem import SmoothingProblem, relative_motions, viewpoint_scales
 
 # (m, rad) added to the standard deviations of each motion factor and of the start prior: keeps the factor
@@ -88,12 +89,14 @@ class RunHistory:
 
     def smoothing_problem(
         self, motion: MotionModel, signal: MotionSignal, config: SlamConfig, landmark_ids: NDArray[np.int64]
-    ) -> tuple[SmoothingProblem, NDArray[np.float64], Callable[[SmoothingProblem], NDArray[np.float64]]]:
-        """``(problem, poses (P, 3), rescale)``: the factors of the run (module docstring) for the final map's
-        ``landmark_ids``, the filter's poses at the problem's stamps (the warm start: at a stamp of several
-        scans, the pose after the last), and the viewpoint scales of the noise for any labelling of the
-        observations (:func:`turtlelib.smoothed_association.revise_associations`). ValueError before
-        :meth:`begin`."""
+    ) -> tuple[
+        SmoothingProblem, NDArray[np.float64], Callable[[SmoothingProblem], NDArray[np.float64]], Unassigned
+    ]:
+        """``(problem, poses (P, 3), rescale, unassigned)``: the factors of the run (module docstring) for the
+        final map's ``landmark_ids``, the filter's poses at the problem's stamps (the warm start: at a stamp
+        of several scans, the pose after the last), the viewpoint scales of the noise for any labelling of
+        the observations, and the observations of no landmark of the map (the last two for
+        :func:`turtlelib.smoothed_association.revise_associations`). ValueError before :meth:`begin`."""
         if self.start_pose is None:
             raise ValueError("the run has not started: no motion sample yet")
         scan_t_ns = np.array(self._scan_t_ns, dtype=np.int64)
@@ -110,8 +113,9 @@ class RunHistory:
         observation_pose = np.repeat(scan_pose, per_scan)
         associated = np.concatenate([np.zeros(0, dtype=np.int64), *self._landmark_ids])
         kept = np.isin(associated, landmark_ids)
-        z = np.concatenate([np.zeros((0, 2)), *self._z])[kept]
-        R = np.concatenate([np.zeros((0, 2, 2)), *self._R])[kept]
+        all_z = np.concatenate([np.zeros((0, 2)), *self._z])
+        all_R = np.concatenate([np.zeros((0, 2, 2)), *self._R])
+        z, R = all_z[kept], all_R[kept]
         problem = SmoothingProblem(
             pose_t_ns=pose_t_ns,
             prior_mean=self.start_pose,
@@ -131,4 +135,5 @@ class RunHistory:
                 sensor_xy, labelled.observation_pose, labelled.observation_landmark, config.fusion_scale
             )
 
-        return replace(problem, noise_scale=rescale(problem)), poses, rescale
+        unassigned = Unassigned(observation_pose[~kept], all_z[~kept], all_R[~kept])
+        return replace(problem, noise_scale=rescale(problem)), poses, rescale, unassigned

@@ -37,7 +37,8 @@ class SmoothingOutcome:
 
     def decisions(self) -> dict[str, int]:
         """What the smoother did, for a report: linearisations, observations used and, with a revision,
-        landmarks merged, removed and created and the observations left as outliers."""
+        landmarks merged, removed and created, observations adopted, and those left as outliers or
+        unassigned."""
         values = {"smoother_iterations": self.run.iterations, "observations_used": len(self.problem.z)}
         if self.revision is not None:
             values.update(
@@ -45,7 +46,9 @@ class SmoothingOutcome:
                     "landmarks_merged_by_smoother": len(self.revision.merged),
                     "landmarks_removed_by_smoother": len(self.revision.removed),
                     "landmarks_created_by_smoother": len(self.revision.created),
+                    "observations_adopted_by_smoother": self.revision.adopted,
                     "observations_outliers": self.revision.outliers,
+                    "observations_unassigned": self.revision.unassigned,
                 }
             )
         return values
@@ -87,9 +90,11 @@ def smooth_history(
     ``signal``), its ``slam_config`` and its final map (``landmark_ids`` (n,), ``landmarks`` (n, 2)), as the
     module docstring says; ``revise`` for unknown association. ValueError for a history that has not
     started."""
-    problem, poses, rescale = history.smoothing_problem(motion, signal, slam_config, landmark_ids)
+    problem, poses, rescale, unassigned = history.smoothing_problem(motion, signal, slam_config, landmark_ids)
     smoother = Smoother(slam_config.measurement_model(), config)
     if not revise:
         return SmoothingOutcome(smoother.solve(problem, poses, landmark_ids, landmarks), problem, None)
-    revised = revise_associations(smoother, problem, poses, landmark_ids, landmarks, rescale, revision)
+    revised = revise_associations(
+        smoother, problem, poses, landmark_ids, landmarks, rescale, revision, unassigned
+    )
     return SmoothingOutcome(revised.run, revised.problem, revised)

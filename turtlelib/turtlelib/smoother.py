@@ -38,8 +38,8 @@ found): the joint block of the last pose and the landmarks is solved from the fa
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from functools import partial
+from dataclasses import dataclass, field
+from functools import cached_property, partial
 
 import numpy as np
 from numpy.typing import NDArray
@@ -62,7 +62,7 @@ class SmootherConfig:
 
     kernel_width: float = 3.0
     max_iterations: int = 50
-    tolerance: float = 1e-6
+    tolerance: float = 1e-4
 
     def __post_init__(self) -> None:
         store(self, ("kernel_width", "tolerance"), positive)
@@ -72,20 +72,42 @@ class SmootherConfig:
 @dataclass(frozen=True)
 class SmoothedRun:
     """The optimum: ``poses`` (P, 3) ``T_map_body`` at the problem's stamps; ``landmark_ids`` (n,),
-    ``landmarks`` (n, 2); ``final_covariance`` (3 + 2n, 3 + 2n) the joint covariance of the last pose and
-    the landmarks, laid out as the filter's state ``[x, y, theta, m_0x, m_0y, ...]``; ``weights`` (K,) the
-    kernel's weight of each observation at the optimum (1: an inlier, small: an outlier) and
-    ``mahalanobis2`` (K,) its squared Mahalanobis distance ``s = r^T R^-1 r`` there; the final cost
-    ``F`` and the linearisations used."""
+    ``landmarks`` (n, 2); ``weights`` (K,) the kernel's weight of each observation at the optimum (1: an
+    inlier, small: an outlier) and ``mahalanobis2`` (K,) its squared Mahalanobis distance
+    ``s = r^T R^-1 r`` there; the final cost ``F`` and the linearisations used; ``information`` the
+    (N, N) ``J^T W J`` there, whose inverse blocks are the covariances (module docstring), solved when
+    asked for (:meth:`covariance`, :attr:`final_covariance`)."""
 
     poses: NDArray[np.float64]
     landmark_ids: NDArray[np.int64]
     landmarks: NDArray[np.float64]
-    final_covariance: NDArray[np.float64]
     weights: NDArray[np.float64]
     mahalanobis2: NDArray[np.float64]
     cost: float
     iterations: int
+    information: sparse.csc_matrix = field(repr=False, compare=False)
+
+    def covariance(self, variables: NDArray[np.int64]) -> NDArray[np.float64]:
+        """The block of ``(J^T W J)^-1`` of ``variables`` (k,) (indices into ``[poses (3P), landmarks
+        (2n)]``), (k, k), by columns from one factorisation."""
+        covariance = np.empty((len(variables), len(variables)))
+        for first in range(0, len(variables), _COLUMNS_PER_SOLVE):
+            columns = np.arange(first, min(first + _COLUMNS_PER_SOLVE, len(variables)))
+            rhs = np.zeros((self.information.shape[0], len(columns)))
+            rhs[variables[columns], np.arange(len(columns))] = 1.0
+            covariance[:, columns] = self._factor.solve(rhs)[variables]
+        return 0.5 * (covariance + covariance.T)
+
+    def landmark_variables(self, slots: NDArray[np.int64]) -> NDArray[np.int64]:
+        """The variable indices ``[m_s0x, m_s0y, m_s1x, ...]`` (2k,) of the landmarks at ``slots`` (k,)."""
+        return (3 * len(self.poses) + 2 * np.asarray(slots)[:, None] + np.arange(2)).ravel()
+
+    @cached_property
+    def final_covariance(self) -> NDArray[np.float64]:
+        """(3 + 2n, 3 + 2n) the joint covariance of the last pose and the landmarks, laid out as the
+        filter's state ``[x, y, theta, m_0x, m_0y, ...]``."""
+        last_pose = 3 * len(self.poses) - 3 + np.arange(3)
+        return self.covariance(np.r_[last_pose, self.landmark_variables(np.arange(len(self.landmark_ids)))])
 
     @property
     def landmark_covariance(self) -> NDArray[np.float64]:
@@ -98,6 +120,10 @@ class SmoothedRun:
         n = len(self.landmark_ids)
         blocks = self.landmark_covariance.reshape(n, 2, n, 2)
         return blocks[np.arange(n), :, np.arange(n), :]
+
+    @cached_property
+    def _factor(self):
+        return _factorise(self.information)
 
 
 class Smoother:
@@ -152,11 +178,11 @@ class Smoother:
             poses=x[: system.n_pose_vars].reshape(-1, 3),
             landmark_ids=landmark_ids,
             landmarks=x[system.n_pose_vars :].reshape(-1, 2),
-            final_covariance=system.final_covariance(lin),
             weights=lin.weights,
             mahalanobis2=lin.mahalanobis2,
             cost=lin.cost,
             iterations=iterations,
+            information=(lin.J.T @ lin.J).tocsc(),
         )
 
 
@@ -298,19 +324,6 @@ class _System:
         moved = x + step
         moved[2 : self.n_pose_vars : 3] = normalize_angles(moved[2 : self.n_pose_vars : 3])
         return moved
-
-    def final_covariance(self, lin: _Linearisation) -> NDArray[np.float64]:
-        """The block of ``(J^T W J)^-1`` (3 + 2n, 3 + 2n) of the last pose and the landmarks, by columns
-        from one factorisation."""
-        variables = np.r_[self.n_pose_vars - 3 : self.n_vars]
-        factor = _factorise((lin.J.T @ lin.J).tocsc())
-        covariance = np.empty((len(variables), len(variables)))
-        for first in range(0, len(variables), _COLUMNS_PER_SOLVE):
-            columns = np.arange(first, min(first + _COLUMNS_PER_SOLVE, len(variables)))
-            rhs = np.zeros((self.n_vars, len(columns)))
-            rhs[variables[columns], np.arange(len(columns))] = 1.0
-            covariance[:, columns] = factor.solve(rhs)[variables]
-        return 0.5 * (covariance + covariance.T)
 
 
 def _whitening(S: NDArray[np.float64]) -> NDArray[np.float64]:
