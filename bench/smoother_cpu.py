@@ -6,7 +6,7 @@ association, recovering the landmark covariance) runs ``--repeat`` times from th
 CPU time (user + system of this process, ``time.process_time``) of each smoothing is reported, median and
 range, beside the filter's and the figures the smoother gave (they are the same on every repetition).
 
-Usage: python -P bench/smoother_cpu.py --mrclam DIR --victoria DIR [--repeat 3] [--write]
+Usage: .venv/bin/python -P bench/smoother_cpu.py --mrclam DIR --victoria DIR [--repeat 3] [--write]
 (``--write`` replaces the "## Smoother" section of docs/benchmarks.md).
 """
 
@@ -89,7 +89,8 @@ def main() -> None:
         [
             HEADING,
             "",
-            f"`python -P bench/smoother_cpu.py --mrclam DIR --victoria DIR --repeat {args.repeat}` on "
+            "`.venv/bin/python -P bench/smoother_cpu.py --mrclam DIR --victoria DIR "
+            f"--repeat {args.repeat}` on "
             f"{platform.machine()}, Python {platform.python_version()}, one BLAS thread, "
             f"{time.strftime('%Y-%m-%d')}. CPU seconds (user + system) of the smoother after the filter: "
             "building the factors, solving, revising the associations (unknown association) and the "
