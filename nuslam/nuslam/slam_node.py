@@ -516,7 +516,9 @@ class SlamNode(Node):
             response.success, response.message = False, f"could not save the map to {path}: {error}"
             self.get_logger().error(response.message)
             return response
-        smoothed = " (smoothed run)" if self.node_config.smooth_saved_map else ""
+        smoothed = ""
+        if self.node_config.smooth_saved_map:
+            smoothed = f" (smoothed run; the filter has {len(self.slam.landmark_ids)})"
         response.message = f"saved {landmark_map.n_landmarks} landmarks{smoothed} to {path}"
         try:
             grid_saved = self.grid.save(pose_at)

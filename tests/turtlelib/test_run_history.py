@@ -11,6 +11,7 @@ from turtlelib.motion_models import TwistNoise, UnicycleMotion
 from turtlelib.motion_signals import HeldInputs
 from turtlelib.range_bearing import predict_observations
 from turtlelib.run_history import RunHistory
+from turtlelib.run_smoothing import smooth_history
 
 MOTION = UnicycleMotion(TwistNoise(forward_m2_per_m=1e-3, heading_rad2_per_rad=1e-3, lateral_m2_per_m=1e-4))
 CONFIG = SlamConfig(range_std=0.02, bearing_std=0.01, confirm_count=1)
@@ -95,3 +96,23 @@ def test_no_history_unless_asked_and_no_problem_before_the_start():
     assert SlamTimeline(slam, HeldInputs()).history is None
     with pytest.raises(ValueError, match="not started"):
         RunHistory().smoothing_problem(MOTION, HeldInputs(), CONFIG, np.array([0]))
+
+
+def test_a_smoothing_after_a_break_covers_the_landmarks_seen_since():
+    line = timeline()
+    drive(line, range(0, 100, 10))
+    line.slam.reset(line.slam.pose, np.eye(3) * 1e-4, keep_map=True)
+    line.break_history()
+    # from here on only landmark 1 is in view
+    for k, t in enumerate(range(100, 200, 10)):
+        line.add_motion(t * MS, (0.2, 0.1))
+        if k % 2 == 0:
+            line.add_observations(t * MS, scan_of(line.slam)[1:], ids=[1])
+    slam = line.slam
+    outcome = smooth_history(
+        line.history, MOTION, HeldInputs(), CONFIG, slam.landmark_ids, slam.landmarks, revise=False
+    )
+    np.testing.assert_array_equal(slam.landmark_ids, [0, 1])
+    np.testing.assert_array_equal(outcome.run.landmark_ids, [1])
+    np.testing.assert_allclose(outcome.run.landmarks, LANDMARKS[1:], atol=1e-6)
+    assert outcome.pose_at(180 * MS) is not None and outcome.pose_at(185 * MS) is None

@@ -87,6 +87,11 @@ class RunHistory:
         self._landmark_ids.append(landmark_ids)
         self._scan_poses.append(np.array(pose, dtype=np.float64))
 
+    def observed_landmarks(self) -> NDArray[np.int64]:
+        """The ids (ascending) the filter associated an observation of the history with."""
+        ids = np.unique(np.concatenate([np.zeros(0, dtype=np.int64), *self._landmark_ids]))
+        return ids[ids >= 0]
+
     def smoothing_problem(
         self, motion: MotionModel, signal: MotionSignal, config: SlamConfig, landmark_ids: NDArray[np.int64]
     ) -> tuple[

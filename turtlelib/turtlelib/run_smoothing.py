@@ -88,8 +88,12 @@ def smooth_history(
 ) -> SmoothingOutcome:
     """The run of ``history`` smoothed with the filter's ``motion`` model (its samples read through
     ``signal``), its ``slam_config`` and its final map (``landmark_ids`` (n,), ``landmarks`` (n, 2)), as the
-    module docstring says; ``revise`` for unknown association. ValueError for a history that has not
-    started."""
+    module docstring says; ``revise`` for unknown association. The landmarks of the map that the history
+    never saw (before a relocalization) have no factor and are left out of the smoothed map. ValueError for
+    a history that has not started, or a problem without a unique optimum."""
+    # only the landmarks the history saw (a relocalization starts it again): the others have no factor
+    seen = np.isin(landmark_ids, history.observed_landmarks())
+    landmark_ids, landmarks = landmark_ids[seen], landmarks[seen]
     problem, poses, rescale, unassigned = history.smoothing_problem(motion, signal, slam_config, landmark_ids)
     smoother = Smoother(slam_config.measurement_model(), config)
     if not revise:

@@ -341,8 +341,12 @@ def _pose_difference(q: NDArray[np.float64], q_ref: NDArray[np.float64]) -> NDAr
 
 def _factorise(H: sparse.csc_matrix):
     """SuperLU of the symmetric positive definite ``H``: a minimum-degree ordering of its pattern, the
-    diagonal as pivots (no row exchanges, so the ordering is kept)."""
-    return splu(H, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+    diagonal as pivots (no row exchanges, so the ordering is kept). ValueError for a singular ``H`` (a
+    variable no factor constrains)."""
+    try:
+        return splu(H, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+    except RuntimeError as error:
+        raise ValueError(f"the smoothing problem has no unique optimum ({error})") from error
 
 
 def _solve(H: sparse.csc_matrix, b: NDArray[np.float64]) -> NDArray[np.float64]:
