@@ -100,7 +100,7 @@ class RunHistory:
         """``(problem, poses (P, 3), rescale, unassigned)``: the factors of the run (module docstring) for the
         final map's ``landmark_ids``, the filter's poses at the problem's stamps (the warm start: at a stamp
         of several scans, the pose after the last), the viewpoint scales of the noise for any labelling of
-        the observations, and the observations of no landmark of the map (the last two for
+        the observations, and the usable observations of no landmark of the map (the last two for
         :func:`turtlelib.smoothed_association.revise_associations`). ValueError before :meth:`begin`."""
         if self.start_pose is None:
             raise ValueError("the run has not started: no motion sample yet")
@@ -140,5 +140,7 @@ class RunHistory:
                 sensor_xy, labelled.observation_pose, labelled.observation_landmark, config.fusion_scale
             )
 
-        unassigned = Unassigned(observation_pose[~kept], all_z[~kept], all_R[~kept])
+        # the observations of no landmark that the sensor model takes (in its range, as the filter checks)
+        free = ~kept & measurement.usable(all_z)
+        unassigned = Unassigned(observation_pose[free], all_z[free], all_R[free])
         return replace(problem, noise_scale=rescale(problem)), poses, rescale, unassigned

@@ -225,7 +225,7 @@ class _System:
         rows, cols, vals = [], [], []
 
         def block(values: NDArray, row0: NDArray, col0: NDArray) -> None:
-            k, a, b = values.shape
+            _, a, b = values.shape
             rows.append(
                 (row0[:, None, None] + np.arange(a)[None, :, None] + np.zeros((1, 1, b), int)).ravel()
             )
