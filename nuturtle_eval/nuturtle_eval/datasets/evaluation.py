@@ -18,6 +18,10 @@ best fits the estimated positions to the reference (:func:`~nuturtle_eval.metric
 removes the unobservable global frame. NEES ``e^T P^-1 e`` per sample, its mean and the fraction inside the
 two-sided 95 % chi2 interval of one sample.
 
+Victoria Park's published protocol (``--protocol published``) adds the literature's score,
+``ate_rmse_published_m = sqrt(mean_k |p_k - g_j(k)|^2)`` over the estimates ``k`` that have a fix ``g_j(k)``
+within 25 ms of their stamp (:func:`pair_with_fixes`): no interpolation and no alignment.
+
 Map (MRCLAM)
 ------------
 Known association pairs each mapped landmark with the true one of its id. Unknown association first
@@ -39,15 +43,18 @@ from numpy.typing import NDArray
 
 from turtlelib import Transform2D, normalize_angles
 from turtlelib.consistency import chi2_bounds
+from turtlelib.validation import one_of
 
 from ..metrics import align_se2, associate_landmarks, pose_nees
 from .experiment import Experiment, ExperimentResult
 from .mrclam import MrclamRecording
-from .setups import interpolate_poses, laser_points
+from .setups import PROTOCOLS, interpolate_poses, laser_points
 from .victoria import VictoriaRecording, gps_outliers
 
 NEES_PROB = 0.95
 LANDMARK_GATE_M = 0.5
+# the published protocol scores the estimates that have a GPS fix within 25 ms of their stamp
+PUBLISHED_PAIRING_NS = 25_000_000
 
 
 @dataclass(frozen=True)
@@ -212,10 +219,52 @@ def evaluate_mrclam(
     )
 
 
+def pair_with_fixes(
+    t_ns: NDArray[np.int64], fix_t_ns: NDArray[np.int64], tolerance_ns: int
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """``(estimates, fixes)``: the indices of the estimates stamped ``t_ns`` (S,) that have a fix within
+    ``tolerance_ns``, and of that fix, the nearest one ``j(k) = argmin_j |t_k - tau_j|`` (the earlier of
+    two equally near), kept when ``|t_k - tau_j(k)| <= tolerance_ns``. One fix may serve two estimates.
+    ``fix_t_ns`` (G,) increasing; ValueError otherwise, or for a negative tolerance."""
+    t_ns, fix_t_ns = np.asarray(t_ns, dtype=np.int64), np.asarray(fix_t_ns, dtype=np.int64)
+    if np.any(np.diff(fix_t_ns) <= 0):
+        raise ValueError("fix_t_ns must be increasing")
+    if tolerance_ns < 0:
+        raise ValueError(f"tolerance_ns must be >= 0, got {tolerance_ns}")
+    if fix_t_ns.size == 0:
+        return np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp)
+    # the fixes on either side of each stamp (the first or last fix twice beyond the ends)
+    after = np.searchsorted(fix_t_ns, t_ns)
+    before, after = np.maximum(after - 1, 0), np.minimum(after, fix_t_ns.size - 1)
+    earlier = np.abs(t_ns - fix_t_ns[before]) <= np.abs(fix_t_ns[after] - t_ns)
+    nearest = np.where(earlier, before, after)
+    estimates = np.flatnonzero(np.abs(t_ns - fix_t_ns[nearest]) <= tolerance_ns)
+    return estimates, nearest[estimates]
+
+
+def published_metrics(result: ExperimentResult, recording: VictoriaRecording) -> dict:
+    """The published protocol's score: ``ate_rmse_published_m = sqrt(mean_k |p_k - g_j(k)|^2)`` over the
+    ``published_fixes`` estimates with an (outlier-free) GPS fix ``g_j(k)`` within ``PUBLISHED_PAIRING_NS``
+    of their stamp (:func:`pair_with_fixes`), ``p_k`` the laser point of the estimate itself (no
+    interpolation, no alignment)."""
+    points, _ = laser_points(result.poses)
+    good = ~gps_outliers(recording.gps_t_ns, recording.gps_xy)
+    estimates, fixes = pair_with_fixes(result.t_ns, recording.gps_t_ns[good], PUBLISHED_PAIRING_NS)
+    error_m = np.linalg.norm(points[estimates] - recording.gps_xy[good][fixes], axis=1)
+    return {
+        "ate_rmse_published_m": float(np.sqrt(np.mean(error_m**2))) if error_m.size else float("nan"),
+        "ate_max_published_m": float(error_m.max()) if error_m.size else float("nan"),
+        "published_fixes": int(error_m.size),
+        "published_pairing_s": PUBLISHED_PAIRING_NS * 1e-9,
+    }
+
+
 def evaluate_victoria(
-    experiment: Experiment, result: ExperimentResult, recording: VictoriaRecording
+    experiment: Experiment, result: ExperimentResult, recording: VictoriaRecording, protocol: str = "aligned"
 ) -> Evaluation:
-    """Victoria Park's laser point against the GPS fixes (module docstring)."""
+    """Victoria Park's laser point against the GPS fixes (module docstring); with ``protocol``
+    ``published`` also :func:`published_metrics`."""
+    one_of("protocol", protocol, PROTOCOLS)
     t0 = experiment.motion_t_ns[0]
     points, point_covariances = laser_points(result.poses, result.covariances)
     track, _ = laser_points(result.track)
@@ -242,6 +291,8 @@ def evaluate_victoria(
             "landmark_nees_mean": None,
         }
     )
+    if protocol == "published":
+        metrics.update(published_metrics(result, recording))
     metrics.update(_timing_metrics(experiment, result))
     return Evaluation(
         t_s=t_rel,

@@ -125,6 +125,29 @@ def test_victoria_excerpt_end_to_end(tmp_path):
     # started from the GPS: within a few metres of it over the first 30 s
     assert metrics["ate_rmse_m"] < 5.0
     assert metrics["nees_dof"] == 2
+    # the default (aligned) protocol adds no published figures
+    assert "ate_rmse_published_m" not in metrics and "published_fixes" not in metrics
+
+
+def test_victoria_published_protocol_end_to_end(tmp_path):
+    out = tmp_path / "run"
+    argv = ["victoria", "--data", str(DATA / "victoria_30s"), "--out", str(out), "--no-progress"]
+    assert main([*argv, "--protocol", "published"]) == 0
+    metrics = _outputs(out)
+    # the published figures beside the usual ones: a subset of the estimates, within metres of the GPS
+    assert 0 < metrics["published_fixes"] < metrics["scans_applied"]
+    assert 0.0 < metrics["ate_rmse_published_m"] < 5.0
+    assert metrics["published_pairing_s"] == 0.025
+    assert "published" in metrics["run"]
+
+
+def test_victoria_protocol_is_one_of_the_two(tmp_path, capsys):
+    argv = ["victoria", "--data", str(DATA / "victoria_30s"), "--out", str(tmp_path / "run")]
+    with pytest.raises(SystemExit) as exit_info:
+        main([*argv, "--protocol", "gps"])
+    assert exit_info.value.code == 2
+    assert "invalid choice: 'gps'" in capsys.readouterr().err
+    assert not (tmp_path / "run").exists()
 
 
 def test_calibrate_writes_params_that_a_run_takes(tmp_path, capsys):

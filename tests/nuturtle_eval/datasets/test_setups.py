@@ -1,9 +1,11 @@
-"""The Victoria Park start from the GPS (``setups.gps_start``) and the scan cut it runs on
-(``Scans.until``), on hand-made scans and the 30 s excerpt (data/README.md)."""
+"""The Victoria Park starts, from the GPS (``setups.gps_start``) and the published one
+(``setups.published_start``), and the scan cut the first runs on (``Scans.until``), on hand-made scans and the
+30 s excerpt (data/README.md)."""
 
 from __future__ import annotations
 
 import dataclasses
+import math
 from pathlib import Path
 
 import numpy as np
@@ -12,10 +14,12 @@ import pytest
 from nuturtle_eval.datasets.experiment import Experiment, Scans, run_experiment
 from nuturtle_eval.datasets.setups import (
     GPS_MIN_STD_M,
+    PUBLISHED_THETA_STD_RAD,
     START_WINDOW_S,
     VICTORIA_PARAMS,
     gps_start,
     laser_points,
+    published_start,
     victoria_experiment,
 )
 from nuturtle_eval.datasets.victoria import load_victoria
@@ -84,3 +88,32 @@ def test_too_few_fixes_in_the_start_window_is_a_clear_error(recording):
     late = dataclasses.replace(recording, gps_t_ns=recording.gps_t_ns[:2], gps_xy=recording.gps_xy[:2])
     with pytest.raises(ValueError, match="fewer than 3 GPS fixes"):
         gps_start(run, late)
+
+
+def test_the_published_start_moves_the_laser_pose_to_the_rear_axle_centre():
+    """The published pose (-67.6493 m, -41.7142 m, 35.5 deg) is the laser's; by hand, with
+    cos 35.5 deg = 0.814116 and sin 35.5 deg = 0.580703, the laser offset R(theta) [3.78, 0.50] is
+    (3.78 cos - 0.50 sin, 3.78 sin + 0.50 cos) = (2.787005, 2.602115) m, so the rear-axle centre is at
+    (-67.6493 - 2.787005, -41.7142 - 2.602115) = (-70.436305, -44.316315) m, with the same heading."""
+    T_map_body0 = published_start()
+    np.testing.assert_allclose(
+        T_map_body0.as_array(), [-70.436305, -44.316315, math.radians(35.5)], rtol=0, atol=1e-6
+    )
+    # and the laser of that body pose is the published point again
+    laser, _ = laser_points(T_map_body0.as_array()[None, :])
+    np.testing.assert_allclose(laser[0], [-67.6493, -41.7142], rtol=0, atol=1e-12)
+
+
+def test_the_published_protocol_starts_there_without_the_gps_window(recording):
+    run = victoria_experiment(recording, VICTORIA_PARAMS, "published")
+    np.testing.assert_array_equal(run.T_map_body0.as_array(), published_start().as_array())
+    assert (run.config.initial_xy_std, run.config.initial_theta_std) == (
+        GPS_MIN_STD_M,
+        PUBLISHED_THETA_STD_RAD,
+    )
+    # the rest of the run is the aligned protocol's
+    aligned = victoria_experiment(recording, VICTORIA_PARAMS, "aligned")
+    np.testing.assert_array_equal(run.scans.t_ns, aligned.scans.t_ns)
+    np.testing.assert_array_equal(run.motion_samples, aligned.motion_samples)
+    with pytest.raises(ValueError, match="protocol"):
+        victoria_experiment(recording, VICTORIA_PARAMS, "gps")
