@@ -52,11 +52,11 @@ GPS_MIN_STD_M = 0.5
 # aligned to the GPS (gps_start); ``published`` starts from the literature's fixed start pose
 PROTOCOLS = ("aligned", "published")
 # The published start (the EKF/FastSLAM/PHD-SLAM codes on this dataset start at x0 = [-67.6493; -41.7142;
-# 35.5 pi/180] with P0 = 0): that x0 is the first GPS fix (Lo_m[0], La_m[0]) = (-67.64927, -41.71422) m,
+# 35.5 pi/180], some with P0 = 0): that x0 is the first GPS fix (Lo_m[0], La_m[0]) = (-67.64927, -41.71422) m,
 # i.e. a pose in the GPS frame [East, North] (our map frame) with the heading CCW from East, of the point
 # those codes' vehicle model tracks: the laser at (a + L, b) = (3.78, 0.50) m from the rear-axle centre,
 # which is also the GPS antenna (the dataset's README, car.png). The fix is stamped 0 s, the first odometry
-# sample 0.973 s, and the car stands still (speed 0) until 3 s, so it is also the pose at the first sample.
+# sample 0.973 s, and the car stands still (speed 0) until 3.25 s, so it is also the pose at the first sample.
 PUBLISHED_T_MAP_LASER0 = (-67.6493, -41.7142, math.radians(35.5))
 # its heading σ: 35.5 deg lies 0.23 deg from the heading of the aligned start (35.27 deg), and the whole
 # published run's best rigid alignment to the GPS turns it by 0.13 deg (docs/real_data.md); 1 deg covers
