@@ -166,7 +166,7 @@ def summary(metrics: dict) -> str:
     """The main figures, one line each (those the run has: MRCLAM has no published protocol); with a
     smoothed run, filter and smoother side by side."""
     smoothed = metrics.get("smoothed")
-    lines = [metrics["run"] if smoothed is None else f"{metrics['run']:41s}{'filter':>12s}{'smoother':>12s}"]
+    lines = [metrics["run"]] + ([] if smoothed is None else [f"  {'':32s}{'filter':>12s}{'smoother':>12s}"])
     for key in (key for key in SUMMARY_KEYS if key in metrics):
         values = [metrics.get(key)] + ([] if smoothed is None else [smoothed.get(key)])
         shown = "".join(f"{v:>12.4g}" if isinstance(v, float) else f"{v!s:>12s}" for v in values)
