@@ -94,7 +94,8 @@ def main() -> None:
             f"{platform.machine()}, Python {platform.python_version()}, one BLAS thread, "
             f"{time.strftime('%Y-%m-%d')}. CPU seconds (user + system) of the smoother after the filter: "
             "building the factors, solving, revising the associations (unknown association) and the "
-            "landmark covariance. The machine is shared: repeated runs vary.",
+            "landmark covariance. The machine is shared: repeated runs vary (load average "
+            f"{os.getloadavg()[0]:.1f} on its {os.cpu_count()} cores when this run ended).",
             "",
             "| run | poses | filter CPU (s) | smoother CPU (s), median (range) | target (s) | ATE aligned, "
             "filter (m) | smoother (m) |",
