@@ -39,7 +39,8 @@ def gate_2d(prob: float) -> float:
 def mahalanobis_2d(
     nu: NDArray[np.float64], S: NDArray[np.float64]
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """``(D2 = nu^T S^-1 nu, ln det S)`` for stacks of 2-vectors ``nu`` (..., 2) and 2x2 ``S`` (..., 2, 2).
+    """``(D2 = nu^T S^-1 nu, ln det S)`` for stacks of 2-vectors ``nu`` (..., 2) and 2x2 ``S`` (..., 2, 2) of
+    one shape.
 
     Closed-form 2x2 inverse, vectorised: ``S^-1 = [[S11, -S01], [-S10, S00]] / det S``.
     """
@@ -56,12 +57,15 @@ def _d2_det(
     nu: NDArray[np.float64], S: NDArray[np.float64]
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """``(D2, det S)`` (...,) of :func:`mahalanobis_2d`."""
-    S00, S01, S10, S11 = S[..., 0, 0], S[..., 0, 1], S[..., 1, 0], S[..., 1, 1]
+    shape = nu.shape[:-1]
+    # the stacks flattened, so that every entry below is one strided run (one inner loop per operation)
+    nu, S = nu.reshape(-1, 2), S.reshape(-1, 4)
+    S00, S01, S10, S11 = S[:, 0], S[:, 1], S[:, 2], S[:, 3]
     det = S00 * S11 - S01 * S10
-    a, b = nu[..., 0], nu[..., 1]
+    a, b = nu[:, 0], nu[:, 1]
     # D2 = (a^2 S11 - a b (S01 + S10) + b^2 S00) / det
     d2 = (a * a * S11 - a * b * (S01 + S10) + b * b * S00) / det
-    return d2, det
+    return d2.reshape(shape), det.reshape(shape)
 
 
 def mahalanobis_lower_bound(
@@ -88,12 +92,15 @@ def nearest_neighbour(cost: NDArray[np.float64], compatible: NDArray[np.bool_]) 
     ``cost`` (K, n) is ``D2 + ln det S``; pairs are taken in increasing cost among ``compatible`` (K, n)
     ones, each observation and each landmark at most once.
     """
-    match = [-1] * cost.shape[0]
-    obs_idx, lm_idx = np.nonzero(compatible)
-    order = np.argsort(cost[obs_idx, lm_idx], kind="stable")
+    count, n = cost.shape
+    match = [-1] * count
+    # the compatible pairs by flat index k n + j, row by row
+    pairs = np.flatnonzero(compatible)
+    order = np.argsort(cost.ravel()[pairs], kind="stable")
     taken: set[int] = set()
     # the pairs in increasing cost, as Python ints
-    for k, j in zip(obs_idx[order].tolist(), lm_idx[order].tolist(), strict=True):
+    for pair in pairs[order].tolist():
+        k, j = divmod(pair, n)
         if match[k] < 0 and j not in taken:
             match[k] = j
             taken.add(j)

@@ -116,12 +116,13 @@ def residual(z: NDArray[np.float64], z_hat: NDArray[np.float64]) -> NDArray[np.f
     The only place where range-bearing residual angles are wrapped; ``z`` and ``z_hat`` broadcast.
     """
     nu = np.subtract(z, z_hat)
-    bearing = nu[..., 1]
+    # the bearings as one strided run (a stack of pairs, e.g. gating's (K, n, 2), in one inner loop)
+    bearing = nu.reshape(-1, 2)[:, 1]
     # nu_bearing <- wrap(b - b_hat) as normalize_angles does it (exact): the remainder by 2 pi, then one
-    # shift by 2 pi where it lies beyond pi (adding 0 elsewhere leaves it bit for bit). The remainder
-    # leaves |b| < 2 pi as it is and takes 2 pi off 2 pi <= |b| < 3 pi exactly (Sterbenz), as the shift
-    # does: below 3 pi the shift alone gives the same, and below pi (the usual case) nothing changes.
-    # NaN and inf fail both bounds and are refused below.
+    # shift by 2 pi where it lies beyond pi (the others untouched). The remainder leaves |b| < 2 pi as it
+    # is and takes 2 pi off 2 pi <= |b| < 3 pi exactly (Sterbenz), as the shift does: below 3 pi the
+    # shift alone gives the same, and below pi (the usual case) nothing changes. NaN and inf fail both
+    # bounds and are refused below.
     largest = np.abs(bearing).max() if bearing.size else 0.0
     if largest < math.pi:
         return nu
@@ -129,8 +130,8 @@ def residual(z: NDArray[np.float64], z_hat: NDArray[np.float64]) -> NDArray[np.f
         if not np.isfinite(bearing).all():
             raise ValueError("angles must be finite")
         np.fmod(bearing, math.tau, out=bearing)
-    bearing -= (bearing > math.pi) * math.tau
-    bearing += (bearing <= -math.pi) * math.tau
+    np.subtract(bearing, math.tau, out=bearing, where=bearing > math.pi)
+    np.add(bearing, math.tau, out=bearing, where=bearing <= -math.pi)
     return nu
 
 

@@ -210,11 +210,10 @@ class SlamState:
         """Joint covariances (k, 5, 5) of ``[x, y, theta, m_ix, m_iy]`` for ``slots`` (default all), O(k), in
         the stored coordinates (for the filter's Jacobians)."""
         self._apply_pending()
-        slots = np.arange(self._n) if slots is None else np.asarray(slots)
         # every entry from the upper triangle, P_ab at flat index min(a, b) * capacity + max(a, b) for the
-        # state indices [0, 1, 2, 3 + 2i, 4 + 2i] of slot i: base + 2i step, in one gather
-        base, step = _pose_landmark_block_indices(self._cov.shape[0])
-        return self._cov.ravel()[base + LANDMARK_DIM * slots[:, None, None] * step]
+        # state indices [0, 1, 2, 3 + 2i, 4 + 2i] of slot i, in one gather
+        flat = _pose_landmark_block_indices(self._cov.shape[0])
+        return self._cov.ravel()[flat[: self._n] if slots is None else flat[slots]]
 
     # --- the filter steps --------------------------------------------------------------------------------
 
@@ -634,12 +633,12 @@ def _landmark_block_indices(k: int) -> NDArray[np.int64]:
     return flat
 
 
-@functools.lru_cache(maxsize=128)
-def _pose_landmark_block_indices(capacity: int) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-    """``(base, step)`` (5, 5): the flat indices into the C-ordered (capacity, capacity) storage of the
-    upper-triangle entries ``P_ab`` of ``[x, y, theta, m_ix, m_iy]`` are ``base + 2i step`` for slot ``i``
+@functools.lru_cache(maxsize=16)
+def _pose_landmark_block_indices(capacity: int) -> NDArray[np.int64]:
+    """Flat indices (c, 5, 5) into the C-ordered (capacity, capacity) storage of the upper-triangle entries
+    ``P_ab`` of ``[x, y, theta, m_ix, m_iy]`` for every slot ``i < c`` of the capacity: ``base + 2i step``
     (``base`` those of slot 0; ``step`` 0 between robot indices, 1 between a robot and a landmark index,
-    ``capacity + 1`` between landmark indices). Read-only, one pair per capacity."""
+    ``capacity + 1`` between landmark indices). Read-only, one table per capacity."""
     indices = np.arange(ROBOT_DIM + LANDMARK_DIM)
     rows, columns = indices[:, None], indices[None, :]
     base = np.minimum(rows, columns) * capacity + np.maximum(rows, columns)
@@ -647,8 +646,10 @@ def _pose_landmark_block_indices(capacity: int) -> tuple[NDArray[np.int64], NDAr
     step = np.where(
         landmark[:, None] & landmark[None, :], capacity + 1, landmark[:, None] | landmark[None, :]
     )
-    base.flags.writeable = step.flags.writeable = False
-    return base, step
+    slots = np.arange((capacity - ROBOT_DIM) // LANDMARK_DIM)
+    flat = base + LANDMARK_DIM * slots[:, None, None] * step
+    flat.flags.writeable = False
+    return flat
 
 
 @functools.lru_cache(maxsize=128)
