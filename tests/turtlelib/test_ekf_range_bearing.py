@@ -145,6 +145,16 @@ def test_residual_broadcasts_observations_against_landmarks():
     np.testing.assert_allclose(nu[1, 1], [0.5, 6.0 - 2.0 * PI], atol=1e-12)
 
 
+def test_residual_wraps_inputs_of_any_memory_layout():
+    # column-major stacks (Fortran-ordered, as a transposed array is) are wrapped as row-major ones
+    rng = np.random.default_rng(3)
+    z, z_hat = rng.uniform(-3.0 * PI, 3.0 * PI, (2, 3, 4, 2))
+    expected = residual(z.copy(), z_hat.copy())
+    nu = residual(np.asfortranarray(z), np.asfortranarray(z_hat))
+    np.testing.assert_array_equal(nu, expected)
+    assert [normalize_angle(b) for b in (z - z_hat)[..., 1].ravel()] == nu[..., 1].ravel().tolist()
+
+
 @pytest.mark.parametrize("bearing", [math.nan, math.inf])
 def test_residual_rejects_non_finite_bearings(bearing):
     with pytest.raises(ValueError):

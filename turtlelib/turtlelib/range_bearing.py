@@ -115,8 +115,9 @@ def residual(z: NDArray[np.float64], z_hat: NDArray[np.float64]) -> NDArray[np.f
 
     The only place where range-bearing residual angles are wrapped; ``z`` and ``z_hat`` broadcast.
     """
-    nu = np.subtract(z, z_hat)
-    # the bearings as one strided run (a stack of pairs, e.g. gating's (K, n, 2), in one inner loop)
+    # C order whatever the inputs' layout, so that the bearings are one strided run of it (a view: a stack
+    # of pairs, e.g. gating's (K, n, 2), wrapped in one inner loop per operation)
+    nu = np.subtract(z, z_hat, order="C")
     bearing = nu.reshape(-1, 2)[:, 1]
     # nu_bearing <- wrap(b - b_hat) as normalize_angles does it (exact): the remainder by 2 pi, then one
     # shift by 2 pi where it lies beyond pi (the others untouched). The remainder leaves |b| < 2 pi as it
