@@ -362,8 +362,9 @@ class GatedTracks:
         """The column (or -1) for each observation: confirmed landmarks first; tentative landmarks only take
         observations that no confirmed landmark is compatible with."""
         compatible = gating.d2 < self._gate_associate
-        confirmed = view.tracks.confirmed[gating.slots]
-        if confirmed.all():  # no tentative landmark among them (the usual scan)
+        tracks = view.tracks
+        confirmed = None if tracks.all_confirmed else tracks.confirmed[gating.slots]
+        if confirmed is None or confirmed.all():  # no tentative landmark among them (the usual scan)
             return self._matcher.match(gating, compatible, R, view)
         with_confirmed = compatible & confirmed
         match = self._matcher.match(gating, with_confirmed, R, view)

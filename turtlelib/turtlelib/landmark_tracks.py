@@ -26,6 +26,7 @@ class LandmarkTracks:
         self._sighted_ns = np.zeros(capacity, dtype=np.int64)
         self._last_view_xy = np.full((capacity, 2), np.inf)
         self._confirmed = np.zeros(capacity, dtype=bool)
+        self._tentative = 0  # how many rows are not confirmed
         # the columns strategies add, by name
         self._columns: dict[str, NDArray[np.float64]] = {}
         self._n = 0
@@ -46,6 +47,11 @@ class LandmarkTracks:
     def confirmed(self) -> NDArray[np.bool_]:
         """Confirmed flag of every slot (n,), a view."""
         return self._confirmed[: self._n]
+
+    @property
+    def all_confirmed(self) -> bool:
+        """Whether every slot is confirmed (no tentative landmark), O(1)."""
+        return self._tentative == 0
 
     def add_column(self, name: str, width: int) -> None:
         """A float column ``name`` (n, width), zero for the rows held (no-op if it exists); it grows and
@@ -75,6 +81,7 @@ class LandmarkTracks:
         self._sighted_ns[new] = stamp_ns
         self._last_view_xy[new] = np.inf
         self._confirmed[new] = confirmed
+        self._tentative += 0 if confirmed else k
         for column in self._columns.values():
             column[new] = 0.0
         self._slot_of.update(zip(np.asarray(landmark_ids).tolist(), range(self._n, self._n + k), strict=True))
@@ -86,6 +93,7 @@ class LandmarkTracks:
     def remove(self, slot: int) -> None:
         """Forget ``slot``; the last row moves into it."""
         del self._slot_of[int(self._ids[slot])]
+        self._tentative -= not self._confirmed[slot]
         last = self._n - 1
         if slot != last:
             for array in self._arrays():
@@ -96,21 +104,23 @@ class LandmarkTracks:
     def sighted(self, slots: NDArray[np.int64], confirm_count: int, stamp_ns: int) -> NDArray[np.int64]:
         """Count one sighting at ``stamp_ns`` of each of the distinct tentative ``slots`` not yet sighted at
         that stamp or later (copies of one scan count once); returns the ids this confirms."""
-        if self._confirmed[slots].all():  # the usual scan: only confirmed landmarks sighted
+        # the usual scan: only confirmed landmarks sighted
+        if self._tentative == 0 or self._confirmed[slots].all():
             return np.zeros(0, dtype=np.int64)
         tentative = slots[~self._confirmed[slots] & (self._sighted_ns[slots] < stamp_ns)]
         self._seen[tentative] += 1
         self._sighted_ns[tentative] = stamp_ns
         newly = tentative[self._seen[tentative] >= confirm_count]
         self._confirmed[newly] = True
+        self._tentative -= len(newly)
         return np.sort(self._ids[newly])
 
     def expired(self, stamp_ns: int, timeout_ns: int) -> NDArray[np.int64]:
         """Slots of tentative landmarks first seen ``timeout_ns`` or more before ``stamp_ns``, highest
         first."""
-        n = self._n
-        if self._confirmed[:n].all():  # no tentative landmark
+        if self._tentative == 0:
             return np.zeros(0, dtype=np.int64)
+        n = self._n
         old = ~self._confirmed[:n] & (stamp_ns - self._born[:n] >= timeout_ns)
         return old.nonzero()[0][::-1]
 
