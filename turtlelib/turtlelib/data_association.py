@@ -340,15 +340,19 @@ class GatedTracks:
             else:
                 gating = view.gate(z_usable, R_usable, np.arange(view.n_landmarks))
             match = self._associate(gating, R_usable, view)
-            far_from_all = (gating.d2 > self._gate_new).all(axis=1)
             rows = (match >= 0).nonzero()[0]
             columns = match[rows]
             slots = gating.slots[columns]
-            landmark_ids[usable[rows]] = view.tracks.ids[slots]
-            status[usable[rows]] = MATCHED
-            fused = (usable[rows], slots, gating.nu[rows, columns], gating.H_robot[columns])
+            matched = usable[rows]
+            landmark_ids[matched] = view.tracks.ids[slots]
+            status[matched] = MATCHED
+            fused = (matched, slots, gating.nu[rows, columns], gating.H_robot[columns])
             H_landmark = gating.H_landmark[columns]
-            births = usable[(match < 0) & far_from_all]
+            # births: the unmatched observations beyond gate_new of every landmark (none when all matched)
+            unmatched = (match < 0).nonzero()[0]
+            if len(unmatched):
+                unmatched = unmatched[(gating.d2[unmatched] > self._gate_new).all(axis=1)]
+            births = usable[unmatched]
         else:  # nothing to match: every usable observation may start a landmark
             empty = np.zeros(0, dtype=np.int64)
             fused = (empty, empty, np.zeros((0, 2)), np.zeros((0, 2, ROBOT_DIM)))
