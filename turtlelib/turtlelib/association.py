@@ -57,15 +57,16 @@ def _d2_det(
     nu: NDArray[np.float64], S: NDArray[np.float64]
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """``(D2, det S)`` (...,) of :func:`mahalanobis_2d`."""
-    shape = nu.shape[:-1]
-    # the stacks flattened, so that every entry below is one strided run (one inner loop per operation)
-    nu, S = nu.reshape(-1, 2), S.reshape(-1, 4)
-    S00, S01, S10, S11 = S[:, 0], S[:, 1], S[:, 2], S[:, 3]
+    stack = nu.shape[:-1]
+    if len(stack) > 1:  # a stack of stacks (gating's (K, n)) flattened: every entry one strided run below
+        d2, det = _d2_det(nu.reshape(-1, 2), S.reshape(-1, 2, 2))
+        return d2.reshape(stack), det.reshape(stack)
+    S00, S01, S10, S11 = S[..., 0, 0], S[..., 0, 1], S[..., 1, 0], S[..., 1, 1]
     det = S00 * S11 - S01 * S10
-    a, b = nu[:, 0], nu[:, 1]
+    a, b = nu[..., 0], nu[..., 1]
     # D2 = (a^2 S11 - a b (S01 + S10) + b^2 S00) / det
     d2 = (a * a * S11 - a * b * (S01 + S10) + b * b * S00) / det
-    return d2.reshape(shape), det.reshape(shape)
+    return d2, det
 
 
 def mahalanobis_lower_bound(

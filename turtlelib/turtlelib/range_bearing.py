@@ -115,10 +115,10 @@ def residual(z: NDArray[np.float64], z_hat: NDArray[np.float64]) -> NDArray[np.f
 
     The only place where range-bearing residual angles are wrapped; ``z`` and ``z_hat`` broadcast.
     """
-    # C order whatever the inputs' layout, so that the bearings are one strided run of it (a view: a stack
-    # of pairs, e.g. gating's (K, n, 2), wrapped in one inner loop per operation)
+    # a stack of stacks (gating's (K, n, 2)) is wrapped as one strided run of bearings: C order whatever the
+    # inputs' layout, so that the flattened bearings are a view
     nu = np.subtract(z, z_hat, order="C")
-    bearing = nu.reshape(-1, 2)[:, 1]
+    bearing = nu[..., 1] if nu.ndim < 3 else nu.reshape(-1, 2)[:, 1]
     # nu_bearing <- wrap(b - b_hat) as normalize_angles does it (exact): the remainder by 2 pi, then one
     # shift by 2 pi where it lies beyond pi (the others untouched). The remainder leaves |b| < 2 pi as it
     # is and takes 2 pi off 2 pi <= |b| < 3 pi exactly (Sterbenz), as the shift does: below 3 pi the
