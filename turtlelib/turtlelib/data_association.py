@@ -128,8 +128,10 @@ class SlamView:
         H_robot: NDArray[np.float64],
         H_landmark: NDArray[np.float64],
     ) -> Gating:
-        # S_kj = H_j P H_j^T + R_k
-        S = self._predicted_covariances(H_robot, H_landmark, slots)[None] + R[:, None]
+        Sigma = self._predicted_covariances(H_robot, H_landmark, slots)
+        # S_kj = Sigma_j + R_k: R_k repeated for each landmark, so that the sum is one contiguous run
+        count, k = len(R), len(slots)
+        S = (np.repeat(R.reshape(count, 1, 4), k, axis=1) + Sigma.reshape(1, k, 4)).reshape(count, k, 2, 2)
         d2, log_det = mahalanobis_2d(nu, S)
         return Gating(slots, nu, d2, log_det, H_robot, H_landmark)
 
@@ -333,19 +335,27 @@ class GatedTracks:
     ) -> Plan:
         usable = view.model.usable(z).nonzero()[0]
         z_usable, R_usable = (z, R) if len(usable) == len(z) else (z[usable], R[usable])
-        status, landmark_ids = _empty_plan(len(z))
-        if view.n_landmarks and len(usable):
-            if view.n_landmarks >= PREFILTER_MIN_LANDMARKS:
+        n_landmarks = view.n_landmarks
+        if n_landmarks and len(usable):
+            if n_landmarks >= PREFILTER_MIN_LANDMARKS:
                 gating = view.gate_near(z_usable, R_usable, self._gate_new)
             else:
-                gating = view.gate(z_usable, R_usable, np.arange(view.n_landmarks))
+                gating = view.gate(z_usable, R_usable, np.arange(n_landmarks))
             match = self._associate(gating, R_usable, view)
             rows = (match >= 0).nonzero()[0]
             columns = match[rows]
             slots = gating.slots[columns]
-            matched = usable[rows]
-            landmark_ids[matched] = view.tracks.ids[slots]
-            status[matched] = MATCHED
+            if len(rows) == len(z):  # every observation matched (the usual scan)
+                matched, status, landmark_ids = (
+                    rows,
+                    np.full(len(z), MATCHED, dtype=np.int8),
+                    view.tracks.ids[slots],
+                )
+            else:
+                matched = usable[rows]
+                status, landmark_ids = _empty_plan(len(z))
+                landmark_ids[matched] = view.tracks.ids[slots]
+                status[matched] = MATCHED
             fused = (matched, slots, gating.nu[rows, columns], gating.H_robot[columns])
             H_landmark = gating.H_landmark[columns]
             # births: the unmatched observations beyond gate_new of every landmark (none when all matched)
@@ -354,6 +364,7 @@ class GatedTracks:
                 unmatched = unmatched[(gating.d2[unmatched] > self._gate_new).all(axis=1)]
             births = usable[unmatched]
         else:  # nothing to match: every usable observation may start a landmark
+            status, landmark_ids = _empty_plan(len(z))
             empty = np.zeros(0, dtype=np.int64)
             fused = (empty, empty, np.zeros((0, 2)), np.zeros((0, 2, ROBOT_DIM)))
             H_landmark = np.zeros((0, 2, 2))
