@@ -41,9 +41,10 @@ def _sensor_position(
     pose: NDArray[np.float64], T_body_sensor: Transform2D
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """``p_sensor = [x, y] + R(theta) [sx, sy]`` and its heading derivative ``t = R'(theta) [sx, sy]``."""
-    c, s = math.cos(pose[2]), math.sin(pose[2])
+    x, y, theta = pose.tolist()
+    c, s = math.cos(theta), math.sin(theta)
     sx, sy = T_body_sensor.x, T_body_sensor.y
-    p_sensor = np.array([pose[0] + c * sx - s * sy, pose[1] + s * sx + c * sy])
+    p_sensor = np.array([x + c * sx - s * sy, y + s * sx + c * sy])
     dp_dtheta = np.array([-s * sx - c * sy, c * sx - s * sy])
     return p_sensor, dp_dtheta
 
@@ -65,7 +66,7 @@ def predict_observations(
     z_hat = np.empty_like(d)
     z_hat[:, 0] = rho
     # bearing = atan2(d_y, d_x) - theta - sphi
-    z_hat[:, 1] = np.arctan2(d_y, d_x) - (pose[2] + T_body_sensor.theta)
+    np.subtract(np.arctan2(d_y, d_x), pose[2] + T_body_sensor.theta, out=z_hat[:, 1])
 
     # H_landmark = [[d_x/rho, d_y/rho], [-d_y/rho^2, d_x/rho^2]] = [d / rho; J d / rho^2], J d = [-d_y, d_x]
     H_landmark = np.empty((len(d), 2, 2))
