@@ -100,6 +100,21 @@ def test_nearest_neighbour_leaves_the_loser_unmatched_without_alternative():
     np.testing.assert_array_equal(nearest_neighbour(cost, np.ones((2, 1), dtype=bool)), [-1, 0])
 
 
+@settings(max_examples=200, deadline=None)
+@given(st.integers(1, 5), st.integers(1, 5), st.integers(0, 2**32 - 1))
+def test_nearest_neighbour_is_the_greedy_pass_over_every_compatible_pair(count, n, seed):
+    # costs on a coarse grid (ties, resolved row by row) and a random compatibility, wide or tall
+    rng = np.random.default_rng(seed)
+    cost = rng.integers(0, 4, (count, n)).astype(float)
+    compatible = rng.random((count, n)) < 0.6
+    expected, taken = [-1] * count, set()
+    for _, k, j in sorted((cost[k, j], k, j) for k, j in zip(*compatible.nonzero(), strict=True)):
+        if expected[k] < 0 and j not in taken:
+            expected[k] = j
+            taken.add(j)
+    np.testing.assert_array_equal(nearest_neighbour(cost, compatible), expected)
+
+
 def test_nearest_neighbour_empty():
     assert nearest_neighbour(np.zeros((0, 4)), np.zeros((0, 4), dtype=bool)).shape == (0,)
     np.testing.assert_array_equal(nearest_neighbour(np.zeros((2, 0)), np.zeros((2, 0), dtype=bool)), [-1, -1])

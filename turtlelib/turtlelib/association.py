@@ -96,15 +96,18 @@ def nearest_neighbour(cost: NDArray[np.float64], compatible: NDArray[np.bool_]) 
     count, n = cost.shape
     match = [-1] * count
     # the compatible pairs by flat index k n + j, row by row
-    pairs = np.flatnonzero(compatible)
-    order = np.argsort(cost.ravel()[pairs], kind="stable")
+    pairs = compatible.ravel().nonzero()[0]
+    order = cost.ravel()[pairs].argsort(kind="stable")
     taken: set[int] = set()
-    # the pairs in increasing cost, as Python ints
+    most = min(count, n)  # pairs that can be taken
+    # the pairs in increasing cost, as Python ints, until no observation or no landmark is left
     for pair in pairs[order].tolist():
         k, j = divmod(pair, n)
         if match[k] < 0 and j not in taken:
             match[k] = j
             taken.add(j)
+            if len(taken) == most:
+                break
     return np.array(match, dtype=np.int64)
 
 
