@@ -2,13 +2,15 @@
 
 ::
 
-    python -m nuturtle_eval.datasets mrclam --data DIR --robot K [--association known|unknown] [--out DIR]
-    python -m nuturtle_eval.datasets victoria --data DIR [--protocol aligned|published] [--out DIR]
+    python -m nuturtle_eval.datasets mrclam --data DIR --robot K [--association known|unknown] [--smooth]
+        [--out DIR]
+    python -m nuturtle_eval.datasets victoria --data DIR [--protocol aligned|published] [--smooth] [--out DIR]
     python -m nuturtle_eval.datasets calibrate --data DIR --robot K [--out FILE]
 
 ``mrclam`` / ``victoria`` write ``metrics.json``, ``trajectory.png``, ``errors.png``, ``nees.png`` and the
-parameters used (``params.yaml``) into ``--out``; ``--params FILE`` replaces the defaults (e.g. with what
-``calibrate`` wrote). See docs/real_data.md.
+parameters used (``params.yaml``) into ``--out``, with ``--smooth`` also the smoothed run beside the
+filter's (``smoothed.png``, ``smoothed_errors.png``, ``smoothed`` in metrics.json); ``--params FILE``
+replaces the defaults (e.g. with what ``calibrate`` wrote). See docs/real_data.md.
 """
 
 from __future__ import annotations
