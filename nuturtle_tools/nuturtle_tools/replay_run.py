@@ -637,9 +637,10 @@ class Replay:
             (out_dir / "config.yaml").write_text(params_file([self.landmarks, self.slam]), encoding="utf-8")
             self._write_map(out_dir)
             bag_seconds = (self.source.end_ns - self.source.start_ns) / NS_PER_S
+            record = self._run_record()
             try:
                 metrics = evaluate_and_plot(
-                    out_dir, self._run_record(), sim_seconds=bag_seconds, wall_seconds=wall_seconds
+                    out_dir, record, sim_seconds=bag_seconds, wall_seconds=wall_seconds
                 )
             except ValueError as error:
                 self.logger.warning(f"no accuracy metrics: {error}")
@@ -647,7 +648,7 @@ class Replay:
             accuracy = metrics is not None
             values = {**(metrics.as_dict() if metrics is not None else {}), **values}
             if self.options.smooth:
-                values["smoothed"] = self._write_smoothed(out_dir / SMOOTHED_DIR, bag_seconds)
+                values["smoothed"] = self._write_smoothed(out_dir / SMOOTHED_DIR, record, bag_seconds)
         write_metrics(out_dir, values)
         return ReplayResult(values, out_dir, accuracy, interrupted)
 
@@ -692,12 +693,12 @@ class Replay:
             ),
         )
 
-    def _write_smoothed(self, folder: Path, sim_seconds: float) -> dict[str, Any]:
-        """``folder``: slam's whole run smoothed (:meth:`nuslam.slam_node.SlamNode.smooth_run`) as a replay's
-        outputs: map.json (the smoothed map), trajectory.png and covariance.png (of the last pose and the
-        landmarks), the grid of slam's keyframes at the smoothed poses (map.yaml, map.pgm, grid.png) and,
-        with ground truth, errors.png; returns its metrics (the smoothed poses have no
-        covariance: no NEES), what the smoother decided and its CPU and wall time."""
+    def _write_smoothed(self, folder: Path, record: RunRecord, sim_seconds: float) -> dict[str, Any]:
+        """``folder``: slam's whole run smoothed (:meth:`nuslam.slam_node.SlamNode.smooth_run`) in place of
+        the filter's in its run ``record``, as a replay's outputs: map.json (the smoothed map), trajectory.png
+        and covariance.png (of the last pose and the landmarks), the grid of slam's keyframes at the smoothed
+        poses (map.yaml, map.pgm, grid.png) and, with ground truth, errors.png; returns its metrics (the
+        smoothed poses have no covariance: no NEES), what the smoother decided and its CPU time."""
         folder.mkdir()
         cpu_start, wall_start = time.process_time(), time.monotonic()
         outcome = self.slam.smooth_run()
@@ -709,7 +710,7 @@ class Replay:
             outcome.landmark_map(slam.node_config.map_id, stamp_ns, slam.map_parameters()),
         )
         record = replace(
-            self._run_record(),
+            record,
             slam=PoseSeries(outcome.problem.pose_t_ns / NS_PER_S, run.poses),
             slam_covariances=np.full((len(run.poses), 3, 3), np.nan),
             snapshot=SlamSnapshot(

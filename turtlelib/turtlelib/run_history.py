@@ -44,6 +44,10 @@ class RunHistory:
     def __init__(self) -> None:
         self.start_pose: NDArray[np.float64] | None = None
         self.start_covariance = np.zeros((3, 3))
+        self._forget()
+
+    def _forget(self) -> None:
+        """No motion sample and no scan."""
         self.motion_t_ns: list[int] = []
         self.motion_samples: list[Sample] = []
         self._scan_t_ns: list[int] = []
@@ -61,7 +65,7 @@ class RunHistory:
     ) -> None:
         """Forget everything and start at the motion sample ``(t_ns, sample)`` with the filter's ``pose`` (3,)
         and ``covariance`` (3, 3) there."""
-        self.__init__()
+        self._forget()
         self.start_pose, self.start_covariance = np.array(pose, dtype=np.float64), np.array(covariance)
         self.motion_t_ns.append(t_ns)
         self.motion_samples.append(sample)

@@ -24,22 +24,18 @@ from turtlelib.smoother import SmootherConfig
 
 from .experiment import Experiment, ExperimentResult
 
-# the smoother's defaults, chosen on MRCLAM Dataset 7 robot 1 (docs/real_data.md, "Smoother"): a narrow
-# kernel, since the camera's errors have heavy tails (barcode misreads, tubes hiding each other)
-SMOOTHER = SmootherConfig(kernel_width=1.0)
-REVISION = RevisionConfig()
-
 
 def smooth_run(
     experiment: Experiment,
     result: ExperimentResult,
     revise: bool,
-    config: SmootherConfig = SMOOTHER,
-    revision: RevisionConfig = REVISION,
+    config: SmootherConfig | None = None,
+    revision: RevisionConfig | None = None,
 ) -> tuple[ExperimentResult, dict]:
     """The smoothed run as an :class:`ExperimentResult` (module docstring; ``cpu_seconds`` the smoother's,
     building the factors included) and what it decided: with ``revise`` (unknown association), the filter's
-    associations are revised."""
+    associations are revised. ``config`` and ``revision`` default to turtlelib's defaults, the ones the
+    slam node and the replay use too (chosen on MRCLAM Dataset 7 robot 1, docs/real_data.md)."""
     cpu_start = time.process_time()
     outcome = smooth_history(
         result.history,
