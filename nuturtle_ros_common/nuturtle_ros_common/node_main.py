@@ -12,8 +12,16 @@ running (a callback then fails on a dead context), and re-raise SIGINT as a ``Ke
 the main thread is (a traceback and exit code -2 when a second SIGINT lands in the shutdown). A second
 signal while the node stops is ignored, and every stop signal once it has stopped; a signal whose
 disposition is SIG_IGN at start-up (``nohup``, a background job of a script) stays ignored. Exit codes: 0
-stopped (a signal, or the context shut down), 1 could not start (an invalid parameter, a port in use), 2 a
-bad command line (argparse's usage error).
+stopped (a signal, or the context shut down), 1 could not start (an invalid parameter, a port in use) or
+could not stop (below), 2 a bad command line (argparse's usage error).
+
+Bounded: from the moment a node starts stopping, the process is gone within ``STOP_DEADLINE_S``, before
+launch or docker would SIGKILL it. A stop normally takes well under 2 s; past the deadline (a ``stop()`` that
+blocks, or the middleware's teardown deadlocking: once seen in CI, turtle_control still there 10 s after its
+SIGTERM) :mod:`faulthandler` prints where every thread is and ends the process with exit code 1. Its
+watchdog is a C thread: it fires even while the main thread is blocked inside C++ holding the GIL, and it
+covers the interpreter's exit, where the DDS participant is deleted. ``run_node`` is therefore a process's
+``main``: nothing may run after it but the exit.
 
 Spinning: rclpy's EventsExecutor (``rclpy.experimental``, C++), not the SingleThreadedExecutor, which
 rebuilds and scans a wait set of every subscription, timer, service and QoS event handler for each
@@ -28,6 +36,7 @@ executor, as ROS 2's component containers do in C++.
 from __future__ import annotations
 
 import argparse
+import faulthandler
 import sys
 import time
 import traceback
@@ -51,13 +60,17 @@ from .throttle import WARN_THROTTLE_S
 SPIN_PERIOD_S = 0.1
 # The longest a stopping node waits for its last messages to be acknowledged (s)
 FLUSH_TIMEOUT_S = 0.5
+# From the start of a stop to the process's end at the latest (s): launch SIGKILLs a node 10 s after its
+# SIGINT (sigterm_timeout + sigkill_timeout), docker 10 s after its SIGTERM
+STOP_DEADLINE_S = 8.0
 ROS_ARGUMENTS_HELP = """\
 ROS arguments come after --ros-args: -p NAME:=VALUE sets a parameter, --params-file FILE loads a YAML
 file of them, -r FROM:=TO remaps a name (docs/robot.md, "Parameters", says which value wins).
 `ros2 param describe /NODE NAME` describes a parameter of the running node.
 
 Stops on SIGINT (Ctrl-C), SIGTERM or SIGHUP with exit code 0 (docs/robot.md, "Stopping a node");
-exit code 1: it could not start (an invalid parameter: the message says which), 2: a bad command line.
+exit code 1: it could not start (an invalid parameter: the message says which) or its stop took over 8 s
+(where each thread was is printed), 2: a bad command line.
 """
 
 
@@ -148,6 +161,7 @@ def run_nodes(
 ) -> int:
     """:func:`run_node` for the nodes `factory()` builds (one process, one executor): the process exit
     code (module docstring: 0 stopped, 1 could not start; ``--help`` and a bad command line exit here).
+    The process's ``main``: once the nodes stop, the process must exit within ``STOP_DEADLINE_S``.
 
     A ValueError (an invalid parameter) or an OSError (something the node cannot have: a port in use)
     while building the node is logged as fatal with its message and gives exit code 1, without a
@@ -183,18 +197,22 @@ def spin_until_stopped(
             for node in nodes:
                 node.get_logger().info(f"parameters: {effective_parameters(node)}")
             spin_guarded(nodes, stop)
-        for node in nodes:
-            if stop.received is not None:
-                node.get_logger().info(f"{stop.received}: stopping")
-            if isinstance(node, SafeStop) and node.context.ok():
-                node.stop()
-                flush(node, FLUSH_TIMEOUT_S)
     except ExternalShutdownException:
         pass
     finally:
-        for node in nodes:
-            node.destroy_node()
-        rclpy.try_shutdown()
+        # from here on the process only stops, and is gone within the deadline (module docstring)
+        faulthandler.dump_traceback_later(STOP_DEADLINE_S, exit=True)
+        try:
+            for node in nodes:
+                if stop.received is not None:
+                    node.get_logger().info(f"{stop.received}: stopping")
+                if isinstance(node, SafeStop) and node.context.ok():
+                    node.stop()
+                    flush(node, FLUSH_TIMEOUT_S)
+        finally:
+            for node in nodes:
+                node.destroy_node()
+            rclpy.try_shutdown()
     return 0
 
 

@@ -24,6 +24,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from datetime import timedelta
 from pathlib import Path
 
 import pytest
@@ -34,6 +35,7 @@ from ros_test_messages import cylinder_array, stamp
 from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
 
+from nuturtle_ros_common.node_main import STOP_DEADLINE_S
 from nuturtle_ros_common.stop_signals import STOP_SIGNALS
 from rclpy_harness import RosHarness, matched
 
@@ -107,8 +109,13 @@ class Run:
 def start(module: str, arguments: list[str], cwd: Path) -> Run:
     """``python -P -m module arguments`` in its own session, stderr read by a thread (cwd outside the
     repository, whose package folders would shadow the installed packages)."""
+    return start_python(["-m", module, *arguments], cwd)
+
+
+def start_python(arguments: list[str], cwd: Path) -> Run:
+    """``python -P arguments`` as :func:`start` runs it."""
     process = subprocess.Popen(
-        [sys.executable, "-P", "-m", module, *arguments], cwd=cwd, stdout=subprocess.PIPE,
+        [sys.executable, "-P", *arguments], cwd=cwd, stdout=subprocess.PIPE,
         stderr=subprocess.PIPE, text=True, start_new_session=True,
     )  # fmt: skip
     run = Run(process)
@@ -287,3 +294,39 @@ def test_slam_stops_cleanly_while_busy(ros, tmp_path):
     assert run.stop_s is not None, run.text[-3000:]
     assert run.process.returncode == 0, run.text[-3000:]
     assert "Traceback" not in run.text and "ERROR" not in run.text, run.text[-3000:]
+
+
+# A node whose safe stop never returns (a driver blocked on its serial port, a middleware that deadlocks)
+STUCK_NODE = """
+import sys, time
+from rclpy.node import Node
+from nuturtle_ros_common.node_main import run_node
+
+class StuckStop(Node):
+    def __init__(self):
+        super().__init__("stuck_stop")
+
+    def stop(self):
+        time.sleep(3600.0)
+
+sys.exit(run_node(StuckStop, "stuck_stop", "stop() never returns", ["stuck_stop", "--ros-args"]))
+"""
+
+
+def test_a_stop_that_never_ends_ends_the_process_by_the_deadline_and_says_where_it_was(tmp_path):
+    """Issue: in CI turtle_control logged "SIGTERM: stopping" and was still there 10 s later (killed: exit
+    code -9, no word of where it hung). Past ``STOP_DEADLINE_S`` from the start of its stop the process
+    prints every thread's stack and exits with code 1, whatever it is blocked in."""
+    run = start_python(["-c", STUCK_NODE], tmp_path)
+    try:
+        assert run.started.wait(60.0), run.text[-3000:]
+        os.killpg(run.process.pid, signal.SIGTERM)
+        run.process.wait(timeout=STOP_DEADLINE_S + HANG_S)
+    finally:
+        if run.process.poll() is None:
+            os.killpg(run.process.pid, signal.SIGKILL)
+            run.process.wait()
+    assert run.process.returncode == 1, run.text[-3000:]
+    assert "SIGTERM: stopping" in run.text, run.text[-3000:]
+    assert f"Timeout ({timedelta(seconds=STOP_DEADLINE_S)})!" in run.text, run.text[-3000:]
+    assert 'File "<string>", line 11 in stop' in run.text, run.text[-3000:]
