@@ -20,8 +20,8 @@ launch or docker would SIGKILL it. A stop normally takes well under 2 s; past th
 blocks, or the middleware's teardown deadlocking: once seen in CI, turtle_control still there 10 s after its
 SIGTERM) :mod:`faulthandler` prints where every thread is and ends the process with exit code 1. Its
 watchdog is a C thread: it fires even while the main thread is blocked inside C++ holding the GIL, and it
-covers the interpreter's exit, where the DDS participant is deleted. ``run_node`` is therefore a process's
-``main``: nothing may run after it but the exit.
+covers the interpreter's exit too, where rclpy's context and with it the DDS participant are finalized.
+``run_node`` is therefore a process's ``main``: nothing may run after it but the exit.
 
 Spinning: rclpy's EventsExecutor (``rclpy.experimental``, C++), not the SingleThreadedExecutor, which
 rebuilds and scans a wait set of every subscription, timer, service and QoS event handler for each
@@ -70,7 +70,7 @@ file of them, -r FROM:=TO remaps a name (docs/robot.md, "Parameters", says which
 
 Stops on SIGINT (Ctrl-C), SIGTERM or SIGHUP with exit code 0 (docs/robot.md, "Stopping a node");
 exit code 1: it could not start (an invalid parameter: the message says which) or its stop took over 8 s
-(where each thread was is printed), 2: a bad command line.
+(the stack of every thread is printed), 2: a bad command line.
 """
 
 
