@@ -494,6 +494,14 @@ class SlamNode(Node):
             revise=self.node_config.association == "unknown",
         )
 
+    def map_to_save(self, outcome: SmoothingOutcome | None = None) -> LandmarkMap:
+        """The landmark map ``~/save_map`` writes (in ``map_id``, stamped with the filter's time, with the
+        node's parameters): the filter's, or that of the smoothed run ``outcome`` (:meth:`smooth_run`)."""
+        source = self.slam if outcome is None else outcome
+        return source.landmark_map(
+            self.node_config.map_id, self.timeline.filter_time_ns or 0, self.map_parameters()
+        )
+
     def _on_save_map(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         """Write the map (confirmed landmarks, joint covariance, the parameters) to ``map_file`` and the grid
         beside it: the filter's, or with ``smooth_saved_map`` those of the smoothed run."""
@@ -501,27 +509,19 @@ class SlamNode(Node):
         if not path:
             response.success, response.message = False, "map_file is not set: nowhere to save the map"
             return response
-        stamp_ns = self.timeline.filter_time_ns or 0
-        frame, parameters = self.node_config.map_id, self.map_parameters()
-        # the grid's keyframes at the smoothed poses of their scans (else at the filter's)
-        pose_at = None
         try:
-            if self.node_config.smooth_saved_map:
-                outcome = self.smooth_run()
-                landmark_map, pose_at = outcome.landmark_map(frame, stamp_ns, parameters), outcome.pose_at
-            else:
-                landmark_map = self.slam.landmark_map(frame, stamp_ns, parameters)
+            outcome = self.smooth_run() if self.node_config.smooth_saved_map else None
+            landmark_map = self.map_to_save(outcome)
             save_map(path, landmark_map)
         except (OSError, ValueError) as error:
             response.success, response.message = False, f"could not save the map to {path}: {error}"
             self.get_logger().error(response.message)
             return response
-        smoothed = ""
-        if self.node_config.smooth_saved_map:
-            smoothed = f" (smoothed run; the filter has {len(self.slam.landmark_ids)})"
+        smoothed = "" if outcome is None else f" (smoothed run; the filter has {len(self.slam.landmark_ids)})"
         response.message = f"saved {landmark_map.n_landmarks} landmarks{smoothed} to {path}"
         try:
-            grid_saved = self.grid.save(pose_at)
+            # the grid's keyframes at the smoothed poses of their scans (else at the filter's)
+            grid_saved = self.grid.save(None if outcome is None else outcome.pose_at)
         except (OSError, ValueError) as error:
             response.success = False
             response.message += f"; could not save the occupancy grid: {error}"

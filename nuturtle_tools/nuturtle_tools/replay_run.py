@@ -704,11 +704,7 @@ class Replay:
         outcome = self.slam.smooth_run()
         cpu_seconds, wall_seconds = time.process_time() - cpu_start, time.monotonic() - wall_start
         slam, run = self.slam, outcome.run
-        stamp_ns = slam.timeline.filter_time_ns or 0
-        save_map(
-            folder / "map.json",
-            outcome.landmark_map(slam.node_config.map_id, stamp_ns, slam.map_parameters()),
-        )
+        save_map(folder / "map.json", slam.map_to_save(outcome))
         record = replace(
             record,
             slam=PoseSeries(outcome.problem.pose_t_ns / NS_PER_S, run.poses),
@@ -734,12 +730,7 @@ class Replay:
     def _write_map(self, out_dir: Path) -> None:
         """map.json: the final map in the slam node's own map file format (:mod:`turtlelib.slam_map`: ids,
         centres, joint covariance, the node's parameters), so slam can load it (``map_file``)."""
-        slam = self.slam
-        stamp_ns = slam.timeline.filter_time_ns or 0
-        save_map(
-            out_dir / "map.json",
-            slam.slam.landmark_map(slam.node_config.map_id, stamp_ns, slam.map_parameters()),
-        )
+        save_map(out_dir / "map.json", self.slam.map_to_save())
 
 
 def run_replay(options: ReplayOptions) -> ReplayResult:

@@ -172,9 +172,8 @@ class Smoother:
         iterations = 0
         widths = (self._config.kernel_width,) if near_optimum else (np.inf, self._config.kernel_width)
         for width in widths:
-            x, used = system.minimise(x, width, self._config.max_iterations, self._config.tolerance)
+            x, lin, used = system.minimise(x, width, self._config.max_iterations, self._config.tolerance)
             iterations += used
-        lin = system.linearise(x, self._config.kernel_width)
         return SmoothedRun(
             poses=x[: system.n_pose_vars].reshape(-1, 3),
             landmark_ids=landmark_ids,
@@ -296,9 +295,9 @@ class _System:
 
     def minimise(
         self, x: NDArray[np.float64], width: float, max_iterations: int, tolerance: float
-    ) -> tuple[NDArray[np.float64], int]:
+    ) -> tuple[NDArray[np.float64], _Linearisation, int]:
         """Levenberg-Marquardt from ``x`` with kernel width ``width`` (module docstring); returns the
-        optimum and the number of linearisations."""
+        optimum, the linearisation there and the number of linearisations."""
         lam = 1e-6
         lin = self.linearise(x, width)
         for iteration in range(1, max_iterations + 1):
@@ -313,12 +312,12 @@ class _System:
                     break
                 lam *= 10.0
                 if lam > 1e12:
-                    return x, iteration
+                    return x, lin, iteration
             decrease = lin.cost - trial.cost
             x, lin, lam = candidate, trial, max(lam / 10.0, 1e-12)
             if decrease < tolerance * lin.cost:
-                return x, iteration
-        return x, max_iterations
+                return x, lin, iteration
+        return x, lin, max_iterations
 
     def retract(self, x: NDArray[np.float64], step: NDArray[np.float64]) -> NDArray[np.float64]:
         """``x (+) dx``: added, with the headings wrapped."""
