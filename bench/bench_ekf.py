@@ -35,9 +35,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench_docs, also und
 from bench_docs import write_section
 
 from turtlelib import DiffDrive, Transform2D
-from turtlelib.ekf_slam import EkfSlam, ObservationStatus, SlamConfig
-from turtlelib.motion_models import DiffDriveMotion
-from turtlelib.range_bearing import predict_observations
+from turtlelib.estimation.ekf_slam import EkfSlam, ObservationStatus, SlamConfig
+from turtlelib.estimation.range_bearing import predict_observations
+from turtlelib.motion.motion_models import DiffDriveMotion
 
 ROOT = Path(__file__).resolve().parents[1]
 HEADING = "## EKF SLAM"

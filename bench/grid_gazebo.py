@@ -2,7 +2,7 @@
 
 /work/shared/datasets/tb3_gazebo_burger (see its README): a Burger in Gazebo's turtlebot3_world for 27.7 s.
 Its /odom is Gazebo's true pose in the world frame, so each /scan is inserted at /odom's pose at the scan's
-stamp (turtlelib.pose_buffer interpolates between odometry messages) composed with the Burger's LiDAR
+stamp (turtlelib.geometry.pose_buffer interpolates between odometry messages) composed with the Burger's LiDAR
 mount: the grid mapping alone, against the world's known cylinders (nine of radius 0.15 m at x, y in
 {-1.1, 0, 1.1}).
 
@@ -36,7 +36,7 @@ sys.path.insert(0, str(ROOT / "bench"))  # bench_docs
 from bench_docs import write_section  # noqa: E402
 
 from turtlelib import GridConfig, GridMap, OccupancyGrid, RangeScan, Transform2D  # noqa: E402
-from turtlelib.pose_buffer import PoseBuffer  # noqa: E402
+from turtlelib.geometry.pose_buffer import PoseBuffer  # noqa: E402
 
 HEADING = "## Occupancy grid: Gazebo recording"
 BAG = Path("/work/shared/datasets/tb3_gazebo_burger")
@@ -202,7 +202,7 @@ def main() -> None:
     result = measure(arguments.bag)
     slam = None
     if arguments.replay is not None:
-        from turtlelib.grid_map_file import load_grid_map
+        from turtlelib.mapping.grid_map_file import load_grid_map
 
         slam = outline_counts(load_grid_map(arguments.replay / "map.yaml"))
     text = section(result, slam)

@@ -192,7 +192,7 @@ def measure(resolution_m: float) -> dict[str, float]:
 
 def measure_slam(seed: int, out_dir: Path) -> dict:
     """The demo's grid at SLAM poses after its two minutes (module docstring), with its SLAM errors."""
-    from turtlelib.grid_map_file import load_grid_map
+    from turtlelib.mapping.grid_map_file import load_grid_map
 
     run_dir = out_dir / f"seed{seed}"
     run_once(None, seed, DURATION_S, "unknown", run_dir)

@@ -21,8 +21,8 @@ import time
 import numpy as np
 
 from turtlelib import DiffDrive
-from turtlelib.ekf_slam import EkfSlam, SlamConfig
-from turtlelib.motion_models import DiffDriveMotion
+from turtlelib.estimation.ekf_slam import EkfSlam, SlamConfig
+from turtlelib.motion.motion_models import DiffDriveMotion
 
 S = 10**9
 SCAN_NS = S // 5

@@ -32,7 +32,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench_docs, also und
 
 from bench_docs import write_section
 
-from turtlelib.slip_recovery import SlipRecoveryConfig
+from turtlelib.estimation.slip_recovery import SlipRecoveryConfig
 
 
 def _scenarios():
@@ -92,7 +92,7 @@ def section(seeds: int) -> str:
         f"`python bench/slip_events.py --seeds {seeds} --write` (seeds 0-{seeds - 1}; the scenarios are "
         "`tests/slip_scenarios.py`; nusim's default world, 5 Hz scans, 20 Hz joint states). ",
         "Errors 20 s after the event (`none`: after 120 s of driving); the recovery is "
-        "`turtlelib.slip_recovery` ([reliability.md](reliability.md#slip-and-bumps-slam)).",
+        "`turtlelib.estimation.slip_recovery` ([reliability.md](reliability.md#slip-and-bumps-slam)).",
         "",
         "| " + " | ".join(HEADER) + " |",
         "|" + "---|" * len(HEADER),

@@ -26,12 +26,12 @@ import numpy as np
 from nusim.simulation import NoiseConfig, Simulation, SimulationConfig, default_lidar
 from nuturtle_description.robot_params import model_params
 from turtlelib import EkfSlam, LandmarkDetector, SlamConfig, SlamTimeline, Twist2D
-from turtlelib.detection import DetectorConfig
-from turtlelib.motion_models import DiffDriveMotion
-from turtlelib.motion_signals import WheelAngles
-from turtlelib.range_bearing import observations_from_points
-from turtlelib.slam_map import LandmarkMap
-from turtlelib.slip_recovery import SlipRecovery, SlipRecoveryConfig, lost_wheel_turn_per_m
+from turtlelib.estimation.range_bearing import observations_from_points
+from turtlelib.estimation.slip_recovery import SlipRecovery, SlipRecoveryConfig, lost_wheel_turn_per_m
+from turtlelib.mapping.landmark_map import LandmarkMap
+from turtlelib.motion.motion_models import DiffDriveMotion
+from turtlelib.motion.motion_signals import WheelAngles
+from turtlelib.sensing.detection import DetectorConfig
 
 PHYSICS_DT_S = 0.01
 JOINT_EVERY = 5  # physics steps per joint_states (20 Hz)

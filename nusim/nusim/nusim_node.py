@@ -78,9 +78,9 @@ from nuturtle_ros_common.tf_compat import OptionalTfBroadcaster
 from nuturtle_ros_common.throttle import WARN_THROTTLE_S
 from nuturtle_ros_common.wheel_joints import WheelJoints, wheel_values
 from turtlelib import Twist2D
-from turtlelib.scan_model import LidarConfig
-from turtlelib.timebase import NS_PER_S
-from turtlelib.validation import positive, store
+from turtlelib.sensing.scan_model import LidarConfig
+from turtlelib.util.timebase import NS_PER_S
+from turtlelib.util.validation import positive, store
 
 from .simulation import (
     ArenaConfig,

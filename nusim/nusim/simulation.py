@@ -38,7 +38,7 @@ around the last point where the clearance was measured answers those without a c
 
 Sensors
 -------
-* LiDAR: ``turtlelib.scan_model.simulate_scan`` from ``T_world_scan = T_world_body @ T_body_scan``
+* LiDAR: ``turtlelib.sensing.scan_model.simulate_scan`` from ``T_world_scan = T_world_body @ T_body_scan``
   (``T_body_scan``: the robot's ``lidar_x``, ``lidar_y``, ``lidar_yaw``) against the cylinders and the walls,
   on the scan's beam layout (``LidarConfig.scan_layout``: fixed, or drawn per turn for the LDS-02). The
   TurtleBot3 LiDARs are in ``LIDAR_MODELS`` (``lidar_model``: ``lds01``, ``lds02``, ``gazebo``).
@@ -62,8 +62,8 @@ from numpy.typing import NDArray
 
 from nuturtle_description.robot_params import RobotParams
 from turtlelib import DiffDrive, Transform2D
-from turtlelib.scan_model import LidarConfig, arena_walls, polygon_walls, simulate_scan
-from turtlelib.validation import finite_real, in_range, integer, non_negative, one_of, positive, store
+from turtlelib.sensing.scan_model import LidarConfig, arena_walls, polygon_walls, simulate_scan
+from turtlelib.util.validation import finite_real, in_range, integer, non_negative, one_of, positive, store
 
 # How much less than the measured clearance the free ball's radius is (m): far above the rounding of a
 # contact test, far below any distance that matters

@@ -1,10 +1,10 @@
 """slam's occupancy grid: LiDAR scans placed at slam's poses, published on `map`, saved beside the
-landmark map in map_server's format (a thin owner over `turtlelib.occupancy_grid`).
+landmark map in map_server's format (a thin owner over `turtlelib.mapping.occupancy_grid`).
 
 Mapping (``mode: mapping``): each `scan` (sensor_msgs/LaserScan, frame ``sensor_id`` or ``body_id``) is
 inserted into a `turtlelib.OccupancyGrid` at ``T_map_scan = T_map_body(t_s) T_body_scan``: the body pose
 slam published for the scan's own stamp ``t_s`` (slam's poses on ``~/odom`` at each motion sample, read
-between two samples along one constant twist: `turtlelib.pose_buffer.PoseBuffer`) composed with the
+between two samples along one constant twist: `turtlelib.geometry.pose_buffer.PoseBuffer`) composed with the
 LiDAR mount of the robot model (``T_body_scan``: ``lidar_x``, ``lidar_y``, ``lidar_yaw``; identity for a
 scan in ``body_id``). A scan newer than slam's newest pose waits (up to ``MAX_WAITING_SCANS``) for the
 motion sample that reaches it. Every scan is also offered to `turtlelib.ScanKeyframes` (one kept per
@@ -16,8 +16,8 @@ slam had when the scan arrived (predicted from the motion, before the landmarks 
 were fused); when slam applies that scan's landmarks at once (the filter then sits at the scan's stamp),
 the posterior pose at that stamp replaces the keyframe's (:meth:`GridMapping.corrected`). ``~/save_map``
 re-renders the keyframes at these poses (`ScanKeyframes.render`) and writes ``<stem>.yaml`` +
-``<stem>.pgm`` beside ``map_file`` (`turtlelib.grid_map_file.save_grid_map`: map_server's trinary format,
-each file written atomically).
+``<stem>.pgm`` beside ``map_file`` (`turtlelib.mapping.grid_map_file.save_grid_map`: map_server's trinary
+format, each file written atomically).
 
 Localization (``mode: localization``): the grid saved beside ``map_file`` is loaded at start-up, if there,
 and published once; no scan is mapped. A malformed grid file stops the node at start-up with the reason.
@@ -55,11 +55,11 @@ from nuturtle_ros_common.diagnostics import OK, WARN, status
 from nuturtle_ros_common.ros_params import declare_dataclass
 from nuturtle_ros_common.throttle import SourceWarnings
 from turtlelib import GridConfig, KeyframeConfig, OccupancyGrid, RangeScan, ScanKeyframes, Transform2D
-from turtlelib.grid_map_file import load_grid_map, save_grid_map
-from turtlelib.occupancy_grid import GridMap
-from turtlelib.pose_buffer import PoseBuffer
-from turtlelib.timebase import NS_PER_S
-from turtlelib.validation import positive, store
+from turtlelib.geometry.pose_buffer import PoseBuffer
+from turtlelib.mapping.grid_map_file import load_grid_map, save_grid_map
+from turtlelib.mapping.occupancy_grid import GridMap
+from turtlelib.util.timebase import NS_PER_S
+from turtlelib.util.validation import positive, store
 
 # slam's poses kept to place scans (20 s of joint_states at 20 Hz: scans arrive well within that)
 POSE_BUFFER_SAMPLES = 400

@@ -10,7 +10,7 @@ Motion (`motion_source`)
     `odom`: the relative pose between consecutive `odom` messages through `turtlelib.OdometryMotion`
     (twist noise `odom_*`), for any base that publishes odometry (a Gazebo TurtleBot3, a Create, ...).
 Maps (`map_file`, `mode`)
-    `map_file` (a `turtlelib.slam_map` JSON file) is loaded at start-up when it exists; in `mode:
+    `map_file` (a `turtlelib.mapping.landmark_map` JSON file) is loaded at start-up when it exists; in `mode:
     localization` it must, and its landmarks stay fixed (a Schmidt update: only the pose is estimated,
     detections of unmapped landmarks are counted, not added); in `mapping` SLAM goes on from it. A
     corrupt, wrong-version, non-finite or other-frame file stops the node at start-up with the reason.
@@ -36,7 +36,7 @@ Subscribes
         `confirm_count` sightings). Noise ``R = diag(range_std^2, bearing_std^2)``.
     `association` = `known`: `fake_sensor` (MarkerArray from nusim, frame `body_id`): marker id = landmark
         id; positions with per-axis standard deviation `fake_sensor_std`, turned into range-bearing with
-        ``R = J Sigma J^T`` (`turtlelib.range_bearing.observations_from_points`).
+        ``R = J Sigma J^T`` (`turtlelib.estimation.range_bearing.observations_from_points`).
 Publishes
     `~/odom` (nav_msgs/Odometry, `map_id` -> `body_id`, stamped with the joint_states stamp): the pose at
         that stamp with its (x, y, yaw) covariance in the 6x6, and the wheels' body twist.
@@ -55,8 +55,8 @@ Publishes
         observations were rejected or skipped since the last report), `slam: occupancy grid`
         (`nuslam.grid_mapping`: scans mapped and skipped; WARN when scans were skipped since the last
         report), `slam: motion vs LiDAR`
-        (`turtlelib.slip_recovery`: WARN naming the cause while scans contradict the wheels' motion (slip,
-        bump) and for `slip_report_s` after each relocalization against the map, ERROR when they keep
+        (`turtlelib.estimation.slip_recovery`: WARN naming the cause while scans contradict the wheels' motion
+        (slip, bump) and for `slip_report_s` after each relocalization against the map, ERROR when they keep
         coming; scans held and relocalizations so far).
     `/tf` `map_id` -> `odom_id` where tf2_msgs is installed: ``T_map_odom = T_map_body T_odom_body^-1``
         at each pose's stamp, with ``T_odom_body`` the transform the odometry source broadcasts (read from
@@ -77,8 +77,9 @@ Parameters
     initial_*_std, jcbb_max_nodes),
     `turtlelib.TimelineConfig`
     (max_observation_delay, max_observation_lead, max_pending_observations),
-    `turtlelib.slip_recovery.SlipRecoveryConfig` (slip_recovery, slip_min_matches, slip_match_radius,
-    slip_confirm_scans, slip_margin_m, slip_margin_rad, slip_stall_tolerance, slip_report_s), `model`, then
+    `turtlelib.estimation.slip_recovery.SlipRecoveryConfig` (slip_recovery, slip_min_matches,
+    slip_match_radius, slip_confirm_scans, slip_margin_m, slip_margin_rad, slip_stall_tolerance,
+    slip_report_s), `model`, then
     `RobotParams` (that model's constants by default), `WheelJoints`, `PathTrailConfig`,
     `turtlelib.SampleGateConfig` (speed_margin, max_sample_gap, max_bridged_gap, restart_samples),
     `nuslam.grid_mapping.GridTopicConfig`, `turtlelib.GridConfig` and `turtlelib.KeyframeConfig` prefixed
@@ -158,15 +159,15 @@ from turtlelib import (
     TwistNoise,
     WheelAngles,
 )
-from turtlelib.pose_buffer import PoseBuffer
-from turtlelib.pose_twist import PoseTwist
-from turtlelib.range_bearing import observations_from_points
-from turtlelib.run_smoothing import SmoothingOutcome, smooth_history
-from turtlelib.sample_gate import GateResult, Verdict
-from turtlelib.slam_map import LandmarkMap, load_map, save_map
-from turtlelib.slip_recovery import SlipRecovery, SlipRecoveryConfig, lost_wheel_turn_per_m
-from turtlelib.validation import finite_real, names, non_negative, one_of, positive, store
-from turtlelib.wheel_odometry import WheelOdometry
+from turtlelib.estimation.range_bearing import observations_from_points
+from turtlelib.estimation.slip_recovery import SlipRecovery, SlipRecoveryConfig, lost_wheel_turn_per_m
+from turtlelib.geometry.pose_buffer import PoseBuffer
+from turtlelib.mapping.landmark_map import LandmarkMap, load_map, save_map
+from turtlelib.motion.pose_twist import PoseTwist
+from turtlelib.motion.sample_gate import GateResult, Verdict
+from turtlelib.motion.wheel_odometry import WheelOdometry
+from turtlelib.smoothing.run_smoothing import SmoothingOutcome, smooth_history
+from turtlelib.util.validation import finite_real, names, non_negative, one_of, positive, store
 
 ASSOCIATIONS = ("known", "unknown")
 MOTION_SOURCES = ("joint_states", "odom")
@@ -202,14 +203,15 @@ class SlamNodeConfig:
     * ``landmark_radius`` (m, > 0): drawn radius of the mapped landmarks;
     * ``wheel_noise`` (sqrt(rad), >= 0): the motion model's wheel slip, ``N(0, wheel_noise^2 |dphi|)`` per
       wheel over an increment ``dphi`` (:class:`turtlelib.DiffDriveMotion`);
-    * ``map_file``: path of the map file (:mod:`turtlelib.slam_map`, JSON): loaded at start-up when it
+    * ``map_file``: path of the map file (:mod:`turtlelib.mapping.landmark_map`, JSON): loaded at start-up
+    when it
       exists (it must, with ``mode: localization``), written by ``~/save_map``; empty for none;
     * ``observation_timeout`` (s, > 0): the wheels turning this long (joint_states time) without an
       observation arriving gives a (throttled) warning: slam is only dead-reckoning;
     * ``smooth_saved_map``: keep the run's history (since start-up, the last reset or relocalization;
       memory grows with the run) and have ``~/save_map`` save the landmark map of the whole run smoothed
-      and the occupancy grid of its keyframes at the smoothed poses (:mod:`turtlelib.run_smoothing`; the
-      call blocks the node while it smooths, seconds for a long run); mapping only.
+      and the occupancy grid of its keyframes at the smoothed poses (:mod:`turtlelib.smoothing.run_smoothing`;
+      the call blocks the node while it smooths, seconds for a long run); mapping only.
     """
 
     association: str = "unknown"

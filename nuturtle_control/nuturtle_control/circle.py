@@ -30,7 +30,7 @@ from std_srvs.srv import Empty
 from nuturtle_ros_common.node_main import run_node
 from nuturtle_ros_common.ros_params import declare_dataclass, replace_from_parameters
 from turtlelib import Twist2D
-from turtlelib.validation import finite_real, positive, store
+from turtlelib.util.validation import finite_real, positive, store
 
 
 @dataclass(frozen=True)

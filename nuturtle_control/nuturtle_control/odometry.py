@@ -53,9 +53,9 @@ from nuturtle_ros_common.throttle import SourceWarnings
 from nuturtle_ros_common.wheel_joints import WheelJoints
 from nuturtle_ros_common.wheel_stream import declare_wheel_stream
 from turtlelib import Transform2D, Twist2D
-from turtlelib.sample_gate import Verdict
-from turtlelib.validation import names
-from turtlelib.wheel_odometry import WheelOdometry
+from turtlelib.motion.sample_gate import Verdict
+from turtlelib.motion.wheel_odometry import WheelOdometry
+from turtlelib.util.validation import names
 
 
 @dataclass(frozen=True)

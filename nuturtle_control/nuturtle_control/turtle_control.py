@@ -36,7 +36,7 @@ from nuturtle_ros_common.ros_params import declare_dataclass
 from nuturtle_ros_common.throttle import WARN_THROTTLE_S
 from nuturtle_ros_common.wheel_joints import WheelJoints
 from turtlelib import Twist2D
-from turtlelib.wheel_limits import limit_wheel_speeds
+from turtlelib.motion.wheel_limits import limit_wheel_speeds
 
 # How often the command timeout is checked (s, node clock)
 WATCHDOG_PERIOD_S = 0.05

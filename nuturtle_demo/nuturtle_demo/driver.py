@@ -58,7 +58,7 @@ from nuturtle_ros_common.conversions import transform_from_pose
 from nuturtle_ros_common.node_main import run_node
 from nuturtle_ros_common.ros_params import declare_dataclass
 from turtlelib import Transform2D, Twist2D
-from turtlelib.validation import non_negative, positive, store
+from turtlelib.util.validation import non_negative, positive, store
 
 
 @dataclass(frozen=True)

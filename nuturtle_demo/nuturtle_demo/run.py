@@ -79,8 +79,8 @@ from nuturtle_tools.recorder import BagWriter, TeeSink, TopicRecorder
 from nuturtle_tools.relay_config import RelayConfig, check_port_free
 from nuturtle_tools.staged_run import run_staged
 from turtlelib import MODES, Transform2D, TwistNoise, normalize_angle
-from turtlelib.slam_map import load_map
-from turtlelib.validation import finite_real, integer, one_of, positive, store
+from turtlelib.mapping.landmark_map import load_map
+from turtlelib.util.validation import finite_real, integer, one_of, positive, store
 
 from .driver import FigureEightDriver, RouteConfig
 from .lockstep import Pace, run_cycle

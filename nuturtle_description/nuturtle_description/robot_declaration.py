@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from rclpy.node import Node
 
 from nuturtle_ros_common.ros_params import declare_dataclass
-from turtlelib.validation import one_of
+from turtlelib.util.validation import one_of
 
 from .robot_params import DEFAULT_MODEL, MODEL_ENV, RobotParams, environment_model, model_names, model_params
 

@@ -24,7 +24,7 @@ import yaml
 
 from nuturtle_ros_common.ros_files import share_file
 from turtlelib import DiffDrive, Transform2D
-from turtlelib.validation import finite_real, integer, non_negative, one_of, positive, store
+from turtlelib.util.validation import finite_real, integer, non_negative, one_of, positive, store
 
 PACKAGE = "nuturtle_description"
 # The environment variable ROBOTIS' launch files read the model from, and the model when it is unset

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from xml.sax.saxutils import quoteattr
 
-from turtlelib.validation import one_of
+from turtlelib.util.validation import one_of
 
 from .robot_params import RobotParams, model_names
 

@@ -24,8 +24,8 @@ Metrics
   landmark without a partner within the gate is *spurious*, a mapped landmark whose nearest true
   centre is another one's partner a *duplicate*; RMSE ``sqrt(mean |m_hat_i - m_j|^2)`` over the pairs;
 * pose NEES ``eps_k = e_k^T P_k^-1 e_k`` (3 dof) per estimate with covariance ``P_k``, judged against the
-  two-sided 95% chi2 interval for one run (``turtlelib.consistency``); estimates whose covariance is
-  singular (the exactly known start, before the robot moves) are left out; with none left (a run that
+  two-sided 95% chi2 interval for one run (``turtlelib.estimation.consistency``); estimates whose covariance
+  is singular (the exactly known start, before the robot moves) are left out; with none left (a run that
   ended before the robot moved) the NEES figures are NaN (null in metrics.json).
 """
 
@@ -39,7 +39,7 @@ from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
 
 from turtlelib import Transform2D, normalize_angles
-from turtlelib.consistency import chi2_bounds, nees
+from turtlelib.estimation.consistency import chi2_bounds, nees
 
 POSE_DOF = 3
 # Covariances with a smallest eigenvalue at or below this (m^2 or rad^2: a 1 micrometre / microradian

@@ -14,8 +14,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from turtlelib.grid_map_file import FREE_PIXEL, FREE_THRESH, OCCUPIED_PIXEL, OCCUPIED_THRESH, UNKNOWN_PIXEL
-from turtlelib.occupancy_grid import GridMap
+from turtlelib.mapping.grid_map_file import (
+    FREE_PIXEL,
+    FREE_THRESH,
+    OCCUPIED_PIXEL,
+    OCCUPIED_THRESH,
+    UNKNOWN_PIXEL,
+)
+from turtlelib.mapping.occupancy_grid import GridMap
 
 from .metrics import PoseSeries, pose_errors
 
@@ -114,8 +120,8 @@ def plot_grid(
     path: str | Path, grid: GridMap, path_xy: NDArray[np.float64], landmarks_xy: NDArray[np.float64]
 ) -> None:
     """grid.png: the occupancy grid as map_saver's trinary image shows it (occupied >= 65 black, free <= 19
-    white, the rest grey: :mod:`turtlelib.grid_map_file`) with the SLAM path ``path_xy`` (K, 2) and the
-    mapped landmarks (n, 2) over it, in the map frame (m)."""
+    white, the rest grey: :mod:`turtlelib.mapping.grid_map_file`) with the SLAM path ``path_xy`` (K, 2) and
+    the mapped landmarks (n, 2) over it, in the map frame (m)."""
     figure = new_figure(7.0, 7.0)
     axes = figure.add_subplot()
     draw_grid(axes, grid)
@@ -140,7 +146,7 @@ def plot_grid(
 
 def draw_grid(axes: Any, grid: GridMap) -> None:
     """``grid`` on matplotlib ``axes`` in the map frame (m), as map_saver's trinary image shows it
-    (occupied >= 65 black, free <= 19 white, the rest grey: :mod:`turtlelib.grid_map_file`)."""
+    (occupied >= 65 black, free <= 19 white, the rest grey: :mod:`turtlelib.mapping.grid_map_file`)."""
     occupancy = grid.occupancy
     shade = np.full(occupancy.shape, UNKNOWN_PIXEL, dtype=np.uint8)
     shade[(occupancy >= 0) & (occupancy <= round(100.0 * FREE_THRESH))] = FREE_PIXEL

@@ -23,8 +23,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from turtlelib.grid_map_file import save_grid_map
-from turtlelib.occupancy_grid import GridMap
+from turtlelib.mapping.grid_map_file import save_grid_map
+from turtlelib.mapping.occupancy_grid import GridMap
 
 from . import plots
 from .metrics import PoseSeries, RunData, RunMetrics, evaluate_run
@@ -174,8 +174,8 @@ def evaluate_and_plot(
 def write_grid(
     out_dir: Path, grid: GridMap, path_xy: NDArray[np.float64], landmarks_xy: NDArray[np.float64]
 ) -> None:
-    """``map.yaml`` + ``map.pgm`` (:func:`turtlelib.grid_map_file.save_grid_map`) and ``grid.png``: the
-    grid with the SLAM path ``path_xy`` (K, 2) and the landmarks (n, 2) over it, all in the map frame."""
+    """``map.yaml`` + ``map.pgm`` (:func:`turtlelib.mapping.grid_map_file.save_grid_map`) and ``grid.png``:
+    the grid with the SLAM path ``path_xy`` (K, 2) and the landmarks (n, 2) over it, all in the map frame."""
     save_grid_map(out_dir / GRID_YAML, grid)
     plots.plot_grid(out_dir / GRID_FIGURE, grid, path_xy, landmarks_xy)
 

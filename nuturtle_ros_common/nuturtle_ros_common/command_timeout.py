@@ -11,8 +11,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from turtlelib.timebase import NS_PER_S
-from turtlelib.validation import non_negative, store
+from turtlelib.util.timebase import NS_PER_S
+from turtlelib.util.validation import non_negative, store
 
 
 @dataclass(frozen=True)

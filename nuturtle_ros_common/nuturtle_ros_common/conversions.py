@@ -11,8 +11,8 @@ from nav_msgs.msg import Odometry
 from numpy.typing import NDArray
 
 from turtlelib import Transform2D, Twist2D
-from turtlelib.timebase import NS_PER_S
-from turtlelib.validation import covariance
+from turtlelib.util.timebase import NS_PER_S
+from turtlelib.util.validation import covariance
 
 # A quaternion whose norm differs from 1 by more than this is refused: not a rotation someone meant (a
 # zero, a sum of two, a corrupt message); a typed one such as (0, 0, 0.7, 0.7) is within it
@@ -83,8 +83,8 @@ def covariance_from_6x6(values) -> NDArray[np.float64]:
 
 def positive_definite_pose_covariance(values) -> NDArray[np.float64]:
     """The (x, y, yaw) block of a ROS 6x6 covariance, checked finite, symmetric and positive definite
-    (:func:`turtlelib.validation.covariance`; ValueError otherwise: a pose estimate must say how uncertain it
-    is, and a zero variance would claim certainty)."""
+    (:func:`turtlelib.util.validation.covariance`; ValueError otherwise: a pose estimate must say how
+    uncertain it is, and a zero variance would claim certainty)."""
     return covariance("its (x, y, yaw) covariance", covariance_from_6x6(values), (3, 3), definite=True)
 
 

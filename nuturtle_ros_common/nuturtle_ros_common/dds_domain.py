@@ -40,7 +40,7 @@ from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from turtlelib.validation import integer
+from turtlelib.util.validation import integer
 
 if TYPE_CHECKING:
     from rclpy.context import Context

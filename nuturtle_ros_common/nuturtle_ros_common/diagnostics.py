@@ -21,7 +21,7 @@ from collections.abc import Callable, Mapping
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
 
-from turtlelib.timebase import NS_PER_S
+from turtlelib.util.timebase import NS_PER_S
 
 OK = DiagnosticStatus.OK
 WARN = DiagnosticStatus.WARN

@@ -12,7 +12,7 @@ with wheel radius ``r``, track ``b`` and fastest wheel speed ``w`` (rad/s, the r
 The heading is unwrapped against the last accepted sample (``theta_acc + wrap(theta - theta_acc)``), so
 crossing +-pi is motion, not a jump. A replayed or corrupt message, a time jump or a pose jump (an
 odometry source reset to the origin) is refused without moving anything; a source that really restarted
-is followed after ``restart_samples`` messages (`turtlelib.sample_gate`).
+is followed after ``restart_samples`` messages (`turtlelib.motion.sample_gate`).
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from typing import Protocol
 from nav_msgs.msg import Odometry
 
 from turtlelib import Transform2D, normalize_angle
-from turtlelib.sample_gate import GateResult, SampleGate, SampleGateConfig
+from turtlelib.motion.sample_gate import GateResult, SampleGate, SampleGateConfig
 
 from .conversions import stamp_nanoseconds, transform_from_pose
 from .throttle import SourceWarnings

@@ -1,6 +1,7 @@
 """A node's ``~/path`` (nav_msgs/Path): its pose trail, decimated and bounded by
-:class:`turtlelib.path_trail.PathTrail`, published whole at most once per ``path_period`` of the poses' time
-(the parameters of :class:`~turtlelib.path_trail.PathTrailConfig`, declared on the node)."""
+:class:`turtlelib.geometry.path_trail.PathTrail`, published whole at most once per ``path_period`` of the
+poses' time (the parameters of :class:`~turtlelib.geometry.path_trail.PathTrailConfig`, declared on the
+node)."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ from nav_msgs.msg import Odometry, Path
 from rclpy.node import Node
 
 from turtlelib import Transform2D
-from turtlelib.path_trail import PathTrail, PathTrailConfig
+from turtlelib.geometry.path_trail import PathTrail, PathTrailConfig
 
 from .conversions import stamp_nanoseconds
 from .ros_params import declare_dataclass

@@ -11,7 +11,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from turtlelib.validation import names
+from turtlelib.util.validation import names
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,7 @@ from typing import Protocol
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
-from turtlelib.sample_gate import GateResult, SampleGate, SampleGateConfig, Verdict
+from turtlelib.motion.sample_gate import GateResult, SampleGate, SampleGateConfig, Verdict
 
 from .conversions import stamp_nanoseconds
 from .ros_params import declare_dataclass

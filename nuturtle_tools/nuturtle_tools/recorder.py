@@ -57,7 +57,7 @@ from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, W
 from rosbags.typesys import Stores, TypesysError, get_typestore
 from rosbags.typesys.store import Typestore
 
-from turtlelib.timebase import NS_PER_S
+from turtlelib.util.timebase import NS_PER_S
 
 BAG_VERSION = 9
 METADATA_FILE = "metadata.yaml"

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from dataclasses import dataclass
 
-from turtlelib.validation import integer, positive, store
+from turtlelib.util.validation import integer, positive, store
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 8765

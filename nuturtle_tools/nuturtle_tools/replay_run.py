@@ -75,9 +75,9 @@ from nuturtle_ros_common.ros_files import flatten
 from nuturtle_ros_common.shared_clock import share_clock
 from nuturtle_ros_common.stop_signals import StopSignals
 from turtlelib import Transform2D
-from turtlelib.slam_map import save_map
-from turtlelib.timebase import NS_PER_S
-from turtlelib.validation import store
+from turtlelib.mapping.landmark_map import save_map
+from turtlelib.util.timebase import NS_PER_S
+from turtlelib.util.validation import store
 
 from .bag_source import BagError, BagSource, BagTopic
 from .foxglove_relay import FoxgloveRelay, slam_view_transforms
@@ -728,8 +728,9 @@ class Replay:
         }
 
     def _write_map(self, out_dir: Path) -> None:
-        """map.json: the final map in the slam node's own map file format (:mod:`turtlelib.slam_map`: ids,
-        centres, joint covariance, the node's parameters), so slam can load it (``map_file``)."""
+        """map.json: the final map in the slam node's own map file format
+        (:mod:`turtlelib.mapping.landmark_map`: ids, centres, joint covariance, the node's parameters), so
+        slam can load it (``map_file``)."""
         save_map(out_dir / "map.json", self.slam.map_to_save())
 
 

@@ -31,7 +31,7 @@ from nuturtle_description.robot_params import burger_params
 from nuturtle_ros_common.conversions import pose_from_transform, stamp_seconds, yaw_from_quaternion
 from nuturtle_ros_common.ros_files import load_ros_yaml
 from turtlelib import DiffDrive, Transform2D
-from turtlelib.path_trail import PathTrailConfig
+from turtlelib.geometry.path_trail import PathTrailConfig
 
 pytestmark = pytest.mark.ros
 

@@ -33,7 +33,7 @@ from nusim.simulation import (
 )
 from nuturtle_description.robot_params import RobotParams
 from turtlelib import Transform2D
-from turtlelib.scan_model import LidarConfig, arena_walls, polygon_walls
+from turtlelib.sensing.scan_model import LidarConfig, arena_walls, polygon_walls
 
 R_WHEEL = 0.033
 TRACK = 0.16

@@ -1,5 +1,5 @@
 """Slip events and bumps in nusim's simulation, closed loop (tests/slip_scenarios.py: the world, the LiDAR,
-the landmark detector and EKF SLAM on its timeline with turtlelib.slip_recovery), in mapping and in
+the landmark detector and EKF SLAM on its timeline with turtlelib.estimation.slip_recovery), in mapping and in
 localization (a phantom turn in place, a wheel slipping while the robot drives, a push into a cylinder):
 20 s after the event the pose is within 5 cm of the truth, no landmark was mapped beside the cylinders, and
 the recovery's status named the cause while it lasted."""
@@ -9,7 +9,7 @@ from __future__ import annotations
 import pytest
 
 from slip_scenarios import run_scenario
-from turtlelib.slip_recovery import SlipRecoveryConfig
+from turtlelib.estimation.slip_recovery import SlipRecoveryConfig
 
 CAUSES = {"phantom_turn": "wheel slip", "wheel_slip": "wheel slip", "bump": "bump or stall"}
 

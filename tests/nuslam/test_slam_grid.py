@@ -35,7 +35,7 @@ from turtlelib import (
     arena_walls,
     simulate_scan,
 )
-from turtlelib.grid_map_file import load_grid_map
+from turtlelib.mapping.grid_map_file import load_grid_map
 
 pytestmark = pytest.mark.ros
 

@@ -35,7 +35,7 @@ from test_slam_node import (
 
 from nuturtle_ros_common.conversions import covariance_from_6x6
 from turtlelib import DiffDriveMotion, EkfSlam, SlamTimeline, TimelineConfig, Transform2D, WheelAngles
-from turtlelib.range_bearing import observations_from_points
+from turtlelib.estimation.range_bearing import observations_from_points
 
 pytestmark = pytest.mark.ros
 

@@ -2,7 +2,8 @@
 mode localization keeps it fixed, initialpose relocalizes, ~/reset starts again; bad map files stop the
 node at start-up with a clear message.
 
-Expected values come from turtlelib (`turtlelib.slam_map.load_map`, the true landmarks), never from the node.
+Expected values come from turtlelib (`turtlelib.mapping.landmark_map.load_map`, the true landmarks), never
+from the node.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from nuslam.slam_node import SlamNode
 from nuturtle_ros_common.conversions import pose_from_transform
 from rclpy_harness import refused_at_construction
 from turtlelib import Transform2D
-from turtlelib.slam_map import load_map
+from turtlelib.mapping.landmark_map import load_map
 
 pytestmark = pytest.mark.ros
 

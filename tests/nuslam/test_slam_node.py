@@ -44,7 +44,7 @@ from turtlelib import (
     WheelAngles,
     simulate_scan,
 )
-from turtlelib.range_bearing import observations_from_points
+from turtlelib.estimation.range_bearing import observations_from_points
 
 pytestmark = pytest.mark.ros
 

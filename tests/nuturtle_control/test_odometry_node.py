@@ -19,7 +19,7 @@ from sensor_msgs.msg import JointState
 from nuturtle_control.odometry import OdometryFrames, OdometryNode
 from nuturtle_ros_common.conversions import quaternion_from_yaw, yaw_from_quaternion
 from rclpy_harness import matched, record_rosout, warnings_of
-from turtlelib.path_trail import PathTrailConfig
+from turtlelib.geometry.path_trail import PathTrailConfig
 
 pytestmark = pytest.mark.ros
 

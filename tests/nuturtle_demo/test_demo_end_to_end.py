@@ -16,7 +16,7 @@ import pytest
 import yaml
 
 from bag_reading import read_bag
-from turtlelib.grid_map_file import load_grid_map
+from turtlelib.mapping.grid_map_file import load_grid_map
 
 DURATION_S = 40.0
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from nuturtle_demo.run import DemoOptions, run_demo
-from turtlelib.grid_map_file import load_grid_map
-from turtlelib.slam_map import load_map
+from turtlelib.mapping.grid_map_file import load_grid_map
+from turtlelib.mapping.landmark_map import load_map
 
 MAP_S = 20.0
 LOCALIZE_S = 10.0

@@ -29,8 +29,8 @@ from nuturtle_tools.bag_source import BagError, BagSource
 from nuturtle_tools.foxglove_relay import tf2_msgs_installed
 from nuturtle_tools.replay import main
 from nuturtle_tools.replay_run import ReplayOptions, run_replay
-from turtlelib.grid_map_file import load_grid_map
-from turtlelib.slam_map import load_map
+from turtlelib.mapping.grid_map_file import load_grid_map
+from turtlelib.mapping.landmark_map import load_map
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 

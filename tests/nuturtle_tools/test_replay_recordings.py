@@ -21,8 +21,8 @@ from rosbags.typesys import Stores, get_typestore
 
 from nuturtle_tools.bag_source import BagSource
 from nuturtle_tools.replay import main, no_landmarks_hint
-from turtlelib.grid_map_file import load_grid_map
-from turtlelib.slam_map import load_map
+from turtlelib.mapping.grid_map_file import load_grid_map
+from turtlelib.mapping.landmark_map import load_map
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 

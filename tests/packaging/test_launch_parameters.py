@@ -64,7 +64,7 @@ def test_the_association_argument_reaches_slam_over_its_yaml(ros, tmp_path, asso
 def test_the_map_and_motion_arguments_reach_slam_over_its_yaml(ros, tmp_path):
     import numpy as np
 
-    from turtlelib.slam_map import LandmarkMap, save_map
+    from turtlelib.mapping.landmark_map import LandmarkMap, save_map
 
     map_file = str(tmp_path / "lab.json")
     save_map(map_file, LandmarkMap("map", 0, np.array([3]), np.array([[1.0, 2.0]]), 1e-4 * np.eye(2)))

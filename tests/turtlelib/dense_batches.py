@@ -10,8 +10,8 @@ from :func:`stacked_observations` and their new landmarks by :func:`augmented`, 
 import numpy as np
 
 from turtlelib import Transform2D
-from turtlelib.ekf_slam import Association, EkfSlam, ObservationStatus
-from turtlelib.range_bearing import landmarks_from_observations, predict_observations, residual
+from turtlelib.estimation.ekf_slam import Association, EkfSlam, ObservationStatus
+from turtlelib.estimation.range_bearing import landmarks_from_observations, predict_observations, residual
 
 
 def stacked_observations(x, order: list[int], ids, z, R, sensor: Transform2D):

@@ -1,4 +1,4 @@
-"""turtlelib.arc_noise: the closed form of the arc's process noise against its defining integral.
+"""turtlelib.motion.arc_noise: the closed form of the arc's process noise against its defining integral.
 
 The reference integrates ``A(s) Sigma A(s)^T`` over ``s`` in [0, 1] numerically (scipy's adaptive
 quadrature), with ``A(s)`` built in the map frame from the arc ``p(s)`` itself, so it shares nothing with the
@@ -14,12 +14,13 @@ from hypothesis import strategies as st
 from scipy.integrate import quad
 
 from turtlelib import Transform2D, Twist2D
-from turtlelib.arc_noise import MAX_STEP_TURN_RAD, SERIES_BELOW, arc_covariance, arc_covariances
-from turtlelib.geometry import integrate_twist
+from turtlelib.geometry.se2 import integrate_twist
+from turtlelib.motion.arc_noise import MAX_STEP_TURN_RAD, SERIES_BELOW, arc_covariance, arc_covariances
 
 
 def reference_covariance(theta, omega, vx, vy, var_vx, cov_vx_omega, var_omega, var_vy):
-    """``integral_0^1 A(s) Sigma A(s)^T ds`` entry by entry (module docstring of turtlelib.arc_noise)."""
+    """``integral_0^1 A(s) Sigma A(s)^T ds`` entry by entry (module docstring of
+    turtlelib.motion.arc_noise)."""
     start = Transform2D(0.0, 0.0, theta)
 
     def position(s):

@@ -28,9 +28,9 @@ from turtlelib import (
     UnicycleMotion,
     integrate_twist,
 )
-from turtlelib.geometry import integrate_twists
-from turtlelib.motion_models import BatchMotionModel
-from turtlelib.range_bearing import predict_observations
+from turtlelib.estimation.range_bearing import predict_observations
+from turtlelib.geometry.se2 import integrate_twists
+from turtlelib.motion.motion_models import BatchMotionModel
 
 UNICYCLE = UnicycleMotion(NOISE)
 MS = 1_000_000

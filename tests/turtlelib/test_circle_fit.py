@@ -1,4 +1,4 @@
-"""turtlelib.circle_fit: the hyper fit (single and batched) and the range-sensor refinement.
+"""turtlelib.sensing.circle_fit: the hyper fit (single and batched) and the range-sensor refinement.
 
 Independent references: hand-computed circles through exact points, and the hyper fit's definition
 (the generalised eigenvector of ``M A = eta H A`` with the smallest non-negative ``eta``) solved with

@@ -1,4 +1,4 @@
-"""turtlelib.detection: clustering with the seam merge, the landmark detector, and its quality on
+"""turtlelib.sensing.detection: clustering with the seam merge, the landmark detector, and its quality on
 synthetic LDS-01 scans (see detection_scenes.py for the scenes and the scoring rules).
 """
 

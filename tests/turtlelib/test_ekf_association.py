@@ -1,4 +1,4 @@
-"""turtlelib.association: chi2 gates, batched 2x2 Mahalanobis distances, nearest neighbour and JCBB.
+"""turtlelib.estimation.matching: chi2 gates, batched 2x2 Mahalanobis distances, nearest neighbour and JCBB.
 
 JCBB is checked against brute-force enumeration of every hypothesis on small random problems.
 """
@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import chi2
 
-from turtlelib.association import (
+from turtlelib.estimation.matching import (
     chi2_gate,
     joint_compatibility,
     mahalanobis_2d,

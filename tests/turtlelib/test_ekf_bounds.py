@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from turtlelib import DiffDrive, DiffDriveMotion, SlamTimeline, TimelineConfig, WheelAngles
-from turtlelib.ekf_slam import EkfSlam, ObservationStatus, SlamConfig
+from turtlelib.estimation.ekf_slam import EkfSlam, ObservationStatus, SlamConfig
 
 BURGER = DiffDrive(wheel_radius=0.033, track_width=0.16)
 MOTION = DiffDriveMotion(BURGER, 0.05)

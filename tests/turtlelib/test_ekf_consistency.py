@@ -1,4 +1,4 @@
-"""turtlelib.consistency: NEES, NIS and the chi2 bounds of their averages."""
+"""turtlelib.estimation.consistency: NEES, NIS and the chi2 bounds of their averages."""
 
 import math
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from turtlelib.consistency import chi2_bounds, nees, nis
+from turtlelib.estimation.consistency import chi2_bounds, nees, nis
 
 
 def test_nees_hand_cases():

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from turtlelib import Transform2D, TwistNoise, UnicycleMotion
-from turtlelib.ekf_slam import EkfSlam, SlamConfig
-from turtlelib.range_bearing import predict_observations
+from turtlelib.estimation.ekf_slam import EkfSlam, SlamConfig
+from turtlelib.estimation.range_bearing import predict_observations
 
 RANGE_STD, BEARING_STD = 0.05, 0.02
 STILL = UnicycleMotion(TwistNoise())  # no motion noise: the pose stays exactly known

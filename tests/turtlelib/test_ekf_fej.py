@@ -21,8 +21,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from turtlelib import Transform2D, TwistNoise, UnicycleMotion
-from turtlelib.ekf_slam import EkfSlam, SlamConfig
-from turtlelib.range_bearing import predict_observations
+from turtlelib.estimation.ekf_slam import EkfSlam, SlamConfig
+from turtlelib.estimation.range_bearing import predict_observations
 
 LANDMARKS = np.array([[2.0, 0.0], [1.0, 2.2], [-1.5, 1.5], [-2.0, -0.5], [0.0, -2.0], [1.6, -1.4]])
 NOISE = TwistNoise(forward_m2_per_m=1e-3, heading_rad2_per_m=2e-3, heading_rad2_per_rad=1e-3)
@@ -115,7 +115,7 @@ def test_final_heading_error_against_the_filter_sigma(linearization, consistent)
     seed=st.integers(0, 1000),
 )
 def test_oc_jacobians_have_the_unobservable_directions_in_their_null_space(pose, offset, shift, seed):
-    from turtlelib.linearization import observability_constrained
+    from turtlelib.estimation.linearization import observability_constrained
 
     landmarks = np.random.default_rng(seed).uniform(-6.0, 6.0, (4, 2)) + pose[:2] + 0.5
     T_body_sensor = Transform2D(*offset, 0.0)
@@ -135,7 +135,7 @@ def test_oc_jacobians_have_the_unobservable_directions_in_their_null_space(pose,
 
 
 def test_oc_changes_nothing_when_the_jacobian_already_respects_the_null_space():
-    from turtlelib.linearization import observability_constrained
+    from turtlelib.estimation.linearization import observability_constrained
 
     pose, landmarks = np.array([0.3, -0.2, 0.7]), np.array([[2.0, 1.0], [-1.0, 3.0]])
     # sensor at the body origin, N at the Jacobians' own point: H N = 0 already

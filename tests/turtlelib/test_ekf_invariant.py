@@ -27,7 +27,7 @@ information about the global heading.
 ``DenseInvariantEkf`` below is that filter written from the group, densely: full N x N matrices, ``T``
 from the generators, the exponential by ``scipy.linalg.expm``, the gain by ``np.linalg.solve`` and the
 Joseph form, new landmarks augmented in standard coordinates and converted with ``T``. The fast filter
-(turtlelib.slam_state via EkfSlam) must agree with it to rounding.
+(turtlelib.estimation.slam_state via EkfSlam) must agree with it to rounding.
 """
 
 import math
@@ -41,10 +41,10 @@ from hypothesis import strategies as st
 from scipy.stats import chi2
 
 from turtlelib import Transform2D, TwistNoise, UnicycleMotion
-from turtlelib.consistency import nees
-from turtlelib.ekf_slam import EkfSlam, ObservationStatus, SlamConfig
-from turtlelib.range_bearing import predict_observations
-from turtlelib.slam_map import LandmarkMap
+from turtlelib.estimation.consistency import nees
+from turtlelib.estimation.ekf_slam import EkfSlam, ObservationStatus, SlamConfig
+from turtlelib.estimation.range_bearing import predict_observations
+from turtlelib.mapping.landmark_map import LandmarkMap
 
 PI = math.pi
 J = np.array([[0.0, -1.0], [1.0, 0.0]])
@@ -249,7 +249,7 @@ def test_the_filter_moves_its_mean_by_the_group_exponential(phi, seed):
     # SlamState._retract against expm of hat(xi), on both sides of its series switch at |phi| = 1e-4. Just
     # above the switch the closed form (1 - cos(phi)) / phi cancels (measured: ~3e-13 off at 1e-4, against
     # 4e-14 for the series there), times the step |xi_point| (here < ~2 m): hence 2e-12 rather than 1e-13
-    from turtlelib.slam_state import SlamState
+    from turtlelib.estimation.slam_state import SlamState
 
     rng = np.random.default_rng(seed)
     state = SlamState(rng.uniform(-3.0, 3.0, 3), np.eye(3), invariant=True)

@@ -17,9 +17,9 @@ import pytest
 from slam_world import CONFIG, MOTION, N_SCANS, PI, World
 
 from turtlelib import MODES, LandmarkMap, Transform2D, load_map, save_map
-from turtlelib.consistency import chi2_bounds, nees
-from turtlelib.ekf_slam import EkfSlam, ObservationStatus, SlamConfig
-from turtlelib.range_bearing import predict_observations, residual
+from turtlelib.estimation.consistency import chi2_bounds, nees
+from turtlelib.estimation.ekf_slam import EkfSlam, ObservationStatus, SlamConfig
+from turtlelib.estimation.range_bearing import predict_observations, residual
 
 LANDMARKS = np.array(
     [[1.2, 0.0], [0.9, 1.3], [-1.0, 0.6], [-0.6, -0.9], [0.6, -1.1], [-0.3, 1.7], [1.5, 0.6]]

@@ -18,9 +18,9 @@ from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
 
 from turtlelib import LandmarkMap, TwistNoise, UnicycleMotion
-from turtlelib.data_association import Gating, SlamView
-from turtlelib.ekf_slam import EkfSlam, ObservationStatus, SlamConfig
-from turtlelib.range_bearing import predict_observations, residual
+from turtlelib.estimation.association_policies import Gating, SlamView
+from turtlelib.estimation.ekf_slam import EkfSlam, ObservationStatus, SlamConfig
+from turtlelib.estimation.range_bearing import predict_observations, residual
 
 MOTION = UnicycleMotion(TwistNoise(forward_m2_per_m=0.01, heading_rad2_per_m=0.01))
 SIGMA_M = 0.05

@@ -1,4 +1,4 @@
-"""EKF SLAM prediction: the wheel-slip process noise (turtlelib.wheel_noise) and EkfSlam.predict.
+"""EKF SLAM prediction: the wheel-slip process noise (turtlelib.motion.wheel_noise) and EkfSlam.predict.
 
 Hand-computed integrals for a straight line and a spin in place, rate independence (one step equals many
 along the same arc), the first-order agreement with DiffDrive.step_jacobians, and Monte Carlo sampling of
@@ -13,10 +13,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from turtlelib import DiffDrive, Transform2D
-from turtlelib.arc_noise import MAX_STEP_TURN_RAD
-from turtlelib.ekf_slam import EkfSlam, SlamConfig
-from turtlelib.motion_models import DiffDriveMotion
-from turtlelib.wheel_noise import wheel_slip_covariance
+from turtlelib.estimation.ekf_slam import EkfSlam, SlamConfig
+from turtlelib.motion.arc_noise import MAX_STEP_TURN_RAD
+from turtlelib.motion.motion_models import DiffDriveMotion
+from turtlelib.motion.wheel_noise import wheel_slip_covariance
 
 PI = math.pi
 BURGER = DiffDrive(wheel_radius=0.033, track_width=0.16)
@@ -58,7 +58,7 @@ def test_straight_line_noise_is_the_integrated_random_walk():
 @pytest.mark.parametrize("omega", [1e-3, 0.3, 0.999, 1.0, 2.5, 6.0])
 def test_spin_in_place_noise(omega):
     # dphi = (-a, a) from heading 0: omega = 2 r a / d, u = 0, A(s) = [[cos, 0], [sin, 0], [0, 1]];
-    # turtlelib.arc_noise must match the hand-computed integrals to ~1e-13
+    # turtlelib.motion.arc_noise must match the hand-computed integrals to ~1e-13
     k = 0.05
     a = omega * TRACK / (2.0 * R_WHEEL)
     q = k * k * a

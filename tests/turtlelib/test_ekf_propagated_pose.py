@@ -11,9 +11,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from turtlelib import DiffDrive, Transform2D
-from turtlelib.ekf_slam import EkfSlam, SlamConfig
-from turtlelib.motion_models import DiffDriveMotion
-from turtlelib.range_bearing import predict_observations
+from turtlelib.estimation.ekf_slam import EkfSlam, SlamConfig
+from turtlelib.estimation.range_bearing import predict_observations
+from turtlelib.motion.motion_models import DiffDriveMotion
 
 PI = math.pi
 BURGER = DiffDrive(wheel_radius=0.033, track_width=0.16)

@@ -1,4 +1,5 @@
-"""turtlelib.range_bearing: the observation model, its inverse, their Jacobians, and the residual wrap.
+"""turtlelib.estimation.range_bearing: the observation model, its inverse, their Jacobians, and the residual
+wrap.
 
 Every Jacobian is checked against central finite differences.
 """
@@ -12,7 +13,7 @@ from hypothesis import example, given
 from hypothesis import strategies as st
 
 from turtlelib import Transform2D, normalize_angle
-from turtlelib.range_bearing import landmarks_from_observations, predict_observations, residual
+from turtlelib.estimation.range_bearing import landmarks_from_observations, predict_observations, residual
 
 PI = math.pi
 LDS01 = Transform2D(-0.032, 0.0, 0.0)

@@ -13,10 +13,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from turtlelib import DiffDrive, Transform2D, TwistNoise, UnicycleMotion
-from turtlelib.association import chi2_gate
-from turtlelib.ekf_slam import EkfSlam, ObservationStatus, SlamConfig
-from turtlelib.motion_models import DiffDriveMotion
-from turtlelib.range_bearing import predict_observations
+from turtlelib.estimation.ekf_slam import EkfSlam, ObservationStatus, SlamConfig
+from turtlelib.estimation.matching import chi2_gate
+from turtlelib.estimation.range_bearing import predict_observations
+from turtlelib.motion.motion_models import DiffDriveMotion
 
 PI = math.pi
 BURGER = DiffDrive(wheel_radius=0.033, track_width=0.16)

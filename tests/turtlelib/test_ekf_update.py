@@ -2,8 +2,8 @@
 
 `DenseEkf` below is the textbook filter: full N x N Jacobians, `S^-1` by `np.linalg.inv`, the Joseph form
 `(I - K H) P (I - K H)^T + K R K^T`, and state augmentation with full Jacobians. The fast filter
-(turtlelib.slam_state via EkfSlam) must agree with it to 1e-9 through predictions, batched updates, new
-landmarks (beyond the initial storage capacity) and marginalisation.
+(turtlelib.estimation.slam_state via EkfSlam) must agree with it to 1e-9 through predictions, batched updates,
+new landmarks (beyond the initial storage capacity) and marginalisation.
 """
 
 import copy
@@ -15,11 +15,11 @@ import pytest
 from dense_batches import augmented, fuse_known_batch, random_noise, stacked_observations
 
 from turtlelib import DiffDrive, Transform2D
-from turtlelib.ekf_slam import EkfSlam, ObservationStatus, SlamConfig
-from turtlelib.motion_models import DiffDriveMotion
-from turtlelib.range_bearing import landmarks_from_observations, predict_observations, residual
-from turtlelib.slam_state import SlamState
-from turtlelib.wheel_noise import wheel_slip_covariance
+from turtlelib.estimation.ekf_slam import EkfSlam, ObservationStatus, SlamConfig
+from turtlelib.estimation.range_bearing import landmarks_from_observations, predict_observations, residual
+from turtlelib.estimation.slam_state import SlamState
+from turtlelib.motion.motion_models import DiffDriveMotion
+from turtlelib.motion.wheel_noise import wheel_slip_covariance
 
 PI = math.pi
 BURGER = DiffDrive(wheel_radius=0.033, track_width=0.16)

@@ -27,10 +27,10 @@ from slam_world import (
 )
 
 from turtlelib import Transform2D
-from turtlelib.consistency import chi2_bounds, nees
-from turtlelib.ekf_slam import EkfSlam, ObservationStatus, SlamConfig
-from turtlelib.motion_models import DiffDriveMotion
-from turtlelib.range_bearing import predict_observations
+from turtlelib.estimation.consistency import chi2_bounds, nees
+from turtlelib.estimation.ekf_slam import EkfSlam, ObservationStatus, SlamConfig
+from turtlelib.estimation.range_bearing import predict_observations
+from turtlelib.motion.motion_models import DiffDriveMotion
 
 # the last two only 0.25 m apart: 6 to 7 sigma in the association metric
 LANDMARKS = np.array(

@@ -1,4 +1,4 @@
-"""turtlelib.geometry: angle wrapping, Twist2D and the SE(2) group (property tests + hand-computed cases).
+"""turtlelib.geometry.se2: angle wrapping, Twist2D and the SE(2) group (property tests + hand-computed cases).
 
 Independent references: homogeneous 3x3 matrices (composition, points, inverse), scipy.linalg.expm of the
 se(2) matrix (exponential), and T [V] T^-1 (adjoint).
@@ -14,7 +14,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from turtlelib import Transform2D, Twist2D, integrate_twist, normalize_angle, normalize_angles
-from turtlelib.geometry import SMALL_ANGLE_RAD
+from turtlelib.geometry.se2 import SMALL_ANGLE_RAD
 
 PI = math.pi
 coords_m = st.floats(-10.0, 10.0, allow_nan=False)

@@ -14,8 +14,8 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 from turtlelib import Transform2D
-from turtlelib.grid_map_file import load_grid_map, save_grid_map
-from turtlelib.occupancy_grid import GridMap
+from turtlelib.mapping.grid_map_file import load_grid_map, save_grid_map
+from turtlelib.mapping.occupancy_grid import GridMap
 
 occupancy_grids = hnp.arrays(
     np.int8, hnp.array_shapes(min_dims=2, max_dims=2, max_side=12), elements=st.integers(-1, 100)

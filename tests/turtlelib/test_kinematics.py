@@ -1,4 +1,4 @@
-"""turtlelib.kinematics.DiffDrive: forward/inverse kinematics, exact arc steps, step Jacobians.
+"""turtlelib.motion.kinematics.DiffDrive: forward/inverse kinematics, exact arc steps, step Jacobians.
 
 Jacobians are checked against central finite differences of `step`, including straight-line motion and
 rotations on both sides of the series threshold.
@@ -13,7 +13,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from turtlelib import DiffDrive, Transform2D, Twist2D
-from turtlelib.geometry import SMALL_ANGLE_RAD
+from turtlelib.geometry.se2 import SMALL_ANGLE_RAD
 
 PI = math.pi
 BURGER = DiffDrive(wheel_radius=0.033, track_width=0.16)

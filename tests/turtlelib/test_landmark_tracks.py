@@ -4,7 +4,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from turtlelib.landmark_tracks import LandmarkTracks
+from turtlelib.estimation.landmark_tracks import LandmarkTracks
 
 
 def test_all_confirmed_hand_case():

@@ -1,4 +1,4 @@
-"""Motion models (turtlelib.motion_models) and motion signals (turtlelib.motion_signals).
+"""Motion models (turtlelib.motion.motion_models) and motion signals (turtlelib.motion.motion_signals).
 
 Every model: G by finite differences, Q by Monte Carlo (the twist noise simulated as a random walk on many
 sub-steps), and splitting a motion into shorter steps leaves mean and covariance unchanged; hand-computed
@@ -27,7 +27,7 @@ from turtlelib import (
     integrate_twist,
     normalize_angles,
 )
-from turtlelib.geometry import Twist2D
+from turtlelib.geometry.se2 import Twist2D
 
 BURGER = DiffDrive(wheel_radius=0.033, track_width=0.16)
 NOISE = TwistNoise(
@@ -210,7 +210,7 @@ def test_ackermann_rear_axle_speed_and_turn_rate_hand_case():
 
 
 def test_diff_drive_motion_is_the_wheel_slip_model():
-    from turtlelib.wheel_noise import wheel_slip_covariance
+    from turtlelib.motion.wheel_noise import wheel_slip_covariance
 
     T = Transform2D(0.1, 0.2, 0.3)
     q, G, Q = DiffDriveMotion(BURGER, 0.05).step(T, (2.0, 3.0))

@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from turtlelib import Transform2D
-from turtlelib.occupancy_grid import (
+from turtlelib.mapping.occupancy_grid import (
     GridConfig,
     KeyframeConfig,
     OccupancyGrid,

@@ -10,7 +10,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from turtlelib import Transform2D, normalize_angle
-from turtlelib.path_trail import PathTrail, PathTrailConfig
+from turtlelib.geometry.path_trail import PathTrail, PathTrailConfig
 
 
 def test_keeps_the_first_pose_then_only_after_the_step_or_turn_thresholds():

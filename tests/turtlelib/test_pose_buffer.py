@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from turtlelib import Transform2D, Twist2D, integrate_twist
-from turtlelib.pose_buffer import PoseBuffer
+from turtlelib.geometry.pose_buffer import PoseBuffer
 
 
 def test_samples_and_interpolation_along_one_arc():

@@ -7,7 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from turtlelib import Transform2D, Twist2D, integrate_twist
-from turtlelib.pose_twist import PoseTwist
+from turtlelib.motion.pose_twist import PoseTwist
 
 
 def test_a_straight_step_gives_its_speed():

@@ -1,4 +1,5 @@
-"""turtlelib.range_bearing.observations_from_points: Cartesian points with covariance to range-bearing.
+"""turtlelib.estimation.range_bearing.observations_from_points: Cartesian points with covariance to
+range-bearing.
 
 Hand cases, the Jacobian implied by R against central finite differences of z(p), Monte Carlo sampling of
 R, vectorisation, and the ValueErrors.
@@ -12,7 +13,7 @@ from finite_differences import central_jacobian, wrapping
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from turtlelib.range_bearing import observations_from_points
+from turtlelib.estimation.range_bearing import observations_from_points
 
 PI = math.pi
 

@@ -1,5 +1,5 @@
-"""The run history a timeline keeps for a smoother (turtlelib.run_history): what it records, where it
-starts again, and the smoothing problem it gives."""
+"""The run history a timeline keeps for a smoother (turtlelib.estimation.run_history): what it records, where
+it starts again, and the smoothing problem it gives."""
 
 from __future__ import annotations
 
@@ -7,11 +7,12 @@ import numpy as np
 import pytest
 
 from turtlelib import EkfSlam, SlamConfig, SlamTimeline, TimelineConfig, Transform2D
-from turtlelib.motion_models import TwistNoise, UnicycleMotion
-from turtlelib.motion_signals import HeldInputs
-from turtlelib.range_bearing import predict_observations
-from turtlelib.run_history import RunHistory
-from turtlelib.run_smoothing import smooth_history
+from turtlelib.estimation.range_bearing import predict_observations
+from turtlelib.estimation.run_history import RunHistory
+from turtlelib.motion.motion_models import TwistNoise, UnicycleMotion
+from turtlelib.motion.motion_signals import HeldInputs
+from turtlelib.smoothing.history_problem import problem_from_history
+from turtlelib.smoothing.run_smoothing import smooth_history
 
 MOTION = UnicycleMotion(TwistNoise(forward_m2_per_m=1e-3, heading_rad2_per_rad=1e-3, lateral_m2_per_m=1e-4))
 CONFIG = SlamConfig(range_std=0.02, bearing_std=0.01, confirm_count=1)
@@ -48,8 +49,8 @@ def test_the_timeline_records_the_run():
     assert history.n_scans == 10
     np.testing.assert_array_equal(history.start_pose, start)
     assert history.motion_t_ns == [t * MS for t in range(0, 200, 10)]
-    problem, poses, rescale, unassigned = history.smoothing_problem(
-        MOTION, HeldInputs(), CONFIG, np.array([0, 1])
+    problem, poses, rescale, unassigned = problem_from_history(
+        history, MOTION, HeldInputs(), CONFIG, np.array([0, 1])
     )
     # the first scan shares the start's stamp: it is pose 0, whose prior is the filter's start
     np.testing.assert_array_equal(problem.pose_t_ns, np.arange(0, 200, 20) * MS)
@@ -68,7 +69,9 @@ def test_the_timeline_records_the_run():
 def test_only_landmarks_of_the_final_map_are_kept():
     line = timeline()
     drive(line, range(0, 100, 10))
-    problem, _, _, unassigned = line.history.smoothing_problem(MOTION, HeldInputs(), CONFIG, np.array([1]))
+    problem, _, _, unassigned = problem_from_history(
+        line.history, MOTION, HeldInputs(), CONFIG, np.array([1])
+    )
     np.testing.assert_array_equal(problem.observation_landmark, np.ones(5, dtype=int))
     # landmark 0's observations wait as unassigned, from the same poses
     np.testing.assert_array_equal(unassigned.observation_pose, problem.observation_pose)
@@ -95,7 +98,7 @@ def test_no_history_unless_asked_and_no_problem_before_the_start():
     slam = EkfSlam(CONFIG, MOTION)
     assert SlamTimeline(slam, HeldInputs()).history is None
     with pytest.raises(ValueError, match="not started"):
-        RunHistory().smoothing_problem(MOTION, HeldInputs(), CONFIG, np.array([0]))
+        problem_from_history(RunHistory(), MOTION, HeldInputs(), CONFIG, np.array([0]))
 
 
 def test_a_smoothing_after_a_break_covers_the_landmarks_seen_since():

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from turtlelib.sample_gate import SampleGate, SampleGateConfig, Verdict
+from turtlelib.motion.sample_gate import SampleGate, SampleGateConfig, Verdict
 
 MS = 1_000_000  # ns
 # 6 rad/s at most, 1.5 x with the default margin; slack 0.001 rad

@@ -1,5 +1,5 @@
-"""turtlelib.scan_model: LidarConfig and its per-scan layouts, ray casting against circles and segments,
-simulated scans of the TurtleBot3 LiDARs (LDS-01, LDS-02, Gazebo).
+"""turtlelib.sensing.scan_model: LidarConfig and its per-scan layouts, ray casting against circles and
+segments, simulated scans of the TurtleBot3 LiDARs (LDS-01, LDS-02, Gazebo).
 
 References: hand-computed ranges, the geometric definition of a hit (the hit point lies on the object and
 nothing is hit earlier, checked by sampling the ray), and invariance under moving sensor and world

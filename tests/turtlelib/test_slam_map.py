@@ -1,5 +1,5 @@
-"""LandmarkMap's checks and the map file (turtlelib.slam_map): bit-for-bit round trips, refused files, atomic
-saves."""
+"""LandmarkMap's checks and the map file (turtlelib.mapping.landmark_map): bit-for-bit round trips, refused
+files, atomic saves."""
 
 import json
 import math
@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from turtlelib import LandmarkMap, load_map, save_map
-from turtlelib.slam_map import MAP_FORMAT, MAP_FORMAT_VERSION
+from turtlelib.mapping.landmark_map import MAP_FORMAT, MAP_FORMAT_VERSION
 
 
 def small_map(n: int = 3, seed: int = 0) -> LandmarkMap:

@@ -17,8 +17,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from turtlelib import DiffDrive, DiffDriveMotion, SlamTimeline, TimelineConfig, Transform2D, WheelAngles
-from turtlelib.ekf_slam import EkfSlam, ObservationStatus, SlamConfig
-from turtlelib.range_bearing import predict_observations
+from turtlelib.estimation.ekf_slam import EkfSlam, ObservationStatus, SlamConfig
+from turtlelib.estimation.range_bearing import predict_observations
 
 PI = math.pi
 BURGER = DiffDrive(wheel_radius=0.033, track_width=0.16)

@@ -1,5 +1,6 @@
-"""turtlelib.map_alignment and turtlelib.slip_recovery: the alignment of detections with the map, its
-covariance, and the recovery that holds contradicting scans and relocalizes (closed-loop scenarios in
+"""turtlelib.estimation.map_alignment and turtlelib.estimation.slip_recovery: the alignment of detections with
+the map, its covariance, and the recovery that holds contradicting scans and relocalizes (closed-loop
+scenarios in
 nusim: tests/nusim/test_slip_events.py).
 """
 
@@ -13,9 +14,9 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from turtlelib import DiffDrive, DiffDriveMotion, EkfSlam, ObservationStatus, SlamConfig, Transform2D
-from turtlelib.map_alignment import Search, align_to_map, explained, rigid_fit
-from turtlelib.range_bearing import observations_from_points
-from turtlelib.slip_recovery import SlipRecovery, SlipRecoveryConfig
+from turtlelib.estimation.map_alignment import Search, align_to_map, explained, rigid_fit
+from turtlelib.estimation.range_bearing import observations_from_points
+from turtlelib.estimation.slip_recovery import SlipRecovery, SlipRecoveryConfig
 
 DRIVE = DiffDrive(0.033, 0.16)
 SENSOR = Transform2D(-0.032, 0.0, 0.0)

@@ -1,5 +1,6 @@
-"""The smoother over a run (turtlelib.smoother, turtlelib.smoothing_problem, turtlelib.smoothed_association):
-Jacobians by finite differences, exact recovery without noise, the landmark covariance by Monte Carlo, the
+"""The smoother over a run (turtlelib.smoothing.smoother, turtlelib.smoothing.smoothing_problem,
+turtlelib.smoothing.association_revision): Jacobians by finite differences, exact recovery without noise, the
+landmark covariance by Monte Carlo, the
 motion factors against the filter's own prediction, and the revised association decisions."""
 
 from __future__ import annotations
@@ -11,13 +12,13 @@ import pytest
 from scipy.special import chdtri
 
 from turtlelib import EkfSlam, SlamConfig, SlamTimeline, TimelineConfig, Transform2D
-from turtlelib.measurement_models import RangeBearing
-from turtlelib.motion_models import TwistNoise, UnicycleMotion
-from turtlelib.motion_signals import HeldInputs
-from turtlelib.range_bearing import predict_observations
-from turtlelib.smoothed_association import RevisionConfig, Unassigned, revise_associations
-from turtlelib.smoother import Smoother, SmootherConfig, _System
-from turtlelib.smoothing_problem import SmoothingProblem, relative_motions, viewpoint_scales
+from turtlelib.estimation.measurement_models import RangeBearing
+from turtlelib.estimation.range_bearing import predict_observations
+from turtlelib.motion.motion_models import TwistNoise, UnicycleMotion
+from turtlelib.motion.motion_signals import HeldInputs
+from turtlelib.smoothing.association_revision import RevisionConfig, Unassigned, revise_associations
+from turtlelib.smoothing.smoother import Smoother, SmootherConfig, _System
+from turtlelib.smoothing.smoothing_problem import SmoothingProblem, relative_motions, viewpoint_scales
 
 SENSOR = Transform2D(0.1, -0.05, 0.02)
 MEASUREMENT = RangeBearing(SENSOR, range_std=0.02, bearing_std=0.01)

@@ -1,4 +1,4 @@
-"""turtlelib.validation: every check accepts exactly the values it documents, returns them converted, and
+"""turtlelib.util.validation: every check accepts exactly the values it documents, returns them converted, and
 names the field in a ``<name> must be ..., got <value>`` message."""
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from turtlelib.validation import (
+from turtlelib.util.validation import (
     EIGENVALUE_RTOL,
     SYMMETRY_RTOL,
     covariance,

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from turtlelib.wheel_limits import limit_wheel_speeds
+from turtlelib.motion.wheel_limits import limit_wheel_speeds
 
 LIMIT = 265 / 41.6666667  # the Burger's 6.36 rad/s
 

@@ -9,7 +9,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from turtlelib import DiffDrive, Transform2D
-from turtlelib.wheel_odometry import WheelOdometry
+from turtlelib.motion.wheel_odometry import WheelOdometry
 
 DRIVE = DiffDrive(0.033, 0.16)
 TOL = 1e-9

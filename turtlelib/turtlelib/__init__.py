@@ -4,9 +4,33 @@ occupancy grid mapping.
 No ROS import, ever: the ROS nodes in nusim, nuturtle_control and nuslam are thin wrappers over this.
 """
 
-from .circle_fit import Circle, CircleFits, fit_circle, fit_circles, refine_for_range_sensor
-from .consistency import chi2_bounds, nees, nis
-from .detection import (
+from .estimation.consistency import chi2_bounds, nees, nis
+from .estimation.ekf_slam import MODES, Association, EkfSlam, ObservationStatus, SlamConfig
+from .estimation.slam_timeline import SlamTimeline, TimelineConfig
+from .geometry.se2 import Transform2D, Twist2D, integrate_twist, normalize_angle, normalize_angles
+from .mapping.grid_map_file import load_grid_map, save_grid_map
+from .mapping.landmark_map import LandmarkMap, load_map, save_map
+from .mapping.occupancy_grid import (
+    GridConfig,
+    GridMap,
+    KeyframeConfig,
+    OccupancyGrid,
+    RangeScan,
+    ScanKeyframes,
+)
+from .motion.kinematics import DiffDrive
+from .motion.motion_models import (
+    AckermannMotion,
+    DiffDriveMotion,
+    MotionModel,
+    OdometryMotion,
+    TwistNoise,
+    UnicycleMotion,
+)
+from .motion.motion_signals import HeldInputs, MotionSignal, OdometryPoses, WheelAngles
+from .motion.sample_gate import GateResult, SampleGate, SampleGateConfig, Verdict
+from .sensing.circle_fit import Circle, CircleFits, fit_circle, fit_circles, refine_for_range_sensor
+from .sensing.detection import (
     Clusters,
     Detections,
     DetectorConfig,
@@ -15,24 +39,7 @@ from .detection import (
     check_scan_layout,
     cluster_scan,
 )
-from .ekf_slam import MODES, Association, EkfSlam, ObservationStatus, SlamConfig
-from .geometry import Transform2D, Twist2D, integrate_twist, normalize_angle, normalize_angles
-from .grid_map_file import load_grid_map, save_grid_map
-from .kinematics import DiffDrive
-from .motion_models import (
-    AckermannMotion,
-    DiffDriveMotion,
-    MotionModel,
-    OdometryMotion,
-    TwistNoise,
-    UnicycleMotion,
-)
-from .motion_signals import HeldInputs, MotionSignal, OdometryPoses, WheelAngles
-from .occupancy_grid import GridConfig, GridMap, KeyframeConfig, OccupancyGrid, RangeScan, ScanKeyframes
-from .sample_gate import GateResult, SampleGate, SampleGateConfig, Verdict
-from .scan_model import LidarConfig, arena_walls, cast_beams, polygon_walls, simulate_scan
-from .slam_map import LandmarkMap, load_map, save_map
-from .slam_timeline import SlamTimeline, TimelineConfig
+from .sensing.scan_model import LidarConfig, arena_walls, cast_beams, polygon_walls, simulate_scan
 
 __all__ = [
     "Circle",

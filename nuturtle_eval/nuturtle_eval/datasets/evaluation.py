@@ -42,8 +42,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from turtlelib import Transform2D, normalize_angles
-from turtlelib.consistency import chi2_bounds
-from turtlelib.validation import one_of
+from turtlelib.estimation.consistency import chi2_bounds
+from turtlelib.util.validation import one_of
 
 from ..metrics import align_se2, associate_landmarks, pose_nees
 from .experiment import Experiment, ExperimentResult

@@ -30,8 +30,8 @@ from turtlelib import (
     TimelineConfig,
     Transform2D,
 )
-from turtlelib.run_history import RunHistory
-from turtlelib.timebase import NS_PER_S
+from turtlelib.estimation.run_history import RunHistory
+from turtlelib.util.timebase import NS_PER_S
 
 # data association: landmark ids given with the observations (known) or found by the filter (unknown)
 ASSOCIATIONS = ("known", "unknown")

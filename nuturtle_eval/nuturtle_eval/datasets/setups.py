@@ -31,8 +31,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from turtlelib import AckermannMotion, HeldInputs, SlamConfig, Transform2D, TwistNoise, UnicycleMotion
-from turtlelib.timebase import NS_PER_S
-from turtlelib.validation import finite_real, in_range, one_of, positive, store
+from turtlelib.util.timebase import NS_PER_S
+from turtlelib.util.validation import finite_real, in_range, one_of, positive, store
 
 from ..metrics import align_se2
 from .experiment import ASSOCIATIONS, Experiment, Scans, run_experiment

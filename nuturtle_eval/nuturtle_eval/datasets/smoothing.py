@@ -1,11 +1,12 @@
 """The smoother over a dataset run (``--smooth``): the filter's run re-estimated as a whole.
 
-The factors come from the run's history (:class:`turtlelib.run_history.RunHistory`, kept by the filter's
-timeline): poses at the start and at every applied scan, the motion between them from the experiment's
+The factors come from the run's history (:class:`turtlelib.estimation.run_history.RunHistory`, kept by the
+filter's timeline): poses at the start and at every applied scan, the motion between them from the
+experiment's
 motion model and signal (as the filter predicted it), and the observations the filter associated with a
 landmark of its final map, with the filter's noise model (correlated errors included). :func:`smooth_run`
-solves them from the filter's estimates (:func:`turtlelib.run_smoothing.smooth_history`; with unknown
-association the associations are revised) and gives an
+solves them from the filter's estimates (:func:`turtlelib.smoothing.run_smoothing.smooth_history`; with
+unknown association the associations are revised) and gives an
 :class:`~nuturtle_eval.datasets.experiment.ExperimentResult` that the evaluation and the figures take as they
 take the filter's: the smoothed poses at the scans (no pose covariance: NaN) and the smoothed map with the
 covariance of the information matrix.
@@ -18,9 +19,9 @@ import time
 
 import numpy as np
 
-from turtlelib.run_smoothing import smooth_history
-from turtlelib.smoothed_association import RevisionConfig
-from turtlelib.smoother import SmootherConfig
+from turtlelib.smoothing.association_revision import RevisionConfig
+from turtlelib.smoothing.run_smoothing import smooth_history
+from turtlelib.smoothing.smoother import SmootherConfig
 
 from .experiment import Experiment, ExperimentResult
 

@@ -1,0 +1,1 @@
+"""SE(2) geometry: the pose and twist value types, stamped pose buffers, decimated pose trails."""

@@ -1,0 +1,455 @@
+"""Occupancy grid mapping from known poses: log-odds cells, vectorised ray casting, a grid that grows.
+
+The grid
+--------
+Square cells of side ``resolution_m`` (m) aligned with the map frame. Cell ``(row, col)`` covers
+``x in [(col + col0) res, (col + col0 + 1) res)`` and ``y in [(row + row0) res, (row + row0 + 1) res)``
+where ``(col0, row0)`` are integers: the map frame's cell ``floor(x / res), floor(y / res)`` is the grid's
+``(row, col) = (floor(y / res) - row0, floor(x / res) - col0)``. So the origin (the corner of cell
+``(0, 0)``) is ``(col0 res, row0 res)`` and growing the grid only changes the integers ``col0, row0``:
+every cell keeps its world position exactly. Rows run along +y and columns along +x, row-major with row 0
+at the origin: the layout of ``nav_msgs/OccupancyGrid`` (``data[row * width + col]``, ``info.origin`` the
+pose of cell (0, 0)'s corner), which :meth:`OccupancyGrid.grid_map` gives as int8 (-1 unknown, 0..100).
+
+The inverse sensor model (log odds)
+-----------------------------------
+Each cell holds the log odds of being occupied, ``l = log(p / (1 - p))``, with inverse
+``p = 1 / (1 + exp(-l))``; 0 (``p = 1/2``) before any observation. Under the usual independence
+assumptions (each cell alone, observations independent given the cell's state, prior 1/2), Bayes' rule
+for a cell observed by a scan is the sum ``l <- l + l_obs`` (Thrun, Burgard, Fox, *Probabilistic Robotics*,
+ch. 9.2) with
+
+* ``l_hit = log(p_hit / (1 - p_hit))`` for the cell a beam ends in (``hit_probability > 1/2``),
+* ``l_miss = log(p_miss / (1 - p_miss))`` for a cell a beam passes through (``miss_probability < 1/2``),
+
+then clamped to ``[l_min, l_max]`` (the log odds of ``min_probability`` and ``max_probability``), so a cell
+that changes (a door opens) needs a bounded number of scans to flip (OctoMap's clamping: Hornung et al.,
+"OctoMap", Autonomous Robots 2013; the defaults 0.7 / 0.4 / 0.12 / 0.97 are theirs). A cell is updated at
+most once per scan: occupied if any beam of the scan ends in it, else free if any passes through it (an
+end wins over a pass: a wall seen at a grazing angle is not cleared by the neighbouring beams). The
+occupancy published is ``round(100 p)``; cells never observed are -1.
+
+The beams
+---------
+Beam ``b`` of a scan leaves the sensor at ``phi_b = angle_min + b angle_increment`` (sensor frame, rad).
+A return ``range_min <= rho_b <= range_max`` (finite, > 0) ends at ``p = T_map_scan [rho_b cos phi_b,
+rho_b sin phi_b]``: its end cell is hit, the cells from the sensor's up to the end's, that cell excluded,
+are missed. Anything else (0, NaN, inf, out of the limits: what LiDARs write for no return, and what
+``sensor_msgs/LaserScan`` says to discard) is a beam that saw nothing within its limits: it misses every
+cell up to ``min(no_return_clear_m, range_max)`` along its direction and marks nothing occupied
+(``no_return_clear_m = 0`` turns this off).
+
+The cells a segment from ``s`` to ``e`` crosses (in the map frame's cell units ``u = x / res``, so that the
+cells do not depend on the grid's current extent) are found in closed form, all beams at once (the
+traversal of Amanatides & Woo, "A fast voxel traversal algorithm", 1987, with its steps counted instead of
+iterated): the segment crosses ``n_x = |floor(e_x) - floor(s_x)|`` vertical cell borders at
+``t_x(k) = (f_x + k) / |d_x|``, ``k = 0 .. n_x - 1`` (``d = e - s``, ``f_x`` the distance from ``s_x`` to
+the first border in the direction of travel) and ``n_y`` horizontal ones at ``t_y(j)`` alike. After its
+k-th vertical crossing the segment is in column ``floor(s_x) + sign(d_x) (k + 1)`` and in the row reached
+after the horizontal crossings before it, ``c = #{j: t_y(j) < t_x(k)} = clip(ceil(t_x(k) |d_y| - f_y), 0,
+n_y)`` (and the same for the horizontal crossings, a tie going to the vertical one): the cells entered are
+known without ordering the crossings, and the last is the end cell. (Rounding can only matter where a
+segment passes within rounding of a cell corner: both or neither of the corner's side cells is then listed.)
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from functools import partial
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ..geometry.path_trail import PathTrail, PathTrailConfig
+from ..geometry.se2 import Transform2D
+from ..util.validation import finite_real, in_range, integer, non_negative, positive, store
+
+UNKNOWN = -1  # nav_msgs/OccupancyGrid's value of a cell never observed
+# Largest side of a grid (cells): 2^15 x 2^15 cells are 5 GB of state, far beyond any TurtleBot's map
+_MAX_CELLS = 2**15
+
+
+def log_odds(probability: float | NDArray[np.float64]) -> float | NDArray[np.float64]:
+    """``l = log(p / (1 - p))`` for ``p`` in (0, 1)."""
+    return np.log(probability) - np.log1p(-probability)
+
+
+def probability(log_odds_value: float | NDArray[np.float64]) -> float | NDArray[np.float64]:
+    """``p = 1 / (1 + exp(-l))``, the inverse of :func:`log_odds`."""
+    return 1.0 / (1.0 + np.exp(-log_odds_value))
+
+
+@dataclass(frozen=True)
+class GridConfig:
+    """Occupancy grid mapping parameters (the names are the future ROS parameters).
+
+    * ``resolution_m`` (m, > 0): the side of a cell;
+    * ``initial_size_m`` (m, > 0): side of the square grid at the start, centred on the map origin;
+    * ``max_size_m`` (m, >= ``initial_size_m``): the grid grows as scans reach past it, up to this side
+      in x and in y (a scan that would need more raises ValueError and changes nothing);
+    * ``grow_margin_m`` (m, >= 0): the extra space added around a scan that needs a larger grid, so the
+      grid grows now and then rather than at every scan;
+    * ``hit_probability`` in (1/2, 1), ``miss_probability`` in (0, 1/2): the inverse sensor model of a
+      beam's end cell and of the cells it passes through (module docstring);
+    * ``min_probability`` in (0, ``miss_probability``], ``max_probability`` in [``hit_probability``, 1):
+      the clamping bounds;
+    * ``no_return_clear_m`` (m, >= 0): how far a beam without a return clears.
+
+    ValueError for anything else.
+    """
+
+    resolution_m: float = 0.05
+    initial_size_m: float = 4.0
+    max_size_m: float = 100.0
+    grow_margin_m: float = 2.0
+    hit_probability: float = 0.7
+    miss_probability: float = 0.4
+    min_probability: float = 0.12
+    max_probability: float = 0.97
+    no_return_clear_m: float = 1.0
+
+    def __post_init__(self) -> None:
+        store(self, ("resolution_m", "initial_size_m", "max_size_m"), positive)
+        store(self, ("grow_margin_m", "no_return_clear_m"), non_negative)
+        store(self, ("hit_probability",), partial(in_range, low=0.5, high=1.0, open_low=True, open_high=True))
+        store(
+            self, ("miss_probability",), partial(in_range, low=0.0, high=0.5, open_low=True, open_high=True)
+        )
+        store(
+            self,
+            ("min_probability",),
+            partial(in_range, low=0.0, high=self.miss_probability, open_low=True),
+        )
+        store(
+            self,
+            ("max_probability",),
+            partial(in_range, low=self.hit_probability, high=1.0, open_high=True),
+        )
+        if self.max_size_m < self.initial_size_m:
+            raise ValueError(
+                f"max_size_m must be >= initial_size_m = {self.initial_size_m}, got {self.max_size_m}"
+            )
+        cells = self.max_size_m / self.resolution_m
+        if cells > _MAX_CELLS:
+            raise ValueError(f"max_size_m / resolution_m must be <= {_MAX_CELLS} cells a side, got {cells}")
+
+
+@dataclass(frozen=True)
+class RangeScan:
+    """One 2D LiDAR scan as ``sensor_msgs/LaserScan`` gives it: ``ranges`` (m), beam ``b`` at
+    ``angle_min + b angle_increment`` (rad, sensor frame), valid returns in ``[range_min, range_max]``.
+
+    ``ranges`` is stored as a read-only float64 copy (any value allowed: invalid ones mean no return);
+    ValueError for an empty or non 1-D ``ranges``, non-finite angles, a zero increment or limits that are
+    not ``0 <= range_min < range_max`` finite.
+    """
+
+    ranges: NDArray[np.float64]
+    angle_min: float
+    angle_increment: float
+    range_min: float
+    range_max: float
+
+    def __post_init__(self) -> None:
+        ranges = np.array(self.ranges, dtype=np.float64)
+        if ranges.ndim != 1 or ranges.shape[0] == 0:
+            raise ValueError(f"ranges must be a non-empty 1-D array, got shape {ranges.shape}")
+        ranges.flags.writeable = False
+        object.__setattr__(self, "ranges", ranges)
+        store(self, ("angle_min", "angle_increment", "range_max"), finite_real)
+        store(self, ("range_min",), non_negative)
+        if self.angle_increment == 0.0:
+            raise ValueError("angle_increment must be non-zero")
+        if not self.range_min < self.range_max:
+            raise ValueError(f"need range_min < range_max, got {self.range_min}, {self.range_max}")
+
+    def returns(self) -> NDArray[np.bool_]:
+        """Beams with a return: finite, > 0 and in ``[range_min, range_max]`` (NaN fails every test)."""
+        rho = self.ranges
+        return (rho > 0.0) & (rho >= self.range_min) & (rho <= self.range_max)
+
+
+@dataclass(frozen=True, eq=False)
+class GridMap:
+    """An occupancy grid as ``nav_msgs/OccupancyGrid`` carries it.
+
+    ``occupancy`` (height, width) int8, -1 (unknown) or 0..100 (per cent occupied), row ``r`` along +y and
+    column ``c`` along +x of the grid's frame (``data = occupancy.ravel()``, row-major, row 0 at the
+    origin); ``resolution_m`` (m) the cell side; ``origin`` the pose in the map frame of cell (0, 0)'s
+    corner (``info.origin``; yaw 0 for the grids made here). Stored read-only; ValueError for values
+    outside -1..100, an empty grid or a resolution that is not finite and > 0.
+    """
+
+    occupancy: NDArray[np.int8]
+    resolution_m: float
+    origin: Transform2D
+
+    def __post_init__(self) -> None:
+        occupancy = np.array(self.occupancy)
+        if occupancy.ndim != 2 or occupancy.size == 0:
+            raise ValueError(f"occupancy must be a non-empty 2-D array, got shape {occupancy.shape}")
+        if occupancy.dtype.kind not in "iu":
+            raise ValueError(f"occupancy must hold integers, got {occupancy.dtype}")
+        if occupancy.min() < UNKNOWN or occupancy.max() > 100:
+            raise ValueError("occupancy values must be -1 (unknown) or 0..100")
+        occupancy = occupancy.astype(np.int8)
+        occupancy.flags.writeable = False
+        object.__setattr__(self, "occupancy", occupancy)
+        store(self, ("resolution_m",), positive)
+        if not isinstance(self.origin, Transform2D):
+            raise ValueError(f"origin must be a Transform2D, got {type(self.origin).__name__}")
+
+    @property
+    def width(self) -> int:
+        return self.occupancy.shape[1]
+
+    @property
+    def height(self) -> int:
+        return self.occupancy.shape[0]
+
+
+class OccupancyGrid:
+    """A log-odds occupancy grid that grows as scans reach past it (module docstring).
+
+    ``log_odds`` (height, width) float32 and ``observed`` (height, width) bool are the state; ``col0``,
+    ``row0`` the integer cell offsets of cell (0, 0) (origin ``(col0 res, row0 res)``).
+    """
+
+    def __init__(self, config: GridConfig) -> None:
+        self.config = config
+        res = config.resolution_m
+        self._l_hit = float(log_odds(config.hit_probability))
+        self._l_miss = float(log_odds(config.miss_probability))
+        self._l_min = float(log_odds(config.min_probability))
+        self._l_max = float(log_odds(config.max_probability))
+        self._max_cells = math.ceil(config.max_size_m / res)
+        half = math.ceil(0.5 * config.initial_size_m / res)
+        self.col0 = self.row0 = -half
+        self.log_odds = np.zeros((2 * half, 2 * half), dtype=np.float32)
+        self.observed = np.zeros((2 * half, 2 * half), dtype=bool)
+        self._hit_scratch = np.zeros(self.log_odds.size, dtype=bool)
+        self._layout: tuple[int, float, float] | None = None
+        self._directions = np.zeros((0, 2))
+
+    @property
+    def origin_m(self) -> tuple[float, float]:
+        """``(x, y)`` (m) of cell (0, 0)'s corner in the map frame."""
+        res = self.config.resolution_m
+        return self.col0 * res, self.row0 * res
+
+    def cell_of(self, p_map: ArrayLike) -> NDArray[np.int64]:
+        """``(row, col)`` (N, 2) of points ``p_map`` (N, 2) (m), possibly outside the grid."""
+        p = np.asarray(p_map, dtype=np.float64).reshape(-1, 2)
+        res = self.config.resolution_m
+        return np.column_stack(
+            (
+                np.floor(p[:, 1] / res).astype(np.int64) - self.row0,
+                np.floor(p[:, 0] / res).astype(np.int64) - self.col0,
+            )
+        )
+
+    def insert_scan(self, scan: RangeScan, T_map_scan: Transform2D) -> None:
+        """Update the grid with ``scan`` taken from the sensor pose ``T_map_scan`` (module docstring).
+
+        The grid first grows if the scan reaches past it; ValueError (and no change) if it would then be
+        larger than ``max_size_m``.
+        """
+        if not isinstance(scan, RangeScan) or not isinstance(T_map_scan, Transform2D):
+            raise ValueError(
+                f"need a RangeScan and a Transform2D, got {type(scan).__name__}, {type(T_map_scan).__name__}"
+            )
+        res = self.config.resolution_m
+        returns = scan.returns()
+        reach_m = np.where(returns, scan.ranges, min(self.config.no_return_clear_m, scan.range_max))
+        u_scan = self._unit_vectors(scan)
+        c, s = math.cos(T_map_scan.theta), math.sin(T_map_scan.theta)
+        # end points in the map frame, in cells: (R u rho + p) / res
+        ex = (c * u_scan[:, 0] - s * u_scan[:, 1]) * reach_m + T_map_scan.x
+        ey = (s * u_scan[:, 0] + c * u_scan[:, 1]) * reach_m + T_map_scan.y
+        ex /= res
+        ey /= res
+        sx, sy = T_map_scan.x / res, T_map_scan.y / res
+        self._grow_to_include(
+            math.floor(min(sx, ex.min())),
+            math.floor(min(sy, ey.min())),
+            math.floor(max(sx, ex.max())),
+            math.floor(max(sy, ey.max())),
+        )
+        # cells in the map frame's cell units (independent of the grid's extent), then in the grid
+        width = self.log_odds.shape[1]
+        offset = self.row0 * width + self.col0
+        end_row, end_col = np.floor(ey).astype(np.int64), np.floor(ex).astype(np.int64)
+        hit = (end_row * width + end_col)[returns] - offset
+        start = math.floor(sy) * width + math.floor(sx) - offset
+        traversed = _traversed_cells(sx, sy, ex, ey, width) + start
+        # an end wins over a pass (a cell is updated once per scan)
+        is_hit = self._hit_scratch
+        is_hit[hit] = True
+        free = traversed[~is_hit[traversed]]
+        if not is_hit[start] and reach_m.max() > 0.0:
+            free = np.append(free, start)
+        is_hit[hit] = False
+        flat_l = self.log_odds.reshape(-1)
+        flat_observed = self.observed.reshape(-1)
+        # duplicates in free (or hit) write the same value: each cell is updated once
+        flat_l[free] = np.maximum(flat_l[free] + self._l_miss, self._l_min)
+        flat_l[hit] = np.minimum(flat_l[hit] + self._l_hit, self._l_max)
+        flat_observed[free] = True
+        flat_observed[hit] = True
+
+    def grid_map(self) -> GridMap:
+        """The grid as ``nav_msgs/OccupancyGrid`` values: ``round(100 p)``, -1 where never observed."""
+        percent = np.rint(100.0 * probability(self.log_odds.astype(np.float64))).astype(np.int8)
+        occupancy = np.where(self.observed, percent, np.int8(UNKNOWN))
+        x, y = self.origin_m
+        return GridMap(occupancy, self.config.resolution_m, Transform2D(x, y, 0.0))
+
+    def _unit_vectors(self, scan: RangeScan) -> NDArray[np.float64]:
+        """``[cos(phi_b), sin(phi_b)]`` (B, 2) of the scan's beams, kept while the layout stays the same."""
+        layout = (scan.ranges.shape[0], scan.angle_min, scan.angle_increment)
+        if layout != self._layout:
+            phi = scan.angle_min + scan.angle_increment * np.arange(layout[0], dtype=np.float64)
+            self._directions = np.column_stack((np.cos(phi), np.sin(phi)))
+            self._layout = layout
+        return self._directions
+
+    def _grow_to_include(self, col_low: int, row_low: int, col_high: int, row_high: int) -> None:
+        """Grow (by whole cells, ``grow_margin_m`` to spare on each side that grows) so that the map-frame
+        cells from ``(col_low, row_low)`` to ``(col_high, row_high)`` lie inside; ValueError (and no change)
+        if the grid would then be wider or taller than ``max_size_m``."""
+        height, width = self.log_odds.shape
+        margin = math.ceil(self.config.grow_margin_m / self.config.resolution_m)
+        spans = []
+        for axis, low_old, size, low, high in (
+            ("x", self.col0, width, col_low, col_high),
+            ("y", self.row0, height, row_low, row_high),
+        ):
+            new_low, new_end = min(low_old, low), max(low_old + size, high + 1)
+            if new_end - new_low > self._max_cells:
+                raise ValueError(
+                    f"the scan reaches past max_size_m = {self.config.max_size_m} m of grid in {axis} "
+                    f"(cells {low}..{high}, the grid holds {low_old}..{low_old + size - 1})"
+                )
+            if new_low < low_old:
+                new_low = max(new_low - margin, new_end - self._max_cells)
+            if new_end > low_old + size:
+                new_end = min(new_end + margin, new_low + self._max_cells)
+            spans.append((new_low, new_end))
+        (new_col0, col_end), (new_row0, row_end) = spans
+        if (new_col0, col_end, new_row0, row_end) == (
+            self.col0,
+            self.col0 + width,
+            self.row0,
+            self.row0 + height,
+        ):
+            return
+        log_odds_grid = np.zeros((row_end - new_row0, col_end - new_col0), dtype=np.float32)
+        observed = np.zeros(log_odds_grid.shape, dtype=bool)
+        rows = slice(self.row0 - new_row0, self.row0 - new_row0 + height)
+        cols = slice(self.col0 - new_col0, self.col0 - new_col0 + width)
+        log_odds_grid[rows, cols] = self.log_odds
+        observed[rows, cols] = self.observed
+        self.log_odds, self.observed = log_odds_grid, observed
+        self.col0, self.row0 = new_col0, new_row0
+        self._hit_scratch = np.zeros(log_odds_grid.size, dtype=bool)
+
+
+def _traversed_cells(
+    sx: float, sy: float, ex: NDArray[np.float64], ey: NDArray[np.float64], width: int
+) -> NDArray[np.int64]:
+    """The cells each segment from ``(sx, sy)`` to ``(ex_b, ey_b)`` (cell units: m / res) enters after
+    leaving the start cell, end cells included, all segments back to back (module docstring), as offsets
+    ``d_row width + d_col`` from the start cell in a row-major grid ``width`` cells wide."""
+    i0, j0 = math.floor(sx), math.floor(sy)
+    dx, dy = ex - sx, ey - sy
+    n_x = np.abs(np.floor(ex) - i0)
+    n_y = np.abs(np.floor(ey) - j0)
+    # a step along x is one cell, along y one row of the grid
+    step_x = np.where(dx > 0.0, 1.0, -1.0)
+    step_y = np.where(dy > 0.0, float(width), -float(width))
+    # distance from the start to the first border crossed, per axis, in cells
+    f_x = np.where(dx > 0.0, i0 + 1 - sx, sx - i0)
+    f_y = np.where(dy > 0.0, j0 + 1 - sy, sy - j0)
+    abs_dx, abs_dy = np.abs(dx), np.abs(dy)
+
+    def crossings(n: NDArray[np.float64]) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
+        """The segment of each crossing and its number k along its axis."""
+        counts = n.astype(np.intp)
+        beam = np.repeat(np.arange(counts.shape[0]), counts)
+        first = np.cumsum(n) - n
+        return beam, np.arange(beam.shape[0], dtype=np.float64) - first[beam]
+
+    # vertical borders: t = (f_x + k) / |d_x|; the row is the number of horizontal crossings before t
+    beam, k = crossings(n_x)
+    t = (f_x[beam] + k) / abs_dx[beam]
+    before = np.minimum(np.maximum(np.ceil(t * abs_dy[beam] - f_y[beam]), 0.0), n_y[beam])
+    offsets_x = step_x[beam] * (k + 1.0) + step_y[beam] * before
+    # horizontal borders: the column is the number of vertical crossings at or before t
+    beam, k = crossings(n_y)
+    t = (f_y[beam] + k) / abs_dy[beam]
+    before = np.minimum(np.maximum(np.floor(t * abs_dx[beam] - f_x[beam]) + 1.0, 0.0), n_x[beam])
+    offsets_y = step_y[beam] * (k + 1.0) + step_x[beam] * before
+    return np.concatenate((offsets_x, offsets_y)).astype(np.int64)
+
+
+@dataclass(frozen=True)
+class KeyframeConfig:
+    """Which scans to keep for re-rendering: a scan is kept when the robot moved ``keyframe_step_m`` (m,
+    >= 0) or turned ``keyframe_turn_rad`` (rad, >= 0) since the last kept one; at most ``max_keyframes``
+    (>= 1), the oldest dropped. ValueError otherwise."""
+
+    keyframe_step_m: float = 0.1
+    keyframe_turn_rad: float = 0.2
+    max_keyframes: int = 5000
+
+    def __post_init__(self) -> None:
+        store(self, ("keyframe_step_m", "keyframe_turn_rad"), non_negative)
+        store(self, ("max_keyframes",), partial(integer, minimum=1))
+
+
+class ScanKeyframes:
+    """Decimated ``(stamp_ns, scan)`` keyframes, to render a fresh grid from corrected poses (after a loop
+    closure, SLAM's estimate of past poses changes: the grid made incrementally keeps the old ones)."""
+
+    def __init__(self, config: KeyframeConfig) -> None:
+        self.config = config
+        self._trail: PathTrail[tuple[int, RangeScan]] = PathTrail(
+            PathTrailConfig(
+                path_min_step_m=config.keyframe_step_m,
+                path_min_turn_rad=config.keyframe_turn_rad,
+                path_max_poses=config.max_keyframes,
+                path_period=0.0,
+            )
+        )
+
+    def __len__(self) -> int:
+        return len(self._trail.items)
+
+    @property
+    def stamps_ns(self) -> list[int]:
+        return [stamp_ns for stamp_ns, _ in self._trail.items]
+
+    def offer(self, stamp_ns: int, T_map_body: Transform2D, scan: RangeScan) -> bool:
+        """Keep ``scan`` (taken at ``stamp_ns``, int ns, with the body at ``T_map_body``) if the body moved
+        enough since the last kept scan; True if kept."""
+        return self._trail.offer(T_map_body, (integer("stamp_ns", stamp_ns), scan))
+
+    def render(
+        self,
+        pose_at: Callable[[int], Transform2D | None],
+        T_body_scan: Transform2D,
+        config: GridConfig,
+    ) -> OccupancyGrid:
+        """A new grid of every kept scan placed at ``pose_at(stamp_ns) @ T_body_scan`` (the corrected body
+        pose at its stamp and the LiDAR mount); scans whose pose is None (unknown) are skipped."""
+        grid = OccupancyGrid(config)
+        for stamp_ns, scan in self._trail.items:
+            T_map_body = pose_at(stamp_ns)
+            if T_map_body is not None:
+                grid.insert_scan(scan, T_map_body @ T_body_scan)
+        return grid
+
+    def clear(self) -> None:
+        self._trail.clear()

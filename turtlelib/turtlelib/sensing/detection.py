@@ -1,0 +1,576 @@
+"""Cylinder (landmark) detection in a 2D LiDAR scan: clustering, circle fitting, classification.
+
+Pipeline (all in the sensor frame; m, rad)
+------------------------------------------
+1. Points: beam ``b`` at ``phi_b = angle_min + b angle_increment`` within the first full turn
+   (:func:`beams_in_one_turn`) with a valid range ``rho_b`` (finite, ``> 0`` and inside ``[range_min,
+   range_max]``: 0.0, NaN and inf mean no return) gives ``p_b = rho_b [cos(phi_b), sin(phi_b)]``; other
+   beams are dropped.
+2. Clustering: consecutive valid points ``p_i, p_{i+1}`` belong to the same cluster when
+   ``|p_{i+1} - p_i| < cluster_threshold``. When the scan covers a full turn the point sequence is
+   cyclic: the last and the first cluster are merged if the gap across the seam is under the threshold.
+3. Candidates: clusters with ``n >= min_points`` points and a chord ``|p_n - p_1| <= 2 max_radius``
+   (no cylinder is wider than its diameter).
+4. Silhouette: the beam just before a cluster and the one just after it *saw past* the cluster when
+   they have no return or a longer range than the cluster's end; the cylinder's outline (a ray from the
+   sensor tangent to it) then lies between that beam and the cluster's end beam.
+5. Circle fit, all candidates in one batched pass: the hyper fit
+   (:func:`turtlelib.sensing.circle_fit.fit_circles`), then one Gauss-Newton step of the LiDAR likelihood
+   (:func:`turtlelib.sensing.circle_fit.refine_for_range_sensor`): range noise ``beam_range_std`` along each
+   beam plus the silhouette rays, each known to a uniform error over one beam step (lateral standard deviation
+   ``rho_end * angle_increment / sqrt(12)``). With 1 cm noise and a handful of points per cylinder the
+   silhouette fixes the radius far better than the ranges do.
+6. Classification: a candidate is a cylinder when every test passes:
+   * it shows at least ``min_silhouette_edges`` silhouette edges (a wall seen between two nearer
+     objects shows none);
+   * the radius lies in ``[min_radius, max_radius]`` and the RMS residual is ``<= max_residual``;
+   * the centre lies beyond the points, ``|c| > mean_i |p_i|`` (the sensor sees a cylinder's outside;
+     an arena corner or any concave curve has its centre on the sensor's side);
+   * inscribed-angle test (Xavier et al., "Fast line, arc/circle and leg detection from laser scan
+     data", ICRA 2005): by the inscribed angle theorem every interior point ``p_i`` of an arc sees the
+     chord ``p_1 p_n`` under the same angle ``alpha_i = angle(p_1 - p_i, p_n - p_i) = pi - arc / 2``,
+     and a cylinder seen from outside shows at most half its circumference, so the mean of ``alpha_i``
+     lies in ``[min_inscribed_angle, max_inscribed_angle]`` and their standard deviation is at most
+     ``max_inscribed_angle_std``; a wall gives about 180 deg and a corner widely varying angles. (The
+     upper bound sits well above the noise-free 135 deg: with 1 cm noise a far cylinder's few points
+     look flatter than they are.)
+   * silhouette clearance: a beam that saw past the cluster misses the circle, ``|v x c| >= R -
+     silhouette_tolerance`` for its direction ``v``.
+7. Measurement: centre ``c`` gives ``range_m = |c|``, ``bearing_rad = atan2(c_y, c_x)`` and the
+   range-bearing covariance ``R = diag(range_std^2, bearing_std^2)``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from functools import partial
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ..util.validation import finite_real, in_range, integer, non_negative, positive, store
+from .circle_fit import fit_circles, refine_for_range_sensor
+
+# A scan is a full turn when the angular gap from its last beam back to its first is at most this many
+# beam increments.
+_SEAM_GAP_INCREMENTS = 1.5
+# Slack of check_scan_layout (rad): LaserScan's angles are float32, ~1e-7 relative, over ~1000 beams
+LAYOUT_SLACK_RAD = 1e-4
+# Valid ranges are > 0 and finite whatever the scan's limits.
+_SMALLEST_RANGE = float(np.nextafter(0.0, 1.0))
+_LARGEST_RANGE = float(np.finfo(np.float64).max)
+# Offsets from a cluster's first and last beam to the beams just outside it, and the matching sides of
+# _ScanGeometry.bisectors.
+_BEFORE_AFTER = np.array([-1, 1])
+_BEFORE_AFTER_SIDE = np.array([0, 1])
+# Floor on a silhouette edge's standard deviation: at a subnormal range rho * increment / sqrt(12) underflows
+_SMALLEST_EDGE_STD = float(np.finfo(np.float64).tiny)
+
+
+@dataclass(frozen=True)
+class DetectorConfig:
+    """Thresholds of the cylinder detector (field names are the ``landmarks`` node's ROS parameters).
+
+    Clustering and candidates:
+
+    * ``cluster_threshold`` (m, > 0): largest gap between consecutive points of one cluster;
+    * ``min_points`` (int >= 3): fewest points of a cylinder.
+
+    Classification (see the module docstring):
+
+    * ``min_radius``, ``max_radius`` (m, ``0 <= min_radius < max_radius``): radius window;
+    * ``max_residual`` (m, > 0): largest RMS distance of the points from the fitted circle;
+    * ``min_inscribed_angle``, ``max_inscribed_angle`` (rad, ``0 <= min < max <= pi``): window of the
+      mean inscribed angle; ``max_inscribed_angle_std`` (rad, > 0): largest spread of the angles;
+    * ``min_silhouette_edges`` (int in [0, 2]): fewest silhouette edges a cylinder must show;
+    * ``silhouette_tolerance`` (m, >= 0): how far a circle may reach into a beam that saw past it.
+
+    Fit and measurement:
+
+    * ``beam_range_std`` (m, > 0): range noise of one beam (noise and quantisation), for the refinement;
+    * ``min_cos_incidence`` (in (0, 1]): floor on the cosine of a beam's incidence angle there;
+    * ``range_std`` (m, > 0), ``bearing_std`` (rad, > 0): standard deviations of a detection's range and
+      bearing, the diagonal of its covariance.
+
+    The defaults suit the TurtleBot3 LiDARs (LDS-01, LDS-02, Gazebo's: beams of about 1 deg, about 1 cm
+    range noise) and cylinders of 0.03-0.2 m radius (ours are 0.038 m, turtlebot3_world's 0.15 m);
+    ``range_std`` and ``bearing_std`` bound the errors measured on such scans (see docs/benchmarks.md).
+    Invalid values raise ValueError.
+    """
+
+    cluster_threshold: float = 0.1
+    min_points: int = 4
+    min_radius: float = 0.02
+    max_radius: float = 0.25
+    max_residual: float = 0.02
+    min_inscribed_angle: float = math.radians(80.0)
+    max_inscribed_angle: float = math.radians(160.0)
+    max_inscribed_angle_std: float = 0.8
+    min_silhouette_edges: int = 1
+    silhouette_tolerance: float = 0.03
+    beam_range_std: float = 0.01
+    min_cos_incidence: float = 0.2
+    range_std: float = 0.015
+    bearing_std: float = 0.006
+
+    def __post_init__(self) -> None:
+        prefix = "detector "
+        store(self, ("min_points",), partial(integer, minimum=3, maximum=2**31 - 1), prefix)
+        store(self, ("min_silhouette_edges",), partial(integer, minimum=0, maximum=2), prefix)
+        positive_fields = ("cluster_threshold", "max_residual", "max_inscribed_angle_std", "beam_range_std")
+        store(self, (*positive_fields, "range_std", "bearing_std"), positive, prefix)
+        store(self, ("silhouette_tolerance", "min_radius"), non_negative, prefix)
+        store(self, ("max_radius",), finite_real, prefix)
+        store(self, ("min_cos_incidence",), partial(in_range, low=0.0, high=1.0, open_low=True), prefix)
+        angles = ("min_inscribed_angle", "max_inscribed_angle")
+        store(self, angles, partial(in_range, low=0.0, high=math.pi), prefix)
+        if not self.min_radius < self.max_radius:
+            raise ValueError(f"need min_radius < max_radius, got {self.min_radius}, {self.max_radius}")
+        if not self.min_inscribed_angle < self.max_inscribed_angle:
+            raise ValueError(
+                "need min_inscribed_angle < max_inscribed_angle, got "
+                f"{self.min_inscribed_angle}, {self.max_inscribed_angle}"
+            )
+
+
+@dataclass(frozen=True, eq=False)
+class Clusters:
+    """K clusters of scan points stored back to back.
+
+    ``p_sensor`` (P, 2): points in the sensor frame (m); cluster k is
+    ``p_sensor[offsets[k]:offsets[k + 1]]``, its points in scan order (a cluster merged across the seam
+    of a full-turn scan starts with the end of the scan). ``offsets`` (K + 1,) rises from 0 to P;
+    ``beam_index`` (P,) is each point's beam number in the scan.
+    """
+
+    p_sensor: NDArray[np.float64]
+    offsets: NDArray[np.intp]
+    beam_index: NDArray[np.intp]
+
+    def __len__(self) -> int:
+        return self.offsets.shape[0] - 1
+
+    @property
+    def sizes(self) -> NDArray[np.intp]:
+        """Points per cluster, shape (K,)."""
+        return np.diff(self.offsets)
+
+    @property
+    def labels(self) -> NDArray[np.intp]:
+        """Each point's cluster number, shape (P,)."""
+        return np.repeat(np.arange(len(self)), self.sizes)
+
+    def points(self, k: int) -> NDArray[np.float64]:
+        """The points of cluster ``k``, shape (n_k, 2)."""
+        if not 0 <= k < len(self):
+            raise IndexError(f"cluster {k} out of range for {len(self)} clusters")
+        return self.p_sensor[self.offsets[k] : self.offsets[k + 1]]
+
+
+@dataclass(frozen=True, eq=False)
+class Detections:
+    """K detected cylinders, as arrays (sensor frame; m, rad).
+
+    ``p_sensor`` (K, 2) centres, ``radius`` (K,), ``n_points`` (K,) int, ``residual`` (K,) RMS fit
+    error, ``range_m`` (K,) and ``bearing_rad`` (K,) of the centres, ``covariance`` (K, 2, 2) of the
+    measurement ``[range_m, bearing_rad]``, and ``cluster_index`` (K,) the cluster of the scan's
+    :class:`Clusters` each came from (-1 when not given). Inconsistent shapes raise ValueError.
+    """
+
+    p_sensor: NDArray[np.float64]
+    radius: NDArray[np.float64]
+    n_points: NDArray[np.intp]
+    residual: NDArray[np.float64]
+    range_m: NDArray[np.float64]
+    bearing_rad: NDArray[np.float64]
+    covariance: NDArray[np.float64]
+    cluster_index: NDArray[np.intp] | None = None
+
+    def __post_init__(self) -> None:
+        k = self.radius.shape[0] if self.radius.ndim == 1 else -1
+        if self.cluster_index is None:
+            object.__setattr__(self, "cluster_index", np.full(max(k, 0), -1, dtype=np.intp))
+        vectors = (
+            self.radius,
+            self.n_points,
+            self.residual,
+            self.range_m,
+            self.bearing_rad,
+            self.cluster_index,
+        )
+        if (
+            k < 0
+            or any(v.shape != (k,) for v in vectors)
+            or self.p_sensor.shape != (k, 2)
+            or self.covariance.shape != (k, 2, 2)
+        ):
+            raise ValueError("detection arrays must have shapes (K, 2), (K,) x 5 and (K, 2, 2)")
+
+    def __len__(self) -> int:
+        return self.radius.shape[0]
+
+    def measurements(self) -> NDArray[np.float64]:
+        """``[range_m, bearing_rad]`` per detection, shape (K, 2)."""
+        return np.column_stack((self.range_m, self.bearing_rad))
+
+
+def _is_full_turn(angles_rad: NDArray[np.float64]) -> bool:
+    """Whether the beams wrap around: the gap from the last beam back to the first is at most
+    ``_SEAM_GAP_INCREMENTS`` beam steps (in the scan's direction of rotation)."""
+    if angles_rad.shape[0] < 2:
+        return False
+    step = float(angles_rad[1] - angles_rad[0])
+    closing = math.fmod(math.copysign(1.0, step) * float(angles_rad[0] - angles_rad[-1]), math.tau) % math.tau
+    return step != 0.0 and closing <= _SEAM_GAP_INCREMENTS * abs(step)
+
+
+@dataclass(frozen=True, eq=False)
+class _ScanGeometry:
+    """Beam directions of a scan layout, computed once per layout.
+
+    ``bisectors[b]`` holds the unit rays halfway between beam ``b`` and the beam before it, and between
+    ``b`` and the beam after it (neighbours wrap around the scan; a ray degenerates to beam ``b``'s own
+    direction where the two beams are opposite). ``edge_std_per_m`` is ``increment / sqrt(12)``: a ray
+    known to lie uniformly within one beam step at range ``rho`` has lateral standard deviation
+    ``rho edge_std_per_m``.
+    """
+
+    directions: NDArray[np.float64]  # (B, 2) unit vectors [cos(phi), sin(phi)]
+    bisectors: NDArray[np.float64]  # (B, 2, 2): [beam, before/after, xy]
+    full_turn: bool
+    edge_std_per_m: float
+
+    @classmethod
+    def from_angles(cls, angles_rad: NDArray[np.float64]) -> _ScanGeometry:
+        directions = np.column_stack((np.cos(angles_rad), np.sin(angles_rad)))
+        before, after = np.roll(directions, 1, axis=0), np.roll(directions, -1, axis=0)
+        sums = np.stack((directions + before, directions + after), axis=1)
+        norms = np.hypot(sums[:, :, 0], sums[:, :, 1])[:, :, None]
+        bisectors = np.where(norms > 1e-12, sums / np.maximum(norms, 1e-12), directions[:, None, :])
+        increment = abs(float(angles_rad[1] - angles_rad[0])) if angles_rad.shape[0] > 1 else 0.0
+        return cls(directions, bisectors, _is_full_turn(angles_rad), increment / math.sqrt(12.0))
+
+
+def _valid_beams(range_m: NDArray[np.float64], range_min: float, range_max: float) -> NDArray[np.bool_]:
+    """Beams with a return: ``0 < rho``, ``range_min <= rho <= range_max`` and finite (NaN fails both
+    comparisons)."""
+    return (range_m >= max(range_min, _SMALLEST_RANGE)) & (range_m <= min(range_max, _LARGEST_RANGE))
+
+
+def _cluster(
+    range_m: NDArray[np.float64],
+    valid: NDArray[np.bool_],
+    geometry: _ScanGeometry,
+    cluster_threshold: float,
+) -> Clusters:
+    """Steps 1-2 of the pipeline (see the module docstring) on validated input."""
+    beam_index = valid.nonzero()[0]
+    # p_b = rho_b [cos(phi_b), sin(phi_b)]
+    p_sensor = range_m[beam_index, None] * geometry.directions[beam_index]
+    n = beam_index.shape[0]
+    if n == 0:
+        return Clusters(p_sensor, np.zeros(1, dtype=np.intp), beam_index)
+    # a new cluster starts where |p_{i+1} - p_i| >= cluster_threshold
+    step = p_sensor[1:] - p_sensor[:-1]
+    gap2 = step[:, 0] * step[:, 0] + step[:, 1] * step[:, 1]
+    breaks = (gap2 >= cluster_threshold * cluster_threshold).nonzero()[0] + 1
+    if geometry.full_turn and breaks.shape[0] > 0:
+        seam = p_sensor[0] - p_sensor[-1]
+        if seam @ seam < cluster_threshold * cluster_threshold:
+            # merge across the seam: move the last cluster to the front
+            last = breaks[-1]
+            p_sensor = np.concatenate((p_sensor[last:], p_sensor[:last]))
+            beam_index = np.concatenate((beam_index[last:], beam_index[:last]))
+            breaks = breaks[:-1] + (n - last)
+    offsets = np.empty(breaks.shape[0] + 2, dtype=np.intp)
+    offsets[0], offsets[1:-1], offsets[-1] = 0, breaks, n
+    return Clusters(p_sensor, offsets, beam_index)
+
+
+def _checked_ranges(ranges: ArrayLike) -> NDArray[np.float64]:
+    range_m = np.asarray(ranges, dtype=np.float64)
+    if range_m.ndim != 1 or range_m.shape[0] == 0:
+        raise ValueError(f"ranges must be a non-empty 1-D array, got shape {range_m.shape}")
+    return range_m
+
+
+def beams_in_one_turn(samples: int, angle_increment: float) -> int:
+    """How many of a scan's ``samples`` beams the detector uses: the first beams up to one full turn.
+
+    Beam ``b`` lies ``b |angle_increment|`` (rad) past the first; it is kept while ``(b + 1/2)
+    |angle_increment| < 2 pi``. A later beam points within half a step of the first beam, one turn on (or
+    further round), so it repeats a direction already scanned: Gazebo's LiDAR spans 0 to 6.28 rad in 360
+    beams of 6.28/359 rad, and its last beam, 0.0032 rad short of a turn, repeats the first (359 kept).
+    LDS-01 (360 beams of 2 pi / 360) and LDS-02 layouts keep every beam. At least one beam is kept.
+    ``angle_increment`` must be finite and non-zero.
+    """
+    step = abs(angle_increment)
+    if (samples - 0.5) * step < math.tau:
+        return samples
+    return max(1, math.ceil(math.tau / step - 0.5))
+
+
+def check_scan_layout(samples: int, angle_min: float, angle_max: float, angle_increment: float) -> None:
+    """ValueError unless a scan's layout agrees with itself (sensor_msgs/LaserScan's fields).
+
+    Beam ``b`` is at ``angle_min + b angle_increment`` (rad); the last, ``angle_min + (samples - 1)
+    angle_increment``, must be ``angle_max`` to within one increment (drivers differ: the LDS-01's gives
+    ``angle_max = 2 pi`` for 360 beams of 1 degree, one increment past its last beam; the LDS-02's last
+    beam lies up to one increment before ``angle_max``) plus ``LAYOUT_SLACK_RAD`` for float32 rounding;
+    the angles finite, the increment non-zero and both ends within one turn of zero. A scan that disagrees
+    (a negated or doubled increment, twice the ranges) would put every beam in the wrong direction.
+    Beams beyond one full turn (Gazebo's last beam repeats its first) do not make a layout wrong: the
+    detector drops them (:func:`beams_in_one_turn`).
+    """
+    values = (angle_min, angle_max, angle_increment)
+    if not all(math.isfinite(v) for v in values) or angle_increment == 0.0:
+        raise ValueError(f"need finite angle_min, angle_max and angle_increment != 0, got {values}")
+    if samples < 1:
+        raise ValueError("a scan needs a non-empty ranges array")
+    if max(abs(angle_min), abs(angle_max)) > 2.0 * math.pi + LAYOUT_SLACK_RAD:
+        raise ValueError(f"angle_min {angle_min} or angle_max {angle_max} is more than a turn from 0")
+    last = angle_min + (samples - 1) * angle_increment
+    if abs(last - angle_max) > abs(angle_increment) + LAYOUT_SLACK_RAD:
+        raise ValueError(
+            f"{samples} ranges from angle_min {angle_min} by {angle_increment} rad end at {last:.6g} rad, "
+            f"but angle_max is {angle_max}: the layout contradicts itself"
+        )
+
+
+def _checked_limits(range_min: float, range_max: float) -> tuple[float, float]:
+    range_min, range_max = float(range_min), float(range_max)
+    if math.isnan(range_min) or math.isnan(range_max) or not range_min < range_max:
+        raise ValueError(f"need range_min < range_max, got {range_min}, {range_max}")
+    return range_min, range_max
+
+
+def cluster_scan(
+    ranges: ArrayLike,
+    angles: ArrayLike,
+    config: DetectorConfig,
+    range_min: float = 0.0,
+    range_max: float = math.inf,
+) -> Clusters:
+    """Cluster a scan: ``ranges`` (B,) in m along beam directions ``angles`` (B,) in rad.
+
+    Drops beams that are 0.0, NaN, inf or outside ``[range_min, range_max]``, splits the remaining
+    points where consecutive points are ``cluster_threshold`` or more apart, and, when the beams cover a
+    full turn (the gap from the last beam back to the first is at most 1.5 beam steps), merges the last
+    cluster into the first across the seam. ValueError for empty or mismatched arrays, non-finite angles
+    or ``range_min >= range_max``.
+    """
+    range_m = _checked_ranges(ranges)
+    angles_rad = np.asarray(angles, dtype=np.float64)
+    if angles_rad.shape != range_m.shape or not np.isfinite(angles_rad).all():
+        raise ValueError(f"angles must be finite with the shape of ranges {range_m.shape}")
+    range_min, range_max = _checked_limits(range_min, range_max)
+    geometry = _ScanGeometry.from_angles(angles_rad)
+    return _cluster(range_m, _valid_beams(range_m, range_min, range_max), geometry, config.cluster_threshold)
+
+
+@dataclass(eq=False)
+class LandmarkDetector:
+    """Finds cylinders in 2D LiDAR scans (see the module docstring for the pipeline and its tests).
+
+    Holds the beam directions of the last scan layout it saw, so it is cheap to call once per scan.
+    """
+
+    config: DetectorConfig
+    # the last scan layout (samples, angle_min, angle_increment) and its beam geometry
+    _layout: tuple[tuple[int, float, float], _ScanGeometry] | None = field(
+        default=None, init=False, repr=False
+    )
+
+    def detect(
+        self,
+        ranges: ArrayLike,
+        angle_min: float,
+        angle_increment: float,
+        range_min: float,
+        range_max: float,
+    ) -> Detections:
+        """Cylinders in a scan of ``ranges`` (B,) (m) on beams ``angle_min + b * angle_increment`` (rad).
+
+        Beams that are 0.0, NaN, inf or outside ``[range_min, range_max]`` are ignored, and so are beams
+        beyond one full turn (:func:`beams_in_one_turn`: Gazebo's last beam repeats its first). ValueError for
+        an empty or non-1-D ``ranges``, a non-finite or zero ``angle_increment``, a non-finite
+        ``angle_min``, or ``range_min >= range_max``.
+        """
+        return self.detect_with_clusters(ranges, angle_min, angle_increment, range_min, range_max)[0]
+
+    def detect_with_clusters(
+        self,
+        ranges: ArrayLike,
+        angle_min: float,
+        angle_increment: float,
+        range_min: float,
+        range_max: float,
+    ) -> tuple[Detections, Clusters]:
+        """As :meth:`detect`, also returning every cluster of the scan (for a debug topic)."""
+        range_m = _checked_ranges(ranges)
+        range_min, range_max = _checked_limits(range_min, range_max)
+        angle_min, angle_increment = float(angle_min), float(angle_increment)
+        if not (math.isfinite(angle_min) and math.isfinite(angle_increment) and angle_increment != 0.0):
+            raise ValueError(
+                f"need finite angle_min and angle_increment != 0, got {angle_min}, {angle_increment}"
+            )
+        range_m = range_m[: beams_in_one_turn(range_m.shape[0], angle_increment)]
+        geometry = self._scan_geometry(range_m.shape[0], angle_min, angle_increment)
+        valid = _valid_beams(range_m, range_min, range_max)
+        clusters = _cluster(range_m, valid, geometry, self.config.cluster_threshold)
+        return self._classify(clusters, range_m, valid, geometry), clusters
+
+    def _scan_geometry(self, samples: int, angle_min: float, angle_increment: float) -> _ScanGeometry:
+        key = (samples, angle_min, angle_increment)
+        if self._layout is not None and self._layout[0] == key:
+            return self._layout[1]
+        angles_rad = angle_min + angle_increment * np.arange(samples, dtype=np.float64)
+        geometry = _ScanGeometry.from_angles(angles_rad)
+        self._layout = (key, geometry)
+        return geometry
+
+    def _classify(
+        self,
+        clusters: Clusters,
+        range_m: NDArray[np.float64],
+        valid: NDArray[np.bool_],
+        geometry: _ScanGeometry,
+    ) -> Detections:
+        """Steps 3-7 of the pipeline: fit the candidates, keep those that pass every test."""
+        cfg = self.config
+        sizes = clusters.offsets[1:] - clusters.offsets[:-1]
+        first_all, last_all = clusters.offsets[:-1], clusters.offsets[1:] - 1
+        chord = clusters.p_sensor[last_all] - clusters.p_sensor[first_all]
+        # 3. candidates: n >= min_points and |p_n - p_1| <= 2 max_radius
+        candidate = (sizes >= cfg.min_points) & (
+            chord[:, 0] * chord[:, 0] + chord[:, 1] * chord[:, 1] <= 4.0 * cfg.max_radius * cfg.max_radius
+        )
+        if not candidate.any():
+            nothing = np.empty(0, dtype=np.intp)
+            return self._detections(np.empty((0, 2)), np.empty(0), nothing, np.empty(0), nothing)
+        n = sizes[candidate]
+        p = clusters.p_sensor[candidate.repeat(sizes)]
+        offsets = np.zeros(n.shape[0] + 1, dtype=np.intp)
+        np.cumsum(n, out=offsets[1:])
+        starts, ends = offsets[:-1], offsets[1:] - 1
+        end_beam = np.empty((n.shape[0], 2), dtype=np.intp)
+        end_beam[:, 0] = clusters.beam_index[first_all[candidate]]
+        end_beam[:, 1] = clusters.beam_index[last_all[candidate]]
+
+        # 4. silhouette: neighbour beams (K, 2) and whether each saw past its cluster
+        neighbour, saw_past = _neighbour_beams(end_beam, range_m, valid, geometry)
+        # the outline ray runs halfway between the end beam and the neighbour, known to within one
+        # beam step: sigma = rho_end * increment / sqrt(12), inf where no beam saw past
+        edge = geometry.bisectors[end_beam, _BEFORE_AFTER_SIDE]
+        edge_std = np.maximum(range_m[end_beam] * geometry.edge_std_per_m, _SMALLEST_EDGE_STD)
+        edge_std[~saw_past] = np.inf
+
+        # 5. hyper fit, then one Gauss-Newton step of the LiDAR likelihood (where the hyper fit found a
+        # line the fit has no circle, and the cluster is rejected below)
+        fits = refine_for_range_sensor(
+            p, offsets, fit_circles(p, offsets), cfg.beam_range_std, cfg.min_cos_incidence, edge, edge_std
+        )
+        centre, radius, residual, is_circle = fits.centre, fits.radius, fits.residual, fits.is_circle
+        rho = np.hypot(p[:, 0], p[:, 1])
+
+        # 6. tests
+        # |c| > mean_i |p_i|
+        beyond = np.hypot(centre[:, 0], centre[:, 1]) * n > np.add.reduceat(rho, starts)
+        alpha_mean, alpha_var = _inscribed_angles(p, starts, ends, n)
+        # |v x c| >= R - tolerance for each neighbour v that saw past
+        v = geometry.directions[neighbour]
+        distance = np.abs(v[:, :, 0] * centre[:, None, 1] - v[:, :, 1] * centre[:, None, 0])
+        clear = ~saw_past | (distance >= radius[:, None] - cfg.silhouette_tolerance)
+        edges_seen = saw_past[:, 0].astype(np.intp) + saw_past[:, 1]
+        is_cylinder = (
+            is_circle
+            & (edges_seen >= cfg.min_silhouette_edges)
+            & (radius >= cfg.min_radius)
+            & (radius <= cfg.max_radius)
+            & (residual <= cfg.max_residual)
+            & beyond
+            & (alpha_mean >= cfg.min_inscribed_angle)
+            & (alpha_mean <= cfg.max_inscribed_angle)
+            & (alpha_var <= cfg.max_inscribed_angle_std * cfg.max_inscribed_angle_std)
+            & clear[:, 0]
+            & clear[:, 1]
+        )
+        return self._detections(
+            centre[is_cylinder],
+            radius[is_cylinder],
+            n[is_cylinder],
+            residual[is_cylinder],
+            np.flatnonzero(candidate)[is_cylinder],
+        )
+
+    def _detections(
+        self,
+        p_sensor: NDArray[np.float64],
+        radius: NDArray[np.float64],
+        n_points: NDArray[np.intp],
+        residual: NDArray[np.float64],
+        cluster_index: NDArray[np.intp],
+    ) -> Detections:
+        """Step 7: range, bearing and covariance of the kept centres."""
+        cfg = self.config
+        covariance = np.zeros((radius.shape[0], 2, 2))
+        # R = diag(range_std^2, bearing_std^2)
+        covariance[:, 0, 0] = cfg.range_std * cfg.range_std
+        covariance[:, 1, 1] = cfg.bearing_std * cfg.bearing_std
+        return Detections(
+            p_sensor=p_sensor,
+            radius=radius,
+            n_points=n_points,
+            residual=residual,
+            # range = |c|, bearing = atan2(c_y, c_x)
+            range_m=np.hypot(p_sensor[:, 0], p_sensor[:, 1]),
+            bearing_rad=np.arctan2(p_sensor[:, 1], p_sensor[:, 0]),
+            covariance=covariance,
+            cluster_index=cluster_index,
+        )
+
+
+def _neighbour_beams(
+    end_beam: NDArray[np.intp],
+    range_m: NDArray[np.float64],
+    valid: NDArray[np.bool_],
+    geometry: _ScanGeometry,
+) -> tuple[NDArray[np.intp], NDArray[np.bool_]]:
+    """The beams just outside clusters and whether each saw past its cluster.
+
+    ``end_beam`` (K, 2) holds each cluster's first and last beam; the neighbours are the beam before the
+    first and the one after the last (wrapping in a full-turn scan). A neighbour saw past the cluster
+    when it has no return or a longer range than the cluster's end; one that hit something closer (an
+    occluder) or lies outside a partial scan did not. Returns the neighbours (K, 2), clipped into the
+    scan, and the flags (K, 2).
+    """
+    samples = range_m.shape[0]
+    neighbour = end_beam + _BEFORE_AFTER
+    if geometry.full_turn:
+        neighbour %= samples
+        inside = True
+    else:
+        inside = (neighbour >= 0) & (neighbour < samples)
+        neighbour = np.clip(neighbour, 0, samples - 1)
+    saw_past = inside & (~valid[neighbour] | (range_m[neighbour] > range_m[end_beam]))
+    return neighbour, saw_past
+
+
+def _inscribed_angles(
+    p: NDArray[np.float64], starts: NDArray[np.intp], ends: NDArray[np.intp], n: NDArray[np.intp]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Mean and variance of ``alpha_i = angle(p_1 - p_i, p_n - p_i)`` over each set's interior points."""
+    to_first = p[starts].repeat(n, axis=0) - p
+    to_last = p[ends].repeat(n, axis=0) - p
+    cross = to_first[:, 0] * to_last[:, 1] - to_first[:, 1] * to_last[:, 0]
+    dot = to_first[:, 0] * to_last[:, 0] + to_first[:, 1] * to_last[:, 1]
+    alpha = np.arctan2(np.abs(cross), dot)
+    # the end points see a zero-length side: leave them out
+    alpha[starts] = 0.0
+    alpha[ends] = 0.0
+    interior = n - 2
+    alpha_mean = np.add.reduceat(alpha, starts) / interior
+    # var = mean(alpha^2) - mean(alpha)^2
+    alpha_var = np.add.reduceat(alpha * alpha, starts) / interior - alpha_mean * alpha_mean
+    return alpha_mean, alpha_var

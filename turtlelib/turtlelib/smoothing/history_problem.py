@@ -1,0 +1,89 @@
+"""The smoothing problem of a filter's run: a :class:`turtlelib.estimation.run_history.RunHistory` turned
+into the factors of :mod:`turtlelib.smoothing.smoothing_problem` with the filter's own models.
+
+* poses at the start and at every scan stamp (scans of one stamp share a pose; a scan at the start's
+  stamp is pose 0, on which the prior lies as the state before any update; its covariance floored at
+  ``MIN_FACTOR_STD``, as the motion factors', so that an exactly known start stays invertible);
+* the motion between them from the motion model and signal
+  (:func:`~turtlelib.smoothing.smoothing_problem.relative_motions`);
+* the observations of the landmarks that are in the final map (those of tentative landmarks that were
+  dropped are left out), each ``R`` scaled for errors correlated over the viewpoint as the filter does
+  (:func:`~turtlelib.smoothing.smoothing_problem.viewpoint_scales` with ``SlamConfig.fusion_scale``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..estimation.ekf_slam import SlamConfig
+from ..estimation.run_history import RunHistory
+from ..motion.motion_models import MotionModel
+from ..motion.motion_signals import MotionSignal
+from .association_revision import Unassigned
+from .smoothing_problem import SmoothingProblem, relative_motions, viewpoint_scales
+
+# (m, rad) added to the standard deviations of each motion factor and of the start prior: keeps the factor
+# of a standing robot and of an exactly known start invertible, far below every sensor's resolution
+MIN_FACTOR_STD = 1e-4
+
+Rescale = Callable[[SmoothingProblem], NDArray[np.float64]]
+
+
+def problem_from_history(
+    history: RunHistory,
+    motion: MotionModel,
+    signal: MotionSignal,
+    config: SlamConfig,
+    landmark_ids: NDArray[np.int64],
+) -> tuple[SmoothingProblem, NDArray[np.float64], Rescale, Unassigned]:
+    """``(problem, poses (P, 3), rescale, unassigned)``: the factors of ``history`` (module docstring) for
+    the final map's ``landmark_ids``, the filter's poses at the problem's stamps (the warm start: at a stamp
+    of several scans, the pose after the last), the viewpoint scales of the noise for any labelling of the
+    observations, and the usable observations of no landmark of the map (the last two for
+    :func:`turtlelib.smoothing.association_revision.revise_associations`). ValueError before the history's
+    start."""
+    if history.start_pose is None:
+        raise ValueError("the run has not started: no motion sample yet")
+    scan_t_ns = np.array(history.scan_t_ns, dtype=np.int64)
+    pose_t_ns = np.unique(np.r_[history.motion_t_ns[0], scan_t_ns])
+    poses = np.empty((len(pose_t_ns), 3))
+    poses[0] = history.start_pose
+    scan_pose = np.searchsorted(pose_t_ns, scan_t_ns)
+    if history.n_scans:
+        poses[scan_pose] = np.array(history.scan_poses)
+    delta, Q = relative_motions(
+        motion, signal, history.motion_t_ns, history.motion_samples, pose_t_ns, MIN_FACTOR_STD
+    )
+    per_scan = [len(z) for z in history.scan_z]
+    observation_pose = np.repeat(scan_pose, per_scan)
+    associated = np.concatenate([np.zeros(0, dtype=np.int64), *history.scan_landmark_ids])
+    kept = np.isin(associated, landmark_ids)
+    all_z = np.concatenate([np.zeros((0, 2)), *history.scan_z])
+    all_R = np.concatenate([np.zeros((0, 2, 2)), *history.scan_R])
+    problem = SmoothingProblem(
+        pose_t_ns=pose_t_ns,
+        prior_mean=history.start_pose,
+        prior_covariance=history.start_covariance + MIN_FACTOR_STD**2 * np.eye(3),
+        motion_delta=delta,
+        motion_covariance=Q,
+        observation_pose=observation_pose[kept],
+        observation_landmark=associated[kept],
+        z=all_z[kept],
+        R=all_R[kept],
+    )
+    measurement = config.measurement_model()
+    sensor_xy = np.array([measurement.sensor_xy(q) for q in poses])
+
+    def rescale(labelled: SmoothingProblem) -> NDArray[np.float64]:
+        return viewpoint_scales(
+            sensor_xy, labelled.observation_pose, labelled.observation_landmark, config.fusion_scale
+        )
+
+    # the observations of no landmark that the sensor model takes (in its range, as the filter checks)
+    free = ~kept & measurement.usable(all_z)
+    unassigned = Unassigned(observation_pose[free], all_z[free], all_R[free])
+    return replace(problem, noise_scale=rescale(problem)), poses, rescale, unassigned
