@@ -82,7 +82,7 @@ class _Loop:
             self.slam.load_map(true_map, self.sim.T_world_body)
         turn_per_m = lost_wheel_turn_per_m(robot.track_width)
         self.recovery = SlipRecovery(replace(recovery, slip_turn_per_m=turn_per_m))
-        self.timeline = SlamTimeline(self.slam, WheelAngles(), recovery=self.recovery)
+        self.timeline = SlamTimeline(self.slam, WheelAngles(), step=self.recovery)
         self.detector = LandmarkDetector(DetectorConfig())
         self.lidar = sim_config.lidar
         self.steps = 0

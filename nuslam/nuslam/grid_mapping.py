@@ -2,20 +2,23 @@
 landmark map in map_server's format (a thin owner over `turtlelib.mapping.occupancy_grid`).
 
 Mapping (``mode: mapping``): each `scan` (sensor_msgs/LaserScan, frame ``sensor_id`` or ``body_id``) is
-inserted into a `turtlelib.OccupancyGrid` at ``T_map_scan = T_map_body(t_s) T_body_scan``: the body pose
-slam published for the scan's own stamp ``t_s`` (slam's poses on ``~/odom`` at each motion sample, read
-between two samples along one constant twist: `turtlelib.geometry.pose_buffer.PoseBuffer`) composed with the
-LiDAR mount of the robot model (``T_body_scan``: ``lidar_x``, ``lidar_y``, ``lidar_yaw``; identity for a
-scan in ``body_id``). A scan newer than slam's newest pose waits (up to ``MAX_WAITING_SCANS``) for the
-motion sample that reaches it. Every scan is also offered to `turtlelib.ScanKeyframes` (one kept per
-``grid.keyframe_step_m`` or ``grid.keyframe_turn_rad`` of motion).
+inserted into a `turtlelib.OccupancyGrid` at ``T_map_scan = T_map_body(t_s) T_body_scan``: slam's pose at
+the scan's own stamp ``t_s`` from the filter's time base (`turtlelib.SlamTimeline.pose_at`: the filter moved
+on by the motion to ``t_s``, one step per motion-sample interval) composed with the LiDAR mount of the
+robot model (``T_body_scan``: ``lidar_x``, ``lidar_y``, ``lidar_yaw``; identity for a scan in
+``body_id``). A scan newer than the newest motion sample waits (up to ``MAX_WAITING_SCANS``) for the
+motion sample that reaches it; one older than the filter's time has no pose and is skipped. Every scan is
+also offered to `turtlelib.ScanKeyframes` (one kept per ``grid.keyframe_step_m`` or
+``grid.keyframe_turn_rad`` of motion).
 
 Poses at save: an EKF estimates the current pose, not the past ones, so no later scan moves an earlier
 pose. What a save can improve is the pose of each keyframe's own scan: the grid is built live at the pose
 slam had when the scan arrived (predicted from the motion, before the landmarks seen in that same scan
-were fused); when slam applies that scan's landmarks at once (the filter then sits at the scan's stamp),
-the posterior pose at that stamp replaces the keyframe's (:meth:`GridMapping.corrected`). ``~/save_map``
-re-renders the keyframes at these poses (`ScanKeyframes.render`) and writes ``<stem>.yaml`` +
+were fused); the timeline tells the grid (a `turtlelib.PoseListener`) the posterior pose at the stamp of
+every measurement it applies, which replaces the keyframe's of that stamp
+(:meth:`GridMapping.corrected`), and that the run starts again without its map
+(:meth:`GridMapping.cleared`, slam's ``~/reset``). ``~/save_map`` re-renders the keyframes at these poses
+(`ScanKeyframes.render`) and writes ``<stem>.yaml`` +
 ``<stem>.pgm`` beside ``map_file`` (`turtlelib.mapping.grid_map_file.save_grid_map`: map_server's trinary
 format, each file written atomically).
 
@@ -29,7 +32,7 @@ Publishes (reliable + transient local, depth 1, REP 2003: a late RViz, nav2 or F
     `map_metadata` (nav_msgs/MapMetaData): its ``info``.
 
 Bad input (a scan in another frame, a scan `turtlelib.RangeScan` refuses, one reaching past
-``grid.max_size_m``, one older than slam's kept poses) is skipped with a throttled warning and counted; the
+``grid.max_size_m``, one older than the filter's time) is skipped with a throttled warning and counted; the
 grid is unchanged. `/diagnostics` gets `slam: occupancy grid` (:meth:`GridMapping.status`): scans mapped
 and skipped, keyframes, the grid's size; WARN when scans were skipped since the last report.
 """
@@ -54,15 +57,20 @@ from nuturtle_ros_common.conversions import pose_from_transform, stamp_from_nano
 from nuturtle_ros_common.diagnostics import OK, WARN, status
 from nuturtle_ros_common.ros_params import declare_dataclass
 from nuturtle_ros_common.throttle import SourceWarnings
-from turtlelib import GridConfig, KeyframeConfig, OccupancyGrid, RangeScan, ScanKeyframes, Transform2D
-from turtlelib.geometry.pose_buffer import PoseBuffer
+from turtlelib import (
+    GridConfig,
+    KeyframeConfig,
+    OccupancyGrid,
+    RangeScan,
+    ScanKeyframes,
+    SlamTimeline,
+    Transform2D,
+)
 from turtlelib.mapping.grid_map_file import load_grid_map, save_grid_map
 from turtlelib.mapping.occupancy_grid import GridMap
 from turtlelib.util.timebase import NS_PER_S
 from turtlelib.util.validation import positive, store
 
-# slam's poses kept to place scans (20 s of joint_states at 20 Hz: scans arrive well within that)
-POSE_BUFFER_SAMPLES = 400
 # scans waiting for the motion sample that reaches their stamp (1 s of an LDS-01's 5 Hz)
 MAX_WAITING_SCANS = 5
 PREFIX = "grid."
@@ -153,18 +161,22 @@ class GridMapping:
         self.keyframes = ScanKeyframes(self.keyframe_config)
         # the pose each keyframe's scan is rendered at by a save: T_map_body by stamp (ns)
         self._keyframe_poses: dict[int, Transform2D] = {}
-        self._poses = PoseBuffer(POSE_BUFFER_SAMPLES)
+        # slam's timeline: the poses scans are placed at (set by connect)
+        self._timeline: SlamTimeline | None = None
         self._waiting: deque[tuple[int, RangeScan, Transform2D]] = deque()
         self._newest_ns: int | None = None
         self._published_ns: int | None = None
         self.scans_inserted = self.scans_skipped = self._skipped_reported = 0
         self.loaded = loaded
 
-    def connect(self, node: Node, map_qos: QoSProfile) -> None:
-        """Create `map`, `map_metadata` (``map_qos``) and, when mapping, the `scan` subscription; publish
-        the loaded grid. Nothing when the grid is off."""
+    def connect(self, node: Node, map_qos: QoSProfile, timeline: SlamTimeline) -> None:
+        """Create `map`, `map_metadata` (``map_qos``) and, when mapping, the `scan` subscription placed at
+        ``timeline``'s poses (whose corrections and resets it listens to); publish the loaded grid. Nothing
+        when the grid is off."""
         if not self.topic_config.enabled:
             return
+        self._timeline = timeline
+        timeline.listen(self)
         self._grid_publisher = node.create_publisher(OccupancyGridMsg, "map", map_qos)
         self._metadata_publisher = node.create_publisher(MapMetaData, "map_metadata", map_qos)
         if self.loaded is not None:
@@ -203,7 +215,7 @@ class GridMapping:
                 f"scan at {dropped_ns} ns skipped by the occupancy grid: no slam pose reached its stamp "
                 f"while {MAX_WAITING_SCANS} newer scans came (are joint_states / odom arriving?)",
             )
-        self._insert_reached()
+        self.insert_reached()
 
     def status(self) -> DiagnosticStatus | None:
         """`slam: occupancy grid` for /diagnostics (None when the grid is off): WARN when scans were
@@ -229,22 +241,16 @@ class GridMapping:
         }
         return status("slam: occupancy grid", "slam", WARN if skipped else OK, message, values)
 
-    def add_pose(self, t_ns: int, T_map_body: Transform2D) -> None:
-        """slam's pose at ``t_ns``: insert the scans it reaches. A pose not after the newest (a restarted
-        clock) starts the pose buffer again."""
-        if not self.mapping:
-            return
-        latest = self._poses.latest_time_ns
-        if latest is not None and t_ns <= latest:
-            self._poses.clear()
-        self._poses.add(t_ns, T_map_body)
-        self._insert_reached()
-
     def corrected(self, t_ns: int, T_map_body: Transform2D) -> None:
-        """slam's posterior pose at ``t_ns`` (after fusing the landmarks of the scan stamped ``t_ns``):
-        the pose a save renders that scan's keyframe at, if it is one."""
+        """slam's posterior pose at ``t_ns`` (after fusing a measurement stamped ``t_ns``): the pose a save
+        renders the keyframe of that stamp at, if there is one."""
         if t_ns in self._keyframe_poses:
             self._keyframe_poses[t_ns] = T_map_body
+
+    def cleared(self) -> None:
+        """The run starts again without its map (slam's ~/reset): when mapping, forget every scan."""
+        if self.mapping:
+            self.reset()
 
     @property
     def has_grid(self) -> bool:
@@ -284,14 +290,18 @@ class GridMapping:
 
     # --- helpers -----------------------------------------------------------------------------------------
 
-    def _insert_reached(self) -> None:
-        """Insert, oldest first, the waiting scans slam's poses reach; drop those older than them."""
-        latest = self._poses.latest_time_ns
+    def insert_reached(self) -> None:
+        """Insert, oldest first, the waiting scans the motion samples reach, at slam's pose at their stamps;
+        skip those older than the filter's time."""
+        timeline = self._timeline
+        if timeline is None or not self.mapping:
+            return
+        latest = timeline.latest_time_ns
         while self._waiting and latest is not None and self._waiting[0][0] <= latest:
             t_ns, scan, T_body_scan = self._waiting.popleft()
-            T_map_body = self._poses.at(t_ns)
+            T_map_body = timeline.pose_at(t_ns)
             if T_map_body is None:
-                self._skip(f"scan at {t_ns} ns skipped by the occupancy grid: older than slam's kept poses")
+                self._skip(f"scan at {t_ns} ns skipped by the occupancy grid: older than slam's filter time")
                 continue
             try:
                 self.grid.insert_scan(scan, T_map_body @ T_body_scan)

@@ -151,6 +151,7 @@ from turtlelib import (
     EkfSlam,
     OdometryMotion,
     OdometryPoses,
+    Outcome,
     SlamConfig,
     SlamTimeline,
     TimelineConfig,
@@ -296,7 +297,7 @@ class SlamNode(Node):
             self.slam,
             signal,
             timeline_config,
-            recovery=self.recovery,
+            step=self.recovery,
             keep_history=self.node_config.smooth_saved_map,
         )
         # T_sensor_frame for the frames observations may come in
@@ -317,7 +318,7 @@ class SlamNode(Node):
         self._odom_publisher = self.create_publisher(Odometry, "~/odom", 10)
         # REP 2003: maps are reliable and transient local, so a late subscriber (RViz, Foxglove) gets one
         self._map_publisher = self.create_publisher(MarkerArray, "~/map", MAP_QOS)
-        self.grid.connect(self, MAP_QOS)
+        self.grid.connect(self, MAP_QOS, self.timeline)
         self._tf = OptionalTfBroadcaster(self)
         self._odom_poses = PoseBuffer(ODOM_BUFFER_SAMPLES)
         # the newest pose not yet paired with odom for map -> odom: (t_ns, T_map_body, stamp)
@@ -333,7 +334,7 @@ class SlamNode(Node):
         self._observation_input = InputMonitor(self._observation_topic, started_ns, STALE_S)
         self._update_time = DurationMonitor()
         self._counts = {"fused": 0, "rejected": 0, "unmapped": 0, "skipped": 0, "arrays_applied": 0}
-        self._skipped_reported = self._rejected_reported = self._relocalized_reported = 0
+        self._skipped_reported = self._rejected_reported = 0
         DiagnosticsPublisher(self, self._statuses)
         if self.node_config.association == "known":
             self.create_subscription(MarkerArray, "fake_sensor", self._on_fake_sensor, 10)
@@ -388,8 +389,9 @@ class SlamNode(Node):
             return
         self._check_observations_arrive(t_ns, sample)
         self._publish_pose(stamp_from_nanoseconds(t_ns), V_body, T_map_body, P_pose)
+        self.grid.insert_reached()
         if applied:
-            self._publish_map(stamp_from_nanoseconds(applied[-1][0]))
+            self._publish_map(stamp_from_nanoseconds(applied[-1].t_ns))
 
     def _on_fake_sensor(self, msg: MarkerArray) -> None:
         self._observation_input.arrived(self.get_clock().now().nanoseconds)
@@ -405,7 +407,6 @@ class SlamNode(Node):
             start = time.perf_counter()
             applied = self.timeline.add_observations(t_ns, z, R, ids)
             self._count_applied(applied, start)
-            self._correct_grid(applied)
         except (ValueError, np.linalg.LinAlgError) as error:
             self._warnings.warn("fake_sensor", f"fake_sensor skipped: {error}")
             self._counts["skipped"] += 1
@@ -424,7 +425,6 @@ class SlamNode(Node):
             start = time.perf_counter()
             applied = self.timeline.add_observations(t_ns, z)
             self._count_applied(applied, start)
-            self._correct_grid(applied)
         except (ValueError, np.linalg.LinAlgError) as error:
             self._warnings.warn("landmarks", f"landmarks skipped: {error}")
             self._counts["skipped"] += 1
@@ -473,9 +473,7 @@ class SlamNode(Node):
                     f"it is in frame {msg.header.frame_id!r}, not the map frame {self.node_config.map_id!r}"
                 )
             T_map_body = transform_from_pose(msg.pose.pose)
-            self.slam.reset(T_map_body, positive_definite_pose_covariance(msg.pose.covariance), keep_map=True)
-            self.recovery.forget(T_map_body)
-            self.timeline.break_history()
+            self.timeline.relocalize(T_map_body, positive_definite_pose_covariance(msg.pose.covariance))
         except ValueError as error:
             self._warnings.warn("initialpose", f"initialpose skipped: {error}")
             return
@@ -537,15 +535,7 @@ class SlamNode(Node):
 
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         """Start again as at start-up: the start pose, and the map loaded then (or none)."""
-        T_map_body0 = self.node_config.T_map_body0
-        if self._start_map is None:
-            self.slam.reset(T_map_body0)
-        else:
-            self.slam.load_map(self._start_map, T_map_body0)
-        self.recovery.forget(T_map_body0)
-        self.timeline.break_history()
-        if self.grid.mapping:
-            self.grid.reset()
+        self.timeline.reset(self.node_config.T_map_body0, self._start_map)
         count = 0 if self._start_map is None else self._start_map.n_landmarks
         response.success, response.message = True, f"reset to the start pose with {count} landmarks"
         self.get_logger().info(response.message)
@@ -585,12 +575,6 @@ class SlamNode(Node):
         self.get_logger().debug("observation before the first joint_states: dropped")
         return True
 
-    def _correct_grid(self, applied: list) -> None:
-        """When the filter sits at the stamp of the scan it just applied, its pose is the posterior at that
-        stamp: the pose a save places that scan's keyframe at (`nuslam.grid_mapping`)."""
-        if applied and self.timeline.filter_time_ns == applied[-1][0]:
-            self.grid.corrected(applied[-1][0], self.slam.pose)
-
     def _count_applied(self, applied: list, start: float) -> None:
         """Count the observations of ``applied`` scans and time the call that applied them; warn when
         observations were rejected because the map is full."""
@@ -598,8 +582,8 @@ class SlamNode(Node):
             return
         self._update_time.add(1e3 * (time.perf_counter() - start))
         self._counts["arrays_applied"] += len(applied)
-        for _, association in applied:
-            tally = association.counts
+        for result in applied:
+            tally = result.association.counts
             rejected = tally["rejected"]
             self._counts["rejected"] += rejected
             self._counts["unmapped"] += tally["unmapped"]
@@ -610,10 +594,8 @@ class SlamNode(Node):
                     f"the map holds max_landmarks = {self.config.max_landmarks} landmarks: "
                     "new ones are not added",
                 )
-        slip = self.recovery.status
-        if slip.relocalized > self._relocalized_reported:
-            self._relocalized_reported = slip.relocalized
-            self._warnings.warn("slip", slip.message)
+            if result.outcome is Outcome.RELOCALIZED:
+                self._warnings.warn("slip", self.recovery.status.message)
 
     def _statuses(self, now_ns: int) -> list:
         """The inputs, and the filter: WARN when observations were rejected or skipped since the last
@@ -695,7 +677,6 @@ class SlamNode(Node):
             self._map_to_odom_pending = (stamp_nanoseconds(stamp), T_map_body, stamp)
             self._send_map_to_odom()
         self.path.add(T_map_body, odom)
-        self.grid.add_pose(stamp_nanoseconds(stamp), T_map_body)
 
     def _publish_map(self, stamp: Time) -> None:
         map_id = self.node_config.map_id

@@ -147,5 +147,5 @@ def test_a_full_queue_lets_an_older_observation_displace_the_newest_waiting_one(
     t.add_observations(60 * MS, ring(1))
     assert t.pending_count == 3
     applied = t.add_motion(100 * MS, (0.2, 0.2))
-    assert [stamp for stamp, _ in applied] == [60 * MS]
+    assert [result.t_ns for result in applied] == [60 * MS]
     assert t.pending_count == 2

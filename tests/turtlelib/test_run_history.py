@@ -87,8 +87,7 @@ def test_history_starts_again_after_a_restart_and_a_break():
     drive(line, range(5_010, 5_100, 10))
     # a relocalization from outside: the history starts at the filter's time, from the new pose
     t_f = line.filter_time_ns
-    line.slam.reset(Transform2D(3.0, 2.0, 1.0), np.eye(3) * 0.01, keep_map=True)
-    line.break_history()
+    line.relocalize(Transform2D(3.0, 2.0, 1.0), np.eye(3) * 0.01)
     assert line.history.motion_t_ns[0] == t_f and line.history.n_scans == 0
     np.testing.assert_array_equal(line.history.start_pose, [3.0, 2.0, 1.0])
     np.testing.assert_allclose(line.history.start_covariance, np.eye(3) * 0.01)
@@ -104,8 +103,7 @@ def test_no_history_unless_asked_and_no_problem_before_the_start():
 def test_a_smoothing_after_a_break_covers_the_landmarks_seen_since():
     line = timeline()
     drive(line, range(0, 100, 10))
-    line.slam.reset(line.slam.pose, np.eye(3) * 1e-4, keep_map=True)
-    line.break_history()
+    line.relocalize(line.slam.pose, np.eye(3) * 1e-4)
     # from here on only landmark 1 is in view
     for k, t in enumerate(range(100, 200, 10)):
         line.add_motion(t * MS, (0.2, 0.1))

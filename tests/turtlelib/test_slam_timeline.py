@@ -207,7 +207,7 @@ def test_constant_wheel_speeds_one_prediction_to_the_stamp_and_one_onward(
     arrive_after = data.draw(st.integers(0, latest_arrival(samples, t_o, delay)), label="arrive_after")
     timeline, applied = run_timeline(samples, observation, arrive_after, delay)
 
-    assert [t for t, _ in applied] == [t_o]
+    assert [r.t_ns for r in applied] == [t_o]
     assert timeline.pending_count == 0
     assert timeline.latest_time_ns == t_end
     t_f = timeline.filter_time_ns
@@ -239,8 +239,8 @@ def test_changing_wheel_speeds_same_filter_as_predicting_sample_by_sample(dts, s
     arrive_after = data.draw(st.integers(0, latest_arrival(samples, t_o, delay)), label="arrive_after")
     timeline, applied = run_timeline(samples, observation, arrive_after, delay)
 
-    assert [t for t, _ in applied] == [t_o]
-    np.testing.assert_array_equal(applied[0][1].status, [ObservationStatus.MATCHED] * 3)
+    assert [r.t_ns for r in applied] == [t_o]
+    np.testing.assert_array_equal(applied[0].association.status, [ObservationStatus.MATCHED] * 3)
     reference = drive_by_hand(mapped_filter(), samples, [observation], timeline.filter_time_ns)
     assert_same_filter(timeline.slam, reference)
 
@@ -256,7 +256,7 @@ def test_the_result_does_not_depend_on_the_delay():
     for delay_ns in (0, 50 * MS, 120 * MS, 300 * MS):
         # delivered after the sample at 0.45 s: queued (on time) for every delay
         timeline, applied = run_timeline(samples, observation, 9, delay_ns)
-        assert [t for t, _ in applied] == [470 * MS]
+        assert [r.t_ns for r in applied] == [470 * MS]
         assert timeline.filter_time_ns == 1500 * MS - delay_ns
         filters.append(timeline.slam)
     reference = drive_by_hand(mapped_filter(), samples, [observation], samples[-1][0])
@@ -274,10 +274,10 @@ def test_a_late_observation_is_applied_at_its_stamp_not_at_the_current_pose():
     delay_ns = 200 * MS
     on_time, applied_on_time = run_timeline(samples, observation, 3, delay_ns)
     late, applied_late = run_timeline(samples, observation, 6, delay_ns)  # three samples (0.15 s) later
-    assert [t for t, _ in applied_on_time] == [t for t, _ in applied_late] == [t_o]
+    assert [r.t_ns for r in applied_on_time] == [r.t_ns for r in applied_late] == [t_o]
     assert_same_filter(late.slam, on_time.slam, atol=1e-12)
-    np.testing.assert_array_equal(applied_late[0][1].landmark_ids, [0, 1])
-    np.testing.assert_allclose(applied_late[0][1].nis, applied_on_time[0][1].nis, rtol=1e-9)
+    np.testing.assert_array_equal(applied_late[0].association.landmark_ids, [0, 1])
+    np.testing.assert_allclose(applied_late[0].association.nis, applied_on_time[0].association.nis, rtol=1e-9)
 
     # applying it at the pose of its arrival instead (4 cm further on) gives a visibly different map
     wrong = timeline_of(mapped_filter(), TimelineConfig(max_observation_delay=0.0))
@@ -297,7 +297,7 @@ def test_an_observation_at_the_newest_sample_applies_at_once():
     t_w = samples[-1][0]
     _, ids, z = observation_at(samples, t_w)
     applied = timeline.add_observations(t_w, z, ids=ids)
-    assert [t for t, _ in applied] == [t_w]
+    assert [r.t_ns for r in applied] == [t_w]
     assert timeline.filter_time_ns == t_w
     assert timeline.pending_count == 0
     reference = drive_by_hand(mapped_filter(), samples, [(t_w, ids, z)], t_w)
@@ -329,19 +329,19 @@ def test_observations_newer_than_every_sample_wait_and_apply_in_stamp_order():
 
     # the sample at 0.15 s reaches only the one stamped 0.13 s
     applied = add(timeline, samples[3])
-    assert [t for t, _ in applied] == [130 * MS]
-    np.testing.assert_array_equal(applied[0][1].landmark_ids, [0])
+    assert [r.t_ns for r in applied] == [130 * MS]
+    np.testing.assert_array_equal(applied[0].association.landmark_ids, [0])
     assert timeline.pending_count == 2
     assert timeline.filter_time_ns == 130 * MS  # max(0.13, 0.15 - 0.1) s
     # the sample at 0.25 s reaches the other two, oldest first
     applied = add(timeline, samples[4])
-    assert [t for t, _ in applied] == [170 * MS, 220 * MS]
+    assert [r.t_ns for r in applied] == [170 * MS, 220 * MS]
     # times are integer ns, exactly
-    assert all(type(t) is int for t, _ in applied)
+    assert all(type(r.t_ns) is int for r in applied)
     assert type(timeline.filter_time_ns) is int and type(timeline.latest_time_ns) is int
-    np.testing.assert_array_equal(applied[0][1].landmark_ids, [1])
-    np.testing.assert_array_equal(applied[1][1].landmark_ids, [1, 2])
-    for _, association in applied:
+    np.testing.assert_array_equal(applied[0].association.landmark_ids, [1])
+    np.testing.assert_array_equal(applied[1].association.landmark_ids, [1, 2])
+    for association in [r.association for r in applied]:
         assert np.all(association.status == ObservationStatus.MATCHED)
         assert association.nis > 0.0
     assert timeline.pending_count == 0
@@ -370,7 +370,7 @@ def test_equal_stamps_wait_in_arrival_order():
     timeline.add_observations(second[0], second[2], ids=second[1])
     add(timeline, samples[1])
     applied = add(timeline, samples[2])
-    assert [list(a.landmark_ids) for _, a in applied] == [[0], [2]]
+    assert [list(r.association.landmark_ids) for r in applied] == [[0], [2]]
     reference = mapped_filter()
     reference.predict(angles_at(samples, 70 * MS))
     reference.update_known(first[1], first[2])
@@ -394,8 +394,8 @@ def test_unknown_association_observations_are_timed_too():
         if k == 2:
             assert timeline.add_observations(t_o, z) == []
         if k == 3:
-            assert [t for t, _ in applied] == [t_o]
-            np.testing.assert_array_equal(applied[0][1].status, [ObservationStatus.MATCHED] * 3)
+            assert [r.t_ns for r in applied] == [t_o]
+            np.testing.assert_array_equal(applied[0].association.status, [ObservationStatus.MATCHED] * 3)
     phi_o = angles_at(samples, t_o)
     reference.predict(phi_o)
     reference.update_unknown(z, stamp_ns=t_o)
@@ -428,7 +428,7 @@ def test_a_stale_observation_is_refused_and_changes_nothing():
         timeline.add_observations(150 * MS - 1, GOOD_Z, ids=[0, 1])  # one ns too late
     assert_unchanged(before, snapshot(timeline))
     # exactly at the filter time is still in time
-    assert [t for t, _ in timeline.add_observations(timeline.filter_time_ns, GOOD_Z, ids=[0, 1])] == [
+    assert [r.t_ns for r in timeline.add_observations(timeline.filter_time_ns, GOOD_Z, ids=[0, 1])] == [
         before[3]
     ]
 
@@ -539,7 +539,7 @@ def test_a_motion_sample_the_model_refuses_changes_nothing(delay, waiting):
     assert_unchanged(before, snapshot(timeline))
     # and it is forgotten: the next samples drive on from the last good one, as in a twin that never saw it
     for sample in [(t_w + 60 * MS, 2.0, 2.1), (t_w + 400 * MS, 4.0, 4.5)]:
-        assert [t for t, _ in add(timeline, sample)] == [t for t, _ in add(twin, sample)]
+        assert [r.t_ns for r in add(timeline, sample)] == [r.t_ns for r in add(twin, sample)]
         assert_same_filter(timeline.slam, twin.slam)
         times = (timeline.filter_time_ns, timeline.latest_time_ns, timeline.pending_count)
         assert times == (twin.filter_time_ns, twin.latest_time_ns, twin.pending_count)
@@ -718,5 +718,5 @@ def test_observations_with_and_without_ids_cannot_wait_together():
         timeline.add_observations(0, GOOD_Z)  # nor applied at once ahead of the waiting ones
     assert_unchanged(before, snapshot(timeline))
     applied = timeline.add_motion(50 * MS, (1.0, 1.0))
-    assert [t for t, _ in applied] == [10 * MS]
+    assert [r.t_ns for r in applied] == [10 * MS]
     np.testing.assert_array_equal(timeline.slam.landmark_ids, [0, 1])

@@ -16,6 +16,7 @@ from hypothesis import strategies as st
 from turtlelib import DiffDrive, DiffDriveMotion, EkfSlam, ObservationStatus, SlamConfig, Transform2D
 from turtlelib.estimation.map_alignment import Search, align_to_map, explained, rigid_fit
 from turtlelib.estimation.range_bearing import observations_from_points
+from turtlelib.estimation.scan_steps import Outcome
 from turtlelib.estimation.slip_recovery import SlipRecovery, SlipRecoveryConfig
 
 DRIVE = DiffDrive(0.033, 0.16)
@@ -136,7 +137,7 @@ def _mapped_filter(recovery: SlipRecovery | None = None, known: bool = False) ->
         if recovery is None:
             slam.update(checked, stamp_ns=stamp_ns)
         else:
-            recovery.update(slam, checked, stamp_ns=stamp_ns)
+            recovery.apply(slam, checked, stamp_ns)
     assert len(slam.landmarks) == len(LANDMARKS)
     return slam
 
@@ -145,7 +146,7 @@ def test_scans_that_agree_with_the_motion_update_exactly_as_the_filter():
     recovery = SlipRecovery()
     twin, slam = _mapped_filter(), _mapped_filter(recovery)
     for k in range(5, 10):
-        association = recovery.update(slam, _checked(slam, Transform2D(), False), stamp_ns=k * 200_000_000)
+        association = recovery.apply(slam, _checked(slam, Transform2D(), False), k * 200_000_000).association
         expected = twin.update(_checked(twin, Transform2D(), False), stamp_ns=k * 200_000_000)
         np.testing.assert_array_equal(association.status, expected.status)
         np.testing.assert_array_equal(slam.state, twin.state)
@@ -167,7 +168,7 @@ def test_a_turn_in_place_the_body_does_not_make_is_taken_back_as_a_stall():
     recovery = SlipRecovery()
     slam = _mapped_filter(recovery)
     slam.predict(_wheels(0.0, 0.75))
-    association = recovery.update(slam, _checked(slam, Transform2D(), False), stamp_ns=2_000_000_000)
+    association = recovery.apply(slam, _checked(slam, Transform2D(), False), 2_000_000_000).association
     assert (association.status == ObservationStatus.MATCHED).all()
     assert math.hypot(slam.pose.x, slam.pose.y) < 1e-9 and abs(slam.pose.theta) < 1e-9
     status = recovery.status
@@ -183,12 +184,16 @@ def test_a_turn_while_driving_is_held_then_relocalized_against_the_map(known: bo
     recovery = SlipRecovery()
     slam = _mapped_filter(recovery, known)
     slam.predict(_wheels(0.3, 0.75))
-    first = recovery.update(slam, _checked(slam, Transform2D(0.3, 0.0, 0.0), known), stamp_ns=2_000_000_000)
+    held = recovery.apply(slam, _checked(slam, Transform2D(0.3, 0.0, 0.0), known), 2_000_000_000)
+    assert held.outcome is Outcome.HELD
+    first = held.association
     assert (first.status == ObservationStatus.REJECTED).all()
     assert recovery.status.level == "warn" and "scans held" in recovery.status.message
     assert abs(slam.pose.theta - 0.75) < 1e-9  # nothing fused
     slam.predict(_wheels(0.05, 0.0))
-    second = recovery.update(slam, _checked(slam, Transform2D(0.35, 0.0, 0.0), known), stamp_ns=2_200_000_000)
+    relocalized = recovery.apply(slam, _checked(slam, Transform2D(0.35, 0.0, 0.0), known), 2_200_000_000)
+    assert relocalized.outcome is Outcome.RELOCALIZED
+    second = relocalized.association
     assert (second.status == ObservationStatus.MATCHED).all()
     assert math.hypot(slam.pose.x - 0.35, slam.pose.y) < 0.005 and abs(slam.pose.theta) < 0.005
     assert recovery.status.level == "warn" and recovery.status.message.startswith("wheel slip")
@@ -202,7 +207,7 @@ def test_a_push_against_an_obstacle_is_a_stall_named_bump():
     slam = _mapped_filter(recovery)
     for k in range(3):
         slam.predict(_wheels(0.04, 0.0))
-        recovery.update(slam, _checked(slam, Transform2D(), False), stamp_ns=(10 + k) * 200_000_000)
+        recovery.apply(slam, _checked(slam, Transform2D(), False), (10 + k) * 200_000_000)
     assert recovery.status.stalls >= 1 and recovery.status.message.startswith("bump or stall")
     assert math.hypot(slam.pose.x, slam.pose.y) < 0.045
 
@@ -214,5 +219,5 @@ def test_a_contradiction_beyond_the_reported_motion_is_not_relocalized():
     slam = _mapped_filter(recovery)
     turned = Transform2D(0.0, 0.0, 0.75)
     for k in range(3):
-        recovery.update(slam, _checked(slam, turned, False), stamp_ns=(10 + k) * 200_000_000)
+        recovery.apply(slam, _checked(slam, turned, False), (10 + k) * 200_000_000)
     assert recovery.status.relocalized == 0 and recovery.status.held == 0

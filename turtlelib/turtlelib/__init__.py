@@ -6,7 +6,8 @@ No ROS import, ever: the ROS nodes in nusim, nuturtle_control and nuslam are thi
 
 from .estimation.consistency import chi2_bounds, nees, nis
 from .estimation.ekf_slam import MODES, Association, EkfSlam, ObservationStatus, SlamConfig
-from .estimation.slam_timeline import SlamTimeline, TimelineConfig
+from .estimation.scan_steps import FilterUpdate, Outcome, PoseListener, ScanStep, StepResult
+from .estimation.slam_timeline import ScanResult, SlamTimeline, TimelineConfig
 from .geometry.se2 import Transform2D, Twist2D, integrate_twist, normalize_angle, normalize_angles
 from .mapping.grid_map_file import load_grid_map, save_grid_map
 from .mapping.landmark_map import LandmarkMap, load_map, save_map
@@ -93,6 +94,12 @@ __all__ = [
     "save_map",
     "SlamTimeline",
     "TimelineConfig",
+    "ScanResult",
+    "ScanStep",
+    "StepResult",
+    "Outcome",
+    "FilterUpdate",
+    "PoseListener",
     "GateResult",
     "SampleGate",
     "SampleGateConfig",

@@ -31,6 +31,7 @@ from turtlelib import (
     Transform2D,
 )
 from turtlelib.estimation.run_history import RunHistory
+from turtlelib.estimation.slam_timeline import ScanResult
 from turtlelib.util.timebase import NS_PER_S
 
 # data association: landmark ids given with the observations (known) or found by the filter (unknown)
@@ -139,12 +140,12 @@ def run_experiment(experiment: Experiment, progress: Callable[[int], None] | Non
     t_est, poses, covariances, update_ms = [], [], [], []
     counts = {"matched": 0, "new": 0, "rejected": 0}
 
-    def keep(applied: list, elapsed_ms: float) -> None:
-        for t_ns, association in applied:
-            t_est.append(t_ns)
+    def keep(applied: list[ScanResult], elapsed_ms: float) -> None:
+        for result in applied:
+            t_est.append(result.t_ns)
             poses.append(slam.pose.as_array())
             covariances.append(slam.pose_covariance)
-            tally = association.counts
+            tally = result.association.counts
             for status in counts:
                 counts[status] += tally[status]
         if applied:

@@ -167,6 +167,7 @@ map never grows past ``max_landmarks``: what matters is the memory and time of `
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from enum import IntEnum
@@ -177,7 +178,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..geometry.se2 import Transform2D
+from ..geometry.se2 import Transform2D, normalize_angle
 from ..mapping.landmark_map import LandmarkMap
 from ..motion.motion_models import MotionModel, composed_steps, finite_step
 from ..util.timebase import NS_PER_S
@@ -604,6 +605,35 @@ class EkfSlam:
             nis,
             2 * len(fused),
         )
+
+    def update_pose(
+        self, T_map_body: Transform2D, covariance: ArrayLike, gate: float = math.inf
+    ) -> tuple[float, bool]:
+        """Fuse a measurement of the pose itself (a second pose source: a scan registration, a GNSS-like
+        fix): ``z = q + v``, ``v ~ N(0, covariance)`` (3, 3), so ``H = [I_3, 0]`` and::
+
+            nu = [x_z - x, y_z - y, wrap(theta_z - theta)]
+
+        (invariant coordinates: ``H T``, whose heading column is ``[-y, x, 1]``). In localization the
+        landmarks are considered, not estimated (as :meth:`update` does). Returns the NIS
+        ``nu^T S^-1 nu`` (3 dof) and whether the measurement was fused: not when the NIS is not below
+        ``gate``. ValueError for a non-finite pose or a covariance that is not symmetric positive definite
+        (the filter unchanged)."""
+        R = np.asarray(covariance, dtype=np.float64)
+        z = T_map_body.as_array()
+        if R.shape != (ROBOT_DIM, ROBOT_DIM) or not (np.isfinite(R).all() and np.isfinite(z).all()):
+            raise ValueError(
+                f"a pose measurement needs a finite pose and a finite 3x3 covariance, got {R.shape}"
+            )
+        if not np.allclose(R, R.T) or np.linalg.eigvalsh(0.5 * (R + R.T))[0] <= 0.0:
+            raise ValueError("the pose measurement's covariance must be symmetric positive definite")
+        q = self._state.mean[:ROBOT_DIM]
+        nu = z - q
+        nu[2] = normalize_angle(z[2] - q[2])
+        H = np.eye(ROBOT_DIM)
+        if self._linearization.invariant:
+            H[0, 2], H[1, 2] = -q[1], q[0]
+        return self._state.correct_pose(H, nu, 0.5 * (R + R.T), self._localization, gate)
 
     def _fuse(
         self, model: MeasurementModel, plan: Plan, R: NDArray[np.float64]

@@ -329,6 +329,46 @@ class SlamState:
                 return 0.0, outside
         # add R_i to the diagonal block i
         S_flat[diagonal_blocks] = S_ii
+        return self._kalman_update(S, rhs, consider_landmarks), outside
+
+    def correct_pose(
+        self,
+        H_robot: NDArray[np.float64],
+        nu: NDArray[np.float64],
+        R: NDArray[np.float64],
+        consider_landmarks: bool = False,
+        gate: float = math.inf,
+    ) -> tuple[float, bool]:
+        """EKF update with ``m`` observations of the robot pose alone (``H`` non-zero only in the robot
+        columns, in the stored coordinates): ``H_robot`` (m, 3), innovation ``nu`` (m,) (already wrapped),
+        noise ``R`` (m, m). Returns the NIS ``nu^T S^-1 nu`` and whether it was fused: with a finite
+        ``gate``, nothing changes when the NIS is not below it.
+
+        ``S = H P_qq H^T + R`` and the update of :meth:`correct` (``x += W^T w``, ``P -= W^T W``; the
+        Schmidt update with ``consider_landmarks``): O(N^2 m), or O(N m) considered."""
+        m = len(nu)
+        self._apply_pending()
+        dim = self.dim
+        width = dim if consider_landmarks else self._cov.shape[0]
+        rhs = np.zeros((m, width + 1), order="F")
+        # H P = H P[:3, :]
+        np.matmul(H_robot, self._rows(_ROBOT_INDICES), out=rhs[:, :dim])
+        rhs[:, width] = nu
+        # S = H P_qq H^T + R
+        S = np.ascontiguousarray(rhs[:, :ROBOT_DIM] @ H_robot.T + R)
+        if gate < math.inf:
+            nis = float(nu @ np.linalg.solve(S, nu))
+            if not nis < gate:
+                return nis, False
+        return self._kalman_update(S, rhs, consider_landmarks), True
+
+    def _kalman_update(
+        self, S: NDArray[np.float64], rhs: NDArray[np.float64], consider_landmarks: bool
+    ) -> float:
+        """The update of :meth:`correct` from ``S`` (m, m) and ``rhs = [H P, 0, nu]`` (m, width + 1,
+        F-ordered; width: the storage's capacity, or ``N`` when ``consider_landmarks``); returns the NIS."""
+        dim = self.dim
+        width = rhs.shape[1] - 1
         L, info = dpotrf(S, lower=1, clean=1, overwrite_a=1)
         if info != 0:
             raise np.linalg.LinAlgError("the innovation covariance S is not positive definite")
@@ -338,7 +378,7 @@ class SlamState:
         W = W_pad[:, :dim]
         if consider_landmarks:
             self._consider_update(W, w)
-            return float(w @ w), outside
+            return float(w @ w)
         if self._invariant:
             # x <- exp(W^T w) x on SE_(n+1)(2)
             self._retract(W.T @ w)
@@ -350,7 +390,7 @@ class SlamState:
         self._rank_update(W_pad, -1.0)
         # the robot block is kept whole: its upper triangle into its lower one
         self._fill_robot_block()
-        return float(w @ w), outside
+        return float(w @ w)
 
     def _retract(self, xi: NDArray[np.float64]) -> None:
         """``x <- exp(xi) x`` (N,) on SE_(n+1)(2): ``theta += phi`` and every point (the pose's position and

@@ -32,7 +32,20 @@ Times are integer nanoseconds.
   reached), so a few bad stamps can never block the queue.
 * The pose at ``t_w`` (what a node publishes) is the filter's pose moved on by the motion from ``t_f`` to
   ``t_w``, interval by interval, with its covariance propagated alongside
-  (:meth:`EkfSlam.propagated_pose_along`), without changing the filter.
+  (:meth:`EkfSlam.propagated_pose_along`), without changing the filter; the pose at any ``t`` in
+  ``[t_f, t_w]`` (where a scan is placed in the occupancy grid) likewise (:meth:`SlamTimeline.pose_at`).
+
+Lifecycle
+---------
+What acts on a measurement at its stamp is a :class:`~turtlelib.estimation.scan_steps.ScanStep`: the
+landmark observations go to ``step`` (the plain update by default, slip recovery on a robot), and any
+other pose source (a scan registration, a pose measurement) is attached with its own step
+(:meth:`SlamTimeline.attach`) and queues its measurements with :meth:`SlamTimeline.add`: they wait for the
+motion and are applied in stamp order with the landmark observations. Each applied measurement gives a
+:class:`ScanResult` that says what happened (applied, held, relocalized). :meth:`SlamTimeline.reset` and
+:meth:`SlamTimeline.relocalize` set the filter's pose from outside and reach everything that depends on
+it: every step, the kept history (started again) and the listeners (:meth:`SlamTimeline.listen`:
+``cleared`` at a reset; every applied measurement's posterior pose at its stamp goes to ``corrected``).
 """
 
 from __future__ import annotations
@@ -40,17 +53,19 @@ from __future__ import annotations
 import bisect
 from dataclasses import dataclass
 from functools import partial
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..geometry.se2 import Transform2D
+from ..mapping.landmark_map import LandmarkMap
 from ..motion.motion_signals import MotionSignal, Sample, signal_pieces, timed_sample
 from ..util.timebase import NS_PER_S
 from ..util.validation import integer, non_negative, positive, store
-from .ekf_slam import Association, CheckedObservations, EkfSlam
+from .ekf_slam import Association, EkfSlam
 from .run_history import RunHistory
-from .slip_recovery import SlipRecovery
+from .scan_steps import FilterUpdate, Outcome, PoseListener, ScanStep
 
 
 @dataclass(frozen=True)
@@ -70,31 +85,41 @@ class TimelineConfig:
         store(self, ("max_pending_observations",), partial(integer, minimum=1))
 
 
-@dataclass(frozen=True, eq=False)
-class _Observation:
-    """One scan's observations at ``t_ns``, as the filter validated them."""
+class ScanResult(NamedTuple):
+    """A measurement the timeline applied: its stamp ``t_ns``, the step's ``association`` (landmark
+    observations; None for a measurement of another kind) and what happened (``outcome``)."""
 
     t_ns: int
-    observations: CheckedObservations
+    association: Association | None
+    outcome: Outcome
+
+
+@dataclass(frozen=True, eq=False)
+class _Pending:
+    """A measurement waiting for the motion to reach ``t_ns``: ``payload`` for ``step``."""
+
+    t_ns: int
+    step: ScanStep
+    payload: Any
 
 
 class SlamTimeline:
-    """Feeds an :class:`EkfSlam` motion samples of ``signal`` and stamped observations in time order
+    """Feeds an :class:`EkfSlam` motion samples of ``signal`` and stamped measurements in time order
     (module docstring); ``signal`` must give the inputs of the filter's motion model.
 
-    ``add_motion`` and ``add_observations`` return the observations applied by the call as ``(t_o_ns,
-    Association)`` pairs, oldest first. With ``keep_track`` the timeline also keeps the filter's pose
+    ``add_motion``, ``add_observations`` and ``add`` return the measurements applied by the call as
+    :class:`ScanResult`, oldest first. ``step`` acts on the landmark observations
+    (:class:`~turtlelib.estimation.scan_steps.FilterUpdate` by default;
+    :class:`turtlelib.estimation.slip_recovery.SlipRecovery`: motion the LiDAR contradicts is detected and
+    the filter relocalized against its map). With ``keep_track`` the timeline also keeps the filter's pose
     after every prediction, for :meth:`take_track` (offline runs: it grows until taken). With
-    ``check_motion`` (default) a motion sample the filter's model refuses is refused before anything changes
-    (:meth:`add_motion`); without, the check's cost per sample (a few microseconds, about 10 % of an
-    offline run) is saved, and a refused sample leaves the filter where the refusal stopped it: for runs
-    that end on the first error (recorded data). With ``recovery`` the scans go through it
-    (:class:`turtlelib.estimation.slip_recovery.SlipRecovery`: motion the LiDAR contradicts is detected and
-    the filter relocalized against its map) instead of straight to the filter. With ``keep_history`` the
-    timeline
-    records the run for a smoother (:attr:`history`, :class:`turtlelib.estimation.run_history.RunHistory`; it
-    grows with the run), starting again at each :meth:`restart`, relocalization by ``recovery`` and
-    :meth:`break_history` (for a filter moved from outside: a reset, a new initial pose).
+    ``check_motion`` (default) a motion sample the filter's model refuses is refused before anything
+    changes (:meth:`add_motion`); without, the check's cost per sample (a few microseconds, about 10 % of
+    an offline run) is saved, and a refused sample leaves the filter where the refusal stopped it: for runs
+    that end on the first error (recorded data). With ``keep_history`` the timeline records the run for a
+    smoother (:attr:`history`, :class:`turtlelib.estimation.run_history.RunHistory`; it grows with the
+    run), starting again at each :meth:`restart`, :meth:`reset`, :meth:`relocalize` and relocalization by a
+    step.
     """
 
     def __init__(
@@ -103,13 +128,15 @@ class SlamTimeline:
         signal: MotionSignal,
         config: TimelineConfig | None = None,
         *,
+        step: ScanStep | None = None,
         keep_track: bool = False,
         check_motion: bool = True,
-        recovery: SlipRecovery | None = None,
         keep_history: bool = False,
     ) -> None:
         self.slam = slam
-        self.recovery = recovery
+        self.step: ScanStep = FilterUpdate() if step is None else step
+        self._steps: list[ScanStep] = [self.step]
+        self._listeners: list[PoseListener] = []
         self.signal = signal
         self._check_motion = check_motion
         self.config = TimelineConfig() if config is None else config
@@ -120,7 +147,7 @@ class SlamTimeline:
         self._samples: list[Sample] = []
         self._t_f: int | None = None
         self._s_f: Sample = ()
-        self._pending: list[_Observation] = []
+        self._pending: list[_Pending] = []
         self._track: list[tuple[NDArray[np.int64], NDArray[np.float64]]] | None = [] if keep_track else None
         self.history: RunHistory | None = RunHistory() if keep_history else None
 
@@ -139,7 +166,16 @@ class SlamTimeline:
         """Observations waiting for motion samples that reach their time."""
         return len(self._pending)
 
-    def add_motion(self, t_ns: int, sample: ArrayLike) -> list[tuple[int, Association]]:
+    def attach(self, step: ScanStep) -> ScanStep:
+        """Attach another step (a second pose source) for :meth:`add`; it hears every relocalization."""
+        self._steps.append(step)
+        return step
+
+    def listen(self, listener: PoseListener) -> None:
+        """Tell ``listener`` each applied measurement's posterior pose and every reset (module docstring)."""
+        self._listeners.append(listener)
+
+    def add_motion(self, t_ns: int, sample: ArrayLike) -> list[ScanResult]:
         """A motion sample: the signal's value ``sample`` at ``t_ns``. The first only starts the timeline.
 
         ValueError (nothing changed) for non-finite values, a sample of another length than the first, a
@@ -172,7 +208,7 @@ class SlamTimeline:
 
     def add_observations(
         self, t_ns: int, z: ArrayLike, R: ArrayLike | None = None, ids: ArrayLike | None = None
-    ) -> list[tuple[int, Association]]:
+    ) -> list[ScanResult]:
         """One scan's observations ``z`` (K, 2) [range_m, bearing_rad] stamped ``t_ns``, with noise ``R``
         (K, 2, 2) (default from the filter's config) and, for known association, landmark ``ids`` (K,).
 
@@ -184,11 +220,23 @@ class SlamTimeline:
         """
         t_ns = integer("observation stamp (ns)", t_ns)
         checked = self.slam.checked_observations(z, R, ids)
-        if self._t_f is None:
-            raise ValueError("no motion sample yet: an observation cannot be placed in time")
-        if self._pending and (self._pending[0].observations.ids is None) != (checked.ids is None):
+        waiting = [pending.payload for pending in self._pending if pending.step is self.step]
+        if waiting and (waiting[0].ids is None) != (checked.ids is None):
             # the first update fixes the filter's association mode: the waiting ones would be refused
             raise ValueError("observations with and without ids cannot wait together (one association mode)")
+        return self.add(t_ns, self.step, checked)
+
+    def add(self, t_ns: int, step: ScanStep, payload: Any) -> list[ScanResult]:
+        """A measurement ``payload`` stamped ``t_ns`` for ``step`` (:attr:`step` or one attached): applied
+        now if motion samples reach ``t_ns``, else queued. ValueError (nothing changed) for a step that is
+        not attached, before the first motion sample, for a stale stamp (``t_ns < t_f``), one too far ahead
+        (``t_ns > t_w + max_observation_lead``), or one newer than every waiting measurement when
+        ``max_pending_observations`` are already waiting (an older one displaces the newest waiting one)."""
+        t_ns = integer("measurement stamp (ns)", t_ns)
+        if not any(step is attached for attached in self._steps):
+            raise ValueError("the step is not attached to this timeline (attach it first)")
+        if self._t_f is None:
+            raise ValueError("no motion sample yet: an observation cannot be placed in time")
         if t_ns < self._t_f:
             raise ValueError(
                 f"stale observation: stamped {t_ns} ns, the filter is already at {self._t_f} ns "
@@ -200,7 +248,7 @@ class SlamTimeline:
                 f"observation stamped {(t_ns - t_w) * 1e-9:.3f} s after the newest motion sample (more than "
                 f"max_observation_lead = {self.config.max_observation_lead} s): no motion may ever reach it"
             )
-        observation = _Observation(t_ns, checked)
+        observation = _Pending(t_ns, step, payload)
         if t_ns <= t_w:
             return [self._apply(observation)]
         if len(self._pending) >= self.config.max_pending_observations:
@@ -229,9 +277,43 @@ class SlamTimeline:
         self._pending.clear()
         self._begin_history(t_ns, sample)
 
-    def break_history(self) -> None:
-        """Start the kept history again from the filter as it is now (at ``t_f``): for a filter whose
-        estimate was moved from outside the timeline (a reset, a new initial pose); nothing without
+    def reset(self, T_map_body: Transform2D | None = None, landmark_map: LandmarkMap | None = None) -> None:
+        """Start the run again at ``T_map_body`` (default identity; covariance from the filter's config)
+        with no map, or with ``landmark_map`` (:meth:`EkfSlam.load_map`): the filter, every step, the
+        history and the listeners (``cleared``) all start again; the time base is kept."""
+        if landmark_map is None:
+            self.slam.reset(T_map_body)
+        else:
+            self.slam.load_map(landmark_map, T_map_body)
+        self._moved_from_outside()
+        for listener in self._listeners:
+            listener.cleared()
+
+    def relocalize(self, T_map_body: Transform2D, pose_covariance: ArrayLike) -> None:
+        """The filter's pose becomes ``T_map_body`` with ``pose_covariance`` (3, 3), independent of the map,
+        which is kept (:meth:`EkfSlam.reset` with ``keep_map``): every step hears it and the history starts
+        again."""
+        self.slam.reset(T_map_body, pose_covariance, keep_map=True)
+        self._moved_from_outside()
+
+    def pose_at(self, t_ns: int) -> Transform2D | None:
+        """``T_map_body`` at ``t_ns`` in ``[t_f, t_w]``: the filter moved on by the motion from ``t_f``, one
+        step per sample interval (the filter is unchanged); None outside that span."""
+        if self._t_f is None or not self._t_f <= t_ns <= self._times[-1]:
+            return None
+        pieces = signal_pieces(self.signal, self._times, self._samples, self._t_f, self._s_f, t_ns)
+        return self.slam.propagated_pose_along([u for _, _, u in pieces if u is not None])[0]
+
+    def _moved_from_outside(self, by: ScanStep | None = None) -> None:
+        """The filter's pose was set from outside the steps (or by the step ``by``): the other steps hear
+        it, the history starts again."""
+        for step in self._steps:
+            if step is not by:
+                step.relocalized(self.slam.pose)
+        self._break_history()
+
+    def _break_history(self) -> None:
+        """Start the kept history again from the filter as it is now (at ``t_f``); nothing without
         ``keep_history`` or before the first motion sample."""
         if self._t_f is None or self.history is None:
             return
@@ -283,23 +365,21 @@ class SlamTimeline:
         values as the first sample's."""
         return timed_sample(t_ns, sample, len(self._samples[0]) if self._samples else None)
 
-    def _apply(self, observation: _Observation) -> tuple[int, Association]:
-        self._advance_to(observation.t_ns)
-        checked = observation.observations
-        if self.recovery is None:
-            association = self.slam.update(checked, stamp_ns=observation.t_ns)
-            relocalized = False
-        else:
-            before = self.recovery.status.relocalized
-            association = self.recovery.update(self.slam, checked, stamp_ns=observation.t_ns)
-            relocalized = self.recovery.status.relocalized != before
-        if relocalized:
-            self.break_history()
-        elif self.history is not None:
-            self.history.add_scan(
-                observation.t_ns, checked.z, checked.R, association.landmark_ids, self.slam.pose.as_array()
-            )
-        return observation.t_ns, association
+    def _apply(self, pending: _Pending) -> ScanResult:
+        """Bring the filter to the measurement's stamp, let its step act, and tell whom it concerns."""
+        t_ns = pending.t_ns
+        self._advance_to(t_ns)
+        result = pending.step.apply(self.slam, pending.payload, t_ns)
+        association = result.association
+        if result.outcome is Outcome.RELOCALIZED:
+            self._moved_from_outside(by=pending.step)
+        elif self.history is not None and association is not None:
+            z, R, _ = pending.payload
+            self.history.add_scan(t_ns, z, R, association.landmark_ids, self.slam.pose.as_array())
+        if result.outcome is not Outcome.HELD:
+            for listener in self._listeners:
+                listener.corrected(t_ns, self.slam.pose)
+        return ScanResult(t_ns, association, result.outcome)
 
     def _begin_history(self, t_ns: int, sample: Sample) -> None:
         if self.history is not None:

@@ -73,6 +73,7 @@ from ..util.validation import integer, non_negative, positive, store
 from .association_policies import REJECTED
 from .ekf_slam import Association, CheckedObservations, EkfSlam
 from .map_alignment import Alignment, Search, align_known, align_to_map, explained
+from .scan_steps import Outcome, StepResult
 
 # chi2_3^-1(0.999) (chdtri: the inverse of chi2's upper tail, without importing scipy.stats): a
 # correction outside this is not the filter's own uncertainty
@@ -248,11 +249,12 @@ class SlipStatus:
 
 
 class SlipRecovery:
-    """Updates an :class:`EkfSlam` with one scan's observations as :meth:`EkfSlam.update` does, after the
-    stall and contradiction checks of the module docstring: a stalled body is put back where it stood, a
-    scan that contradicts the motion is held, and the filter relocalized once ``slip_confirm_scans`` agree.
-    With known association the pairs are the ids'. Switched off (``slip_recovery`` false) it is
-    :meth:`EkfSlam.update`."""
+    """A :class:`~turtlelib.estimation.scan_steps.ScanStep`: updates an :class:`EkfSlam` with one scan's
+    observations as :meth:`EkfSlam.update` does, after the stall and contradiction checks of the module
+    docstring: a stalled body is put back where it stood, a scan that contradicts the motion is held, and
+    the filter relocalized once ``slip_confirm_scans`` agree. With known association the pairs are the
+    ids'. Switched off (``slip_recovery`` false) it is
+    :class:`~turtlelib.estimation.scan_steps.FilterUpdate`."""
 
     def __init__(self, config: SlipRecoveryConfig | None = None) -> None:
         self.config = SlipRecoveryConfig() if config is None else config
@@ -267,11 +269,14 @@ class SlipRecovery:
         """The report at the newest scan's time (module docstring)."""
         return self._status
 
-    def update(self, slam: EkfSlam, observations: CheckedObservations, *, stamp_ns: int) -> Association:
-        """Check, then fuse or hold one scan taken at ``stamp_ns`` (ns) (class docstring)."""
+    def apply(self, slam: EkfSlam, observations: CheckedObservations, stamp_ns: int) -> StepResult:
+        """Check, then fuse or hold one scan taken at ``stamp_ns`` (ns) (class docstring): the outcome is
+        ``HELD`` (nothing fused), ``RELOCALIZED`` (the filter relocalized against the map, then the scan
+        fused) or ``APPLIED``."""
         self._now_ns = stamp_ns
         if not self.config.slip_recovery:
-            return slam.update(observations, stamp_ns=stamp_ns)
+            return StepResult(Outcome.APPLIED, slam.update(observations, stamp_ns=stamp_ns))
+        relocalized_before = self._status.relocalized
         if self._T_good is None:
             self._T_good = slam.pose
         z, R, _ = observations
@@ -290,9 +295,10 @@ class SlipRecovery:
                 self._status.held += 1
                 self._report()
                 count = len(z)
-                return Association(
+                held = Association(
                     np.full(count, REJECTED, dtype=np.int8), np.full(count, -1, dtype=np.int64)
                 )
+                return StepResult(Outcome.HELD, held)
         T_before = slam.pose
         association = slam.update(observations, stamp_ns=stamp_ns)
         # the reference moves with the update's correction: only the wheels' motion is compared
@@ -300,11 +306,13 @@ class SlipRecovery:
         if association.counts["matched"] >= 2:
             self._T_good = slam.pose
         self._report()
-        return association
+        relocalized = self._status.relocalized != relocalized_before
+        return StepResult(Outcome.RELOCALIZED if relocalized else Outcome.APPLIED, association)
 
-    def forget(self, T_map_body: Transform2D) -> None:
-        """Start over from a pose set from outside (a reset, an initial pose): nothing held, no stall
-        reference, the search bounded by the motion from ``T_map_body``."""
+    def relocalized(self, T_map_body: Transform2D) -> None:
+        """Start over from a pose set from outside (a reset, an initial pose, another step's
+        relocalization): nothing held, no stall reference, the search bounded by the motion from
+        ``T_map_body``."""
         self._T_good, self._episode = T_map_body, None
         self._stall.rebase(T_map_body, None)
 
