@@ -96,7 +96,7 @@ def test_a_motion_step_that_overflows_raises_and_leaves_the_filter_unchanged():
         with np.errstate(over="ignore", invalid="ignore"), pytest.raises(ValueError):
             slam.predict(u)
         with np.errstate(over="ignore", invalid="ignore"), pytest.raises(ValueError):
-            slam.propagated_pose(u)
+            slam.propagated_pose_along([u])
         assert_same(before, state_of(slam))
         assert np.isfinite(slam.covariance).all()
 

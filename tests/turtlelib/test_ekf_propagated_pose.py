@@ -1,5 +1,6 @@
-"""EkfSlam.propagated_pose (the pose predict would give, filter unchanged) and EkfSlam.checked_observations
-(the validation that the updates and SlamTimeline use to refuse bad observations before queuing them).
+"""EkfSlam.propagated_pose_along (the pose predict would give, filter unchanged) and
+EkfSlam.checked_observations (the validation that the updates and SlamTimeline use to refuse bad observations
+before queuing them).
 """
 
 import copy
@@ -45,7 +46,7 @@ def assert_same(before, after):
         np.testing.assert_array_equal(a, b)
 
 
-# --- propagated_pose ---------------------------------------------------------------------------------------
+# --- propagated_pose_along ---------------------------------------------------------------------------------
 
 
 @settings(deadline=None, max_examples=150)
@@ -56,7 +57,7 @@ def test_propagated_pose_is_what_predict_gives(pose, left, right, wheel_noise):
     predicted = copy.deepcopy(slam)
     predicted.predict((left, right))
 
-    T, P = slam.propagated_pose((left, right))
+    T, P = slam.propagated_pose_along([(left, right)])
     assert isinstance(T, Transform2D)
     np.testing.assert_allclose(T.as_array(), predicted.pose.as_array(), rtol=0.0, atol=1e-12)
     expected = predicted.pose_covariance
@@ -72,7 +73,7 @@ def test_propagated_pose_is_what_predict_gives(pose, left, right, wheel_noise):
 def test_propagated_pose_hand_case():
     # from the origin with a certain pose, both wheels 10 rad: 0.33 m straight ahead, covariance = Q only
     slam = EkfSlam(SlamConfig(sensor_x=-0.032), DiffDriveMotion(BURGER, 0.1))
-    T, P = slam.propagated_pose((10.0, 10.0))
+    T, P = slam.propagated_pose_along([(10.0, 10.0)])
     assert T.x == pytest.approx(0.33, abs=1e-15)
     assert T.y == 0.0 and T.theta == 0.0
     # Q of a straight line: var_v = q r^2 / 2, var_w = 2 q r^2 / d^2, u = r dphi, q = k^2 dphi
@@ -88,7 +89,7 @@ def test_propagated_pose_hand_case():
 
 def test_propagated_pose_without_motion_is_the_current_pose():
     slam = filter_with_map(Transform2D(1.0, -2.0, 2.5))
-    T, P = slam.propagated_pose((0.0, 0.0))
+    T, P = slam.propagated_pose_along([(0.0, 0.0)])
     assert T == slam.pose
     np.testing.assert_array_equal(P, slam.pose_covariance)
     # no inputs at all: the current pose too
@@ -100,8 +101,8 @@ def test_propagated_pose_without_motion_is_the_current_pose():
 def test_propagated_pose_does_not_chain():
     # it always starts from the filter's pose: twice the same call, the same answer
     slam = filter_with_map(Transform2D(0.2, 0.1, -0.4))
-    first = slam.propagated_pose((2.0, 1.0))
-    second = slam.propagated_pose((2.0, 1.0))
+    first = slam.propagated_pose_along([(2.0, 1.0)])
+    second = slam.propagated_pose_along([(2.0, 1.0)])
     assert first[0] == second[0]
     np.testing.assert_array_equal(first[1], second[1])
     assert first[0] != slam.pose
@@ -112,7 +113,7 @@ def test_propagated_pose_rejects_non_finite_increments(left, right):
     slam = filter_with_map(Transform2D())
     before = snapshot(slam)
     with pytest.raises(ValueError):
-        slam.propagated_pose((left, right))
+        slam.propagated_pose_along([(left, right)])
     assert_same(before, snapshot(slam))
 
 

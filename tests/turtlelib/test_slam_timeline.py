@@ -614,7 +614,7 @@ def test_latest_pose_is_the_filter_moved_on_to_the_newest_sample():
     assert t_f == samples[-1][0] - 120 * MS
     phi_f = angles_at(samples, t_f)
     increments = samples[-1][1] - phi_f[0], samples[-1][2] - phi_f[1]
-    expected_pose, expected_P = timeline.slam.propagated_pose(increments)
+    expected_pose, expected_P = timeline.slam.propagated_pose_along([increments])
     predicted = copy.deepcopy(timeline.slam)
     predicted.predict(increments)
 
@@ -648,8 +648,8 @@ def test_latest_pose_follows_each_sample_interval_when_the_wheel_speeds_change()
     np.testing.assert_allclose(pose.as_array(), expected.pose.as_array(), rtol=0.0, atol=1e-12)
     np.testing.assert_allclose(P, expected.pose_covariance, rtol=0.0, atol=1e-12 * np.abs(P).max())
     # one arc from t_f straight to the newest sample would not be the same pose
-    one_arc, _ = timeline.slam.propagated_pose(
-        (later[-1][1] - angles_at(samples, t_f)[0], later[-1][2] - angles_at(samples, t_f)[1])
+    one_arc, _ = timeline.slam.propagated_pose_along(
+        [(later[-1][1] - angles_at(samples, t_f)[0], later[-1][2] - angles_at(samples, t_f)[1])]
     )
     assert np.abs(one_arc.as_array() - pose.as_array()).max() > 1e-4
 

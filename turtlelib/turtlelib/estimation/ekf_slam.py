@@ -498,15 +498,11 @@ class EkfSlam:
         self._linearization.predicted(q_next)
         return poses
 
-    def propagated_pose(self, u: tuple) -> tuple[Transform2D, NDArray[np.float64]]:
-        """The pose and its covariance (3, 3) :meth:`predict` would give for input ``u``, without changing the
-        filter: ``q' = f(q, u)``, ``P_qq' = G P_qq G^T + Q``, O(1), for publishing the pose between filter
-        steps."""
-        return self.propagated_pose_along([u])
-
     def propagated_pose_along(self, inputs: Iterable[tuple]) -> tuple[Transform2D, NDArray[np.float64]]:
-        """As :meth:`propagated_pose` for consecutive inputs, one motion step each; none gives the current
-        pose."""
+        """The pose and its covariance (3, 3) that :meth:`predict` would give for each of the consecutive
+        ``inputs`` in turn, one motion step each (none: the current pose), without changing the filter:
+        ``q' = f(q, u)``, ``P_qq' = G P_qq G^T + Q``, O(1) per input, for publishing the pose between filter
+        steps."""
         T_map_body = self.pose
         P_qq = self._state.pose_covariance.copy()
         for step, u in enumerate(inputs):
@@ -570,7 +566,8 @@ class EkfSlam:
         stamp_ns = integer("stamp_ns", stamp_ns)
         z, R, ids = observations
         mode = "unknown" if ids is None else "known"
-        self._enter_mode(mode)
+        self._check_mode(mode)
+        self._association = mode
         model = self._measurement if measurement is None else measurement
         policy = self._policies[mode]
         view = self.view(model)
@@ -696,7 +693,7 @@ class EkfSlam:
         landmarks with their covariance and makes the new pose independent of them (zero cross-covariance):
         a relocalization, also after :meth:`load_map` and in localization.
         """
-        pose, covariance = self._initial_pose(T_map_body, pose_covariance)
+        pose, covariance = _initial_pose(self._config, T_map_body, pose_covariance)
         if keep_map:
             self._state.reset_robot(pose, covariance, keep_map=True)
         else:
@@ -731,7 +728,7 @@ class EkfSlam:
             raise ValueError(
                 f"the map holds {n} landmarks, more than max_landmarks = {self._config.max_landmarks}"
             )
-        pose, covariance = self._initial_pose(T_map_body, pose_covariance)
+        pose, covariance = _initial_pose(self._config, T_map_body, pose_covariance)
         state = SlamState(
             pose, covariance, capacity_landmarks=max(16, n), invariant=self._linearization.invariant
         )
@@ -760,17 +757,6 @@ class EkfSlam:
             covariance=self._state.covariance[np.ix_(indices, indices)],
             parameters={} if parameters is None else parameters,
         )
-
-    def _initial_pose(
-        self, T_map_body: Transform2D | None, pose_covariance: ArrayLike | None
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """The validated pose (3,) (default identity) and its covariance (3, 3) (default from the config)."""
-        T_map_body = Transform2D() if T_map_body is None else T_map_body
-        if not isinstance(T_map_body, Transform2D):
-            raise ValueError(f"T_map_body must be a Transform2D, got {type(T_map_body).__name__}")
-        if pose_covariance is None:
-            return T_map_body.as_array(), self._config.initial_pose_covariance()
-        return T_map_body.as_array(), covariance("pose covariance", pose_covariance, (3, 3), definite=False)
 
     # --- estimates ---------------------------------------------------------------------------------------
 
@@ -810,12 +796,12 @@ class EkfSlam:
     @property
     def state(self) -> NDArray[np.float64]:
         """``x`` (N,) = ``[x, y, theta, m_0x, m_0y, ...]`` over the confirmed landmarks."""
-        return self._state.mean[self._confirmed_indices()]
+        return self._state.mean[_confirmed_indices(self._state)]
 
     @property
     def covariance(self) -> NDArray[np.float64]:
         """``P`` (N, N), a copy, over the pose and the confirmed landmarks (the layout of :attr:`state`)."""
-        indices = self._confirmed_indices()
+        indices = _confirmed_indices(self._state)
         return self._state.covariance[np.ix_(indices, indices)]
 
     @property
@@ -885,14 +871,23 @@ class EkfSlam:
         if self._association not in (None, mode):
             raise ValueError(f"this filter runs with {self._association} association; reset() to switch")
 
-    def _enter_mode(self, mode: str) -> None:
-        self._check_mode(mode)
-        self._association = mode
 
-    def _confirmed_indices(self) -> NDArray[np.int64]:
-        """State indices of the pose and the confirmed landmarks (in id order)."""
-        first = ROBOT_DIM + 2 * self._state.tracks.slots_by_id(confirmed=True)
-        return np.concatenate([np.arange(ROBOT_DIM), (first[:, None] + np.arange(2)).ravel()])
+def _initial_pose(
+    config: SlamConfig, T_map_body: Transform2D | None, pose_covariance: ArrayLike | None
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The validated pose (3,) (default identity) and its covariance (3, 3) (default from ``config``)."""
+    T_map_body = Transform2D() if T_map_body is None else T_map_body
+    if not isinstance(T_map_body, Transform2D):
+        raise ValueError(f"T_map_body must be a Transform2D, got {type(T_map_body).__name__}")
+    if pose_covariance is None:
+        return T_map_body.as_array(), config.initial_pose_covariance()
+    return T_map_body.as_array(), covariance("pose covariance", pose_covariance, (3, 3), definite=False)
+
+
+def _confirmed_indices(state: SlamState) -> NDArray[np.int64]:
+    """State indices of the pose and the confirmed landmarks (in id order)."""
+    first = ROBOT_DIM + 2 * state.tracks.slots_by_id(confirmed=True)
+    return np.concatenate([np.arange(ROBOT_DIM), (first[:, None] + np.arange(2)).ravel()])
 
 
 def _observations(
