@@ -314,7 +314,7 @@ BAD_SCANS = {
     "infinite angle_min": ({"angle_min": -math.inf}, "angle_min"),
     "range_min == range_max": ({"range_min": 3.5}, "range_min < range_max"),
     "range_min > range_max": ({"range_min": 4.0}, "range_min < range_max"),
-    "NaN range_max": ({"range_max": math.nan}, "range_min < range_max"),
+    "NaN range_max": ({"range_max": math.nan}, "range_max must be a finite number"),
     "no beams": ({"ranges": []}, "non-empty"),
     # layouts that contradict themselves (the issue: 85 of 85 detections were phantoms)
     "angle_increment negated": ({"angle_increment": -LDS01.angle_increment}, "contradicts itself"),
