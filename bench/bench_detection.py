@@ -46,13 +46,12 @@ def time_detection(samples: int, seed: int = 1) -> dict[str, float]:
         scene = random_scene(rng, n_cylinders=10)
         scans.append(simulate_scan(scene.T_world_sensor, scene.circles, scene.walls, lidar, rng))
     detector = LandmarkDetector(DetectorConfig())
-    arguments = (lidar.angle_min, lidar.angle_increment, lidar.range_min, lidar.range_max)
-    found = [len(detector.detect(ranges, *arguments)) for ranges in scans]  # also warms up
+    found = [len(detector.detect(lidar.range_scan(ranges))) for ranges in scans]  # also warms up
     times = []
     for _ in range(REPEATS):
         for ranges in scans:
             start = time.perf_counter()
-            detector.detect(ranges, *arguments)
+            detector.detect(lidar.range_scan(ranges))
             times.append(time.perf_counter() - start)
     return {
         "median": float(np.median(times)),

@@ -32,7 +32,7 @@ sys.path[:0] = [str(ROOT / "bench")]
 from bench_docs import write_section  # noqa: E402
 
 from nusim.simulation import LIDAR_MODELS, ArenaConfig, Obstacles, Simulation, SimulationConfig  # noqa: E402
-from turtlelib import DetectorConfig, LandmarkDetector, Transform2D, check_scan_layout  # noqa: E402
+from turtlelib import DetectorConfig, LandmarkDetector, RangeScan, Transform2D, check_scan_layout  # noqa: E402
 
 RECORDING = Path("/work/shared/datasets/tb3_gazebo_burger")
 TB3_WORLD_CYLINDERS = np.array([(x, y) for x in (-1.1, 0.0, 1.1) for y in (-1.1, 0.0, 1.1)])
@@ -74,8 +74,9 @@ def recorded_gazebo(directory: Path) -> dict[str, object]:
     hits, spurious, errors, radii = np.zeros(9, dtype=int), 0, [], []
     for t_ns, msg in scans:
         check_scan_layout(len(msg.ranges), msg.angle_min, msg.angle_max, msg.angle_increment)
-        ranges = np.asarray(msg.ranges, dtype=np.float64)
-        found = detector.detect(ranges, msg.angle_min, msg.angle_increment, msg.range_min, msg.range_max)
+        found = detector.detect(
+            RangeScan(msg.ranges, msg.angle_min, msg.angle_increment, msg.range_min, msg.range_max)
+        )
         # T_world_footprint interpolated to the scan's stamp
         columns = (poses_array[:, 1], poses_array[:, 2], heading)
         xyt = [np.interp(t_ns, poses_array[:, 0], column) for column in columns]
@@ -108,7 +109,9 @@ def simulated(lidar_model: str) -> dict[str, object]:
         layout = scan.layout
         range_min, range_max = model.reported_range_m or (layout.range_min, layout.range_max)
         start = time.perf_counter()
-        found = detector.detect(scan.range_m, layout.angle_min, layout.angle_increment, range_min, range_max)
+        found = detector.detect(
+            RangeScan(scan.range_m, layout.angle_min, layout.angle_increment, range_min, range_max)
+        )
         times.append(time.perf_counter() - start)
         beams.add(layout.samples)
         nearest, distance = match(T_world_scan @ found.p_sensor.reshape(-1, 2), circles[:, :2])

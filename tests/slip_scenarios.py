@@ -102,13 +102,7 @@ class _Loop:
         if self.steps % JOINT_EVERY == 0:
             self.timeline.add_motion(self.t_ns, tuple(self.sim.wheel_angles_rad))
         if self.steps % SCAN_EVERY == 0:
-            detections = self.detector.detect(
-                self.sim.scan().range_m,
-                self.lidar.angle_min,
-                self.lidar.angle_increment,
-                self.lidar.range_min,
-                self.lidar.range_max,
-            )
+            detections = self.detector.detect(self.lidar.range_scan(self.sim.scan().range_m))
             z, _ = observations_from_points(detections.p_sensor, np.zeros((len(detections), 2, 2)))
             self.timeline.add_observations(self.t_ns, z)
             self.result_errors.append((self.t_ns * 1e-9, self.error()[0]))

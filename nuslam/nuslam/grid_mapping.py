@@ -31,10 +31,12 @@ Publishes (reliable + transient local, depth 1, REP 2003: a late RViz, nav2 or F
         inserted scan's stamp.
     `map_metadata` (nav_msgs/MapMetaData): its ``info``.
 
-Bad input (a scan in another frame, a scan `turtlelib.RangeScan` refuses, one reaching past
-``grid.max_size_m``, one older than the filter's time) is skipped with a throttled warning and counted; the
-grid is unchanged. `/diagnostics` gets `slam: occupancy grid` (:meth:`GridMapping.status`): scans mapped
-and skipped, keyframes, the grid's size; WARN when scans were skipped since the last report.
+Bad input (a scan in another frame, one `nuturtle_ros_common.conversions.range_scan_from_message` refuses:
+a layout that contradicts itself, intensities neither empty nor one per range, what `turtlelib.RangeScan`
+refuses; one reaching past ``grid.max_size_m``, one older than the filter's time) is skipped with a
+throttled warning and counted; the grid is unchanged. `/diagnostics` gets `slam: occupancy grid`
+(:meth:`GridMapping.status`): scans mapped and skipped, keyframes, the grid's size; WARN when scans were
+skipped since the last report.
 """
 
 from __future__ import annotations
@@ -45,7 +47,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
 from nav_msgs.msg import MapMetaData
 from nav_msgs.msg import OccupancyGrid as OccupancyGridMsg
@@ -53,7 +54,12 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
 from sensor_msgs.msg import LaserScan
 
-from nuturtle_ros_common.conversions import pose_from_transform, stamp_from_nanoseconds, stamp_nanoseconds
+from nuturtle_ros_common.conversions import (
+    pose_from_transform,
+    range_scan_from_message,
+    stamp_from_nanoseconds,
+    stamp_nanoseconds,
+)
 from nuturtle_ros_common.diagnostics import OK, WARN, status
 from nuturtle_ros_common.ros_params import declare_dataclass
 from nuturtle_ros_common.throttle import SourceWarnings
@@ -198,13 +204,7 @@ class GridMapping:
                 raise ValueError(
                     f"it is in frame {msg.header.frame_id!r}, expected one of {sorted(self._T_body_from)}"
                 )
-            scan = RangeScan(
-                np.asarray(msg.ranges, dtype=np.float64),
-                msg.angle_min,
-                msg.angle_increment,
-                msg.range_min,
-                msg.range_max,
-            )
+            scan = range_scan_from_message(msg)
         except ValueError as error:
             self._skip(f"scan skipped by the occupancy grid: {error}")
             return

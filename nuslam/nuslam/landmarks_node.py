@@ -4,7 +4,10 @@ Subscribes
     `scan` (sensor_msgs/LaserScan, sensor-data QoS as the LDS-01 publishes it).
 Publishes (stamped with the scan's stamp, in the scan's frame)
     `landmarks` (visualization_msgs/MarkerArray): a DELETEALL, then one CYLINDER (ADD) per detected cylinder,
-        id = its index in this scan, centre in ``pose.position`` (m), diameter in ``scale.x``/``scale.y``.
+        id = its index in this scan, centre in ``pose.position`` (m), diameter in ``scale.x``/``scale.y``,
+        and the detection's range-bearing covariance ``R = diag(range_std^2, bearing_std^2)`` (2x2, [range
+        m, bearing rad] about the scan frame's origin) in ``text`` as ``R=<R_rr> <R_rb> <R_bb>`` (exact
+        floats; `nuturtle_ros_common.markers.noise_text`): the noise slam fuses the detection with.
         One array per scan, also when nothing is found (SLAM counts scans).
     `~/clusters` (visualization_msgs/MarkerArray): a DELETEALL, then one POINTS marker per cluster of the
         scan, cylinders green and rejected clusters grey (for tuning the thresholds).
@@ -14,14 +17,16 @@ Publishes (stamped with the scan's stamp, in the scan's frame)
         since the last report, ERROR when every scan since then was: scans arrive but none is used).
 Parameters
     Every field of `turtlelib.DetectorConfig` (cluster_threshold, min_points, min_radius, max_radius, ...),
-    under the same names. Invalid values stop the node at start-up with a message.
+    under the same names; `range_std` and `bearing_std` are THE observation noise of a detection (slam has
+    no such parameters of its own). Invalid values stop the node at start-up with a message.
 
-A scan whose layout contradicts itself (`turtlelib.check_scan_layout`: angle_min, angle_max,
-angle_increment and the number of ranges disagree; intensities neither empty nor one per range), or that
-the detector refuses (non-finite layout, range_min >= range_max), is skipped with a throttled warning and
-counted; the node keeps running. Every TurtleBot3 LiDAR's layout is used (LDS-01, LDS-02 with its beam
-count changing from scan to scan, Gazebo's): beams beyond one full turn (Gazebo's last, which repeats its
-first) are dropped, and 0.0, NaN, inf and beams outside [range_min, range_max] are no return.
+A scan that `nuturtle_ros_common.conversions.range_scan_from_message` refuses (a layout that contradicts
+itself, `turtlelib.check_scan_layout`: angle_min, angle_max, angle_increment and the number of ranges
+disagree; intensities neither empty nor one per range; a non-finite layout; range_min >= range_max) is
+skipped with a throttled warning and counted; the node keeps running. Every TurtleBot3 LiDAR's layout is
+used (LDS-01, LDS-02 with its beam count changing from scan to scan, Gazebo's): beams beyond one full turn
+(Gazebo's last, which repeats its first) are dropped, and 0.0, NaN, inf and beams outside [range_min,
+range_max] are no return.
 """
 
 from __future__ import annotations
@@ -29,13 +34,13 @@ from __future__ import annotations
 import sys
 import time
 
-import numpy as np
 from geometry_msgs.msg import Point
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import LaserScan
 from visualization_msgs.msg import Marker, MarkerArray
 
+from nuturtle_ros_common.conversions import range_scan_from_message
 from nuturtle_ros_common.diagnostics import (
     ERROR,
     OK,
@@ -45,11 +50,11 @@ from nuturtle_ros_common.diagnostics import (
     InputMonitor,
     status,
 )
-from nuturtle_ros_common.markers import cylinder_marker, delete_all_marker, set_color
+from nuturtle_ros_common.markers import cylinder_marker, delete_all_marker, noise_text, set_color
 from nuturtle_ros_common.node_main import run_node
 from nuturtle_ros_common.ros_params import declare_dataclass
 from nuturtle_ros_common.throttle import WARN_THROTTLE_S
-from turtlelib import Clusters, Detections, DetectorConfig, LandmarkDetector, check_scan_layout
+from turtlelib import Clusters, Detections, DetectorConfig, LandmarkDetector
 
 GREEN = (0.1, 0.8, 0.2, 1.0)
 GREY = (0.6, 0.6, 0.6, 0.8)
@@ -60,13 +65,15 @@ STALE_S = 2.0
 
 
 def landmark_markers(detections: Detections, msg: LaserScan) -> MarkerArray:
-    """The `landmarks` array of one scan: DELETEALL, then a CYLINDER per detection."""
+    """The `landmarks` array of one scan: DELETEALL, then a CYLINDER per detection carrying its noise."""
     frame_id, stamp = msg.header.frame_id, msg.header.stamp
     markers = [delete_all_marker(frame_id, stamp)]
-    for k, ((x, y), radius_m) in enumerate(zip(detections.p_sensor, detections.radius, strict=True)):
-        markers.append(
-            cylinder_marker(frame_id, stamp, "landmarks", k, float(x), float(y), float(radius_m), GREEN)
-        )
+    for k, ((x, y), radius_m, R) in enumerate(
+        zip(detections.p_sensor, detections.radius, detections.covariance, strict=True)
+    ):
+        marker = cylinder_marker(frame_id, stamp, "landmarks", k, float(x), float(y), float(radius_m), GREEN)
+        marker.text = noise_text(R)
+        markers.append(marker)
     return MarkerArray(markers=markers)
 
 
@@ -141,14 +148,8 @@ class LandmarksNode(Node):
     def _on_scan(self, msg: LaserScan) -> None:
         self._scans.arrived(self.get_clock().now().nanoseconds)
         start = time.perf_counter()
-        ranges = np.asarray(msg.ranges, dtype=np.float64)  # array.array('f'): through the buffer protocol
         try:
-            check_scan_layout(len(ranges), msg.angle_min, msg.angle_max, msg.angle_increment)
-            if len(msg.intensities) not in (0, len(ranges)):
-                raise ValueError(f"{len(msg.intensities)} intensities for {len(ranges)} ranges")
-            detections, clusters = self.detector.detect_with_clusters(
-                ranges, msg.angle_min, msg.angle_increment, msg.range_min, msg.range_max
-            )
+            detections, clusters = self.detector.detect_with_clusters(range_scan_from_message(msg))
         except ValueError as error:
             self.get_logger().warning(f"scan skipped: {error}", throttle_duration_sec=WARN_THROTTLE_S)
             self._refused += 1

@@ -33,7 +33,12 @@ Subscribes
     `association` = `unknown` (default): `landmarks` (visualization_msgs/MarkerArray from the `landmarks`
         node, frame `sensor_id` or `body_id`): one scan's cylinder centres; the EKF associates them
         (Mahalanobis gates, nearest neighbour or JCBB, tentative landmarks confirmed after
-        `confirm_count` sightings). Noise ``R = diag(range_std^2, bearing_std^2)``.
+        `confirm_count` sightings). Noise: each CYLINDER's own range-bearing covariance ``R`` (2x2, [range
+        m, bearing rad] about the frame's origin) in its ``text``, ``R=<R_rr> <R_rb> <R_bb>``
+        (`nuturtle_ros_common.markers.noise_text`: the landmarks node's `range_std`, `bearing_std`), carried
+        into the sensor frame when the markers are in `body_id`; an array whose markers carry no text (a
+        recording made before) gets `turtlelib.SlamConfig`'s default ``R = diag(0.02^2, 0.02^2)``, and one
+        with a malformed text is skipped.
     `association` = `known`: `fake_sensor` (MarkerArray from nusim, frame `body_id`): marker id = landmark
         id; positions with per-axis standard deviation `fake_sensor_std`, turned into range-bearing with
         ``R = J Sigma J^T`` (`turtlelib.estimation.range_bearing.observations_from_points`).
@@ -71,8 +76,7 @@ Services (std_srvs/Trigger)
 Parameters
     `SlamNodeConfig` (association, motion_source, x0, y0, theta0, frame ids, fake_sensor_std,
     landmark_radius, wheel_noise, map_file, observation_timeout), `turtlelib.TwistNoise` as `odom_*`,
-    `turtlelib.SlamConfig` (mode, range_std, bearing_std, range_std_per_m, noise_correlation,
-    noise_correlation_length, matcher, gates,
+    `turtlelib.SlamConfig` (mode, noise_correlation, noise_correlation_length, matcher, gates,
     linearization, confirm_count, tentative_timeout, min_range, max_range, max_landmarks, max_observations,
     initial_*_std, jcbb_max_nodes),
     `turtlelib.TimelineConfig`
@@ -85,7 +89,9 @@ Parameters
     `nuslam.grid_mapping.GridTopicConfig`, `turtlelib.GridConfig` and `turtlelib.KeyframeConfig` prefixed
     `grid.` (grid.enabled, grid.publish_period_s, grid.resolution_m, ...). Defaults
     in config/slam.yaml. The filter's sensor mount (`SlamConfig.sensor_x/y/theta`) is the robot's `lidar_x`,
-    `lidar_y`, `lidar_yaw`. Invalid values stop the node at start-up with a message.
+    `lidar_y`, `lidar_yaw`. Its observation noise (`range_std`, `bearing_std`, `range_std_per_m`) is no
+    parameter: the detections carry theirs, and its defaults are only the fallback for arrays without.
+    Invalid values stop the node at start-up with a message.
 
 Observations that arrive before the first motion sample are dropped quietly (start-up order). Bad input
 never stops the node and never changes the estimate: invalid or implausible joint_states
@@ -137,11 +143,17 @@ from nuturtle_ros_common.diagnostics import (
     InputMonitor,
     status,
 )
-from nuturtle_ros_common.markers import cylinder_marker, delete_all_marker, ellipse_marker, marker_positions
+from nuturtle_ros_common.markers import (
+    cylinder_marker,
+    delete_all_marker,
+    ellipse_marker,
+    marker_noise,
+    marker_positions,
+)
 from nuturtle_ros_common.node_main import run_node
 from nuturtle_ros_common.odom_stream import OdomStream
 from nuturtle_ros_common.path_topic import PathTopic
-from nuturtle_ros_common.ros_params import declare_dataclass
+from nuturtle_ros_common.ros_params import declare_dataclass, field_defaults
 from nuturtle_ros_common.tf_compat import OptionalTfBroadcaster
 from nuturtle_ros_common.throttle import SourceWarnings
 from nuturtle_ros_common.wheel_joints import WheelJoints
@@ -160,7 +172,7 @@ from turtlelib import (
     TwistNoise,
     WheelAngles,
 )
-from turtlelib.estimation.range_bearing import observations_from_points
+from turtlelib.estimation.range_bearing import landmarks_from_observations, observations_from_points
 from turtlelib.estimation.slip_recovery import SlipRecovery, SlipRecoveryConfig, lost_wheel_turn_per_m
 from turtlelib.geometry.pose_buffer import PoseBuffer
 from turtlelib.mapping.landmark_map import LandmarkMap, load_map, save_map
@@ -171,6 +183,8 @@ from turtlelib.smoothing.run_smoothing import SmoothingOutcome, smooth_history
 from turtlelib.util.validation import finite_real, names, non_negative, one_of, positive, store
 
 ASSOCIATIONS = ("known", "unknown")
+# SlamConfig's default observation noise: kept at its defaults, not parameters (the detections carry theirs)
+FALLBACK_NOISE_FIELDS = ("range_std", "bearing_std", "range_std_per_m")
 MOTION_SOURCES = ("joint_states", "odom")
 GREEN = (0.1, 0.8, 0.2, 1.0)
 GREEN_TRANSLUCENT = (0.1, 0.8, 0.2, 0.35)
@@ -259,7 +273,10 @@ class SlamNode(Node):
             "sensor_y": T_body_scan.y,
             "sensor_theta": T_body_scan.theta,
         }
-        self.config = declare_dataclass(self, SlamConfig, fixed=sensor_mount)
+        # the observation noise is each detection's own (`landmarks`' markers): the filter's default is only
+        # the fallback for arrays without it, not a parameter
+        fallback_noise = {name: field_defaults(SlamConfig)[name] for name in FALLBACK_NOISE_FIELDS}
+        self.config = declare_dataclass(self, SlamConfig, fixed={**sensor_mount, **fallback_noise})
         timeline_config = declare_dataclass(self, TimelineConfig)
         lost_wheel = {"slip_turn_per_m": lost_wheel_turn_per_m(robot.track_width)}
         self.recovery = SlipRecovery(declare_dataclass(self, SlipRecoveryConfig, fixed=lost_wheel))
@@ -336,10 +353,7 @@ class SlamNode(Node):
         self._counts = {"fused": 0, "rejected": 0, "unmapped": 0, "skipped": 0, "arrays_applied": 0}
         self._skipped_reported = self._rejected_reported = 0
         DiagnosticsPublisher(self, self._statuses)
-        if self.node_config.association == "known":
-            self.create_subscription(MarkerArray, "fake_sensor", self._on_fake_sensor, 10)
-        else:
-            self.create_subscription(MarkerArray, "landmarks", self._on_landmarks, 10)
+        self.create_subscription(MarkerArray, self._observation_topic, self._on_observations, 10)
 
     @property
     def observation_counts(self) -> dict[str, int]:
@@ -393,40 +407,19 @@ class SlamNode(Node):
         if applied:
             self._publish_map(stamp_from_nanoseconds(applied[-1].t_ns))
 
-    def _on_fake_sensor(self, msg: MarkerArray) -> None:
+    def _on_observations(self, msg: MarkerArray) -> None:
+        """One array of `fake_sensor` (known association) or `landmarks` (unknown) into the timeline."""
         self._observation_input.arrived(self.get_clock().now().nanoseconds)
         if self._before_first_motion():
             return
         try:
-            t_ns, ids, p_sensor, rotation = self._observed_points(msg)
-            # Sigma_sensor = R_sf Sigma R_sf^T
-            covariance = np.broadcast_to(
-                rotation @ self._fake_sensor_covariance @ rotation.T, (len(ids), 2, 2)
-            )
-            z, R = observations_from_points(p_sensor, covariance)
+            t_ns, ids, z, R = self._observations(msg)
             start = time.perf_counter()
             applied = self.timeline.add_observations(t_ns, z, R, ids)
             self._count_applied(applied, start)
         except (ValueError, np.linalg.LinAlgError) as error:
-            self._warnings.warn("fake_sensor", f"fake_sensor skipped: {error}")
-            self._counts["skipped"] += 1
-            return
-        self._observed_at = None  # the observations arrive: the silence starts again at the next sample
-        if applied:
-            self._publish_map(msg.markers[0].header.stamp)
-
-    def _on_landmarks(self, msg: MarkerArray) -> None:
-        self._observation_input.arrived(self.get_clock().now().nanoseconds)
-        if self._before_first_motion():
-            return
-        try:
-            t_ns, ids, p_sensor, _ = self._observed_points(msg)
-            z, _ = observations_from_points(p_sensor, np.zeros((len(ids), 2, 2)))
-            start = time.perf_counter()
-            applied = self.timeline.add_observations(t_ns, z)
-            self._count_applied(applied, start)
-        except (ValueError, np.linalg.LinAlgError) as error:
-            self._warnings.warn("landmarks", f"landmarks skipped: {error}")
+            topic = self._observation_topic
+            self._warnings.warn(topic, f"{topic} skipped: {error}")
             self._counts["skipped"] += 1
             return
         self._observed_at = None  # the observations arrive: the silence starts again at the next sample
@@ -650,20 +643,45 @@ class SlamNode(Node):
         self.timeline.restart(t_ns, sample)
         self.odometry.set_reference(t_ns * 1e-9, *sample)
 
-    def _observed_points(
+    def _observations(
         self, msg: MarkerArray
-    ) -> tuple[int, NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
-        """Stamp (ns), ids, centres ``p_sensor`` (K, 2) and the rotation from the markers' frame into the
-        sensor frame; ValueError for an unusable array."""
+    ) -> tuple[int, NDArray[np.int64] | None, NDArray[np.float64], NDArray[np.float64] | None]:
+        """Stamp (ns), landmark ids (known association; None for unknown), observations ``z`` (K, 2)
+        ``[range m, bearing rad]`` in the sensor frame and their noise ``R`` (K, 2, 2) (None: the filter's
+        default, for `landmarks` arrays without noise) of one array; ValueError for an unusable array.
+
+        Known association: positions with covariance ``fake_sensor_std^2 I`` in the markers' frame, rotated
+        into the sensor frame, ``Sigma_sensor = R_sf Sigma R_sf^T``, and turned into range-bearing,
+        ``R = J Sigma_sensor J^T`` (:func:`observations_from_points`). Unknown association: the markers'
+        own noise (:func:`nuturtle_ros_common.markers.marker_noise`), range-bearing about the markers'
+        frame origin: as is in the sensor frame; from another frame carried through the point's covariance,
+        ``Sigma_frame = G R G^T`` (``G = dp/dz``), rotated and turned back as above.
+        """
         positions = marker_positions(msg)
         T_sensor_frame = self._T_sensor_from.get(positions.frame_id)
         if T_sensor_frame is None:
             raise ValueError(
                 f"markers in frame {positions.frame_id!r}; expected one of {sorted(self._T_sensor_from)}"
             )
+        t_ns = stamp_nanoseconds(positions.stamp)
+        count = len(positions.ids)
         # p_sensor = T_sensor_frame @ p_frame
-        p_sensor = T_sensor_frame @ positions.xy if len(positions.ids) else positions.xy
-        return stamp_nanoseconds(positions.stamp), positions.ids, p_sensor, T_sensor_frame.rotation_matrix()
+        p_sensor = T_sensor_frame @ positions.xy if count else positions.xy
+        rotation = T_sensor_frame.rotation_matrix()
+        if self.node_config.association == "known":
+            # Sigma_sensor = R_sf Sigma R_sf^T
+            covariance = np.broadcast_to(rotation @ self._fake_sensor_covariance @ rotation.T, (count, 2, 2))
+            z, R = observations_from_points(p_sensor, covariance)
+            return t_ns, positions.ids, z, R
+        R_frame = marker_noise(msg)
+        if R_frame is None or positions.frame_id == self.node_config.sensor_id:
+            z, _ = observations_from_points(p_sensor, np.zeros((count, 2, 2)))
+            return t_ns, None, z, R_frame
+        z_frame, _ = observations_from_points(positions.xy, np.zeros((count, 2, 2)))
+        _, _, G = landmarks_from_observations(np.zeros(3), z_frame, Transform2D())
+        # Sigma_sensor = R_sf G R G^T R_sf^T
+        z, R = observations_from_points(p_sensor, rotation @ G @ R_frame @ G.transpose(0, 2, 1) @ rotation.T)
+        return t_ns, None, z, R
 
     # --- outputs -----------------------------------------------------------------------------------------
 

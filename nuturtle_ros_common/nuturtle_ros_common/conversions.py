@@ -9,8 +9,9 @@ from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Pose, Quaternion, TransformStamped
 from nav_msgs.msg import Odometry
 from numpy.typing import NDArray
+from sensor_msgs.msg import LaserScan
 
-from turtlelib import Transform2D, Twist2D
+from turtlelib import RangeScan, Transform2D, Twist2D, check_scan_layout
 from turtlelib.util.timebase import NS_PER_S
 from turtlelib.util.validation import covariance
 
@@ -139,3 +140,19 @@ def stamp_from_seconds(seconds: float) -> Time:
     # the fraction (exact) in ns; one that rounds up to 1e9 carries into sec
     carry, nanosec = divmod(round((seconds - sec) * 1e9), 1_000_000_000)
     return Time(sec=int(sec + carry), nanosec=int(nanosec))
+
+
+def range_scan_from_message(msg: LaserScan) -> RangeScan:
+    """The scan of a sensor_msgs/LaserScan: ``ranges`` (m) on beams ``angle_min + b angle_increment`` (rad,
+    the header's frame), returns in ``[range_min, range_max]``.
+
+    ValueError (with the reason) for a layout that contradicts itself (:func:`turtlelib.check_scan_layout`:
+    angle_min, angle_max, angle_increment and the number of ranges disagree), intensities neither empty nor
+    one per range, or what :class:`turtlelib.RangeScan` refuses (non-finite angles, ``range_min >=
+    range_max``, ...).
+    """
+    ranges = np.asarray(msg.ranges, dtype=np.float64)  # array.array('f'): through the buffer protocol
+    check_scan_layout(len(ranges), msg.angle_min, msg.angle_max, msg.angle_increment)
+    if len(msg.intensities) not in (0, len(ranges)):
+        raise ValueError(f"{len(msg.intensities)} intensities for {len(ranges)} ranges")
+    return RangeScan(ranges, msg.angle_min, msg.angle_increment, msg.range_min, msg.range_max)

@@ -3,6 +3,12 @@
 Landmarks travel as MarkerArrays (nusim's `fake_sensor`, the `landmarks` detector): one CYLINDER (action
 ADD) per landmark, its centre in ``pose.position`` (x, y; m) in the header's frame, its diameter in
 ``scale.x``. DELETE / DELETEALL markers only tidy a display.
+
+A detection's noise travels with it in ``Marker.text`` (which a CYLINDER does not draw): its range-bearing
+covariance ``R`` (2 x 2; ``[range m, bearing rad]`` about the header frame's origin, m^2, m rad, rad^2) as
+``R=<R_rr> <R_rb> <R_bb>``, each a Python ``repr`` of a float, so that the text gives back the very floats
+written (:func:`noise_text` writes it, :func:`marker_noise` reads it). An array whose markers carry no
+text (nusim's `fake_sensor`, a recording made before the convention) has no noise of its own.
 """
 
 from __future__ import annotations
@@ -15,6 +21,8 @@ from builtin_interfaces.msg import Time
 from numpy.typing import NDArray
 from visualization_msgs.msg import Marker, MarkerArray
 
+# Marker.text of a detection's noise: NOISE_PREFIX, then R_rr, R_rb, R_bb (repr floats) apart by spaces
+NOISE_PREFIX = "R="
 # Drawn height of cylinders (m): display only.
 MARKER_HEIGHT_M = 0.25
 RGBA = tuple[float, float, float, float]
@@ -83,6 +91,38 @@ def marker_positions(msg: MarkerArray) -> MarkerPositions:
         raise ValueError("non-finite marker position")
     first = msg.markers[0]
     return MarkerPositions(first.header.frame_id, first.header.stamp, ids, xy)
+
+
+def noise_text(R: NDArray[np.float64]) -> str:
+    """The ``Marker.text`` carrying a range-bearing covariance ``R`` (2, 2) (module docstring):
+    ``R=<R_rr> <R_rb> <R_bb>``, exact floats (``R_br`` is ``R_rb``)."""
+    r_rr, r_rb, r_bb = float(R[0, 0]), float(R[0, 1]), float(R[1, 1])
+    return f"{NOISE_PREFIX}{r_rr!r} {r_rb!r} {r_bb!r}"
+
+
+def marker_noise(msg: MarkerArray) -> NDArray[np.float64] | None:
+    """The range-bearing covariances ``R`` (K, 2, 2) carried by the ADD markers of ``msg`` (module
+    docstring), in the order of :func:`marker_positions`; None when none of them carries a text.
+
+    ValueError when only some carry one, or for a text that is not ``R=`` followed by three finite numbers
+    (whether ``R`` is a covariance is for its user to judge).
+    """
+    texts = [marker.text for marker in msg.markers if marker.action == Marker.ADD]
+    if not any(texts):
+        return None
+    R = np.empty((len(texts), 2, 2))
+    for k, text in enumerate(texts):
+        values = text.removeprefix(NOISE_PREFIX).split(" ") if text.startswith(NOISE_PREFIX) else []
+        try:
+            r_rr, r_rb, r_bb = (float(value) for value in values)
+        except ValueError:
+            raise ValueError(
+                f"marker text {text!r} is not a detection's noise {NOISE_PREFIX!r}<R_rr> <R_rb> <R_bb>"
+            ) from None
+        R[k] = ((r_rr, r_rb), (r_rb, r_bb))
+    if not np.isfinite(R).all():
+        raise ValueError("non-finite detection noise in a marker text")
+    return R
 
 
 def ellipse_marker(

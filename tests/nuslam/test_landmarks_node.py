@@ -26,6 +26,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from nusim.nusim_node import NusimNode
 from nuslam.landmarks_node import LandmarksNode
+from nuturtle_ros_common.markers import marker_noise
 from rclpy_harness import matched, record_rosout, refused_at_construction, warnings_of
 from turtlelib import DetectorConfig, LidarConfig, Transform2D, arena_walls, simulate_scan
 
@@ -123,6 +124,15 @@ def test_two_cylinders_give_a_deleteall_then_a_cylinder_each_at_its_centre_with_
         assert marker.pose.orientation.w == 1.0
         assert (marker.color.r, marker.color.g, marker.color.b, marker.color.a) == pytest.approx(GREEN)
     assert rig.warnings() == []
+
+
+def test_each_cylinder_carries_the_detector_s_range_bearing_noise_in_its_text(ros):
+    """range_std / bearing_std are THE observation noise of a detection: on the wire with each one."""
+    rig = Rig(ros, bearing_std=0.05)
+    found = cylinders_of(rig.send(scan_message(T0_NS, scan_ranges())))
+    assert len(found) == 2
+    R = np.diag([DetectorConfig().range_std ** 2, 0.05**2])
+    np.testing.assert_array_equal(marker_noise(MarkerArray(markers=found)), [R, R])
 
 
 def test_a_scan_in_another_frame_keeps_its_frame_and_each_scan_gets_its_own_array(ros):
@@ -314,7 +324,7 @@ BAD_SCANS = {
     "infinite angle_min": ({"angle_min": -math.inf}, "angle_min"),
     "range_min == range_max": ({"range_min": 3.5}, "range_min < range_max"),
     "range_min > range_max": ({"range_min": 4.0}, "range_min < range_max"),
-    "NaN range_max": ({"range_max": math.nan}, "range_min < range_max"),
+    "NaN range_max": ({"range_max": math.nan}, "range_max must be a finite number"),
     "no beams": ({"ranges": []}, "non-empty"),
     # layouts that contradict themselves (the issue: 85 of 85 detections were phantoms)
     "angle_increment negated": ({"angle_increment": -LDS01.angle_increment}, "contradicts itself"),

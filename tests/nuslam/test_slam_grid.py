@@ -23,13 +23,13 @@ from test_slam_maps import call, diagnostics, diagnostics_values, good_document,
 from test_slam_node import Arc, Rig, S
 
 from nuslam.slam_node import MAP_QOS, SlamNode
+from nuturtle_ros_common.conversions import range_scan_from_message
 from rclpy_harness import refused_at_construction
 from turtlelib import (
     GridConfig,
     KeyframeConfig,
     LidarConfig,
     OccupancyGrid,
-    RangeScan,
     ScanKeyframes,
     Transform2D,
     arena_walls,
@@ -55,10 +55,6 @@ def scan_message(T_map_body: Transform2D, t_ns: int, rng: np.random.Generator) -
     msg.header.stamp, msg.header.frame_id = stamp(t_ns), "base_scan"
     msg.ranges = simulate_scan(T_map_body @ T_BODY_SCAN, CIRCLES, WALLS, LIDAR, rng).tolist()
     return msg
-
-
-def range_scan(msg: LaserScan) -> RangeScan:
-    return RangeScan(np.array(msg.ranges), msg.angle_min, msg.angle_increment, msg.range_min, msg.range_max)
 
 
 def drive_and_scan(rig: Rig) -> list[tuple[int, Transform2D, LaserScan]]:
@@ -106,7 +102,7 @@ def test_scans_at_slams_pose_and_the_lidar_mount_make_the_latched_grid(ros):
     assert ros.spin_until(lambda: published and published[-1].header.stamp == stamp(scans[-1][0]), 5.0)
     expected = OccupancyGrid(GridConfig())
     for _, T_map_body, msg in scans:
-        expected.insert_scan(range_scan(msg), T_map_body @ T_BODY_SCAN)
+        expected.insert_scan(range_scan_from_message(msg), T_map_body @ T_BODY_SCAN)
     grid = latched(rig, OccupancyGridMsg, "map")
     assert_grid(grid, expected.grid_map())
     assert [m.header.stamp for m in published] == [stamp(scans[k][0]) for k in (0, 2, 4, 6)], "every 0.3 s"
@@ -123,7 +119,7 @@ def test_save_writes_the_grid_beside_the_map_and_localization_publishes_it(ros, 
     assert response.success and f"to {tmp_path / 'lab.yaml'}" in response.message, response.message
     keyframes = ScanKeyframes(KeyframeConfig())
     for t_ns, T_map_body, msg in scans:
-        keyframes.offer(t_ns, T_map_body, range_scan(msg))
+        keyframes.offer(t_ns, T_map_body, range_scan_from_message(msg))
     true_poses = {t_ns: T for t_ns, T, _ in scans}
     expected = keyframes.render(true_poses.get, T_BODY_SCAN, GridConfig()).grid_map()
     saved = load_grid_map(tmp_path / "lab.yaml")

@@ -31,6 +31,7 @@ from nuslam.landmarks_node import LandmarksNode
 from nuslam.slam_node import SlamNode
 from nuturtle_description.robot_params import burger_params
 from nuturtle_ros_common.conversions import covariance_from_6x6, odometry_message, yaw_from_quaternion
+from nuturtle_ros_common.markers import noise_text
 from rclpy_harness import matched, record_rosout, refused_at_construction, rosout_matched, warnings_of
 from turtlelib import (
     DiffDriveMotion,
@@ -347,6 +348,46 @@ def test_unknown_association_maps_each_landmark_once_after_confirm_count_sightin
     assert counts == [0, 0, 0, 0, 3, 3, 3, 3], "tentative until the 5th sighting"
     assert close_pose(rig.odoms[-1], arc.pose(5 * S + 7 * S // 5), 1e-6)
     assert rig.warnings() == []
+
+
+@pytest.mark.parametrize(
+    ("frame_id", "R"),
+    [
+        ("base_scan", None),  # a recording made before detections carried their noise: the filter's default
+        ("base_scan", np.diag([0.001**2, 0.001**2])),
+        ("base_scan", np.array([[0.05**2, 1e-5], [1e-5, 0.03**2]])),
+        ("base_footprint", np.array([[0.05**2, 1e-5], [1e-5, 0.03**2]])),
+    ],
+    ids=["no text", "small", "large", "large in base_footprint"],
+)
+def test_each_detection_is_fused_with_the_noise_its_marker_carries(ros, frame_id, R):
+    """Standing at the origin with an exact pose, a new landmark's covariance is its observation's noise
+    carried into the map: ``G R G^T`` with ``G = dp/dz`` at the marker's range and bearing in its frame (the
+    sensor's axes are the map's)."""
+    rig = Rig(ros, confirm_count=1)
+    rig.wheels(S, (0.0, 0.0))
+    x, y = relative(T_BODY_SENSOR if frame_id == "base_scan" else Transform2D())[0][1:]
+    array = cylinder_array(frame_id, S, [(0, x, y)])
+    if R is not None:
+        array.markers[1].text = noise_text(R)
+    assert len(mapped(rig.observe(array))) == 1
+    r, b = math.hypot(x, y), math.atan2(y, x)
+    G = np.array([[math.cos(b), -r * math.sin(b)], [math.sin(b), r * math.cos(b)]])
+    R_used = np.diag([SlamConfig().range_std ** 2, SlamConfig().bearing_std ** 2]) if R is None else R
+    np.testing.assert_allclose(rig.node.slam.landmark_covariances[0], G @ R_used @ G.T, rtol=1e-9, atol=0.0)
+    assert rig.warnings() == []
+
+
+def test_an_array_with_a_malformed_noise_text_is_skipped_with_a_warning(ros):
+    rig = Rig(ros, confirm_count=1)
+    rig.wheels(S, (0.0, 0.0))
+    bad = cylinder_array("base_scan", S, relative(T_BODY_SENSOR))
+    bad.markers[1].text = "R=0.0004 0.0"
+    rig.observations.publish(bad)
+    array = rig.observe(cylinder_array("base_scan", S, relative(T_BODY_SENSOR)))
+    assert len(rig.maps) == 1 and len(mapped(array)) == 3, "the map answers the good array only"
+    warnings = rig.warnings(at_least=1)
+    assert len(warnings) == 1 and "landmarks skipped" in warnings[0] and "'R=0.0004 0.0'" in warnings[0]
 
 
 def test_confirm_count_sets_the_sightings_that_confirm_a_landmark(ros):
@@ -691,7 +732,6 @@ def invalid(name: str, value, message: str):
         invalid("tentative_timeout", "2", "tentative_timeout must be of type float"),
         invalid("gate_known", 1.5, "gate_known"),
         invalid("linearization", "exact", "linearization must be one of"),
-        invalid("range_std_per_m", -0.01, "range_std_per_m"),
         invalid("noise_correlation", 1.0, "noise_correlation"),
         invalid("noise_correlation_length", -0.3, "noise_correlation_length"),
         invalid("wheel_noise", -0.1, "wheel_noise"),
@@ -711,6 +751,9 @@ def test_the_default_parameters(ros):
     # the sensor mount is the robot's (lidar_x ...), not a parameter of the filter's own
     assert node.config == SlamConfig(sensor_x=T_BODY_SENSOR.x)
     assert not node.has_parameter("sensor_x")
+    # the observation noise is the detections' own (the landmarks node's): the filter keeps its default as
+    # the fallback for arrays without
+    assert not any(node.has_parameter(name) for name in ("range_std", "bearing_std", "range_std_per_m"))
     assert node.get_parameter("tentative_timeout").value == 2.0  # s
     assert node.get_parameter("gate_known").value == 0.9999
     assert node.get_parameter("linearization").value == "standard"
@@ -729,7 +772,6 @@ def test_the_filter_parameters_reach_the_filter(ros, linearization):
         Parameter("tentative_timeout", value=0.5),
         Parameter("gate_known", value=1.0),
         Parameter("linearization", value=linearization),
-        Parameter("range_std_per_m", value=0.01),
         Parameter("noise_correlation", value=0.9),
         Parameter("noise_correlation_length", value=0.3),
     ]
@@ -741,7 +783,6 @@ def test_the_filter_parameters_reach_the_filter(ros, linearization):
         tentative_timeout=0.5,
         gate_known=1.0,
         linearization=linearization,
-        range_std_per_m=0.01,
         noise_correlation=0.9,
         noise_correlation_length=0.3,
     )

@@ -10,12 +10,14 @@ from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Pose, Quaternion
 from hypothesis import given
 from hypothesis import strategies as st
+from sensor_msgs.msg import LaserScan
 
 from nuturtle_ros_common.conversions import (
     covariance_from_6x6,
     planar_covariance_6x6,
     pose_from_transform,
     quaternion_from_yaw,
+    range_scan_from_message,
     stamp_from_seconds,
     stamp_nanoseconds,
     stamp_seconds,
@@ -110,3 +112,35 @@ def test_planar_covariance_embedding_round_trip():
     P6 = np.reshape(values, (6, 6))
     assert P6[0, 0] == 1.0 and P6[5, 5] == 3.0 and P6[0, 5] == 0.2 and P6[2, 2] == 0.0
     np.testing.assert_array_equal(covariance_from_6x6(values), P)
+
+
+def lds01_message(**fields) -> LaserScan:
+    """An LDS-01 scan: 360 beams of 1 deg from 0 to 2 pi, returns in [0.12, 3.5] m."""
+    msg = LaserScan(angle_min=0.0, angle_max=2.0 * math.pi, angle_increment=2.0 * math.pi / 360)
+    msg.range_min, msg.range_max = 0.12, 3.5
+    msg.ranges = [1.0] * 360
+    for name, value in fields.items():
+        setattr(msg, name, value)
+    return msg
+
+
+def test_range_scan_from_message_keeps_the_layout_and_the_ranges():
+    ranges = np.linspace(0.1, 4.0, 360)
+    scan = range_scan_from_message(lds01_message(ranges=ranges.tolist(), intensities=[5.0] * 360))
+    np.testing.assert_array_equal(scan.ranges, ranges.astype(np.float32))
+    assert (scan.angle_min, scan.range_min, scan.range_max) == (0.0, pytest.approx(0.12), 3.5)
+    assert scan.angle_increment == pytest.approx(2.0 * math.pi / 360, rel=1e-7)
+
+
+@pytest.mark.parametrize(
+    ("fields", "message"),
+    [
+        ({"angle_increment": -2.0 * math.pi / 360}, "contradicts itself"),
+        ({"ranges": [1.0] * 720}, "contradicts itself"),
+        ({"intensities": [1.0] * 180}, "180 intensities for 360 ranges"),
+        ({"range_min": 3.5}, "need range_min < range_max"),
+    ],
+)
+def test_range_scan_from_message_refuses_a_layout_that_contradicts_itself(fields, message):
+    with pytest.raises(ValueError, match=message):
+        range_scan_from_message(lds01_message(**fields))

@@ -91,8 +91,7 @@ class Quality:
         self, scene: Scene, lidar: LidarConfig, detector: LandmarkDetector, ranges: np.ndarray
     ) -> None:
         """Detect in one scan of ``scene`` and score the detections."""
-        limits = (lidar.range_min, lidar.range_max)
-        detections = detector.detect(ranges, lidar.angle_min, lidar.angle_increment, *limits)
+        detections = detector.detect(lidar.range_scan(ranges))
         centres = np.empty((0, 2))
         if len(scene.circles):
             centres = scene.T_world_sensor.inverse() @ scene.circles[:, :2]

@@ -12,7 +12,7 @@ ALLOWED = {
     "geometry": {"util"},
     "motion": {"geometry", "util"},
     "sensing": {"geometry", "util"},
-    "mapping": {"geometry", "util"},
+    "mapping": {"sensing", "geometry", "util"},
     "estimation": {"motion", "sensing", "mapping", "geometry", "util"},
     "smoothing": {"estimation", "motion", "mapping", "geometry", "util"},
 }

@@ -16,7 +16,6 @@ from .mapping.occupancy_grid import (
     GridMap,
     KeyframeConfig,
     OccupancyGrid,
-    RangeScan,
     ScanKeyframes,
 )
 from .motion.kinematics import DiffDrive
@@ -37,9 +36,9 @@ from .sensing.detection import (
     DetectorConfig,
     LandmarkDetector,
     beams_in_one_turn,
-    check_scan_layout,
     cluster_scan,
 )
+from .sensing.range_scan import RangeScan, check_scan_layout
 from .sensing.scan_model import LidarConfig, arena_walls, cast_beams, polygon_walls, simulate_scan
 
 __all__ = [

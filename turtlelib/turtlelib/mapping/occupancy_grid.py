@@ -64,7 +64,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..geometry.path_trail import PathTrail, PathTrailConfig
 from ..geometry.se2 import Transform2D
-from ..util.validation import finite_real, in_range, integer, non_negative, positive, store
+from ..sensing.range_scan import RangeScan
+from ..util.validation import in_range, integer, non_negative, positive, store
 
 UNKNOWN = -1  # nav_msgs/OccupancyGrid's value of a cell never observed
 # Largest side of a grid (cells): 2^15 x 2^15 cells are 5 GB of state, far beyond any TurtleBot's map
@@ -134,41 +135,6 @@ class GridConfig:
         cells = self.max_size_m / self.resolution_m
         if cells > _MAX_CELLS:
             raise ValueError(f"max_size_m / resolution_m must be <= {_MAX_CELLS} cells a side, got {cells}")
-
-
-@dataclass(frozen=True)
-class RangeScan:
-    """One 2D LiDAR scan as ``sensor_msgs/LaserScan`` gives it: ``ranges`` (m), beam ``b`` at
-    ``angle_min + b angle_increment`` (rad, sensor frame), valid returns in ``[range_min, range_max]``.
-
-    ``ranges`` is stored as a read-only float64 copy (any value allowed: invalid ones mean no return);
-    ValueError for an empty or non 1-D ``ranges``, non-finite angles, a zero increment or limits that are
-    not ``0 <= range_min < range_max`` finite.
-    """
-
-    ranges: NDArray[np.float64]
-    angle_min: float
-    angle_increment: float
-    range_min: float
-    range_max: float
-
-    def __post_init__(self) -> None:
-        ranges = np.array(self.ranges, dtype=np.float64)
-        if ranges.ndim != 1 or ranges.shape[0] == 0:
-            raise ValueError(f"ranges must be a non-empty 1-D array, got shape {ranges.shape}")
-        ranges.flags.writeable = False
-        object.__setattr__(self, "ranges", ranges)
-        store(self, ("angle_min", "angle_increment", "range_max"), finite_real)
-        store(self, ("range_min",), non_negative)
-        if self.angle_increment == 0.0:
-            raise ValueError("angle_increment must be non-zero")
-        if not self.range_min < self.range_max:
-            raise ValueError(f"need range_min < range_max, got {self.range_min}, {self.range_max}")
-
-    def returns(self) -> NDArray[np.bool_]:
-        """Beams with a return: finite, > 0 and in ``[range_min, range_max]`` (NaN fails every test)."""
-        rho = self.ranges
-        return (rho > 0.0) & (rho >= self.range_min) & (rho <= self.range_max)
 
 
 @dataclass(frozen=True, eq=False)

@@ -47,19 +47,15 @@ from dataclasses import dataclass, field
 from functools import partial
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
 from ..util.validation import finite_real, in_range, integer, non_negative, positive, store
 from .circle_fit import fit_circles, refine_for_range_sensor
+from .range_scan import RangeScan
 
 # A scan is a full turn when the angular gap from its last beam back to its first is at most this many
 # beam increments.
 _SEAM_GAP_INCREMENTS = 1.5
-# Slack of check_scan_layout (rad): LaserScan's angles are float32, ~1e-7 relative, over ~1000 beams
-LAYOUT_SLACK_RAD = 1e-4
-# Valid ranges are > 0 and finite whatever the scan's limits.
-_SMALLEST_RANGE = float(np.nextafter(0.0, 1.0))
-_LARGEST_RANGE = float(np.finfo(np.float64).max)
 # Offsets from a cluster's first and last beam to the beams just outside it, and the matching sides of
 # _ScanGeometry.bisectors.
 _BEFORE_AFTER = np.array([-1, 1])
@@ -91,11 +87,13 @@ class DetectorConfig:
     * ``beam_range_std`` (m, > 0): range noise of one beam (noise and quantisation), for the refinement;
     * ``min_cos_incidence`` (in (0, 1]): floor on the cosine of a beam's incidence angle there;
     * ``range_std`` (m, > 0), ``bearing_std`` (rad, > 0): standard deviations of a detection's range and
-      bearing, the diagonal of its covariance.
+      bearing, ``R = diag(range_std^2, bearing_std^2)``: THE observation noise of a detection, which slam
+      fuses it with (the ``landmarks`` node sends it along with each detection).
 
     The defaults suit the TurtleBot3 LiDARs (LDS-01, LDS-02, Gazebo's: beams of about 1 deg, about 1 cm
     range noise) and cylinders of 0.03-0.2 m radius (ours are 0.038 m, turtlebot3_world's 0.15 m);
-    ``range_std`` and ``bearing_std`` bound the errors measured on such scans (see docs/benchmarks.md).
+    ``range_std`` and ``bearing_std`` (0.02 m, 0.02 rad: what the filter has always used) bound the errors
+    measured on such scans (see docs/benchmarks.md).
     Invalid values raise ValueError.
     """
 
@@ -111,8 +109,8 @@ class DetectorConfig:
     silhouette_tolerance: float = 0.03
     beam_range_std: float = 0.01
     min_cos_incidence: float = 0.2
-    range_std: float = 0.015
-    bearing_std: float = 0.006
+    range_std: float = 0.02
+    bearing_std: float = 0.02
 
     def __post_init__(self) -> None:
         prefix = "detector "
@@ -242,7 +240,9 @@ class _ScanGeometry:
     edge_std_per_m: float
 
     @classmethod
-    def from_angles(cls, angles_rad: NDArray[np.float64]) -> _ScanGeometry:
+    def of_layout(cls, samples: int, angle_min: float, angle_increment: float) -> _ScanGeometry:
+        """The geometry of beams ``angle_min + b angle_increment``, ``b = 0 .. samples - 1`` (rad)."""
+        angles_rad = angle_min + angle_increment * np.arange(samples, dtype=np.float64)
         directions = np.column_stack((np.cos(angles_rad), np.sin(angles_rad)))
         before, after = np.roll(directions, 1, axis=0), np.roll(directions, -1, axis=0)
         sums = np.stack((directions + before, directions + after), axis=1)
@@ -250,12 +250,6 @@ class _ScanGeometry:
         bisectors = np.where(norms > 1e-12, sums / np.maximum(norms, 1e-12), directions[:, None, :])
         increment = abs(float(angles_rad[1] - angles_rad[0])) if angles_rad.shape[0] > 1 else 0.0
         return cls(directions, bisectors, _is_full_turn(angles_rad), increment / math.sqrt(12.0))
-
-
-def _valid_beams(range_m: NDArray[np.float64], range_min: float, range_max: float) -> NDArray[np.bool_]:
-    """Beams with a return: ``0 < rho``, ``range_min <= rho <= range_max`` and finite (NaN fails both
-    comparisons)."""
-    return (range_m >= max(range_min, _SMALLEST_RANGE)) & (range_m <= min(range_max, _LARGEST_RANGE))
 
 
 def _cluster(
@@ -288,13 +282,6 @@ def _cluster(
     return Clusters(p_sensor, offsets, beam_index)
 
 
-def _checked_ranges(ranges: ArrayLike) -> NDArray[np.float64]:
-    range_m = np.asarray(ranges, dtype=np.float64)
-    if range_m.ndim != 1 or range_m.shape[0] == 0:
-        raise ValueError(f"ranges must be a non-empty 1-D array, got shape {range_m.shape}")
-    return range_m
-
-
 def beams_in_one_turn(samples: int, angle_increment: float) -> int:
     """How many of a scan's ``samples`` beams the detector uses: the first beams up to one full turn.
 
@@ -311,62 +298,24 @@ def beams_in_one_turn(samples: int, angle_increment: float) -> int:
     return max(1, math.ceil(math.tau / step - 0.5))
 
 
-def check_scan_layout(samples: int, angle_min: float, angle_max: float, angle_increment: float) -> None:
-    """ValueError unless a scan's layout agrees with itself (sensor_msgs/LaserScan's fields).
+def _used_beams(scan: RangeScan) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """The ranges (m) of the beams of the scan's first full turn (:func:`beams_in_one_turn`) and which of
+    them have a return (:meth:`RangeScan.returns`)."""
+    samples = beams_in_one_turn(scan.ranges.shape[0], scan.angle_increment)
+    return scan.ranges[:samples], scan.returns()[:samples]
 
-    Beam ``b`` is at ``angle_min + b angle_increment`` (rad); the last, ``angle_min + (samples - 1)
-    angle_increment``, must be ``angle_max`` to within one increment (drivers differ: the LDS-01's gives
-    ``angle_max = 2 pi`` for 360 beams of 1 degree, one increment past its last beam; the LDS-02's last
-    beam lies up to one increment before ``angle_max``) plus ``LAYOUT_SLACK_RAD`` for float32 rounding;
-    the angles finite, the increment non-zero and both ends within one turn of zero. A scan that disagrees
-    (a negated or doubled increment, twice the ranges) would put every beam in the wrong direction.
-    Beams beyond one full turn (Gazebo's last beam repeats its first) do not make a layout wrong: the
-    detector drops them (:func:`beams_in_one_turn`).
+
+def cluster_scan(scan: RangeScan, config: DetectorConfig) -> Clusters:
+    """Steps 1-2 of the pipeline (module docstring) on a scan's beams of one full turn.
+
+    Drops beams without a return (0.0, NaN, inf, outside ``[range_min, range_max]``), splits the
+    remaining points where consecutive points are ``cluster_threshold`` (m) or more apart, and, when the
+    beams cover a full turn (the gap from the last beam back to the first is at most 1.5 beam steps),
+    merges the last cluster into the first across the seam.
     """
-    values = (angle_min, angle_max, angle_increment)
-    if not all(math.isfinite(v) for v in values) or angle_increment == 0.0:
-        raise ValueError(f"need finite angle_min, angle_max and angle_increment != 0, got {values}")
-    if samples < 1:
-        raise ValueError("a scan needs a non-empty ranges array")
-    if max(abs(angle_min), abs(angle_max)) > 2.0 * math.pi + LAYOUT_SLACK_RAD:
-        raise ValueError(f"angle_min {angle_min} or angle_max {angle_max} is more than a turn from 0")
-    last = angle_min + (samples - 1) * angle_increment
-    if abs(last - angle_max) > abs(angle_increment) + LAYOUT_SLACK_RAD:
-        raise ValueError(
-            f"{samples} ranges from angle_min {angle_min} by {angle_increment} rad end at {last:.6g} rad, "
-            f"but angle_max is {angle_max}: the layout contradicts itself"
-        )
-
-
-def _checked_limits(range_min: float, range_max: float) -> tuple[float, float]:
-    range_min, range_max = float(range_min), float(range_max)
-    if math.isnan(range_min) or math.isnan(range_max) or not range_min < range_max:
-        raise ValueError(f"need range_min < range_max, got {range_min}, {range_max}")
-    return range_min, range_max
-
-
-def cluster_scan(
-    ranges: ArrayLike,
-    angles: ArrayLike,
-    config: DetectorConfig,
-    range_min: float = 0.0,
-    range_max: float = math.inf,
-) -> Clusters:
-    """Cluster a scan: ``ranges`` (B,) in m along beam directions ``angles`` (B,) in rad.
-
-    Drops beams that are 0.0, NaN, inf or outside ``[range_min, range_max]``, splits the remaining
-    points where consecutive points are ``cluster_threshold`` or more apart, and, when the beams cover a
-    full turn (the gap from the last beam back to the first is at most 1.5 beam steps), merges the last
-    cluster into the first across the seam. ValueError for empty or mismatched arrays, non-finite angles
-    or ``range_min >= range_max``.
-    """
-    range_m = _checked_ranges(ranges)
-    angles_rad = np.asarray(angles, dtype=np.float64)
-    if angles_rad.shape != range_m.shape or not np.isfinite(angles_rad).all():
-        raise ValueError(f"angles must be finite with the shape of ranges {range_m.shape}")
-    range_min, range_max = _checked_limits(range_min, range_max)
-    geometry = _ScanGeometry.from_angles(angles_rad)
-    return _cluster(range_m, _valid_beams(range_m, range_min, range_max), geometry, config.cluster_threshold)
+    range_m, valid = _used_beams(scan)
+    geometry = _ScanGeometry.of_layout(range_m.shape[0], scan.angle_min, scan.angle_increment)
+    return _cluster(range_m, valid, geometry, config.cluster_threshold)
 
 
 @dataclass(eq=False)
@@ -382,53 +331,27 @@ class LandmarkDetector:
         default=None, init=False, repr=False
     )
 
-    def detect(
-        self,
-        ranges: ArrayLike,
-        angle_min: float,
-        angle_increment: float,
-        range_min: float,
-        range_max: float,
-    ) -> Detections:
-        """Cylinders in a scan of ``ranges`` (B,) (m) on beams ``angle_min + b * angle_increment`` (rad).
+    def detect(self, scan: RangeScan) -> Detections:
+        """Cylinders in ``scan`` (sensor frame; m, rad).
 
-        Beams that are 0.0, NaN, inf or outside ``[range_min, range_max]`` are ignored, and so are beams
-        beyond one full turn (:func:`beams_in_one_turn`: Gazebo's last beam repeats its first). ValueError for
-        an empty or non-1-D ``ranges``, a non-finite or zero ``angle_increment``, a non-finite
-        ``angle_min``, or ``range_min >= range_max``.
+        Beams without a return (0.0, NaN, inf, outside ``[range_min, range_max]``) are ignored, and so are
+        beams beyond one full turn (:func:`beams_in_one_turn`: Gazebo's last beam repeats its first). The
+        scan was validated when it was built (:class:`turtlelib.sensing.range_scan.RangeScan`).
         """
-        return self.detect_with_clusters(ranges, angle_min, angle_increment, range_min, range_max)[0]
+        return self.detect_with_clusters(scan)[0]
 
-    def detect_with_clusters(
-        self,
-        ranges: ArrayLike,
-        angle_min: float,
-        angle_increment: float,
-        range_min: float,
-        range_max: float,
-    ) -> tuple[Detections, Clusters]:
+    def detect_with_clusters(self, scan: RangeScan) -> tuple[Detections, Clusters]:
         """As :meth:`detect`, also returning every cluster of the scan (for a debug topic)."""
-        range_m = _checked_ranges(ranges)
-        range_min, range_max = _checked_limits(range_min, range_max)
-        angle_min, angle_increment = float(angle_min), float(angle_increment)
-        if not (math.isfinite(angle_min) and math.isfinite(angle_increment) and angle_increment != 0.0):
-            raise ValueError(
-                f"need finite angle_min and angle_increment != 0, got {angle_min}, {angle_increment}"
-            )
-        range_m = range_m[: beams_in_one_turn(range_m.shape[0], angle_increment)]
-        geometry = self._scan_geometry(range_m.shape[0], angle_min, angle_increment)
-        valid = _valid_beams(range_m, range_min, range_max)
+        range_m, valid = _used_beams(scan)
+        geometry = self._scan_geometry(range_m.shape[0], scan.angle_min, scan.angle_increment)
         clusters = _cluster(range_m, valid, geometry, self.config.cluster_threshold)
         return self._classify(clusters, range_m, valid, geometry), clusters
 
     def _scan_geometry(self, samples: int, angle_min: float, angle_increment: float) -> _ScanGeometry:
         key = (samples, angle_min, angle_increment)
-        if self._layout is not None and self._layout[0] == key:
-            return self._layout[1]
-        angles_rad = angle_min + angle_increment * np.arange(samples, dtype=np.float64)
-        geometry = _ScanGeometry.from_angles(angles_rad)
-        self._layout = (key, geometry)
-        return geometry
+        if self._layout is None or self._layout[0] != key:
+            self._layout = (key, _ScanGeometry.of_layout(samples, angle_min, angle_increment))
+        return self._layout[1]
 
     def _classify(
         self,

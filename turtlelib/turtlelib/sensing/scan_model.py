@@ -42,6 +42,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..geometry.se2 import Transform2D
 from ..util.validation import finite_real, in_range, integer, non_negative, positive, store
+from .range_scan import RangeScan
 
 # Tolerance on the beams' span <= 2 pi (beams may not wrap past a full turn).
 _FULL_TURN_SLACK_RAD = 1e-9
@@ -109,6 +110,10 @@ class LidarConfig:
     def angles(self) -> NDArray[np.float64]:
         """Beam directions ``phi_b = angle_min + b * angle_increment`` (rad), shape (samples,)."""
         return self.angle_min + self.angle_increment * np.arange(self.samples, dtype=np.float64)
+
+    def range_scan(self, range_m: ArrayLike) -> RangeScan:
+        """``range_m`` (samples,) (m) measured on this layout, as the detector and the grid take a scan."""
+        return RangeScan(range_m, self.angle_min, self.angle_increment, self.range_min, self.range_max)
 
     def scan_layout(self, rng: np.random.Generator) -> LidarConfig:
         """The layout of the next scan: this one when ``spin_spread`` is 0 (nothing is drawn), else one
