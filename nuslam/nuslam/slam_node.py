@@ -125,45 +125,41 @@ from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
 from nuslam.grid_mapping import GridMapping
+from nuslam.map_to_odom import MapToOdom
+from nuslam.observation_reader import ObservationReader
+from nuslam.slam_report import SlamReport
 from nuturtle_description.robot_declaration import declare_robot
+from nuturtle_description.robot_params import RobotParams
 from nuturtle_ros_common.conversions import (
     odometry_message,
     positive_definite_pose_covariance,
     stamp_from_nanoseconds,
     stamp_nanoseconds,
     transform_from_pose,
-    transform_stamped,
 )
 from nuturtle_ros_common.diagnostics import (
-    ERROR,
-    OK,
-    WARN,
     DiagnosticsPublisher,
-    DurationMonitor,
-    InputMonitor,
-    status,
 )
 from nuturtle_ros_common.markers import (
     cylinder_marker,
     delete_all_marker,
     ellipse_marker,
-    marker_noise,
-    marker_positions,
 )
 from nuturtle_ros_common.node_main import run_node
 from nuturtle_ros_common.odom_stream import OdomStream
 from nuturtle_ros_common.path_topic import PathTopic
 from nuturtle_ros_common.ros_params import declare_dataclass, field_defaults
-from nuturtle_ros_common.tf_compat import OptionalTfBroadcaster
 from nuturtle_ros_common.throttle import SourceWarnings
 from nuturtle_ros_common.wheel_joints import WheelJoints
 from nuturtle_ros_common.wheel_stream import declare_wheel_stream
 from turtlelib import (
+    DiffDrive,
     DiffDriveMotion,
     EkfSlam,
+    MotionModel,
+    MotionSignal,
     OdometryMotion,
     OdometryPoses,
-    Outcome,
     SlamConfig,
     SlamTimeline,
     TimelineConfig,
@@ -172,9 +168,7 @@ from turtlelib import (
     TwistNoise,
     WheelAngles,
 )
-from turtlelib.estimation.range_bearing import landmarks_from_observations, observations_from_points
 from turtlelib.estimation.slip_recovery import SlipRecovery, SlipRecoveryConfig, lost_wheel_turn_per_m
-from turtlelib.geometry.pose_buffer import PoseBuffer
 from turtlelib.mapping.landmark_map import LandmarkMap, load_map, save_map
 from turtlelib.motion.pose_twist import PoseTwist
 from turtlelib.motion.sample_gate import GateResult, Verdict
@@ -188,16 +182,10 @@ FALLBACK_NOISE_FIELDS = ("range_std", "bearing_std", "range_std_per_m")
 MOTION_SOURCES = ("joint_states", "odom")
 GREEN = (0.1, 0.8, 0.2, 1.0)
 GREEN_TRANSLUCENT = (0.1, 0.8, 0.2, 0.35)
-# odom samples kept to pair with slam's poses (10 s at the odometry node's 20 Hz)
-ODOM_BUFFER_SAMPLES = 200
-# An input silent this long (s, node clock) is an ERROR in /diagnostics
-STALE_S = 2.0
 # Drawn confidence region of a mapped landmark (standard deviations)
 ELLIPSE_SIGMA = 2.0
 # The default wheel slip (sqrt(rad)); the default odom_* twist noise is this slip on the model's twist
 WHEEL_NOISE = 0.05
-# SlipStatus.level -> diagnostic level
-SLIP_LEVELS = {"ok": OK, "warn": WARN, "error": ERROR}
 # REP 2003 map QoS: reliable, transient local (the last map reaches late subscribers), keep last 1
 MAP_QOS = QoSProfile(
     depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
@@ -219,8 +207,7 @@ class SlamNodeConfig:
     * ``wheel_noise`` (sqrt(rad), >= 0): the motion model's wheel slip, ``N(0, wheel_noise^2 |dphi|)`` per
       wheel over an increment ``dphi`` (:class:`turtlelib.DiffDriveMotion`);
     * ``map_file``: path of the map file (:mod:`turtlelib.mapping.landmark_map`, JSON): loaded at start-up
-    when it
-      exists (it must, with ``mode: localization``), written by ``~/save_map``; empty for none;
+      when it exists (it must, with ``mode: localization``), written by ``~/save_map``; empty for none;
     * ``observation_timeout`` (s, > 0): the wheels turning this long (joint_states time) without an
       observation arriving gives a (throttled) warning: slam is only dead-reckoning;
     * ``smooth_saved_map``: keep the run's history (since start-up, the last reset or relocalization;
@@ -264,112 +251,101 @@ class SlamNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__("slam", **kwargs)
-        self.node_config = declare_dataclass(self, SlamNodeConfig)
+        self.node_config = frames = declare_dataclass(self, SlamNodeConfig)
         robot = declare_robot(self)
-        # the sensor mount is the robot's: written once, in its description
-        T_body_scan = robot.T_body_scan
-        sensor_mount = {
-            "sensor_x": T_body_scan.x,
-            "sensor_y": T_body_scan.y,
-            "sensor_theta": T_body_scan.theta,
-        }
-        # the observation noise is each detection's own (`landmarks`' markers): the filter's default is only
-        # the fallback for arrays without it, not a parameter
-        fallback_noise = {name: field_defaults(SlamConfig)[name] for name in FALLBACK_NOISE_FIELDS}
-        self.config = declare_dataclass(self, SlamConfig, fixed={**sensor_mount, **fallback_noise})
-        timeline_config = declare_dataclass(self, TimelineConfig)
-        lost_wheel = {"slip_turn_per_m": lost_wheel_turn_per_m(robot.track_width)}
-        self.recovery = SlipRecovery(declare_dataclass(self, SlipRecoveryConfig, fixed=lost_wheel))
+        self.timeline = self._estimator(robot)
+        self.slam, self.recovery = self.timeline.slam, self.timeline.step
         self.joints = declare_dataclass(self, WheelJoints)
         self.path = PathTopic(self)
-        drive = robot.diff_drive()
-        odom_noise = declare_dataclass(
-            self, TwistNoise, prefix="odom_", overrides=vars(TwistNoise.from_wheel_slip(drive, WHEEL_NOISE))
-        )
-        self._from_odom = self.node_config.motion_source == "odom"
-        if self._from_odom:
-            motion, signal = OdometryMotion(odom_noise), OdometryPoses()
-            self.odometry: WheelOdometry | PoseTwist = PoseTwist()
-        else:
-            motion, signal = DiffDriveMotion(drive, self.node_config.wheel_noise), WheelAngles()
-            self.odometry = WheelOdometry(drive)
-        self.slam = EkfSlam(self.config, motion, self.node_config.T_map_body0)
-        # the map loaded at start-up (None: none), which ~/reset goes back to
-        self._start_map = self._load_start_map()
-        if self._start_map is not None:
-            self.slam.load_map(self._start_map, self.node_config.T_map_body0)
         self._warnings = SourceWarnings(self.get_logger())
-        frames = self.node_config
+        grid_frames = (frames.map_id, frames.body_id, frames.sensor_id)
+        localization = self.config.mode == "localization"
         self.grid = GridMapping(
-            self,
-            T_body_scan,
-            (frames.map_id, frames.body_id, frames.sensor_id),
-            self._warnings,
-            frames.map_file,
-            self.config.mode == "localization",
+            self, robot.T_body_scan, grid_frames, self._warnings, frames.map_file, localization
         )
-        if self.node_config.smooth_saved_map and self.config.mode == "localization":
-            raise ValueError("smooth_saved_map needs mode mapping: in localization the map is fixed")
-        self.timeline = SlamTimeline(
-            self.slam,
-            signal,
-            timeline_config,
-            step=self.recovery,
-            keep_history=self.node_config.smooth_saved_map,
-        )
-        # T_sensor_frame for the frames observations may come in
+        known = frames.association == "known"
         T_body_sensor = self.config.T_body_sensor
-        self._T_sensor_from = {
-            self.node_config.sensor_id: Transform2D(),
-            self.node_config.body_id: T_body_sensor.inverse(),
-        }
-        self._fake_sensor_covariance = self.node_config.fake_sensor_std**2 * np.eye(2)
-        self._observation_topic = "fake_sensor" if self.node_config.association == "known" else "landmarks"
+        self._reader = ObservationReader(
+            known, frames.fake_sensor_std, frames.sensor_id, frames.body_id, T_body_sensor
+        )
         # the stamp and value of the first motion sample since the last observation
         self._observed_at: tuple[int, tuple[float, ...]] | None = None
         self._wheels = declare_wheel_stream(self, self.joints, robot, self._warnings)
         self._odom = OdomStream(
             frames.odom_id, frames.body_id, robot, self._wheels.gate.config, self._warnings
         )
+        topics = (frames.motion_source, "fake_sensor" if known else "landmarks")
+        started_ns = self.get_clock().now().nanoseconds
+        self.report = SlamReport(self.slam, self.recovery, self.grid, self._warnings, topics, started_ns)
+        self._connect(topics[1])
 
+    def _estimator(self, robot: RobotParams) -> SlamTimeline:
+        """The filter (``SlamConfig``; the sensor mount is the robot's, written once in its description; the
+        observation noise is each detection's own, so the filter's default is only the fallback, not a
+        parameter) with its motion model and the map loaded at start-up, on its timeline with slip recovery
+        acting on the scans."""
+        frames, T_body_scan = self.node_config, robot.T_body_scan
+        fixed = {"sensor_x": T_body_scan.x, "sensor_y": T_body_scan.y, "sensor_theta": T_body_scan.theta}
+        fixed.update({name: field_defaults(SlamConfig)[name] for name in FALLBACK_NOISE_FIELDS})
+        self.config = declare_dataclass(self, SlamConfig, fixed=fixed)
+        timeline_config = declare_dataclass(self, TimelineConfig)
+        lost_wheel = {"slip_turn_per_m": lost_wheel_turn_per_m(robot.track_width)}
+        recovery = SlipRecovery(declare_dataclass(self, SlipRecoveryConfig, fixed=lost_wheel))
+        motion, signal, self.odometry = self._motion_model(robot.diff_drive())
+        slam = EkfSlam(self.config, motion, frames.T_map_body0)
+        # the map loaded at start-up (None: none), which ~/reset goes back to
+        self._start_map = self._load_start_map()
+        if self._start_map is not None:
+            slam.load_map(self._start_map, frames.T_map_body0)
+        if frames.smooth_saved_map and self.config.mode == "localization":
+            raise ValueError("smooth_saved_map needs mode mapping: in localization the map is fixed")
+        return SlamTimeline(
+            slam, signal, timeline_config, step=recovery, keep_history=frames.smooth_saved_map
+        )
+
+    def _motion_model(self, drive: DiffDrive) -> tuple[MotionModel, MotionSignal, WheelOdometry | PoseTwist]:
+        """The filter's motion model, the signal its samples are read through, and the body-twist odometry
+        for the published twist: the wheels' (``joint_states``) or the odometry source's (``odom``)."""
+        odom_noise = declare_dataclass(
+            self, TwistNoise, prefix="odom_", overrides=vars(TwistNoise.from_wheel_slip(drive, WHEEL_NOISE))
+        )
+        if self.node_config.motion_source == "odom":
+            return OdometryMotion(odom_noise), OdometryPoses(), PoseTwist()
+        return DiffDriveMotion(drive, self.node_config.wheel_noise), WheelAngles(), WheelOdometry(drive)
+
+    def _connect(self, observation_topic: str) -> None:
+        """Publishers, subscriptions, services and the diagnostics timer, once everything else is checked
+        (a node that fails at start-up must not hold subscriptions: their callbacks keep it alive)."""
+        frames = self.node_config
         self._odom_publisher = self.create_publisher(Odometry, "~/odom", 10)
         # REP 2003: maps are reliable and transient local, so a late subscriber (RViz, Foxglove) gets one
         self._map_publisher = self.create_publisher(MarkerArray, "~/map", MAP_QOS)
         self.grid.connect(self, MAP_QOS, self.timeline)
-        self._tf = OptionalTfBroadcaster(self)
-        self._odom_poses = PoseBuffer(ODOM_BUFFER_SAMPLES)
-        # the newest pose not yet paired with odom for map -> odom: (t_ns, T_map_body, stamp)
-        self._map_to_odom_pending: tuple[int, Transform2D, Time] | None = None
-        if not self._from_odom:
+        self._map_to_odom = MapToOdom(self, frames.map_id, frames.odom_id)
+        if frames.motion_source == "joint_states":
             self.create_subscription(JointState, "joint_states", self._on_joint_states, 10)
         self.create_subscription(Odometry, "odom", self._on_odom, 10)
         self.create_subscription(PoseWithCovarianceStamped, "initialpose", self._on_initial_pose, 10)
         self.create_service(Trigger, "~/save_map", self._on_save_map)
         self.create_service(Trigger, "~/reset", self._on_reset)
-        started_ns = self.get_clock().now().nanoseconds
-        self._motion_input = InputMonitor(self.node_config.motion_source, started_ns, STALE_S)
-        self._observation_input = InputMonitor(self._observation_topic, started_ns, STALE_S)
-        self._update_time = DurationMonitor()
-        self._counts = {"fused": 0, "rejected": 0, "unmapped": 0, "skipped": 0, "arrays_applied": 0}
-        self._skipped_reported = self._rejected_reported = 0
-        DiagnosticsPublisher(self, self._statuses)
-        self.create_subscription(MarkerArray, self._observation_topic, self._on_observations, 10)
+        DiagnosticsPublisher(self, self.report.statuses)
+        self.create_subscription(MarkerArray, observation_topic, self._on_observations, 10)
 
     @property
     def observation_counts(self) -> dict[str, int]:
         """Observation arrays so far (read-only): ``received`` on the observation topic, ``applied`` by the
         filter, ``skipped`` (refused), ``pending`` (waiting for motion samples past their stamp)."""
         return {
-            "received": self._observation_input.count,
-            "applied": self._counts["arrays_applied"],
-            "skipped": self._counts["skipped"],
+            "received": self.report.observation_input.count,
+            "applied": self.report.counts["arrays_applied"],
+            "skipped": self.report.counts["skipped"],
             "pending": self.timeline.pending_count,
         }
 
     # --- inputs ------------------------------------------------------------------------------------------
 
     def _on_joint_states(self, msg: JointState) -> None:
-        self._motion_input.arrived(self.get_clock().now().nanoseconds)
+        self.report.motion_input.arrived(self.get_clock().now().nanoseconds)
         self._follow(self._wheels.offer(msg))
 
     def _follow(self, result: GateResult | None) -> None:
@@ -390,7 +366,7 @@ class SlamNode(Node):
         try:
             start = time.perf_counter()
             applied = self.timeline.add_motion(t_ns, sample)
-            self._count_applied(applied, start)
+            self.report.applied(applied, 1e3 * (time.perf_counter() - start))
             if self.odometry.reference_time_s is None:
                 self.odometry.set_reference(t_s, *sample)
             V_body = self.odometry.step(t_s, *sample)
@@ -409,18 +385,16 @@ class SlamNode(Node):
 
     def _on_observations(self, msg: MarkerArray) -> None:
         """One array of `fake_sensor` (known association) or `landmarks` (unknown) into the timeline."""
-        self._observation_input.arrived(self.get_clock().now().nanoseconds)
+        self.report.observation_input.arrived(self.get_clock().now().nanoseconds)
         if self._before_first_motion():
             return
         try:
-            t_ns, ids, z, R = self._observations(msg)
+            t_ns, ids, z, R = self._reader.read(msg)
             start = time.perf_counter()
             applied = self.timeline.add_observations(t_ns, z, R, ids)
-            self._count_applied(applied, start)
+            self.report.applied(applied, 1e3 * (time.perf_counter() - start))
         except (ValueError, np.linalg.LinAlgError) as error:
-            topic = self._observation_topic
-            self._warnings.warn(topic, f"{topic} skipped: {error}")
-            self._counts["skipped"] += 1
+            self.report.skipped(error)
             return
         self._observed_at = None  # the observations arrive: the silence starts again at the next sample
         if applied:
@@ -430,32 +404,15 @@ class SlamNode(Node):
         """A plausible odom sample is kept for ``map -> odom`` and, with ``motion_source: odom``, moves the
         filter; after a restart of the source (`OdomStream`) the odom frame is another, so the kept samples
         go."""
-        if self._from_odom:
-            self._motion_input.arrived(self.get_clock().now().nanoseconds)
+        from_odom = self.node_config.motion_source == "odom"
+        if from_odom:
+            self.report.motion_input.arrived(self.get_clock().now().nanoseconds)
         result = self._odom.offer(msg)
         if result is None:
             return
-        if result.verdict is Verdict.RESTARTED:
-            self._odom_poses.clear()
-        for t_ns, (x, y, theta) in result.samples:
-            self._odom_poses.add(t_ns, Transform2D(x, y, theta))
-        if self._from_odom:
+        self._map_to_odom.odom(result.samples, result.verdict is Verdict.RESTARTED)
+        if from_odom:
             self._follow(result)
-        self._send_map_to_odom()
-
-    def _send_map_to_odom(self) -> None:
-        """``T_map_odom = T_map_body T_odom_body^-1`` for the pending pose, once odom covers its stamp."""
-        if self._map_to_odom_pending is None:
-            return
-        t_ns, T_map_body, stamp = self._map_to_odom_pending
-        T_odom_body = self._odom_poses.at(t_ns)
-        if T_odom_body is None:
-            return
-        frames = self.node_config
-        self._tf.send(
-            transform_stamped(T_map_body @ T_odom_body.inverse(), frames.map_id, frames.odom_id, stamp)
-        )
-        self._map_to_odom_pending = None
 
     def _on_initial_pose(self, msg: PoseWithCovarianceStamped) -> None:
         """Relocalize: the pose and its (x, y, yaw) covariance, positive definite, in ``map_id``, become
@@ -568,59 +525,6 @@ class SlamNode(Node):
         self.get_logger().debug("observation before the first joint_states: dropped")
         return True
 
-    def _count_applied(self, applied: list, start: float) -> None:
-        """Count the observations of ``applied`` scans and time the call that applied them; warn when
-        observations were rejected because the map is full."""
-        if not applied:
-            return
-        self._update_time.add(1e3 * (time.perf_counter() - start))
-        self._counts["arrays_applied"] += len(applied)
-        for result in applied:
-            tally = result.association.counts
-            rejected = tally["rejected"]
-            self._counts["rejected"] += rejected
-            self._counts["unmapped"] += tally["unmapped"]
-            self._counts["fused"] += tally["matched"] + tally["new"]
-            if rejected and self.slam.map_full:
-                self._warnings.warn(
-                    "map",
-                    f"the map holds max_landmarks = {self.config.max_landmarks} landmarks: "
-                    "new ones are not added",
-                )
-            if result.outcome is Outcome.RELOCALIZED:
-                self._warnings.warn("slip", self.recovery.status.message)
-
-    def _statuses(self, now_ns: int) -> list:
-        """The inputs, and the filter: WARN when observations were rejected or skipped since the last
-        report."""
-        skipped = self._counts["skipped"] - self._skipped_reported
-        rejected = self._counts["rejected"] - self._rejected_reported
-        self._skipped_reported, self._rejected_reported = self._counts["skipped"], self._counts["rejected"]
-        mapped, tentative = len(self.slam.landmark_ids), len(self.slam.tentative_ids)
-        message = f"{self.config.mode}: {mapped} landmarks mapped, {tentative} tentative"
-        if skipped or rejected:
-            period = f"{DiagnosticsPublisher.PERIOD_S:g} s"
-            message += f"; in the last {period} {skipped} arrays skipped, {rejected} observations rejected"
-        values = {
-            "landmarks_mapped": mapped,
-            "landmarks_tentative": tentative,
-            "observations_fused": self._counts["fused"],
-            "observations_rejected": self._counts["rejected"],
-            "observations_unmapped": self._counts["unmapped"],
-            "observation_arrays_skipped": self._counts["skipped"],
-            **self._update_time.values("scan_update"),
-        }
-        slip = self.recovery.status
-        slip_values = {"scans_held": slip.held, "relocalizations": slip.relocalized}
-        grid = self.grid.status()
-        return [
-            self._motion_input.status("slam", now_ns),
-            self._observation_input.status("slam", now_ns),
-            status("slam: filter", "slam", WARN if skipped or rejected else OK, message, values),
-            status("slam: motion vs LiDAR", "slam", SLIP_LEVELS[slip.level], slip.message, slip_values),
-            *([grid] if grid is not None else []),
-        ]
-
     def _check_observations_arrive(self, t_ns: int, sample: tuple[float, ...]) -> None:
         """Warn (throttled) when the robot has moved for ``observation_timeout`` without observations."""
         if self._observed_at is None or t_ns < self._observed_at[0]:
@@ -629,59 +533,12 @@ class SlamNode(Node):
         since_ns, since_sample = self._observed_at
         silent_s = (t_ns - since_ns) * 1e-9
         if silent_s > self.node_config.observation_timeout and sample != since_sample:
-            topic = self._observation_topic
-            source = "nusim's fake sensor" if topic == "fake_sensor" else "the landmarks node"
-            self._warnings.warn(
-                "observations",
-                f"no {topic} for {silent_s:.1f} s while the robot moves: slam is only dead-reckoning "
-                f"(is {source} running and publishing {topic}"
-                + ("? Its /diagnostics count the scans it refuses)" if topic == "landmarks" else "?)"),
-            )
+            self.report.silent(silent_s)
 
     def _restart(self, t_ns: int, sample: tuple[float, ...]) -> None:
         """Take this motion sample as the new start of the timeline and of the odometry (estimate kept)."""
         self.timeline.restart(t_ns, sample)
         self.odometry.set_reference(t_ns * 1e-9, *sample)
-
-    def _observations(
-        self, msg: MarkerArray
-    ) -> tuple[int, NDArray[np.int64] | None, NDArray[np.float64], NDArray[np.float64] | None]:
-        """Stamp (ns), landmark ids (known association; None for unknown), observations ``z`` (K, 2)
-        ``[range m, bearing rad]`` in the sensor frame and their noise ``R`` (K, 2, 2) (None: the filter's
-        default, for `landmarks` arrays without noise) of one array; ValueError for an unusable array.
-
-        Known association: positions with covariance ``fake_sensor_std^2 I`` in the markers' frame, rotated
-        into the sensor frame, ``Sigma_sensor = R_sf Sigma R_sf^T``, and turned into range-bearing,
-        ``R = J Sigma_sensor J^T`` (:func:`observations_from_points`). Unknown association: the markers'
-        own noise (:func:`nuturtle_ros_common.markers.marker_noise`), range-bearing about the markers'
-        frame origin: as is in the sensor frame; from another frame carried through the point's covariance,
-        ``Sigma_frame = G R G^T`` (``G = dp/dz``), rotated and turned back as above.
-        """
-        positions = marker_positions(msg)
-        T_sensor_frame = self._T_sensor_from.get(positions.frame_id)
-        if T_sensor_frame is None:
-            raise ValueError(
-                f"markers in frame {positions.frame_id!r}; expected one of {sorted(self._T_sensor_from)}"
-            )
-        t_ns = stamp_nanoseconds(positions.stamp)
-        count = len(positions.ids)
-        # p_sensor = T_sensor_frame @ p_frame
-        p_sensor = T_sensor_frame @ positions.xy if count else positions.xy
-        rotation = T_sensor_frame.rotation_matrix()
-        if self.node_config.association == "known":
-            # Sigma_sensor = R_sf Sigma R_sf^T
-            covariance = np.broadcast_to(rotation @ self._fake_sensor_covariance @ rotation.T, (count, 2, 2))
-            z, R = observations_from_points(p_sensor, covariance)
-            return t_ns, positions.ids, z, R
-        R_frame = marker_noise(msg)
-        if R_frame is None or positions.frame_id == self.node_config.sensor_id:
-            z, _ = observations_from_points(p_sensor, np.zeros((count, 2, 2)))
-            return t_ns, None, z, R_frame
-        z_frame, _ = observations_from_points(positions.xy, np.zeros((count, 2, 2)))
-        _, _, G = landmarks_from_observations(np.zeros(3), z_frame, Transform2D())
-        # Sigma_sensor = R_sf G R G^T R_sf^T
-        z, R = observations_from_points(p_sensor, rotation @ G @ R_frame @ G.transpose(0, 2, 1) @ rotation.T)
-        return t_ns, None, z, R
 
     # --- outputs -----------------------------------------------------------------------------------------
 
@@ -691,9 +548,7 @@ class SlamNode(Node):
         frames = self.node_config
         odom = odometry_message(T_map_body, V_body, frames.map_id, frames.body_id, stamp, P_pose)
         self._odom_publisher.publish(odom)
-        if self._tf.available:
-            self._map_to_odom_pending = (stamp_nanoseconds(stamp), T_map_body, stamp)
-            self._send_map_to_odom()
+        self._map_to_odom.pose(stamp_nanoseconds(stamp), T_map_body, stamp)
         self.path.add(T_map_body, odom)
 
     def _publish_map(self, stamp: Time) -> None:

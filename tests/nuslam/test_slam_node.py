@@ -847,7 +847,7 @@ def test_map_to_odom_composed_with_the_broadcast_odom_gives_slam_s_pose_when_sla
     ros, odom_first
 ):
     rig = Rig(ros, observation_timeout=100.0)
-    recorder = rig.node._tf = TfRecorder()
+    recorder = rig.node._map_to_odom._tf = TfRecorder()
     odom_publisher = rig.odom
     # the odometry node has run for a while: its odom frame is far from slam's map (which starts at 0)
     T_odom_start = Transform2D(-0.13, 0.98, -2.89)

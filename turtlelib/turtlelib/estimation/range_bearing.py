@@ -178,3 +178,25 @@ def observations_from_points(
     # R = J Sigma J^T
     R = J @ sigma @ J.transpose(0, 2, 1)
     return z, 0.5 * (R + R.transpose(0, 2, 1))
+
+
+def observations_in_sensor_frame(
+    p_frame: NDArray[np.float64], R_frame: NDArray[np.float64], T_sensor_frame: Transform2D
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Points ``p_frame`` (K, 2) (m) observed in range and bearing about another frame's origin with noise
+    ``R_frame`` (K, 2, 2), as range-bearing observations about the sensor's. With ``r = |p|`` the point's
+    covariance is ``G R_frame G^T``, ``G = dp/dz = [[p_x / r, -p_y], [p_y / r, p_x]]``; moved into the
+    sensor frame, ``p_sensor = T_sensor_frame p``, ``Sigma_sensor = C G R_frame G^T C^T`` (``C`` its
+    rotation); then :func:`observations_from_points`. Returns ``(z (K, 2), R (K, 2, 2))``; ValueError as
+    :func:`observations_from_points` (and for a point at the frame's origin)."""
+    p = np.asarray(p_frame, dtype=np.float64).reshape(-1, 2)
+    r = np.hypot(p[:, 0], p[:, 1])
+    if np.any(r == 0.0):
+        raise ValueError("a point at the frame's origin has no bearing")
+    G = np.empty((len(p), 2, 2))
+    G[:, 0, 0], G[:, 0, 1] = p[:, 0] / r, -p[:, 1]
+    G[:, 1, 0], G[:, 1, 1] = p[:, 1] / r, p[:, 0]
+    C = T_sensor_frame.rotation_matrix()
+    # Sigma_sensor = C G R G^T C^T
+    sigma = C @ G @ np.asarray(R_frame, dtype=np.float64) @ G.transpose(0, 2, 1) @ C.T
+    return observations_from_points(T_sensor_frame @ p if len(p) else p, sigma)

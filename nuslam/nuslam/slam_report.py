@@ -1,0 +1,131 @@
+"""What slam counts and reports: its inputs' rates, the filter's fusions and refusals, slip recovery and the
+occupancy grid, in `/diagnostics` (1 Hz), and the throttled warnings of a map that is full, a
+relocalization, and a robot that moves without observations.
+
+Statuses (diagnostic_msgs/DiagnosticStatus, hardware id ``slam``)
+    `slam: <motion_source>`, `slam: <observation topic>`: rates; ERROR after ``STALE_S`` of the node's clock
+        without a message.
+    `slam: filter`: mode, landmarks mapped and tentative, observations fused, rejected and (localization)
+        unmapped, arrays skipped, time per applied scan; WARN when observations were rejected or arrays
+        skipped since the last report.
+    `slam: motion vs LiDAR` (`turtlelib.estimation.slip_recovery`): WARN naming the cause while scans
+        contradict the wheels' motion and for ``slip_report_s`` after each relocalization against the map,
+        ERROR when they keep coming; scans held and relocalizations so far.
+    `slam: occupancy grid` (`nuslam.grid_mapping`), when the grid is on.
+"""
+
+from __future__ import annotations
+
+from diagnostic_msgs.msg import DiagnosticStatus
+
+from nuslam.grid_mapping import GridMapping
+from nuturtle_ros_common.diagnostics import (
+    ERROR,
+    OK,
+    WARN,
+    DiagnosticsPublisher,
+    DurationMonitor,
+    InputMonitor,
+)
+from nuturtle_ros_common.diagnostics import status as diagnostic_status
+from nuturtle_ros_common.throttle import SourceWarnings
+from turtlelib import EkfSlam, Outcome, ScanResult
+from turtlelib.estimation.slip_recovery import SlipRecovery
+
+# An input silent this long (s, node clock) is an ERROR in /diagnostics
+STALE_S = 2.0
+# SlipStatus.level -> diagnostic level
+SLIP_LEVELS = {"ok": OK, "warn": WARN, "error": ERROR}
+
+
+class SlamReport:
+    """slam's counts and statuses (module docstring) over its ``slam`` filter, ``recovery`` and ``grid``;
+    the inputs are ``motion_topic`` and ``observation_topic``, watched from ``started_ns`` (node clock)."""
+
+    def __init__(
+        self,
+        slam: EkfSlam,
+        recovery: SlipRecovery,
+        grid: GridMapping,
+        warnings: SourceWarnings,
+        topics: tuple[str, str],
+        started_ns: int,
+    ) -> None:
+        self._slam, self._recovery, self._grid, self._warnings = slam, recovery, grid, warnings
+        motion_topic, self.observation_topic = topics
+        self.motion_input = InputMonitor(motion_topic, started_ns, STALE_S)
+        self.observation_input = InputMonitor(self.observation_topic, started_ns, STALE_S)
+        self._update_time = DurationMonitor()
+        self.counts = {"fused": 0, "rejected": 0, "unmapped": 0, "skipped": 0, "arrays_applied": 0}
+        self._reported = {"skipped": 0, "rejected": 0}
+
+    def applied(self, results: list[ScanResult], elapsed_ms: float) -> None:
+        """Count the observations of the applied scans and the time of the call that applied them; warn when
+        observations were rejected because the map is full, and at each relocalization against the map."""
+        if not results:
+            return
+        self._update_time.add(elapsed_ms)
+        self.counts["arrays_applied"] += len(results)
+        for result in results:
+            tally = result.association.counts
+            self.counts["rejected"] += tally["rejected"]
+            self.counts["unmapped"] += tally["unmapped"]
+            self.counts["fused"] += tally["matched"] + tally["new"]
+            if tally["rejected"] and self._slam.map_full:
+                self._warnings.warn(
+                    "map",
+                    f"the map holds max_landmarks = {self._slam.config.max_landmarks} landmarks: "
+                    "new ones are not added",
+                )
+            if result.outcome is Outcome.RELOCALIZED:
+                self._warnings.warn("slip", self._recovery.status.message)
+
+    def skipped(self, error: Exception) -> None:
+        """An observation array refused (warned, throttled, and counted)."""
+        topic = self.observation_topic
+        self._warnings.warn(topic, f"{topic} skipped: {error}")
+        self.counts["skipped"] += 1
+
+    def silent(self, silent_s: float) -> None:
+        """The robot moved ``silent_s`` without an observation arriving: warn (throttled)."""
+        topic = self.observation_topic
+        source = "nusim's fake sensor" if topic == "fake_sensor" else "the landmarks node"
+        self._warnings.warn(
+            "observations",
+            f"no {topic} for {silent_s:.1f} s while the robot moves: slam is only dead-reckoning "
+            f"(is {source} running and publishing {topic}"
+            + ("? Its /diagnostics count the scans it refuses)" if topic == "landmarks" else "?)"),
+        )
+
+    def statuses(self, now_ns: int) -> list[DiagnosticStatus]:
+        """The statuses (module docstring) at ``now_ns`` (node clock)."""
+        skipped = self.counts["skipped"] - self._reported["skipped"]
+        rejected = self.counts["rejected"] - self._reported["rejected"]
+        self._reported = {"skipped": self.counts["skipped"], "rejected": self.counts["rejected"]}
+        slam = self._slam
+        mapped, tentative = len(slam.landmark_ids), len(slam.tentative_ids)
+        message = f"{slam.config.mode}: {mapped} landmarks mapped, {tentative} tentative"
+        if skipped or rejected:
+            period = f"{DiagnosticsPublisher.PERIOD_S:g} s"
+            message += f"; in the last {period} {skipped} arrays skipped, {rejected} observations rejected"
+        values = {
+            "landmarks_mapped": mapped,
+            "landmarks_tentative": tentative,
+            "observations_fused": self.counts["fused"],
+            "observations_rejected": self.counts["rejected"],
+            "observations_unmapped": self.counts["unmapped"],
+            "observation_arrays_skipped": self.counts["skipped"],
+            **self._update_time.values("scan_update"),
+        }
+        slip = self._recovery.status
+        slip_values = {"scans_held": slip.held, "relocalizations": slip.relocalized}
+        grid = self._grid.status()
+        return [
+            self.motion_input.status("slam", now_ns),
+            self.observation_input.status("slam", now_ns),
+            diagnostic_status("slam: filter", "slam", WARN if skipped or rejected else OK, message, values),
+            diagnostic_status(
+                "slam: motion vs LiDAR", "slam", SLIP_LEVELS[slip.level], slip.message, slip_values
+            ),
+            *([grid] if grid is not None else []),
+        ]
