@@ -254,7 +254,7 @@ class SlamNode(Node):
         self.node_config = frames = declare_dataclass(self, SlamNodeConfig)
         robot = declare_robot(self)
         self.timeline = self._estimator(robot)
-        self.slam, self.recovery = self.timeline.slam, self.timeline.step
+        self.slam = self.timeline.slam
         self.joints = declare_dataclass(self, WheelJoints)
         self.path = PathTopic(self)
         self._warnings = SourceWarnings(self.get_logger())
@@ -290,7 +290,7 @@ class SlamNode(Node):
         self.config = declare_dataclass(self, SlamConfig, fixed=fixed)
         timeline_config = declare_dataclass(self, TimelineConfig)
         lost_wheel = {"slip_turn_per_m": lost_wheel_turn_per_m(robot.track_width)}
-        recovery = SlipRecovery(declare_dataclass(self, SlipRecoveryConfig, fixed=lost_wheel))
+        self.recovery = SlipRecovery(declare_dataclass(self, SlipRecoveryConfig, fixed=lost_wheel))
         motion, signal, self.odometry = self._motion_model(robot.diff_drive())
         slam = EkfSlam(self.config, motion, frames.T_map_body0)
         # the map loaded at start-up (None: none), which ~/reset goes back to
@@ -300,7 +300,7 @@ class SlamNode(Node):
         if frames.smooth_saved_map and self.config.mode == "localization":
             raise ValueError("smooth_saved_map needs mode mapping: in localization the map is fixed")
         return SlamTimeline(
-            slam, signal, timeline_config, step=recovery, keep_history=frames.smooth_saved_map
+            slam, signal, timeline_config, step=self.recovery, keep_history=frames.smooth_saved_map
         )
 
     def _motion_model(self, drive: DiffDrive) -> tuple[MotionModel, MotionSignal, WheelOdometry | PoseTwist]:

@@ -329,7 +329,7 @@ class SlamState:
                 return 0.0, outside
         # add R_i to the diagonal block i
         S_flat[diagonal_blocks] = S_ii
-        return self._kalman_update(S, rhs, consider_landmarks), outside
+        return self._kalman_update(S, rhs, dim, width, consider_landmarks), outside
 
     def correct_pose(
         self,
@@ -360,15 +360,14 @@ class SlamState:
             nis = float(nu @ np.linalg.solve(S, nu))
             if not nis < gate:
                 return nis, False
-        return self._kalman_update(S, rhs, consider_landmarks), True
+        return self._kalman_update(S, rhs, dim, width, consider_landmarks), True
 
     def _kalman_update(
-        self, S: NDArray[np.float64], rhs: NDArray[np.float64], consider_landmarks: bool
+        self, S: NDArray[np.float64], rhs: NDArray[np.float64], dim: int, width: int, consider_landmarks: bool
     ) -> float:
         """The update of :meth:`correct` from ``S`` (m, m) and ``rhs = [H P, 0, nu]`` (m, width + 1,
-        F-ordered; width: the storage's capacity, or ``N`` when ``consider_landmarks``); returns the NIS."""
-        dim = self.dim
-        width = rhs.shape[1] - 1
+        F-ordered; ``width``: the storage's capacity, or ``dim`` = N when ``consider_landmarks``); returns
+        the NIS."""
         L, info = dpotrf(S, lower=1, clean=1, overwrite_a=1)
         if info != 0:
             raise np.linalg.LinAlgError("the innovation covariance S is not positive definite")
