@@ -15,8 +15,10 @@ disposition is SIG_IGN at start-up (``nohup``, a background job of a script) sta
 stopped (a signal, or the context shut down), 1 could not start (an invalid parameter, a port in use) or
 could not stop (below), 2 a bad command line (argparse's usage error).
 
-Bounded: from the moment a node starts stopping, the process is gone within ``STOP_DEADLINE_S``, before
-launch or docker would SIGKILL it. A stop normally takes well under 2 s; past the deadline (a ``stop()`` that
+Bounded: from the moment a node starts stopping, the process is gone within ``STOP_DEADLINE_S`` (or the
+seconds the environment variable ``NUTURTLE_STOP_DEADLINE_S`` gives, for a launch or container whose own
+SIGKILL comes at another time; an invalid value stops the process at start-up), before launch or docker
+would SIGKILL it. A stop normally takes well under 2 s; past the deadline (a ``stop()`` that
 blocks, or the middleware's teardown deadlocking: once seen in CI, turtle_control still there 10 s after its
 SIGTERM) :mod:`faulthandler` prints where every thread is and ends the process with exit code 1. Its
 watchdog is a C thread: it fires even while the main thread is blocked inside C++ holding the GIL, and it
@@ -37,6 +39,8 @@ from __future__ import annotations
 
 import argparse
 import faulthandler
+import math
+import os
 import sys
 import time
 import traceback
@@ -63,6 +67,8 @@ FLUSH_TIMEOUT_S = 0.5
 # From the start of a stop to the process's end at the latest (s): launch SIGKILLs a node 10 s after its
 # SIGINT (sigterm_timeout + sigkill_timeout), docker 10 s after its SIGTERM
 STOP_DEADLINE_S = 8.0
+# The environment variable that sets another deadline (s, finite, > 0)
+STOP_DEADLINE_ENV = "NUTURTLE_STOP_DEADLINE_S"
 ROS_ARGUMENTS_HELP = """\
 ROS arguments come after --ros-args: -p NAME:=VALUE sets a parameter, --params-file FILE loads a YAML
 file of them, -r FROM:=TO remaps a name (docs/robot.md, "Parameters", says which value wins).
@@ -171,17 +177,42 @@ def run_nodes(
     """
     check_command_line(name, description, sys.argv if args is None else args)
     try:
+        deadline_s = stop_deadline_s()
+    except ValueError as error:
+        print(f"{name}: {error}", file=sys.stderr)
+        return 1
+    try:
         with StopSignals(second="ignore") as stop:
-            return spin_until_stopped(factory, name, args, stop)
+            return spin_until_stopped(factory, name, args, stop, deadline_s)
     finally:
         # the node is gone, the process exits: a late signal must not end it with its default action
         ignore_stop_signals()
 
 
+def stop_deadline_s() -> float:
+    """The stop deadline (s): ``NUTURTLE_STOP_DEADLINE_S`` if set (finite, > 0; ValueError otherwise), else
+    ``STOP_DEADLINE_S``."""
+    text = os.environ.get(STOP_DEADLINE_ENV)
+    if text is None:
+        return STOP_DEADLINE_S
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value > 0.0):
+        raise ValueError(f"{STOP_DEADLINE_ENV} must be a number of seconds > 0, got {text!r}")
+    return value
+
+
 def spin_until_stopped(
-    factory: Callable[[], Sequence[Node]], name: str, args: Sequence[str] | None, stop: StopSignals
+    factory: Callable[[], Sequence[Node]],
+    name: str,
+    args: Sequence[str] | None,
+    stop: StopSignals,
+    deadline_s: float,
 ) -> int:
-    """:func:`run_nodes` once the command line is checked, with ``stop`` handling the stop signals."""
+    """:func:`run_nodes` once the command line is checked, with ``stop`` handling the stop signals and the
+    process gone within ``deadline_s`` of the start of its stop."""
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     nodes: Sequence[Node] = ()
     try:
@@ -201,7 +232,7 @@ def spin_until_stopped(
         pass
     finally:
         # from here on the process only stops, and is gone within the deadline (module docstring)
-        faulthandler.dump_traceback_later(STOP_DEADLINE_S, exit=True)
+        faulthandler.dump_traceback_later(deadline_s, exit=True)
         try:
             for node in nodes:
                 if stop.received is not None:

@@ -121,6 +121,14 @@ def snapshot(rig: Rig):
     )
 
 
+def taken(rig: Rig, input_monitor: str, count: int, timeout_s: float = 5.0) -> bool:
+    """Spin until the node's ``input_monitor`` (``motion_input`` or ``observation_input``) has counted
+    ``count`` more messages than it had (its callbacks run in this executor: they have then run)."""
+    monitor = getattr(rig.node.report, input_monitor)
+    target = monitor.count + count
+    return rig.ros.spin_until(lambda: monitor.count >= target, timeout_s)
+
+
 def assert_unchanged(before, after) -> None:
     for a, b in zip(before, after, strict=True):
         np.testing.assert_array_equal(a, b)
@@ -157,7 +165,7 @@ def test_one_implausible_joint_states_is_refused_and_changes_nothing(ros, associ
     rig, drive = halfway(ros, association)
     before = snapshot(rig)
     rig.joint_states.publish(hostile_joint_states(drive)[kind])
-    rig.ros.spin_for(0.3)
+    assert taken(rig, "motion_input", 1)
     assert_unchanged(before, snapshot(rig))
     for k in range(HOSTILE_AT + 1, SAMPLES):
         drive.step(k)
@@ -216,7 +224,11 @@ def test_one_implausible_observation_array_changes_nothing(ros, association, kin
     copies = 25 if kind == "stamped 1000 s ahead" else 1  # more than the waiting queue holds
     for _ in range(copies):
         rig.observations.publish(hostile)
-    rig.ros.spin_for(0.5)
+    if copies == 1:
+        assert taken(rig, "observation_input", 1)
+    else:
+        # a burst may lose copies to the queues (depth 10): all of them taken, or 2 s
+        taken(rig, "observation_input", copies, 2.0)
     if kind not in TAKEN_THEN_REJECTED:
         assert_unchanged(before, snapshot(rig))
     assert rig.node.timeline.pending_count == 0

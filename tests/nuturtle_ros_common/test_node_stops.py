@@ -36,7 +36,7 @@ from ros_test_messages import cylinder_array, stamp
 from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
 
-from nuturtle_ros_common.node_main import STOP_DEADLINE_S
+from nuturtle_ros_common.node_main import STOP_DEADLINE_ENV, STOP_DEADLINE_S, stop_deadline_s
 from nuturtle_ros_common.stop_signals import STOP_SIGNALS
 from rclpy_harness import RosHarness, matched
 
@@ -113,11 +113,11 @@ def start(module: str, arguments: list[str], cwd: Path) -> Run:
     return start_python(["-m", module, *arguments], cwd)
 
 
-def start_python(arguments: list[str], cwd: Path) -> Run:
-    """``python -P arguments`` as :func:`start` runs it."""
+def start_python(arguments: list[str], cwd: Path, env: dict[str, str] | None = None) -> Run:
+    """``python -P arguments`` as :func:`start` runs it (``env`` added to the environment)."""
     process = subprocess.Popen(
         [sys.executable, "-P", *arguments], cwd=cwd, stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE, text=True, start_new_session=True,
+        stderr=subprocess.PIPE, text=True, start_new_session=True, env={**os.environ, **(env or {})},
     )  # fmt: skip
     run = Run(process)
     threading.Thread(target=run.read, daemon=True).start()
@@ -316,18 +316,33 @@ sys.exit(run_node(StuckStop, "stuck_stop", "stop() never returns", ["stuck_stop"
 
 def test_a_stop_that_never_ends_ends_the_process_by_the_deadline_and_says_where_it_was(tmp_path):
     """Issue: in CI turtle_control logged "SIGTERM: stopping" and was still there 10 s later (killed: exit
-    code -9, no word of where it hung). Past ``STOP_DEADLINE_S`` from the start of its stop the process
-    prints every thread's stack and exits with code 1, whatever it is blocked in."""
-    run = start_python(["-c", STUCK_NODE], tmp_path)
+    code -9, no word of where it hung). Past the stop deadline (here 1 s, set by ``NUTURTLE_STOP_DEADLINE_S``
+    as a launch with a shorter SIGKILL would; ``STOP_DEADLINE_S`` by default) from the start of its stop the
+    process prints every thread's stack and exits with code 1, whatever it is blocked in."""
+    run = start_python(["-c", STUCK_NODE], tmp_path, env={STOP_DEADLINE_ENV: "1"})
     try:
         assert run.started.wait(60.0), run.text[-3000:]
         os.killpg(run.process.pid, signal.SIGTERM)
-        run.process.wait(timeout=STOP_DEADLINE_S + HANG_S)
+        run.process.wait(timeout=1.0 + HANG_S)
     finally:
         if run.process.poll() is None:
             os.killpg(run.process.pid, signal.SIGKILL)
             run.process.wait()
     assert run.process.returncode == 1, run.text[-3000:]
     assert "SIGTERM: stopping" in run.text, run.text[-3000:]
-    assert f"Timeout ({timedelta(seconds=STOP_DEADLINE_S)})!" in run.text, run.text[-3000:]
+    assert f"Timeout ({timedelta(seconds=1)})!" in run.text, run.text[-3000:]
     assert re.search(r'File "<string>", line \d+ in stop\n', run.text), run.text[-3000:]
+
+
+@pytest.mark.parametrize("value", ["0", "-1", "nan", "inf", "eight"])
+def test_an_invalid_stop_deadline_is_refused(monkeypatch, value):
+    monkeypatch.setenv(STOP_DEADLINE_ENV, value)
+    with pytest.raises(ValueError, match=STOP_DEADLINE_ENV):
+        stop_deadline_s()
+
+
+def test_the_stop_deadline_is_the_default_unless_set(monkeypatch):
+    monkeypatch.delenv(STOP_DEADLINE_ENV, raising=False)
+    assert stop_deadline_s() == STOP_DEADLINE_S
+    monkeypatch.setenv(STOP_DEADLINE_ENV, "2.5")
+    assert stop_deadline_s() == 2.5
