@@ -159,10 +159,10 @@ JOINT_STATES_KINDS = [
 ]
 
 
-@pytest.mark.parametrize("association", ["known", "unknown"])
 @pytest.mark.parametrize("kind", JOINT_STATES_KINDS)
-def test_one_implausible_joint_states_is_refused_and_changes_nothing(ros, association, kind):
-    rig, drive = halfway(ros, association)
+def test_one_implausible_joint_states_is_refused_and_changes_nothing(ros, kind):
+    """The wheels' path does not depend on the association mode: tested under unknown association."""
+    rig, drive = halfway(ros, "unknown")
     before = snapshot(rig)
     rig.joint_states.publish(hostile_joint_states(drive)[kind])
     assert taken(rig, "motion_input", 1)
