@@ -44,6 +44,7 @@ from nuturtle_ros_common.conversions import range_scan_from_message
 from nuturtle_ros_common.diagnostics import (
     ERROR,
     OK,
+    STALE_S,
     WARN,
     DiagnosticsPublisher,
     DurationMonitor,
@@ -60,8 +61,6 @@ GREEN = (0.1, 0.8, 0.2, 1.0)
 GREY = (0.6, 0.6, 0.6, 0.8)
 # Size of a drawn cluster point (m)
 CLUSTER_POINT_M = 0.02
-# An input silent this long (s, node clock) is an ERROR in /diagnostics
-STALE_S = 2.0
 
 
 def landmark_markers(detections: Detections, msg: LaserScan) -> MarkerArray:

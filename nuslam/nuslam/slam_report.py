@@ -22,6 +22,7 @@ from nuslam.grid_mapping import GridMapping
 from nuturtle_ros_common.diagnostics import (
     ERROR,
     OK,
+    STALE_S,
     WARN,
     DiagnosticsPublisher,
     DurationMonitor,
@@ -32,8 +33,6 @@ from nuturtle_ros_common.throttle import SourceWarnings
 from turtlelib import EkfSlam, Outcome, ScanResult
 from turtlelib.estimation.slip_recovery import SlipRecovery
 
-# An input silent this long (s, node clock) is an ERROR in /diagnostics
-STALE_S = 2.0
 # SlipStatus.level -> diagnostic level
 SLIP_LEVELS = {"ok": OK, "warn": WARN, "error": ERROR}
 

@@ -40,6 +40,10 @@ def status(
     return DiagnosticStatus(level=level, name=name, message=message, hardware_id=hardware_id, values=pairs)
 
 
+# An input silent this long (s, node clock) is an ERROR in /diagnostics (the nodes' inputs)
+STALE_S = 2.0
+
+
 class InputMonitor:
     """Arrivals of one input (module docstring); ``started_ns`` is the node's start on its clock."""
 
