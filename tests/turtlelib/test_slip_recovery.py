@@ -1,7 +1,6 @@
 """turtlelib.estimation.map_alignment and turtlelib.estimation.slip_recovery: the alignment of detections with
 the map, its covariance, and the recovery that holds contradicting scans and relocalizes (closed-loop
-scenarios in
-nusim: tests/nusim/test_slip_events.py).
+scenarios in nusim: tests/nusim/test_slip_events.py).
 """
 
 from __future__ import annotations

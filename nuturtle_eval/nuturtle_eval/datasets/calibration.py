@@ -18,8 +18,8 @@ Measurement noise
 Each landmark observation ``z`` is compared with ``h(q_true(t), m_true)`` (the Vicon pose interpolated at
 its stamp; :mod:`turtlelib.estimation.range_bearing`). The residuals are taken as zero-mean Gaussians; the
 bearing's ML standard deviation is ``bearing_std = sqrt(mean(nu_b^2))``, and the range's grows with the
-observed range
-``r`` (``SlamConfig``: ``sigma_r = range_std + range_std_per_m r``, ``range_std_per_m >= 0``), fitted by::
+observed range ``r`` (``SlamConfig``: ``sigma_r = range_std + range_std_per_m r``, ``range_std_per_m >= 0``),
+fitted by::
 
     argmin  sum_k ln sigma_r(r_k)^2 + nu_rk^2 / sigma_r(r_k)^2     (L-BFGS-B over the two parameters)
 

@@ -2,9 +2,9 @@
 
 The factors come from the run's history (:class:`turtlelib.estimation.run_history.RunHistory`, kept by the
 filter's timeline): poses at the start and at every applied scan, the motion between them from the
-experiment's
-motion model and signal (as the filter predicted it), and the observations the filter associated with a
-landmark of its final map, with the filter's noise model (correlated errors included). :func:`smooth_run`
+experiment's motion model and signal (as the filter predicted it), and the observations the filter associated
+with a landmark of its final map, with the filter's noise model (correlated errors included).
+:func:`smooth_run`
 solves them from the filter's estimates (:func:`turtlelib.smoothing.run_smoothing.smooth_history`; with
 unknown association the associations are revised) and gives an
 :class:`~nuturtle_eval.datasets.experiment.ExperimentResult` that the evaluation and the figures take as they

@@ -2,11 +2,10 @@
 
 :class:`turtlelib.estimation.ekf_slam.EkfSlam` asks its policy for a :class:`Plan` over one update's
 observations, given a read-only :class:`SlamView` of the filter, fuses what the plan matches, then asks the
-policy which
-of the plan's unexplained observations may start a landmark (:meth:`AssociationPolicy.admits`, against the
-filter as it is after the fusion and the landmarks started before in the same update) and which tentative
-landmarks it drops (:meth:`AssociationPolicy.expired`). The maths of gates, nearest neighbour and JCBB is in
-:mod:`turtlelib.estimation.matching`.
+policy which of the plan's unexplained observations may start a landmark (:meth:`AssociationPolicy.admits`,
+against the filter as it is after the fusion and the landmarks started before in the same update) and which
+tentative landmarks it drops (:meth:`AssociationPolicy.expired`). The maths of gates, nearest neighbour and
+JCBB is in :mod:`turtlelib.estimation.matching`.
 
 * :class:`KnownIds` (known association): the observation's id names its landmark; an observation of a
   mapped landmark outside ``D2 < chi2_2^-1(gate_known)`` is rejected; an unseen id starts a confirmed

@@ -7,17 +7,14 @@ maps, and its views. What varies is passed in or chosen by a parameter, one clas
 
 * the motion model (:mod:`turtlelib.motion.motion_models`): ``q' = f(q, u)``, ``G``, ``Q``;
 * the measurement model (:mod:`turtlelib.estimation.measurement_models`; default the range-bearing LiDAR of
-the
-  config), per filter and optionally per update (a second sensor): ``h``, its Jacobians, its inverse, the
+  the config), per filter and optionally per update (a second sensor): ``h``, its Jacobians, its inverse, the
   residual, the default noise, the usable range;
 * the data association (:mod:`turtlelib.estimation.association_policies`): a policy (known ids with a gate, or
-gated
-  tracks with tentative landmarks and a matcher: nearest neighbour, JCBB, or one passed in) plans each
+  gated tracks with tentative landmarks and a matcher: nearest neighbour, JCBB, or one passed in) plans each
   update from a read-only view of the filter;
 * the linearisation (:mod:`turtlelib.estimation.linearization`): standard, FEJ, OC or invariant;
 * the state and the records of its landmark slots (:class:`turtlelib.estimation.slam_state.SlamState`, which
-owns
-  both).
+  owns both).
 
 State
 -----
@@ -100,8 +97,8 @@ Update (:meth:`EkfSlam.update_known`, :meth:`EkfSlam.update_unknown`, O(N^2) per
 Observation ``z = [range_m, bearing_rad]`` of a landmark from the sensor at ``T_body_sensor``
 (:mod:`turtlelib.estimation.range_bearing`); one scan's observations are stacked into one update whose ``H``
 touches only the pose and the observed landmarks (:meth:`SlamState.correct`). Landmarks seen for the first
-time are
-initialised from the inverse observation model with their full cross-covariance (:meth:`SlamState.append`).
+time are initialised from the inverse observation model with their full cross-covariance
+(:meth:`SlamState.append`).
 
 Known association gates every observation of a mapped landmark too: one with
 ``D2 = nu^T S^-1 nu >= chi2_2^-1(gate_known)`` (a wrong id, a reflection) is rejected rather than fused,
@@ -708,8 +705,7 @@ class EkfSlam:
         pose_covariance: ArrayLike | None = None,
     ) -> None:
         """Restart with the map ``landmark_map`` (:class:`turtlelib.mapping.landmark_map.LandmarkMap`), from
-        pose
-        ``T_map_body`` (default identity) with ``pose_covariance`` (3, 3) (default from the config), as
+        pose ``T_map_body`` (default identity) with ``pose_covariance`` (3, 3) (default from the config), as
         :meth:`reset` does.
 
         ``x = [pose, m_i in the map's order]``, ``P = blockdiag(P_qq, P_mm)`` (the pose independent of the

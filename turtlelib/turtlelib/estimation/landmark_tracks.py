@@ -5,8 +5,7 @@ confirmed or tentative, and the columns a strategy adds (first estimates:
 
 :class:`turtlelib.estimation.slam_state.SlamState` owns one and is its only writer of rows: it appends rows
 with its landmark slots and swap-removes a row with its slot, so records and state never disagree. Arrays grow
-with
-spare capacity; every query is vectorised (O(n) numpy, no per-landmark Python loop).
+with spare capacity; every query is vectorised (O(n) numpy, no per-landmark Python loop).
 """
 
 from __future__ import annotations

@@ -2,8 +2,7 @@
 
 A measurement model is passed into :class:`turtlelib.estimation.ekf_slam.EkfSlam` like the motion model (and,
 for a second sensor, into one update). It observes a point landmark ``m = [mx, my]`` (m, map frame) from the
-robot
-pose ``q = [x, y, theta]`` (``T_map_body``) with a 2-vector ``z`` and gives the filter what it needs::
+robot pose ``q = [x, y, theta]`` (``T_map_body``) with a 2-vector ``z`` and gives the filter what it needs::
 
     predict:   z_hat = h(q, m),  H_robot = dh/dq,  H_landmark = dh/dm     (z = h(q, m) + v, v ~ N(0, R))
     inverse:   m = g(q, z),  G_robot = dg/dq,  G_z = dg/dz               (a landmark from one observation)

@@ -14,8 +14,7 @@ Signals:
   ``(phi_left, phi_right)`` (rad), constant wheel speeds between samples: linear interpolation,
   ``u = s_to - s_from``.
 * :class:`OdometryPoses` (for :class:`~turtlelib.motion.motion_models.OdometryMotion`): cumulative odometry
-poses
-  ``(x, y, theta)`` (``T_odom_body``), a constant body twist between samples:
+  poses ``(x, y, theta)`` (``T_odom_body``), a constant body twist between samples:
   ``T(fraction) = T0 exp(fraction log(T0^-1 T1))``, ``u = (T_from^-1 T_to, dt_ns)``.
 * :class:`HeldInputs` (for :class:`~turtlelib.motion.motion_models.UnicycleMotion`,
   :class:`~turtlelib.motion.motion_models.AckermannMotion`): rates such as ``(v, omega)`` or ``(speed,

@@ -20,8 +20,7 @@ factor stays invertible.
 
 Correlated observation errors (:class:`turtlelib.estimation.ekf_slam.SlamConfig`'s ``noise_correlation``) are
 modelled as in the filter: each view of a landmark after its first has ``R`` scaled by ``(1 + rho(d)) / (1 -
-rho(d))``,
-``d`` the distance the sensor moved since the landmark's previous view (:func:`viewpoint_scales`).
+rho(d))``, ``d`` the distance the sensor moved since the landmark's previous view (:func:`viewpoint_scales`).
 """
 
 from __future__ import annotations
