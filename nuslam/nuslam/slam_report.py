@@ -59,13 +59,15 @@ class SlamReport:
         self._reported = {"skipped": 0, "rejected": 0}
 
     def applied(self, results: list[ScanResult], elapsed_ms: float) -> None:
-        """Count the observations of the applied scans and the time of the call that applied them; warn when
-        observations were rejected because the map is full, and at each relocalization against the map."""
-        if not results:
+        """Count the observation arrays among the applied measurements (a pose source's have no association)
+        and the time of the call that applied them; warn when observations were rejected because the map is
+        full, and at each relocalization against the map."""
+        arrays = [result for result in results if result.association is not None]
+        if not arrays:
             return
         self._update_time.add(elapsed_ms)
-        self.counts["arrays_applied"] += len(results)
-        for result in results:
+        self.counts["arrays_applied"] += len(arrays)
+        for result in arrays:
             tally = result.association.counts
             self.counts["rejected"] += tally["rejected"]
             self.counts["unmapped"] += tally["unmapped"]

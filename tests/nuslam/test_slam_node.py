@@ -37,8 +37,10 @@ from turtlelib import (
     DiffDriveMotion,
     EkfSlam,
     LidarConfig,
+    Outcome,
     SlamConfig,
     SlamTimeline,
+    StepResult,
     TimelineConfig,
     Transform2D,
     Twist2D,
@@ -969,3 +971,30 @@ def test_observations_before_the_first_joint_states_are_dropped_without_a_warnin
     # and the node goes on normally once joint_states arrive
     rig.wheels(2 * S, (0.0, 0.0))
     assert rig.observe(cylinder_array("base_scan", 2 * S, relative(T_BODY_SENSOR))).markers
+
+
+class FixedPoseSource:
+    """A second pose source attached to the running node's timeline (as a scan registration will be): its
+    payload is a measured pose, fused with EkfSlam.update_pose."""
+
+    def apply(self, slam: EkfSlam, payload: Transform2D, stamp_ns: int) -> StepResult:
+        _, fused = slam.update_pose(payload, np.diag([1e-4, 1e-4, 1e-4]))
+        return StepResult(Outcome.APPLIED if fused else Outcome.HELD)
+
+    def relocalized(self, T_map_body: Transform2D) -> None:
+        """Nothing kept between measurements."""
+
+
+def test_a_pose_source_attached_to_the_node_moves_its_estimate_and_its_report_takes_it(ros):
+    """Review: the node counted every applied measurement as landmark observations and failed on one of
+    another kind. A pose source's measurement, applied when the wheels reach its stamp, moves slam's pose
+    and the node goes on publishing."""
+    rig = Rig(ros, observation_timeout=100.0, initial_xy_std=0.01, initial_theta_std=0.01)
+    source = rig.node.timeline.attach(FixedPoseSource())
+    t_ns = 10 * S
+    rig.wheels(t_ns, (0.0, 0.0))
+    rig.node.timeline.add(t_ns + S // 2, source, Transform2D(0.3, 0.0, 0.0))
+    odom = rig.wheels(t_ns + S, (0.0, 0.0))
+    # standing still: x = 0.3 P / (P + R) with P = R = 1e-4
+    assert pose_of(odom) == pytest.approx((0.15, 0.0, 0.0), abs=1e-9)
+    assert rig.node.observation_counts["applied"] == 0
