@@ -6,6 +6,7 @@ No ROS import, ever: the ROS nodes in nusim, nuturtle_control and nuslam are thi
 
 from .estimation.consistency import chi2_bounds, nees, nis
 from .estimation.ekf_slam import MODES, Association, EkfSlam, ObservationStatus, SlamConfig
+from .estimation.lidar_odometry import LidarOdometry, LidarOdometryConfig
 from .estimation.scan_steps import FilterUpdate, Outcome, PoseListener, ScanStep, StepResult
 from .estimation.slam_timeline import ScanResult, SlamTimeline, TimelineConfig
 from .geometry.se2 import Transform2D, Twist2D, integrate_twist, normalize_angle, normalize_angles
@@ -22,12 +23,13 @@ from .motion.kinematics import DiffDrive
 from .motion.motion_models import (
     AckermannMotion,
     DiffDriveMotion,
+    MeasuredMotion,
     MotionModel,
     OdometryMotion,
     TwistNoise,
     UnicycleMotion,
 )
-from .motion.motion_signals import HeldInputs, MotionSignal, OdometryPoses, WheelAngles
+from .motion.motion_signals import HeldInputs, MeasuredPoses, MotionSignal, OdometryPoses, WheelAngles
 from .motion.sample_gate import GateResult, SampleGate, SampleGateConfig, Verdict
 from .sensing.circle_fit import Circle, CircleFits, fit_circle, fit_circles, refine_for_range_sensor
 from .sensing.detection import (
@@ -40,6 +42,7 @@ from .sensing.detection import (
 )
 from .sensing.range_scan import RangeScan, check_scan_layout
 from .sensing.scan_model import LidarConfig, arena_walls, cast_beams, polygon_walls, simulate_scan
+from .sensing.scan_registration import RegistrationConfig
 
 __all__ = [
     "Circle",
@@ -62,11 +65,13 @@ __all__ = [
     "DiffDrive",
     "AckermannMotion",
     "DiffDriveMotion",
+    "MeasuredMotion",
     "MotionModel",
     "OdometryMotion",
     "TwistNoise",
     "UnicycleMotion",
     "HeldInputs",
+    "MeasuredPoses",
     "MotionSignal",
     "OdometryPoses",
     "WheelAngles",
@@ -78,6 +83,9 @@ __all__ = [
     "MODES",
     "Association",
     "EkfSlam",
+    "LidarOdometry",
+    "LidarOdometryConfig",
+    "RegistrationConfig",
     "ObservationStatus",
     "SlamConfig",
     "GridConfig",

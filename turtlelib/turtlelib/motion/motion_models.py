@@ -48,7 +48,7 @@ from numpy.typing import NDArray
 
 from ..geometry.se2 import Transform2D, Twist2D, integrate_twist, integrate_twists, normalize_angles
 from ..util.timebase import NS_PER_S
-from ..util.validation import finite_real, non_negative, positive, store
+from ..util.validation import covariance, finite_real, non_negative, positive, store
 from .arc_noise import Floats, arc_covariance, arc_covariances, check_turn
 from .kinematics import DiffDrive
 from .wheel_noise import wheel_slip_covariance
@@ -328,6 +328,44 @@ class OdometryMotion:
         dx_m, dy_m, dtheta_rad, dt_ns = _unpack(u, ("dx_m", "dy_m", "dtheta_rad", "dt_ns"))
         T_delta = Transform2D(dx_m, dy_m, dtheta_rad)
         return _twist_step(T_map_body, T_delta, T_delta.log(), dt_ns, self.noise)
+
+
+@dataclass(frozen=True)
+class MeasuredMotion:
+    """A relative pose that comes with its own covariance (a registered LiDAR scan,
+    :mod:`turtlelib.estimation.lidar_odometry`): ``u = (dx_m, dy_m, dtheta_rad, dt_ns, s_xx, s_xy, s_xtheta,
+    s_yy, s_ytheta, s_thetatheta)``, the motion ``T_prev_next`` and the upper triangle of its covariance
+    ``Sigma_u`` (3, 3) in the frame of ``T_prev`` (additive ``[x, y, theta]``, m and rad). With
+    ``B(theta) = blockdiag(R(theta), 1)``::
+
+        q' = q (+) T_prev_next,   Q = B(theta_q) Sigma_u B(theta_q)^T
+
+    ValueError for a covariance that is not symmetric positive semi-definite."""
+
+    def check(self, u: tuple) -> None:
+        self._unpack(u)
+
+    def step(self, T_map_body: Transform2D, u: tuple) -> Step:
+        T_delta, Sigma_u = self._unpack(u)
+        B = rotation_block(T_map_body.theta)
+        # Q = B Sigma_u B^T
+        return _arc_step(T_map_body, T_map_body @ T_delta, B @ Sigma_u @ B.T)
+
+    @staticmethod
+    def _unpack(u: tuple) -> tuple[Transform2D, NDArray[np.float64]]:
+        names = ("dx_m", "dy_m", "dtheta_rad", "dt_ns", "s_xx", "s_xy", "s_xtheta", "s_yy", "s_ytheta")
+        dx_m, dy_m, dtheta_rad, _, s_xx, s_xy, s_xt, s_yy, s_yt, s_tt = _unpack(u, (*names, "s_thetatheta"))
+        Sigma_u = np.array([[s_xx, s_xy, s_xt], [s_xy, s_yy, s_yt], [s_xt, s_yt, s_tt]])
+        return Transform2D(dx_m, dy_m, dtheta_rad), covariance(
+            "motion covariance", Sigma_u, (3, 3), definite=False
+        )
+
+
+def rotation_block(theta_rad: float) -> NDArray[np.float64]:
+    """``B(theta) = blockdiag(R(theta), 1)`` (3, 3): an additive ``[x, y, theta]`` perturbation in a frame
+    turned by ``theta`` expressed in the outer frame."""
+    c, s = math.cos(theta_rad), math.sin(theta_rad)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
 @dataclass(frozen=True)

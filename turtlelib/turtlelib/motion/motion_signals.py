@@ -16,6 +16,9 @@ Signals:
 * :class:`OdometryPoses` (for :class:`~turtlelib.motion.motion_models.OdometryMotion`): cumulative odometry
   poses ``(x, y, theta)`` (``T_odom_body``), a constant body twist between samples:
   ``T(fraction) = T0 exp(fraction log(T0^-1 T1))``, ``u = (T_from^-1 T_to, dt_ns)``.
+* :class:`MeasuredPoses` (for :class:`~turtlelib.motion.motion_models.MeasuredMotion`): odometry poses
+  that carry the covariance of the motion since the previous sample (LiDAR odometry), interpolated as
+  odometry poses, the covariance growing linearly over the interval.
 * :class:`HeldInputs` (for :class:`~turtlelib.motion.motion_models.UnicycleMotion`,
   :class:`~turtlelib.motion.motion_models.AckermannMotion`): rates such as ``(v, omega)`` or ``(speed,
   steering)`` held from their sample until the next (a zero-order hold): ``at = s0``, ``u = (*s_from,
@@ -29,8 +32,11 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
+import numpy as np
+
 from ..geometry.se2 import Transform2D, integrate_twist
 from ..util.validation import finite_real, integer
+from .motion_models import rotation_block
 
 Sample = tuple[float, ...]
 TimedSample = tuple[int, Sample]
@@ -85,6 +91,54 @@ class OdometryPoses:
         if dt_ns == 0 and T_delta == Transform2D():
             return None
         return T_delta.x, T_delta.y, T_delta.theta, dt_ns
+
+
+_ODOMETRY = OdometryPoses()
+
+
+@dataclass(frozen=True)
+class MeasuredPoses:
+    """Cumulative poses ``(x, y, theta)`` (m, m, rad) of the body in an odometry frame, each with the
+    length ``interval_ns`` (a float) of the interval that ends at it and the covariance ``Sigma_k`` of the
+    motion over that interval (upper triangle ``s_xx, s_xy, s_xtheta, s_yy, s_ytheta, s_thetatheta``,
+    additive ``[x, y, theta]`` in the odometry frame): the samples of
+    :class:`turtlelib.estimation.lidar_odometry.LidarOdometry`, for
+    :class:`~turtlelib.motion.motion_models.MeasuredMotion`. Within an interval the body moves along one
+    constant twist and the uncertainty grows linearly in time (a random walk), so a piece of ``dt_ns`` of
+    it, from the pose ``T_from``, is::
+
+        T(fraction) = T0 exp(fraction log(T0^-1 T1))
+        u = (T_from^-1 T_to, dt_ns, B(theta_from)^T (dt_ns / interval_ns) Sigma_k B(theta_from))
+
+    (``B`` of :func:`~turtlelib.motion.motion_models.rotation_block`: the covariance in ``T_from``'s
+    frame; the whole interval's is exact)."""
+
+    def at(self, s0: Sample, s1: Sample, fraction: float) -> Sample:
+        return (*_ODOMETRY.at(s0[:3], s1[:3], fraction), *s1[3:])
+
+    def input(self, s_from: Sample, s_to: Sample, dt_ns: int) -> tuple | None:
+        T_delta = Transform2D(*s_from[:3]).inverse() @ Transform2D(*s_to[:3])
+        if dt_ns == 0 and T_delta == Transform2D():
+            return None
+        interval_ns = s_to[3]
+        fraction = 1.0 if interval_ns <= 0.0 else dt_ns / interval_ns
+        s_xx, s_xy, s_xt, s_yy, s_yt, s_tt = s_to[4:]
+        Sigma = fraction * np.array([[s_xx, s_xy, s_xt], [s_xy, s_yy, s_yt], [s_xt, s_yt, s_tt]])
+        B = rotation_block(s_from[2])
+        # B(theta_from)^T Sigma B(theta_from)
+        S = B.T @ Sigma @ B
+        return (
+            T_delta.x,
+            T_delta.y,
+            T_delta.theta,
+            dt_ns,
+            S[0, 0],
+            S[0, 1],
+            S[0, 2],
+            S[1, 1],
+            S[1, 2],
+            S[2, 2],
+        )
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,187 @@
+"""Scan registration (turtlelib.sensing.scan_registration) and LiDAR odometry
+(turtlelib.estimation.lidar_odometry) against simulated scans of a room with exact truth."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from turtlelib.estimation.lidar_odometry import Basis, LidarOdometry, LidarOdometryConfig, scan_points
+from turtlelib.geometry.se2 import Transform2D, normalize_angle
+from turtlelib.motion.motion_models import TwistNoise
+from turtlelib.sensing.scan_model import LidarConfig, polygon_walls, simulate_scan
+from turtlelib.sensing.scan_registration import (
+    LocalMap,
+    RegistrationConfig,
+    register,
+    voxel_centroids,
+)
+
+# an L-shaped room (m) with a pillar: every direction constrained
+ROOM = polygon_walls([[-3, -2], [4, -2], [4, 1], [1, 1], [1, 3], [-3, 3]])
+PILLAR = np.array([[2.0, -0.5, 0.15]])
+# a corridor 1.6 m wide and 40 m long: its length is constrained by nothing in a 3.5 m scan
+CORRIDOR = polygon_walls([[-20, -0.8], [20, -0.8], [20, 0.8], [-20, 0.8]])
+LIDAR = LidarConfig(range_max=3.5, noise=0.01)
+CONFIG = RegistrationConfig()
+
+
+def points_at(T_world_body: Transform2D, walls, circles=PILLAR, rng=None, lidar=LIDAR) -> np.ndarray:
+    """A simulated scan from ``T_world_body`` (LiDAR at the body origin) as thinned body-frame points."""
+    rng = np.random.default_rng(0) if rng is None else rng
+    scan = lidar.range_scan(simulate_scan(T_world_body, circles, walls, lidar, rng))
+    return voxel_centroids(scan_points(scan, Transform2D()), CONFIG.voxel_m)
+
+
+def map_from(poses, walls, circles=PILLAR) -> LocalMap:
+    """A local map of scans taken at the true ``poses`` (world frame = map frame)."""
+    rng = np.random.default_rng(1)
+    q = np.concatenate([T @ points_at(T, walls, circles, rng) for T in poses])
+    return LocalMap(voxel_centroids(q, CONFIG.voxel_m), CONFIG)
+
+
+def test_voxel_centroids_hand_computed():
+    p = np.array([[0.01, 0.01], [0.03, 0.01], [0.12, 0.0], [-0.01, 0.0]])
+    got = voxel_centroids(p, 0.05)
+    expected = {(0.02, 0.01), (0.12, 0.0), (-0.01, 0.0)}
+    assert {tuple(np.round(row, 12)) for row in got} == expected
+
+
+def test_registration_recovers_the_true_pose_from_a_prior_that_is_off():
+    local_map = map_from([Transform2D(0.0, 0.0, 0.0), Transform2D(0.3, 0.1, 0.2)], ROOM)
+    T_true = Transform2D(0.25, 0.15, 0.1)
+    T_prior = Transform2D(0.40, 0.02, 0.16)  # 0.2 m and 3.4 deg off
+    P_prior = np.diag([0.1**2, 0.1**2, 0.05**2])
+    result = register(points_at(T_true, ROOM), local_map, T_prior, P_prior, CONFIG)
+    assert result is not None and not result.degenerate
+    error = T_true.inverse() @ result.T_map_body
+    assert math.hypot(error.x, error.y) < 0.01
+    assert abs(error.theta) < math.radians(0.3)
+    # the prior's distance is what it was off by, in its own units
+    r = np.array([T_prior.x - result.T_map_body.x, T_prior.y - result.T_map_body.y, T_prior.theta - 0.1])
+    assert result.prior_nis == pytest.approx(r @ np.linalg.solve(P_prior, r), rel=0.1)
+
+
+def test_people_walking_by_do_not_move_the_registration():
+    local_map = map_from([Transform2D(0.0, 0.0, 0.0)], ROOM)
+    T_true = Transform2D(0.1, -0.05, -0.05)
+    # six legs of three people between the robot and the walls, not in the map
+    people = np.array([[1.0, 0.3, 0.06], [1.2, 0.3, 0.06], [-1.0, 1.0, 0.06], [-1.2, 1.1, 0.06],
+                       [0.5, -1.0, 0.06], [0.7, -1.1, 0.06]])  # fmt: skip
+    p = points_at(T_true, ROOM, np.concatenate([PILLAR, people]))
+    result = register(p, local_map, Transform2D(0.0, 0.0, 0.0), np.diag([0.1**2, 0.1**2, 0.05**2]), CONFIG)
+    error = T_true.inverse() @ result.T_map_body
+    assert math.hypot(error.x, error.y) < 0.01 and abs(error.theta) < math.radians(0.3)
+
+
+def test_a_corridor_is_degenerate_along_its_length_and_the_prior_holds_it():
+    local_map = map_from([Transform2D(0.0, 0.0, 0.0)], CORRIDOR, np.zeros((0, 3)))
+    T_true = Transform2D(0.3, 0.05, 0.02)
+    T_prior = Transform2D(0.5, 0.0, 0.0)  # 0.2 m off along the corridor, 5 cm across
+    P_prior = np.diag([0.1**2, 0.1**2, 0.02**2])
+    result = register(points_at(T_true, CORRIDOR, np.zeros((0, 3))), local_map, T_prior, P_prior, CONFIG)
+    assert result.degenerate and result.weakest_std_m > CONFIG.degenerate_std_m
+    # across the corridor and in heading the scan decides; along it the prior does
+    assert result.T_map_body.y == pytest.approx(0.05, abs=0.01)
+    assert result.T_map_body.theta == pytest.approx(0.02, abs=math.radians(0.3))
+    assert result.T_map_body.x == pytest.approx(0.5, abs=0.02)
+    # along the corridor the uncertainty is (nearly) the prior's 0.1 m, across it the scan's
+    assert 0.085 < math.sqrt(result.Sigma[0, 0]) <= 0.1
+    assert math.sqrt(result.Sigma[1, 1]) < 0.01
+
+
+def test_the_covariance_is_what_repeated_scans_give():
+    """Monte Carlo: the registered pose's scatter over scans with independent range noise (seeded) agrees
+    with Sigma: mean NEES within the 99 % band of its chi-square(3 n) / n."""
+    local_map = map_from([Transform2D(0.0, 0.0, 0.0), Transform2D(0.5, 0.3, 0.4)], ROOM)
+    T_true = Transform2D(0.2, 0.1, 0.2)
+    P_prior = np.diag([0.05**2, 0.05**2, 0.03**2])
+    rng = np.random.default_rng(7)
+    lidar = LidarConfig(range_max=3.5, noise=CONFIG.point_std_m)
+    nees = []
+    for _ in range(60):
+        T_prior = Transform2D(*(T_true.as_array() + rng.multivariate_normal(np.zeros(3), P_prior)))
+        result = register(points_at(T_true, ROOM, rng=rng, lidar=lidar), local_map, T_prior, P_prior, CONFIG)
+        e = result.T_map_body.as_array() - T_true.as_array()
+        e[2] = normalize_angle(e[2])
+        nees.append(e @ np.linalg.solve(result.Sigma, e))
+    # chi2(180) / 60: 99 % band [2.38, 3.72]; the map's own noise adds a little
+    assert 2.2 < np.mean(nees) < 3.9
+
+
+def test_nothing_to_match_gives_no_registration():
+    local_map = map_from([Transform2D(0.0, 0.0, 0.0)], ROOM)
+    far = np.array([[50.0, 50.0], [51.0, 50.0], [52.0, 50.0]])
+    assert register(far, local_map, Transform2D(), np.eye(3) * 0.01, CONFIG) is None
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "message"),
+    [
+        ("voxel_m", 0.0, "voxel_m must be finite and > 0"),
+        ("max_iterations", 0, "max_iterations must be"),
+        ("min_points", 2, "min_points must be"),
+        ("kernel", math.nan, "kernel must be a finite number"),
+    ],
+)
+def test_invalid_registration_config_is_refused(field, value, message):
+    with pytest.raises(ValueError, match=message):
+        RegistrationConfig(**{field: value})
+
+
+def test_invalid_odometry_config_is_refused():
+    with pytest.raises(ValueError, match="keyframes must be"):
+        LidarOdometryConfig(keyframes=0)
+    with pytest.raises(ValueError, match="registration must be a RegistrationConfig"):
+        LidarOdometryConfig(registration={"voxel_m": 0.05})
+
+
+NOISE = TwistNoise(forward_m2_per_m=0.02**2, lateral_m2_per_m=0.01**2, heading_rad2_per_m=0.02**2,
+                   heading_rad2_per_rad=0.02**2)  # fmt: skip
+
+
+def drive(walls, circles, wheel_bias: float, steps: int = 40):
+    """LiDAR odometry along an arc in ``walls`` fed wheel odometry whose heading drifts by ``wheel_bias``
+    rad per step; the true, the input's and the registered poses at each scan."""
+    odometry = LidarOdometry(LidarOdometryConfig(), NOISE, Transform2D())
+    rng = np.random.default_rng(3)
+    truth, inputs, registered, bases = [], [], [], []
+    T_true, T_input = Transform2D(-1.5, 0.0, 0.0), Transform2D(-1.5, 0.0, 0.0)
+    odometry.restart(T_input)
+    U = Transform2D(0.05, 0.0, 0.02)
+    for k in range(steps):
+        scan = LIDAR.range_scan(simulate_scan(T_true, circles, walls, LIDAR, rng))
+        result = odometry.step(k * 200_000_000, T_input, scan)
+        truth.append(T_true), inputs.append(T_input), registered.append(result.T_odom_body)
+        bases.append(result.basis)
+        T_true = T_true @ U
+        T_input = T_input @ U @ Transform2D(0.0, 0.0, wheel_bias)
+    return truth, inputs, registered, bases
+
+
+def test_lidar_odometry_corrects_drifting_wheels():
+    truth, inputs, registered, bases = drive(ROOM, PILLAR, wheel_bias=0.01)
+    assert bases[0] is Basis.MOTION and set(bases[1:]) == {Basis.REGISTERED}
+    input_error = abs(normalize_angle(inputs[-1].theta - truth[-1].theta))
+    registered_error = truth[-1].inverse() @ registered[-1]
+    assert input_error == pytest.approx(0.39, abs=1e-9)
+    assert abs(registered_error.theta) < math.radians(1.0)
+    assert math.hypot(registered_error.x, registered_error.y) < 0.03
+
+
+def test_with_nothing_in_sight_the_lidar_odometry_is_the_motion_input():
+    """Never worse than its input: no returns, so every scan rests on the motion input, exactly."""
+    truth, inputs, registered, bases = drive(np.zeros((0, 4)), np.zeros((0, 3)), wheel_bias=0.01, steps=10)
+    assert set(bases) == {Basis.MOTION}
+    for T_input, T_registered in zip(inputs, registered, strict=True):
+        np.testing.assert_allclose(T_registered.as_array(), T_input.as_array(), atol=1e-12)
+
+
+def test_scans_must_come_in_time_order():
+    odometry = LidarOdometry(LidarOdometryConfig(), NOISE, Transform2D())
+    scan = LIDAR.range_scan(simulate_scan(Transform2D(), PILLAR, ROOM, LIDAR, np.random.default_rng(0)))
+    odometry.step(10, Transform2D(), scan)
+    with pytest.raises(ValueError, match="not after the previous scan's"):
+        odometry.step(10, Transform2D(), scan)

@@ -1,0 +1,191 @@
+"""LiDAR odometry: each scan registered to a local map of recent scans, the motion input as its prior.
+
+The motion input (wheel odometry, a recorded ``odom``) gives the pose ``T_odom_body(t_k)`` at each scan's
+stamp ``t_k``. With ``T_k-1`` the previous scan's registered pose (frame ``lidar_odom``) and the input's
+motion between the scans ``U_k = T_odom_body(t_k-1)^-1 T_odom_body(t_k)``, the prior of scan ``k`` and its
+covariance given ``T_k-1`` are::
+
+    T_prior = T_k-1 U_k,     P_prior = Q(T_k-1, log U_k, t_k - t_k-1) + P_floor
+
+(``Q`` the motion input's :class:`~turtlelib.motion.motion_models.TwistNoise`; ``P_floor`` keeps a robot
+that stands still from pinning the registration exactly). The scan is registered to the local map with that
+prior (:func:`turtlelib.sensing.scan_registration.register`): ``T_k`` with covariance ``Sigma_k`` (given
+the map, so given ``T_k-1``). Where registration has nothing to match (the first scan, too few points) the
+scan's pose is the prior: the estimate is then the motion input's own. A scan that moved
+``keyframe_distance_m`` or turned ``keyframe_angle_rad`` from the newest keyframe becomes one; the local map
+is the newest ``keyframes`` of them, thinned to one point per ``voxel_m`` cell.
+
+Each scan gives a sample of :class:`turtlelib.motion.motion_signals.MeasuredPoses` for the filter's
+timeline: the pose ``T_k`` and the covariance ``Sigma_k`` of the motion since ``t_k-1`` (map frame, additive
+``[x, y, theta]``), so the filter's prediction from scan to scan is the registered motion with its
+registered uncertainty (:class:`turtlelib.motion.motion_models.MeasuredMotion`): independent increments,
+which is what a chain of registrations given the previous pose is.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from collections import deque
+from dataclasses import dataclass, field
+from functools import partial
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..geometry.se2 import Transform2D, normalize_angle
+from ..motion.motion_models import TwistNoise
+from ..motion.motion_signals import Sample
+from ..sensing.range_scan import RangeScan
+from ..sensing.scan_registration import (
+    LocalMap,
+    Registration,
+    RegistrationConfig,
+    register,
+    voxel_centroids,
+)
+from ..util.timebase import NS_PER_S
+from ..util.validation import integer, positive, store
+
+# P_floor: (1 mm)^2 and (0.001 rad)^2
+_PRIOR_FLOOR = np.diag([1e-6, 1e-6, 1e-6])
+
+
+@dataclass(frozen=True)
+class LidarOdometryConfig:
+    """``keyframe_distance_m`` (m, > 0), ``keyframe_angle_rad`` (rad, > 0): how far a scan must be from the
+    newest keyframe to become one; ``keyframes`` (int >= 1): keyframes in the local map; ``registration``:
+    the matcher's (:class:`RegistrationConfig`). ValueError for invalid values."""
+
+    keyframe_distance_m: float = 0.2
+    keyframe_angle_rad: float = 0.2
+    keyframes: int = 20
+    registration: RegistrationConfig = field(default_factory=RegistrationConfig)
+
+    def __post_init__(self) -> None:
+        store(self, ("keyframe_distance_m", "keyframe_angle_rad"), positive)
+        store(self, ("keyframes",), partial(integer, minimum=1))
+        if not isinstance(self.registration, RegistrationConfig):
+            raise ValueError(f"registration must be a RegistrationConfig, got {self.registration!r}")
+
+
+class Basis(enum.Enum):
+    """What a scan's pose rests on: the scan registered (``REGISTERED``), registered but weak along a
+    direction the prior then holds (``DEGENERATE``), or the motion input alone (``MOTION``: no map yet,
+    too few points matched)."""
+
+    REGISTERED = "registered"
+    DEGENERATE = "degenerate"
+    MOTION = "motion"
+
+
+@dataclass(frozen=True)
+class OdometryStep:
+    """One scan's result: its stamp, its pose ``T_odom_body`` (frame ``lidar_odom``), the covariance
+    ``Sigma`` (3, 3) of the motion since the previous scan, what it rests on (``basis``) and the
+    registration (None for ``Basis.MOTION``)."""
+
+    t_ns: int
+    T_odom_body: Transform2D
+    Sigma: NDArray[np.float64]
+    basis: Basis
+    registration: Registration | None
+    interval_ns: int
+
+    @property
+    def sample(self) -> Sample:
+        """This step as a :class:`~turtlelib.motion.motion_signals.MeasuredPoses` sample."""
+        T, S = self.T_odom_body, self.Sigma
+        return (
+            T.x,
+            T.y,
+            T.theta,
+            float(self.interval_ns),
+            S[0, 0],
+            S[0, 1],
+            S[0, 2],
+            S[1, 1],
+            S[1, 2],
+            S[2, 2],
+        )
+
+
+def scan_points(scan: RangeScan, T_body_lidar: Transform2D) -> NDArray[np.float64]:
+    """The returns of ``scan`` as points in the body frame (n, 2): ``T_body_lidar rho_b [cos phi_b, sin
+    phi_b]``."""
+    valid = scan.returns()
+    beams = np.flatnonzero(valid)
+    phi = scan.angle_min + beams * scan.angle_increment
+    rho = scan.ranges[valid]
+    p_lidar = np.column_stack([rho * np.cos(phi), rho * np.sin(phi)])
+    return T_body_lidar @ p_lidar
+
+
+class LidarOdometry:
+    """Scan-to-local-map odometry with the motion input as the prior (module docstring). ``noise`` is the
+    motion input's; ``T_body_lidar`` the LiDAR's mount."""
+
+    def __init__(self, config: LidarOdometryConfig, noise: TwistNoise, T_body_lidar: Transform2D) -> None:
+        self.config = config
+        self.noise = noise
+        self.T_body_lidar = T_body_lidar
+        self._keyframes: deque[NDArray[np.float64]] = deque(maxlen=config.keyframes)
+        self._keyframe_pose: Transform2D | None = None
+        self._map: LocalMap | None = None
+        self._last: tuple[int, Transform2D, Transform2D] | None = None
+        self._start = Transform2D()
+
+    def restart(self, T_odom_body: Transform2D | None = None) -> None:
+        """Forget the local map and the last scan (a reset, a relocalization, a time jump): the next scan
+        starts again from ``T_odom_body`` (identity by default)."""
+        self._keyframes.clear()
+        self._keyframe_pose = None
+        self._map = None
+        self._last = None
+        self._start = Transform2D() if T_odom_body is None else T_odom_body
+
+    def step(self, t_ns: int, T_input_body: Transform2D, scan: RangeScan) -> OdometryStep:
+        """Register the scan stamped ``t_ns`` (integer ns, after the previous one) at which the motion
+        input's pose is ``T_input_body``; ValueError for a stamp not after the previous scan's."""
+        t_ns = integer("scan stamp (ns)", t_ns)
+        points = voxel_centroids(scan_points(scan, self.T_body_lidar), self.config.registration.voxel_m)
+        if self._last is None:
+            step = OdometryStep(t_ns, self._start, np.zeros((3, 3)), Basis.MOTION, None, 0)
+        else:
+            step = self._registered(t_ns, T_input_body, points)
+        self._last = (t_ns, step.T_odom_body, T_input_body)
+        self._keep(step.T_odom_body, points)
+        return step
+
+    def _registered(self, t_ns: int, T_input_body: Transform2D, points: NDArray[np.float64]) -> OdometryStep:
+        t_prev, T_prev, T_input_prev = self._last
+        if t_ns <= t_prev:
+            raise ValueError(f"scan stamp {t_ns} ns is not after the previous scan's, {t_prev} ns")
+        # T_prior = T_k-1 U_k,  P_prior = Q(T_k-1, log U_k, dt) + P_floor
+        U = T_input_prev.inverse() @ T_input_body
+        T_prior = T_prev @ U
+        P_prior = self.noise.covariance(T_prev, U.log(), (t_ns - t_prev) / NS_PER_S) + _PRIOR_FLOOR
+        registration = None
+        if self._map is not None and len(points) >= self.config.registration.min_points:
+            registration = register(points, self._map, T_prior, P_prior, self.config.registration)
+        if registration is None:
+            return OdometryStep(t_ns, T_prior, P_prior, Basis.MOTION, None, t_ns - t_prev)
+        basis = Basis.DEGENERATE if registration.degenerate else Basis.REGISTERED
+        return OdometryStep(
+            t_ns, registration.T_map_body, registration.Sigma, basis, registration, t_ns - t_prev
+        )
+
+    def _keep(self, T_odom_body: Transform2D, points: NDArray[np.float64]) -> None:
+        """Make the scan a keyframe if it moved or turned far enough from the newest one."""
+        if self._keyframe_pose is not None:
+            moved = self._keyframe_pose.inverse() @ T_odom_body
+            far = math.hypot(moved.x, moved.y) >= self.config.keyframe_distance_m
+            turned = abs(normalize_angle(moved.theta)) >= self.config.keyframe_angle_rad
+            if not (far or turned):
+                return
+        if len(points) == 0:
+            return
+        self._keyframe_pose = T_odom_body
+        self._keyframes.append(T_odom_body @ points)
+        q_map = voxel_centroids(np.concatenate(list(self._keyframes)), self.config.registration.voxel_m)
+        self._map = LocalMap(q_map, self.config.registration) if len(q_map) >= 3 else None
