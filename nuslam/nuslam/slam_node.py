@@ -5,10 +5,14 @@ The filter is `turtlelib.EkfSlam`; `turtlelib.SlamTimeline` brings it to each ob
 the observation is applied (the motion interpolated between motion samples), so observations that arrive
 late (up to `max_observation_delay`) are still applied at the pose they were taken from.
 
-Motion (`motion_source`)
+Motion (`motion_source`, `scan_registration`)
     `joint_states` (default): the wheel angles through `turtlelib.DiffDriveMotion` (`wheel_noise`);
     `odom`: the relative pose between consecutive `odom` messages through `turtlelib.OdometryMotion`
     (twist noise `odom_*`), for any base that publishes odometry (a Gazebo TurtleBot3, a Create, ...).
+    With `scan_registration`, each `scan` is registered to a local map of recent scans with that motion
+    as its prior (`nuslam.scan_odometry`, `turtlelib.LidarOdometry`, parameters `registration.*`), and
+    the filter predicts with the registered motion and its covariance (`turtlelib.MeasuredMotion`): the
+    pose rests on the walls and furniture wherever the scans see any, on the wheels where they do not.
 Maps (`map_file`, `mode`)
     `map_file` (a `turtlelib.mapping.landmark_map` JSON file) is loaded at start-up when it exists; in `mode:
     localization` it must, and its landmarks stay fixed (a Schmidt update: only the pose is estimated,
@@ -26,7 +30,7 @@ Subscribes
         or the robot's own), for `map -> odom` and (`motion_source: odom`) as the motion; gated like
         joint_states (`nuturtle_ros_common.odom_stream`: time and speed bounds, a reset source restarts).
     `scan` (sensor_msgs/LaserScan, frame `sensor_id` or `body_id`, sensor-data QoS; with `grid.enabled`
-        and no grid loaded): the occupancy grid's input.
+        and no grid loaded, or with `scan_registration`): the occupancy grid's and the registration's input.
     `initialpose` (geometry_msgs/PoseWithCovarianceStamped in `map_id`, RViz's "2D Pose Estimate"):
         relocalization: pose and (x, y, yaw) covariance (finite, symmetric, positive definite, else refused
         with a warning) replace the filter's at its time; the map is kept, independent of the new pose.
@@ -62,7 +66,8 @@ Publishes
         report), `slam: motion vs LiDAR`
         (`turtlelib.estimation.slip_recovery`: WARN naming the cause while scans contradict the wheels' motion
         (slip, bump) and for `slip_report_s` after each relocalization against the map, ERROR when they keep
-        coming; scans held and relocalizations so far).
+        coming; scans held and relocalizations so far), `slam: scan registration` (with
+        `scan_registration`: what the pose rests on, `nuslam.scan_odometry`).
     `/tf` `map_id` -> `odom_id` where tf2_msgs is installed: ``T_map_odom = T_map_body T_odom_body^-1``
         at each pose's stamp, with ``T_odom_body`` the transform the odometry source broadcasts (read from
         its `odom` topic, interpolated between its samples), so that composing the two transforms on /tf
@@ -84,6 +89,8 @@ Parameters
     `turtlelib.estimation.slip_recovery.SlipRecoveryConfig` (slip_recovery, slip_min_matches,
     slip_match_radius, slip_confirm_scans, slip_margin_m, slip_margin_rad, slip_stall_tolerance,
     slip_report_s), `model`, then
+    `turtlelib.LidarOdometryConfig` and `turtlelib.RegistrationConfig` prefixed `registration.` (used with
+    `scan_registration`),
     `RobotParams` (that model's constants by default), `WheelJoints`, `PathTrailConfig`,
     `turtlelib.SampleGateConfig` (speed_margin, max_sample_gap, max_bridged_gap, restart_samples),
     `nuslam.grid_mapping.GridTopicConfig`, `turtlelib.GridConfig` and `turtlelib.KeyframeConfig` prefixed
@@ -115,18 +122,20 @@ from dataclasses import dataclass
 
 import numpy as np
 from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry
 from numpy.typing import NDArray
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from sensor_msgs.msg import JointState
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from sensor_msgs.msg import JointState, LaserScan
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
 from nuslam.grid_mapping import GridMapping
 from nuslam.map_to_odom import MapToOdom
 from nuslam.observation_reader import ObservationReader
+from nuslam.scan_odometry import ScanOdometry
 from nuslam.slam_report import SlamReport
 from nuturtle_description.robot_declaration import declare_robot
 from nuturtle_description.robot_params import RobotParams
@@ -153,13 +162,17 @@ from nuturtle_ros_common.throttle import SourceWarnings
 from nuturtle_ros_common.wheel_joints import WheelJoints
 from nuturtle_ros_common.wheel_stream import declare_wheel_stream
 from turtlelib import (
-    DiffDrive,
     DiffDriveMotion,
     EkfSlam,
+    LidarOdometryConfig,
+    MeasuredMotion,
+    MeasuredPoses,
     MotionModel,
     MotionSignal,
     OdometryMotion,
     OdometryPoses,
+    RegistrationConfig,
+    ScanResult,
     SlamConfig,
     SlamTimeline,
     TimelineConfig,
@@ -210,6 +223,8 @@ class SlamNodeConfig:
       when it exists (it must, with ``mode: localization``), written by ``~/save_map``; empty for none;
     * ``observation_timeout`` (s, > 0): the wheels turning this long (joint_states time) without an
       observation arriving gives a (throttled) warning: slam is only dead-reckoning;
+    * ``scan_registration``: register each scan to a local map of recent scans with the motion as its prior,
+      and predict with the registered motion (:mod:`nuslam.scan_odometry`);
     * ``smooth_saved_map``: keep the run's history (since start-up, the last reset or relocalization;
       memory grows with the run) and have ``~/save_map`` save the landmark map of the whole run smoothed
       and the occupancy grid of its keyframes at the smoothed poses (:mod:`turtlelib.smoothing.run_smoothing`;
@@ -230,6 +245,7 @@ class SlamNodeConfig:
     wheel_noise: float = WHEEL_NOISE
     map_file: str = ""
     observation_timeout: float = 3.0
+    scan_registration: bool = False
     smooth_saved_map: bool = False
 
     def __post_init__(self) -> None:
@@ -253,11 +269,11 @@ class SlamNode(Node):
         super().__init__("slam", **kwargs)
         self.node_config = frames = declare_dataclass(self, SlamNodeConfig)
         robot = declare_robot(self)
+        self._warnings = SourceWarnings(self.get_logger())
         self.timeline = self._estimator(robot)
         self.slam = self.timeline.slam
         self.joints = declare_dataclass(self, WheelJoints)
         self.path = PathTopic(self)
-        self._warnings = SourceWarnings(self.get_logger())
         grid_frames = (frames.map_id, frames.body_id, frames.sensor_id)
         localization = self.config.mode == "localization"
         self.grid = GridMapping(
@@ -277,6 +293,7 @@ class SlamNode(Node):
         topics = (frames.motion_source, "fake_sensor" if known else "landmarks")
         started_ns = self.get_clock().now().nanoseconds
         self.report = SlamReport(self.slam, self.recovery, self.grid, self._warnings, topics, started_ns)
+        self._fused_reported = 0
         self._connect(topics[1])
 
     def _estimator(self, robot: RobotParams) -> SlamTimeline:
@@ -291,7 +308,7 @@ class SlamNode(Node):
         timeline_config = declare_dataclass(self, TimelineConfig)
         lost_wheel = {"slip_turn_per_m": lost_wheel_turn_per_m(robot.track_width)}
         self.recovery = SlipRecovery(declare_dataclass(self, SlipRecoveryConfig, fixed=lost_wheel))
-        motion, signal, self.odometry = self._motion_model(robot.diff_drive())
+        motion, signal, self.odometry = self._motion_model(robot)
         slam = EkfSlam(self.config, motion, frames.T_map_body0)
         # the map loaded at start-up (None: none), which ~/reset goes back to
         self._start_map = self._load_start_map()
@@ -303,15 +320,38 @@ class SlamNode(Node):
             slam, signal, timeline_config, step=self.recovery, keep_history=frames.smooth_saved_map
         )
 
-    def _motion_model(self, drive: DiffDrive) -> tuple[MotionModel, MotionSignal, WheelOdometry | PoseTwist]:
+    def _motion_model(
+        self, robot: RobotParams
+    ) -> tuple[MotionModel, MotionSignal, WheelOdometry | PoseTwist]:
         """The filter's motion model, the signal its samples are read through, and the body-twist odometry
-        for the published twist: the wheels' (``joint_states``) or the odometry source's (``odom``)."""
+        for the published twist: the wheels' (``joint_states``) or the odometry source's (``odom``); with
+        ``scan_registration`` the registered motion, the wheels' or odometry's its prior
+        (``self.scan_odometry``, else None)."""
+        drive, frames = robot.diff_drive(), self.node_config
         odom_noise = declare_dataclass(
             self, TwistNoise, prefix="odom_", overrides=vars(TwistNoise.from_wheel_slip(drive, WHEEL_NOISE))
         )
-        if self.node_config.motion_source == "odom":
-            return OdometryMotion(odom_noise), OdometryPoses(), PoseTwist()
-        return DiffDriveMotion(drive, self.node_config.wheel_noise), WheelAngles(), WheelOdometry(drive)
+        if frames.motion_source == "odom":
+            model, signal, odometry = OdometryMotion(odom_noise), OdometryPoses(), PoseTwist()
+            input_noise = odom_noise
+        else:
+            model, signal = DiffDriveMotion(drive, frames.wheel_noise), WheelAngles()
+            odometry, input_noise = (
+                WheelOdometry(drive),
+                TwistNoise.from_wheel_slip(drive, frames.wheel_noise),
+            )
+        # declared either way, so that the config file holds them and the defaults are there to read
+        registration = declare_dataclass(self, RegistrationConfig, prefix="registration.")
+        config = declare_dataclass(
+            self, LidarOdometryConfig, prefix="registration.", fixed={"registration": registration}
+        )
+        self.scan_odometry = None
+        if not frames.scan_registration:
+            return model, signal, odometry
+        T_body_from = {frames.sensor_id: robot.T_body_scan, frames.body_id: Transform2D()}
+        speed_bounds = (robot.max_linear_speed, robot.max_angular_speed)
+        self.scan_odometry = ScanOdometry(config, input_noise, T_body_from, speed_bounds, self._warnings)
+        return MeasuredMotion(), MeasuredPoses(), odometry
 
     def _connect(self, observation_topic: str) -> None:
         """Publishers, subscriptions, services and the diagnostics timer, once everything else is checked
@@ -326,9 +366,11 @@ class SlamNode(Node):
             self.create_subscription(JointState, "joint_states", self._on_joint_states, 10)
         self.create_subscription(Odometry, "odom", self._on_odom, 10)
         self.create_subscription(PoseWithCovarianceStamped, "initialpose", self._on_initial_pose, 10)
+        if self.scan_odometry is not None:
+            self.create_subscription(LaserScan, "scan", self._on_scan, qos_profile_sensor_data)
         self.create_service(Trigger, "~/save_map", self._on_save_map)
         self.create_service(Trigger, "~/reset", self._on_reset)
-        DiagnosticsPublisher(self, self.report.statuses)
+        DiagnosticsPublisher(self, self._statuses)
         self.create_subscription(MarkerArray, observation_topic, self._on_observations, 10)
 
     @property
@@ -359,18 +401,25 @@ class SlamNode(Node):
             self._add_motion_sample(t_ns, sample)
 
     def _add_motion_sample(self, t_ns: int, sample: tuple[float, ...]) -> None:
-        """Move the timeline and the body-twist odometry on to a plausible motion sample (wheel angles or
-        an odometry pose); publish the pose."""
+        """Move the timeline (or, with ``scan_registration``, the registration's input) and the body-twist
+        odometry on to a plausible motion sample (wheel angles or an odometry pose); publish the pose."""
         t_s = t_ns * 1e-9
         source = self.node_config.motion_source
         try:
-            start = time.perf_counter()
-            applied = self.timeline.add_motion(t_ns, sample)
-            self.report.applied(applied, 1e3 * (time.perf_counter() - start))
+            applied = [] if self.scan_odometry is not None else self._timed_add_motion(t_ns, sample)
             if self.odometry.reference_time_s is None:
                 self.odometry.set_reference(t_s, *sample)
             V_body = self.odometry.step(t_s, *sample)
+            if self.scan_odometry is not None:
+                self.scan_odometry.input(t_ns, self._input_pose(sample))
+                applied = self._add_registered_scans()
+                if self.timeline.latest_time_ns is None:
+                    return  # no scan registered yet: no pose
             T_map_body, P_pose = self.timeline.latest_pose()
+            if self.scan_odometry is not None:
+                T_map_body, P_pose = self.scan_odometry.moved_on(
+                    self.timeline.latest_time_ns, T_map_body, P_pose, t_ns
+                )
         except (ValueError, np.linalg.LinAlgError) as error:
             # a motion the filter's model refuses (a step turning the body by more than 1000 rad, ...):
             # add_motion changed nothing, so the samples after it drive on from the last good one (the
@@ -382,6 +431,52 @@ class SlamNode(Node):
         self.grid.insert_reached()
         if applied:
             self._publish_map(stamp_from_nanoseconds(applied[-1].t_ns))
+
+    def _timed_add_motion(self, t_ns: int, sample: tuple[float, ...]) -> list[ScanResult]:
+        """``timeline.add_motion``, its applied measurements counted and timed."""
+        start = time.perf_counter()
+        applied = self.timeline.add_motion(t_ns, sample)
+        self.report.applied(applied, 1e3 * (time.perf_counter() - start))
+        return applied
+
+    def _input_pose(self, sample: tuple[float, ...]) -> Transform2D:
+        """The motion input's pose ``T_odom_body`` at its newest sample: the odometry's pose, or the wheels'
+        dead reckoning."""
+        if self.node_config.motion_source == "odom":
+            return Transform2D(*sample)
+        return self.odometry.T_odom_body
+
+    def _on_scan(self, msg: LaserScan) -> None:
+        """A scan for the registration (``scan_registration``): registered once the motion reaches it."""
+        self.scan_odometry.on_scan(msg)
+        try:
+            applied = self._add_registered_scans()
+        except (ValueError, np.linalg.LinAlgError) as error:
+            self._warnings.warn("scan", f"scan registration skipped: {error}")
+            return
+        self.grid.insert_reached()
+        if applied:
+            self._publish_map(stamp_from_nanoseconds(applied[-1].t_ns))
+
+    def _add_registered_scans(self) -> list[ScanResult]:
+        """The registered scans the motion reaches, as the timeline's motion samples (the first after a
+        restart of the input restarts the timeline); the measurements they apply."""
+        applied = []
+        for t_ns, sample, restart in self.scan_odometry.reached():
+            if restart:
+                self.timeline.restart(t_ns, sample)
+            else:
+                applied += self._timed_add_motion(t_ns, sample)
+        return applied
+
+    def _statuses(self, now_ns: int) -> list[DiagnosticStatus]:
+        """/diagnostics: the report's, and the registration's (``scan_registration``)."""
+        statuses = self.report.statuses(now_ns)
+        if self.scan_odometry is not None:
+            fused = self.report.counts["fused"]
+            statuses.append(self.scan_odometry.status(fused - self._fused_reported))
+            self._fused_reported = fused
+        return statuses
 
     def _on_observations(self, msg: MarkerArray) -> None:
         """One array of `fake_sensor` (known association) or `landmarks` (unknown) into the timeline."""
@@ -536,8 +631,12 @@ class SlamNode(Node):
             self.report.silent(silent_s)
 
     def _restart(self, t_ns: int, sample: tuple[float, ...]) -> None:
-        """Take this motion sample as the new start of the timeline and of the odometry (estimate kept)."""
-        self.timeline.restart(t_ns, sample)
+        """Take this motion sample as the new start of the timeline (with ``scan_registration``, the next
+        registered scan) and of the odometry (estimate kept)."""
+        if self.scan_odometry is None:
+            self.timeline.restart(t_ns, sample)
+        else:
+            self.scan_odometry.restart()
         self.odometry.set_reference(t_ns * 1e-9, *sample)
 
     # --- outputs -----------------------------------------------------------------------------------------

@@ -145,7 +145,7 @@ NOISE = TwistNoise(forward_m2_per_m=0.02**2, lateral_m2_per_m=0.01**2, heading_r
 def drive(walls, circles, wheel_bias: float, steps: int = 40):
     """LiDAR odometry along an arc in ``walls`` fed wheel odometry whose heading drifts by ``wheel_bias``
     rad per step; the true, the input's and the registered poses at each scan."""
-    odometry = LidarOdometry(LidarOdometryConfig(), NOISE, Transform2D())
+    odometry = LidarOdometry(LidarOdometryConfig(), NOISE)
     rng = np.random.default_rng(3)
     truth, inputs, registered, bases = [], [], [], []
     T_true, T_input = Transform2D(-1.5, 0.0, 0.0), Transform2D(-1.5, 0.0, 0.0)
@@ -153,7 +153,7 @@ def drive(walls, circles, wheel_bias: float, steps: int = 40):
     U = Transform2D(0.05, 0.0, 0.02)
     for k in range(steps):
         scan = LIDAR.range_scan(simulate_scan(T_true, circles, walls, LIDAR, rng))
-        result = odometry.step(k * 200_000_000, T_input, scan)
+        result = odometry.step(k * 200_000_000, T_input, scan, Transform2D())
         truth.append(T_true), inputs.append(T_input), registered.append(result.T_odom_body)
         bases.append(result.basis)
         T_true = T_true @ U
@@ -180,8 +180,8 @@ def test_with_nothing_in_sight_the_lidar_odometry_is_the_motion_input():
 
 
 def test_scans_must_come_in_time_order():
-    odometry = LidarOdometry(LidarOdometryConfig(), NOISE, Transform2D())
+    odometry = LidarOdometry(LidarOdometryConfig(), NOISE)
     scan = LIDAR.range_scan(simulate_scan(Transform2D(), PILLAR, ROOM, LIDAR, np.random.default_rng(0)))
-    odometry.step(10, Transform2D(), scan)
+    odometry.step(10, Transform2D(), scan, Transform2D())
     with pytest.raises(ValueError, match="not after the previous scan's"):
-        odometry.step(10, Transform2D(), scan)
+        odometry.step(10, Transform2D(), scan, Transform2D())

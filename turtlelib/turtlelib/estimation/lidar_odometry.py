@@ -8,12 +8,19 @@ covariance given ``T_k-1`` are::
     T_prior = T_k-1 U_k,     P_prior = Q(T_k-1, log U_k, t_k - t_k-1) + P_floor
 
 (``Q`` the motion input's :class:`~turtlelib.motion.motion_models.TwistNoise`; ``P_floor`` keeps a robot
-that stands still from pinning the registration exactly). The scan is registered to the local map with that
-prior (:func:`turtlelib.sensing.scan_registration.register`): ``T_k`` with covariance ``Sigma_k`` (given
-the map, so given ``T_k-1``). Where registration has nothing to match (the first scan, too few points) the
-scan's pose is the prior: the estimate is then the motion input's own. A scan that moved
-``keyframe_distance_m`` or turned ``keyframe_angle_rad`` from the newest keyframe becomes one; the local map
-is the newest ``keyframes`` of them, thinned to one point per ``voxel_m`` cell.
+that stands still from pinning the registration exactly). After the input restarted (a gap in it, another
+odometry frame, a clock that jumped: :meth:`LidarOdometry.forget_input`) its motion to the next scan is
+taken only if a robot within its speed bounds could have made it in the time (``|U_xy| <= v_max dt +
+s_m``, ``|U_theta| <= omega_max dt + s_rad``: a gap in an odometry that goes on in its frame), else the
+prior is the previous scan's pose; either way widened by ``diag(s_m^2, s_m^2, s_rad^2)``
+(``resume_std_m``, ``resume_std_rad``). The local map, which the robot has not left, is kept.
+
+The scan is registered to the local map with that prior
+(:func:`turtlelib.sensing.scan_registration.register`): ``T_k`` with covariance ``Sigma_k`` (given the map, so
+given ``T_k-1``). Where registration has nothing to match (the first scan, too few points) the scan's pose is
+the prior: the estimate is then the motion input's own. A scan that moved ``keyframe_distance_m`` or turned
+``keyframe_angle_rad`` from the newest keyframe becomes one; the local map is the newest ``keyframes`` of
+them, thinned to one point per ``voxel_m`` cell.
 
 Each scan gives a sample of :class:`turtlelib.motion.motion_signals.MeasuredPoses` for the filter's
 timeline: the pose ``T_k`` and the covariance ``Sigma_k`` of the motion since ``t_k-1`` (map frame, additive
@@ -54,16 +61,20 @@ _PRIOR_FLOOR = np.diag([1e-6, 1e-6, 1e-6])
 @dataclass(frozen=True)
 class LidarOdometryConfig:
     """``keyframe_distance_m`` (m, > 0), ``keyframe_angle_rad`` (rad, > 0): how far a scan must be from the
-    newest keyframe to become one; ``keyframes`` (int >= 1): keyframes in the local map; ``registration``:
-    the matcher's (:class:`RegistrationConfig`). ValueError for invalid values."""
+    newest keyframe to become one; ``keyframes`` (int >= 1): keyframes in the local map; ``resume_std_m``
+    (m, > 0), ``resume_std_rad`` (rad, > 0): the prior's standard deviations for the first scan after the
+    motion input restarted; ``registration``: the matcher's (:class:`RegistrationConfig`). ValueError for
+    invalid values."""
 
     keyframe_distance_m: float = 0.2
     keyframe_angle_rad: float = 0.2
     keyframes: int = 20
+    resume_std_m: float = 0.5
+    resume_std_rad: float = 0.3
     registration: RegistrationConfig = field(default_factory=RegistrationConfig)
 
     def __post_init__(self) -> None:
-        store(self, ("keyframe_distance_m", "keyframe_angle_rad"), positive)
+        store(self, ("keyframe_distance_m", "keyframe_angle_rad", "resume_std_m", "resume_std_rad"), positive)
         store(self, ("keyframes",), partial(integer, minimum=1))
         if not isinstance(self.registration, RegistrationConfig):
             raise ValueError(f"registration must be a RegistrationConfig, got {self.registration!r}")
@@ -123,17 +134,36 @@ def scan_points(scan: RangeScan, T_body_lidar: Transform2D) -> NDArray[np.float6
 
 class LidarOdometry:
     """Scan-to-local-map odometry with the motion input as the prior (module docstring). ``noise`` is the
-    motion input's; ``T_body_lidar`` the LiDAR's mount."""
+    motion input's; ``max_speed_mps`` and ``max_turn_rate_rad_s`` (> 0) bound the robot's motion."""
 
-    def __init__(self, config: LidarOdometryConfig, noise: TwistNoise, T_body_lidar: Transform2D) -> None:
+    def __init__(
+        self,
+        config: LidarOdometryConfig,
+        noise: TwistNoise,
+        max_speed_mps: float = math.inf,
+        max_turn_rate_rad_s: float = math.inf,
+    ) -> None:
         self.config = config
         self.noise = noise
-        self.T_body_lidar = T_body_lidar
+        self._max_speed = (
+            positive("max_speed_mps", max_speed_mps) if math.isfinite(max_speed_mps) else math.inf
+        )
+        self._max_turn = (
+            positive("max_turn_rate_rad_s", max_turn_rate_rad_s)
+            if math.isfinite(max_turn_rate_rad_s)
+            else math.inf
+        )
+        self._input_restarted = False
         self._keyframes: deque[NDArray[np.float64]] = deque(maxlen=config.keyframes)
         self._keyframe_pose: Transform2D | None = None
         self._map: LocalMap | None = None
         self._last: tuple[int, Transform2D, Transform2D] | None = None
         self._start = Transform2D()
+
+    def forget_input(self) -> None:
+        """The motion input restarted: its motion to the next scan is taken only if plausible (module
+        docstring); that scan's stamp may be any."""
+        self._input_restarted = self._last is not None
 
     def restart(self, T_odom_body: Transform2D | None = None) -> None:
         """Forget the local map and the last scan (a reset, a relocalization, a time jump): the next scan
@@ -142,13 +172,17 @@ class LidarOdometry:
         self._keyframe_pose = None
         self._map = None
         self._last = None
+        self._input_restarted = False
         self._start = Transform2D() if T_odom_body is None else T_odom_body
 
-    def step(self, t_ns: int, T_input_body: Transform2D, scan: RangeScan) -> OdometryStep:
-        """Register the scan stamped ``t_ns`` (integer ns, after the previous one) at which the motion
-        input's pose is ``T_input_body``; ValueError for a stamp not after the previous scan's."""
+    def step(
+        self, t_ns: int, T_input_body: Transform2D, scan: RangeScan, T_body_lidar: Transform2D
+    ) -> OdometryStep:
+        """Register the scan stamped ``t_ns`` (integer ns, after the previous one), taken by the LiDAR
+        mounted at ``T_body_lidar``, at which the motion input's pose is ``T_input_body``; ValueError for a
+        stamp not after the previous scan's."""
         t_ns = integer("scan stamp (ns)", t_ns)
-        points = voxel_centroids(scan_points(scan, self.T_body_lidar), self.config.registration.voxel_m)
+        points = voxel_centroids(scan_points(scan, T_body_lidar), self.config.registration.voxel_m)
         if self._last is None:
             step = OdometryStep(t_ns, self._start, np.zeros((3, 3)), Basis.MOTION, None, 0)
         else:
@@ -159,12 +193,26 @@ class LidarOdometry:
 
     def _registered(self, t_ns: int, T_input_body: Transform2D, points: NDArray[np.float64]) -> OdometryStep:
         t_prev, T_prev, T_input_prev = self._last
-        if t_ns <= t_prev:
+        if t_ns <= t_prev and not self._input_restarted:
             raise ValueError(f"scan stamp {t_ns} ns is not after the previous scan's, {t_prev} ns")
         # T_prior = T_k-1 U_k,  P_prior = Q(T_k-1, log U_k, dt) + P_floor
-        U = T_input_prev.inverse() @ T_input_body
+        U, dt_s = T_input_prev.inverse() @ T_input_body, (t_ns - t_prev) / NS_PER_S
+        P_prior = _PRIOR_FLOOR
+        if self._input_restarted:
+            config = self.config
+            plausible = (
+                dt_s > 0.0
+                and math.hypot(U.x, U.y) <= self._max_speed * dt_s + config.resume_std_m
+                and abs(U.theta) <= self._max_turn * dt_s + config.resume_std_rad
+            )
+            U = U if plausible else Transform2D()
+            P_prior = P_prior + np.diag(
+                [config.resume_std_m**2, config.resume_std_m**2, config.resume_std_rad**2]
+            )
+            t_prev = min(t_prev, t_ns)
+            self._input_restarted = False
         T_prior = T_prev @ U
-        P_prior = self.noise.covariance(T_prev, U.log(), (t_ns - t_prev) / NS_PER_S) + _PRIOR_FLOOR
+        P_prior = P_prior + self.noise.covariance(T_prev, U.log(), max(dt_s, 0.0))
         registration = None
         if self._map is not None and len(points) >= self.config.registration.min_points:
             registration = register(points, self._map, T_prior, P_prior, self.config.registration)

@@ -1,0 +1,193 @@
+"""slam's LiDAR odometry (``scan_registration: true``): each `scan` registered to a local map of recent
+scans with the motion input (wheels or odom) as its prior (`turtlelib.LidarOdometry`); the registered
+motion, with its covariance, is what the filter predicts with (`turtlelib.MeasuredMotion`).
+
+Timing: a scan stamped ``t_s`` is registered once the motion input reaches ``t_s`` (its pose there is the
+prior's anchor; the input's poses are kept, interpolated between samples, ``INPUT_POSES`` of them), in stamp
+order; it waits for that up to ``MAX_WAITING_SCANS`` newer scans. Its registered pose becomes the filter's
+next motion sample, so the filter runs at the newest registered scan, and the pose slam publishes at a
+newer input stamp ``t`` is the filter's at ``t_s`` moved on by the input's own motion from ``t_s`` to ``t``
+(:meth:`ScanOdometry.moved_on`).
+
+`/diagnostics` (`slam: scan registration`): what the pose rests on since the last report - scans
+registered, scans degenerate (registered, but weak along a direction, as in a long corridor: WARN), scans
+on the motion input alone (nothing to match: no map yet, too few returns) - and, with the landmark
+observations fused in that time, ERROR when neither registration nor landmarks held the pose (the wheels
+alone: the estimate drifts as they do).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticStatus
+from numpy.typing import NDArray
+from sensor_msgs.msg import LaserScan
+
+from nuturtle_ros_common.conversions import range_scan_from_message, stamp_nanoseconds
+from nuturtle_ros_common.diagnostics import ERROR, OK, WARN, status
+from nuturtle_ros_common.throttle import SourceWarnings
+from turtlelib import Transform2D, TwistNoise
+from turtlelib.estimation.lidar_odometry import Basis, LidarOdometry, LidarOdometryConfig, OdometryStep
+from turtlelib.geometry.pose_buffer import PoseBuffer
+from turtlelib.sensing.range_scan import RangeScan
+from turtlelib.util.timebase import NS_PER_S
+
+# Motion-input poses kept to anchor scans (20 Hz joint_states: 50 s; 100 Hz odom: 10 s)
+INPUT_POSES = 1000
+# Scans that may wait for the motion input to reach their stamp
+MAX_WAITING_SCANS = 10
+
+
+class ScanOdometry:
+    """The scans' registration between the motion input and slam's filter (module docstring).
+    ``T_body_from`` maps each accepted scan frame id to its mount ``T_body_frame``; ``speed_bounds`` are
+    the robot's ``(max_linear_speed, max_angular_speed)`` (m/s, rad/s)."""
+
+    def __init__(
+        self,
+        config: LidarOdometryConfig,
+        noise: TwistNoise,
+        T_body_from: dict[str, Transform2D],
+        speed_bounds: tuple[float, float],
+        warnings: SourceWarnings,
+    ) -> None:
+        self._T_body_from = T_body_from
+        self._odometry = LidarOdometry(config, noise, *speed_bounds)
+        self.noise = noise
+        self._warnings = warnings
+        self._inputs = PoseBuffer(INPUT_POSES)
+        self._waiting: deque[tuple[int, RangeScan, str]] = deque()
+        self._last_ns: int | None = None
+        self._restarting = False
+        self.counts = {basis.value: 0 for basis in Basis} | {"skipped": 0}
+        self._reported = dict(self.counts)
+        self.last: OdometryStep | None = None
+
+    def input(self, t_ns: int, T_input_body: Transform2D) -> None:
+        """The motion input's pose at ``t_ns`` (after the previous one's)."""
+        self._inputs.add(t_ns, T_input_body)
+
+    def restart(self) -> None:
+        """The motion input restarted (a gap, another odometry frame, a clock that jumped back): forget its
+        poses and the waiting scans; the next scan is registered to the kept local map from the last
+        registered pose (`turtlelib.LidarOdometry.forget_input`), and restarts the filter's timeline if
+        its stamp is not after the last one's."""
+        self._inputs.clear()
+        self._waiting.clear()
+        self._odometry.forget_input()
+        self._restarting = True
+
+    def on_scan(self, msg: LaserScan) -> None:
+        """Queue a scan (skipped with a throttled warning when it cannot be read)."""
+        try:
+            t_ns = stamp_nanoseconds(msg.header.stamp)
+            if msg.header.frame_id not in self._T_body_from:
+                raise ValueError(
+                    f"it is in frame {msg.header.frame_id!r}, expected one of {sorted(self._T_body_from)}"
+                )
+            scan = range_scan_from_message(msg)
+        except ValueError as error:
+            self._skip(f"scan skipped by the scan registration: {error}")
+            return
+        self._waiting.append((t_ns, scan, msg.header.frame_id))
+        if len(self._waiting) > MAX_WAITING_SCANS:
+            dropped_ns, _, _ = self._waiting.popleft()
+            self._skip(
+                f"scan at {dropped_ns} ns skipped by the scan registration: the motion input did not reach "
+                f"its stamp while {MAX_WAITING_SCANS} newer scans came (are joint_states / odom arriving?)"
+            )
+
+    def reached(self) -> list[tuple[int, tuple[float, ...], bool]]:
+        """Register the waiting scans the motion input reaches, oldest first: ``(t_ns, sample, restart)``
+        each, ``sample`` the filter's next motion sample (`turtlelib.MeasuredPoses`) and ``restart`` True
+        for the first after a :meth:`restart` of the clock (stamped no later than the last). A scan not
+        after the last registered one (but after a restart), or older than the kept input poses, is skipped
+        with a throttled warning."""
+        samples = []
+        latest = self._inputs.latest_time_ns
+        while self._waiting and latest is not None and self._waiting[0][0] <= latest:
+            t_ns, scan, frame = self._waiting.popleft()
+            T_input_body = self._inputs.at(t_ns)
+            went_back = self._last_ns is not None and t_ns <= self._last_ns
+            if T_input_body is None or (went_back and not self._restarting):
+                self._skip(f"scan at {t_ns} ns skipped by the scan registration: older than the last one")
+                continue
+            try:
+                step = self._odometry.step(t_ns, T_input_body, scan, self._T_body_from[frame])
+            except (ValueError, np.linalg.LinAlgError) as error:
+                self._skip(f"scan at {t_ns} ns skipped by the scan registration: {error}")
+                continue
+            self._last_ns, self.last = t_ns, step
+            self.counts[step.basis.value] += 1
+            if step.basis is Basis.DEGENERATE:
+                self._warnings.warn(
+                    "registration",
+                    f"scan registration degenerate: the scan constrains one direction to only "
+                    f"{step.registration.weakest_std_m:.2f} m (a long corridor?); the motion input holds it",
+                )
+            samples.append((t_ns, step.sample, went_back))
+            self._restarting = False
+        return samples
+
+    def moved_on(
+        self, t_from_ns: int, T_map_body: Transform2D, P_pose: NDArray[np.float64], t_ns: int
+    ) -> tuple[Transform2D, NDArray[np.float64]]:
+        """The pose ``T_map_body`` (covariance ``P_pose``) at ``t_from_ns`` moved on to ``t_ns`` by the
+        motion input's own motion ``U = T_input(t_from)^-1 T_input(t)`` and its noise::
+
+            T = T_map_body U,   P = G P G^T + Q(T_map_body, log U, t - t_from)
+
+        (unchanged where the input's poses do not cover both times)."""
+        T_from, T_to = self._inputs.at(t_from_ns), self._inputs.at(t_ns)
+        if T_from is None or T_to is None or t_ns <= t_from_ns:
+            return T_map_body, P_pose
+        U = T_from.inverse() @ T_to
+        T = T_map_body @ U
+        G = np.eye(3)
+        G[0, 2], G[1, 2] = -(T.y - T_map_body.y), T.x - T_map_body.x
+        Q = self.noise.covariance(T_map_body, U.log(), (t_ns - t_from_ns) / NS_PER_S)
+        return T, G @ P_pose @ G.T + Q
+
+    def status(self, fused_since: int) -> DiagnosticStatus:
+        """`slam: scan registration` (module docstring); ``fused_since``: landmark observations fused since
+        the last report."""
+        since = {key: self.counts[key] - self._reported[key] for key in self.counts}
+        self._reported = dict(self.counts)
+        registered = since[Basis.REGISTERED.value] + since[Basis.DEGENERATE.value]
+        motion_only = since[Basis.MOTION.value]
+        sources = [
+            name for name, used in (("scan registration", registered), ("landmarks", fused_since)) if used
+        ]
+        if not sources and motion_only:
+            level, message = (
+                ERROR,
+                "the pose rests on the motion input alone: no scan registered, no landmark",
+            )
+        elif since[Basis.DEGENERATE.value]:
+            level, degenerate = WARN, since[Basis.DEGENERATE.value]
+            message = (
+                f"the pose rests on {' and '.join(sources)}; {degenerate} scans degenerate "
+                "(a direction the scans do not constrain, held by the motion input)"
+            )
+        else:
+            level = OK
+            message = (
+                f"the pose rests on {' and '.join(sources)}" if sources else "no scan since the last report"
+            )
+        values: dict[str, object] = {f"scans_{key}": value for key, value in self.counts.items()}
+        if self.last is not None and self.last.registration is not None:
+            registration = self.last.registration
+            weakest = registration.weakest_std_m
+            values |= {
+                "last_points_matched": registration.matched,
+                "last_weakest_std_m": weakest if math.isfinite(weakest) else "inf",
+                "last_prior_nis": registration.prior_nis,
+            }
+        return status("slam: scan registration", "slam", level, message, values)
+
+    def _skip(self, text: str) -> None:
+        self.counts["skipped"] += 1
+        self._warnings.warn("scan registration", text)

@@ -1,0 +1,50 @@
+"""slam with `scan_registration` (real rclpy): scans of a room registered with the wheels as the prior
+correct wheels that drift, and /diagnostics says what the pose rests on. The registration's own properties
+(accuracy, outliers, degeneracy, covariance by Monte Carlo, never worse than the input) are tested in
+tests/turtlelib/test_scan_registration.py."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from test_slam_grid import scan_message
+from test_slam_maps import diagnostics
+from test_slam_node import Arc, Rig, S, joint_state, pose_of
+
+from turtlelib import Transform2D
+
+pytestmark = pytest.mark.ros
+
+STEPS = 12
+
+
+def test_registered_scans_correct_drifting_wheels_and_diagnostics_say_so(ros):
+    rig = Rig(ros, scan_registration=True, lidar_x=0.25, lidar_y=-0.1, lidar_yaw=0.5)
+    truth = Arc(Transform2D(), S, vx=0.15, omega=0.5)
+    # the wheels report 0.3 rad/s more turn than the robot makes (a wheel slipping)
+    wheels = Arc(Transform2D(), S, vx=0.15, omega=0.8)
+    rng = np.random.default_rng(2)
+    for k in range(STEPS):
+        t_ns = S + k * S // 5
+        count = len(rig.odoms)
+        rig.joint_states.publish(joint_state(t_ns, wheels.angles(t_ns)))
+        rig.scans.publish(scan_message(truth.pose(t_ns), t_ns, rng))
+        # the pose starts at the first registered scan: from the second step on, each joint_states gives one
+        assert k == 0 or ros.spin_until(lambda c=count: len(rig.odoms) > c, 5.0), f"no odom at step {k}"
+    # a joint_states sample 1 ms after the last scan (registered by then): the pose there is that scan's
+    ros.spin_for(0.3)
+    count = len(rig.odoms)
+    rig.joint_states.publish(joint_state(t_ns + 1_000_000, wheels.angles(t_ns + 1_000_000)))
+    assert ros.spin_until(lambda: len(rig.odoms) > count, 5.0)
+    T_slam = Transform2D(*pose_of(rig.odoms[-1]))
+    T_true, T_wheels = truth.pose(t_ns), wheels.pose(t_ns)
+    assert abs(T_wheels.theta - T_true.theta) == pytest.approx(0.66, abs=1e-6)
+    error = T_true.inverse() @ T_slam
+    assert math.hypot(error.x, error.y) < 0.02
+    assert abs(error.theta) < math.radians(1.0)
+    status = diagnostics(rig, "slam: scan registration")
+    values = {pair.key: pair.value for pair in status.values}
+    assert "the pose rests on scan registration" in status.message
+    assert int(values["scans_registered"]) >= STEPS - 2 and values["scans_skipped"] == "0"
