@@ -157,7 +157,7 @@ def summary(result: Any) -> str:
         lines.append(hint)
     if "observation_arrays_applied" in metrics:
         grid = "map.yaml map.pgm grid.png " if (Path(result.out_dir) / "map.yaml").exists() else ""
-        errors = "errors.png " if result.accuracy else ""
+        errors = "errors.png estimate.tum odometry.tum reference.tum " if result.accuracy else ""
         smoothed = " smoothed/" if "smoothed" in metrics else ""
         lines.append(f"outputs in {result.out_dir}/: metrics.json trajectory.png map.json {grid}"
                      f"covariance.png {errors}slam/ config.yaml{smoothed}")  # fmt: skip

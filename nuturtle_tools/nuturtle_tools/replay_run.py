@@ -58,6 +58,7 @@ from nuturtle_description.robot_params import resolve_model
 from nuturtle_eval.metrics import PoseSeries, odom_in_world
 from nuturtle_eval.run_evaluation import (
     GRID_OUTPUTS,
+    TUM_OUTPUTS,
     ProgressBar,
     RunRecord,
     SlamSnapshot,
@@ -104,7 +105,7 @@ SMOOTHED_DIR = "smoothed"
 # Everything a replay writes into its output folder (nuturtle_eval.run_folder)
 OUTPUTS = (
     "metrics.json", "trajectory.png", "errors.png", "covariance.png", "map.json", *GRID_OUTPUTS,
-    "config.yaml", BAG_NAME, SMOOTHED_DIR,
+    *TUM_OUTPUTS, "config.yaml", BAG_NAME, SMOOTHED_DIR,
 )  # fmt: skip
 TRUTH_PLAYED_AS = "nusim/ground_truth"
 # a recording of nusim (the demo's): its pass/fail targets apply
