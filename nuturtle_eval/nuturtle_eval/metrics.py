@@ -300,6 +300,7 @@ class RunMetrics:
     landmarks_spurious: int
     landmark_rmse_m: float
     nees_pose_mean: float
+    nees_pose_median: float
     nees_pose_within_95_fraction: float
     nees_pose_band_95: tuple[float, float]
     sim_seconds: float
@@ -381,6 +382,7 @@ def evaluate_run(data: RunData, sim_seconds: float, wall_seconds: float) -> RunM
         landmark_rmse_m=association.rmse_m,
         # NaN when no pose had a positive definite covariance (the robot never moved from its known start)
         nees_pose_mean=float(np.mean(eps)) if eps.size else math.nan,
+        nees_pose_median=float(np.median(eps)) if eps.size else math.nan,
         nees_pose_within_95_fraction=float(np.mean((eps >= low) & (eps <= high))) if eps.size else math.nan,
         nees_pose_band_95=(low, high),
         sim_seconds=float(sim_seconds),

@@ -59,6 +59,7 @@ TARGETS = (
     ("rpe_rotation_odom_deg", "RPE 1-10 m, odometry (deg)", "{:.3f}", "", None),
     ("landmark_rmse_m", "landmark RMSE (m)", "{:.4f}", "", None),
     ("nees_pose_mean", "pose NEES, mean (3 dof)", "{:.2f}", "", None),
+    ("nees_pose_median", "pose NEES, median (3 dof)", "{:.2f}", "", None),
     ("nees_pose_within_95_fraction", "pose NEES inside the 95% band", "{:.3f}", ">= 0.9", lambda v: v >= 0.9),
     ("sim_seconds", "simulated time (s)", "{:.1f}", "", None),
     ("wall_seconds", "wall time (s)", "{:.1f}", "<= sim / 2", None),

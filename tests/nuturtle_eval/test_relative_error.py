@@ -30,8 +30,9 @@ def _pairs(path_m, min_m, max_m, chunk):
 def test_band_pairs_are_every_pair_in_the_band_whatever_the_piece_size(steps, min_m, width_m, chunk):
     s = np.concatenate([[0.0], np.cumsum(steps)])
     i, j = _pairs(s, min_m, min_m + width_m, chunk)
-    distance = s[None, :] - s[:, None]
-    expected_i, expected_j = np.nonzero((distance >= min_m) & (distance <= min_m + width_m))
+    # s_i + min_m <= s_j <= s_i + max_m, row i, column j
+    low, high = s[:, None] + min_m, s[:, None] + (min_m + width_m)
+    expected_i, expected_j = np.nonzero((s[None, :] >= low) & (s[None, :] <= high))
     np.testing.assert_array_equal(i, expected_i)
     np.testing.assert_array_equal(j, expected_j)
 
