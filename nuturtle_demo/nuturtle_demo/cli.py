@@ -104,7 +104,7 @@ def report(result: DemoResult, options: DemoOptions) -> str:
         f"{result.message_count} messages on {len(result.recorded_topics)} topics recorded in the "
         f"rosbag2 bag {result.out_dir / BAG_NAME}/ (ros2 bag info / ros2 bag play)",
         f"outputs in {result.out_dir}/: metrics.json trajectory.png errors.png covariance.png "
-        f"{BAG_NAME}/ config.yaml",
+        f"estimate.tum odometry.tum reference.tum {BAG_NAME}/ config.yaml",
     ]
     if result.saved_map is not None:
         success, message = result.saved_map

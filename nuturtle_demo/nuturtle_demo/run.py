@@ -56,6 +56,7 @@ from nuturtle_description.robot_params import resolve_model
 from nuturtle_eval.metrics import RunMetrics, odom_in_world
 from nuturtle_eval.run_evaluation import (
     GRID_OUTPUTS,
+    TUM_OUTPUTS,
     ProgressBar,
     RunRecord,
     evaluate_and_plot,
@@ -94,7 +95,8 @@ SLAM_SERVICE_TIMEOUT_S = 10.0
 BAG_NAME = "run"
 # Everything a run writes into its output folder (nuturtle_eval.run_folder)
 OUTPUTS = (
-    "metrics.json", "trajectory.png", "errors.png", "covariance.png", *GRID_OUTPUTS, "config.yaml", BAG_NAME,
+    "metrics.json", "trajectory.png", "errors.png", "covariance.png", *GRID_OUTPUTS, *TUM_OUTPUTS,
+    "config.yaml", BAG_NAME,
 )  # fmt: skip
 # Wall time to wait for the recorder to subscribe to every topic before the simulation starts (s)
 DISCOVERY_TIMEOUT_S = 10.0

@@ -18,7 +18,11 @@ Metrics
 -------
 * pose error ``e = [x_hat - x, y_hat - y, wrap(theta_hat - theta)]``; final position error ``|e_xy|`` and
   heading error ``|e_theta|`` at the estimate's last stamp;
-* ATE RMSE ``sqrt(mean |e_xy|^2)`` over the whole run (no re-alignment: the frames are tied by the start);
+* ATE RMSE ``sqrt(mean |e_xy|^2)`` over the whole run (no re-alignment: the frames are tied by the start),
+  and the same after the rigid motion that best fits the estimated positions to the truth's
+  (:func:`align_se2`: what evo's ``evo_ape --align`` reports for a planar run);
+* relative pose error over pairs of truth poses 1 to 10 m of the true path apart, translation (m) and
+  rotation (deg), for SLAM and for the odometry (:mod:`nuturtle_eval.relative_error`);
 * landmarks: mapped landmarks ``m_hat`` (K, 2) are associated one-to-one with the true centres ``m``
   (M, 2) by the Hungarian algorithm on Euclidean distance, keeping pairs closer than a gate; a mapped
   landmark without a partner within the gate is *spurious*, a mapped landmark whose nearest true
@@ -40,6 +44,8 @@ from scipy.optimize import linear_sum_assignment
 
 from turtlelib import Transform2D, normalize_angles
 from turtlelib.estimation.consistency import chi2_bounds, nees
+
+from .relative_error import relative_pose_error
 
 POSE_DOF = 3
 # Covariances with a smallest eigenvalue at or below this (m^2 or rad^2: a 1 micrometre / microradian
@@ -140,6 +146,18 @@ def ate_rmse(errors: NDArray[np.float64]) -> float:
     if errors.shape[0] == 0:
         raise ValueError("no pose errors")
     return float(np.sqrt(np.mean(np.sum(errors[:, :2] ** 2, axis=1))))
+
+
+def ate_rmse_aligned(estimate: PoseSeries, truth: PoseSeries) -> float:
+    """``sqrt(mean_k |T p_hat_k - p_k|^2)`` (m) at the estimate's stamps the truth covers, ``p_k`` the
+    truth interpolated there and ``T`` the rigid motion that best fits the estimated positions to them
+    (:func:`align_se2`); NaN with fewer than two such stamps."""
+    covered = estimate.within(truth.t_s[0], truth.t_s[-1])
+    if np.count_nonzero(covered) < 2:
+        return math.nan
+    estimate_xy, truth_xy = estimate.xy[covered], truth.interpolate(estimate.t_s[covered])[:, :2]
+    aligned_xy = align_se2(estimate_xy, truth_xy) @ estimate_xy
+    return float(np.sqrt(np.mean(np.sum((aligned_xy - truth_xy) ** 2, axis=1))))
 
 
 @dataclass(frozen=True)
@@ -266,6 +284,13 @@ class RunMetrics:
     final_heading_error_slam_rad: float
     ate_rmse_odom_m: float
     ate_rmse_slam_m: float
+    ate_rmse_aligned_odom_m: float
+    ate_rmse_aligned_slam_m: float
+    rpe_translation_odom_m: float
+    rpe_rotation_odom_deg: float
+    rpe_translation_slam_m: float
+    rpe_rotation_slam_deg: float
+    rpe_pairs: int
     landmarks_true: int
     landmarks_in_range: int
     landmarks_mapped: int
@@ -275,6 +300,7 @@ class RunMetrics:
     landmarks_spurious: int
     landmark_rmse_m: float
     nees_pose_mean: float
+    nees_pose_median: float
     nees_pose_within_95_fraction: float
     nees_pose_band_95: tuple[float, float]
     sim_seconds: float
@@ -324,6 +350,10 @@ def evaluate_run(data: RunData, sim_seconds: float, wall_seconds: float) -> RunM
     eps = pose_nees(e_slam, data.slam_covariances[slam_covered])
     eps = eps[np.isfinite(eps)]
     low, high = nees_band()
+    rpe_odom, rpe_slam = (
+        relative_pose_error(data.odom, data.truth),
+        relative_pose_error(data.slam, data.truth),
+    )
     association = associate_landmarks(data.mapped_xy, data.true_xy, data.gate_m)
     in_range = landmarks_within_range(data.true_xy, data.truth.xy, data.sensor_range_m, data.true_radii_m)
     paired = np.zeros(in_range.size, dtype=bool)
@@ -335,6 +365,13 @@ def evaluate_run(data: RunData, sim_seconds: float, wall_seconds: float) -> RunM
         final_heading_error_slam_rad=float(abs(e_slam[-1, 2])),
         ate_rmse_odom_m=ate_rmse(e_odom),
         ate_rmse_slam_m=ate_rmse(e_slam),
+        ate_rmse_aligned_odom_m=ate_rmse_aligned(data.odom, data.truth),
+        ate_rmse_aligned_slam_m=ate_rmse_aligned(data.slam, data.truth),
+        rpe_translation_odom_m=rpe_odom.translation_m,
+        rpe_rotation_odom_deg=rpe_odom.rotation_deg,
+        rpe_translation_slam_m=rpe_slam.translation_m,
+        rpe_rotation_slam_deg=rpe_slam.rotation_deg,
+        rpe_pairs=rpe_slam.pairs,
         landmarks_true=int(data.true_xy.shape[0]),
         landmarks_in_range=int(np.count_nonzero(in_range)),
         landmarks_mapped=int(np.asarray(data.mapped_xy).reshape(-1, 2).shape[0]),
@@ -345,6 +382,7 @@ def evaluate_run(data: RunData, sim_seconds: float, wall_seconds: float) -> RunM
         landmark_rmse_m=association.rmse_m,
         # NaN when no pose had a positive definite covariance (the robot never moved from its known start)
         nees_pose_mean=float(np.mean(eps)) if eps.size else math.nan,
+        nees_pose_median=float(np.median(eps)) if eps.size else math.nan,
         nees_pose_within_95_fraction=float(np.mean((eps >= low) & (eps <= high))) if eps.size else math.nan,
         nees_pose_band_95=(low, high),
         sim_seconds=float(sim_seconds),

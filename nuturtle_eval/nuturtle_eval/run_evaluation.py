@@ -28,6 +28,7 @@ from turtlelib.mapping.occupancy_grid import GridMap
 
 from . import plots
 from .metrics import PoseSeries, RunData, RunMetrics, evaluate_run
+from .tum import write_tum
 
 # Landmarks closer than this to a true cylinder count as that cylinder (m)
 LANDMARK_GATE_M = 0.2
@@ -35,6 +36,9 @@ METRICS_FILE = "metrics.json"
 # the occupancy grid in map_server's format (GRID_YAML + its .pgm) and its figure
 GRID_YAML, GRID_FIGURE = "map.yaml", "grid.png"
 GRID_OUTPUTS = (GRID_YAML, "map.pgm", GRID_FIGURE)
+# the trajectories in the TUM format (nuturtle_eval.tum): SLAM's, the odometry's and the reference's
+ESTIMATE_TUM, ODOMETRY_TUM, REFERENCE_TUM = "estimate.tum", "odometry.tum", "reference.tum"
+TUM_OUTPUTS = (ESTIMATE_TUM, ODOMETRY_TUM, REFERENCE_TUM)
 
 # (metrics.json key, label, format, target text, check) of the printed table
 TARGETS = (
@@ -47,8 +51,15 @@ TARGETS = (
     ("final_heading_error_odom_rad", "final heading error, odometry (rad)", "{:.4f}", "", None),
     ("ate_rmse_slam_m", "ATE RMSE, SLAM (m)", "{:.4f}", "", None),
     ("ate_rmse_odom_m", "ATE RMSE, odometry (m)", "{:.4f}", "", None),
+    ("ate_rmse_aligned_slam_m", "ATE RMSE aligned, SLAM (m)", "{:.4f}", "", None),
+    ("ate_rmse_aligned_odom_m", "ATE RMSE aligned, odometry (m)", "{:.4f}", "", None),
+    ("rpe_translation_slam_m", "RPE 1-10 m, SLAM (m)", "{:.4f}", "", None),
+    ("rpe_translation_odom_m", "RPE 1-10 m, odometry (m)", "{:.4f}", "", None),
+    ("rpe_rotation_slam_deg", "RPE 1-10 m, SLAM (deg)", "{:.3f}", "", None),
+    ("rpe_rotation_odom_deg", "RPE 1-10 m, odometry (deg)", "{:.3f}", "", None),
     ("landmark_rmse_m", "landmark RMSE (m)", "{:.4f}", "", None),
     ("nees_pose_mean", "pose NEES, mean (3 dof)", "{:.2f}", "", None),
+    ("nees_pose_median", "pose NEES, median (3 dof)", "{:.2f}", "", None),
     ("nees_pose_within_95_fraction", "pose NEES inside the 95% band", "{:.3f}", ">= 0.9", lambda v: v >= 0.9),
     ("sim_seconds", "simulated time (s)", "{:.1f}", "", None),
     ("wall_seconds", "wall time (s)", "{:.1f}", "<= sim / 2", None),
@@ -138,12 +149,14 @@ def evaluate_and_plot(
     out_dir: Path, record: RunRecord, sim_seconds: float, wall_seconds: float
 ) -> RunMetrics | None:
     """Write the figures of ``record`` into ``out_dir`` and return its metrics: ``trajectory.png`` (once
-    SLAM published a pose) and ``covariance.png``; with a grid, ``map.yaml`` + ``map.pgm`` (map_server's
+    SLAM published a pose) and ``covariance.png``; the trajectories in the TUM format (:func:`write_tums`);
+    with a grid, ``map.yaml`` + ``map.pgm`` (map_server's
     format) and ``grid.png`` (:func:`write_grid`); with the truth, odometry and SLAM poses also the metrics
     (:func:`metrics.evaluate_run`, landmarks paired within ``LANDMARK_GATE_M``) and ``errors.png``, else
     None. ValueError from evaluate_run (``errors.png`` is then not written)."""
     odom = record.odom if record.odom is not None and len(record.odom) else None
     snapshot = record.snapshot
+    write_tums(out_dir, record.slam, odom, record.truth)
     if len(record.slam):
         plots.plot_trajectory(
             out_dir / "trajectory.png", record.truth, odom, record.slam, record.circles,
@@ -169,6 +182,16 @@ def evaluate_and_plot(
     metrics = evaluate_run(data, sim_seconds=sim_seconds, wall_seconds=wall_seconds)
     plots.plot_slam_errors(out_dir / "errors.png", record.slam, record.slam_covariances, record.truth)
     return metrics
+
+
+def write_tums(
+    out_dir: Path, estimate: PoseSeries, odometry: PoseSeries | None, reference: PoseSeries | None
+) -> None:
+    """``estimate.tum``, ``odometry.tum`` and ``reference.tum`` (:mod:`nuturtle_eval.tum`) in ``out_dir``:
+    each series that has a pose (all in the reference's frame, as the metrics compare them)."""
+    for name, series in ((ESTIMATE_TUM, estimate), (ODOMETRY_TUM, odometry), (REFERENCE_TUM, reference)):
+        if series is not None and len(series):
+            write_tum(out_dir / name, series)
 
 
 def write_grid(

@@ -85,6 +85,10 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--smooth", action="store_true",
                         help="also smooth slam's whole run at the end and write it beside the filter's "
                         "outputs (OUT/smoothed/, metrics.json 'smoothed')")  # fmt: skip
+    parser.add_argument("--max-range-m", type=float, default=None, metavar="M",
+                        help="cut the played scans to M metres, as a shorter-ranged LiDAR would see them "
+                        "(range_max lowered, readings beyond it no return), e.g. 3.5 for an LDS-01 "
+                        "(default: as recorded)")  # fmt: skip
     parser.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     parser.add_argument("--check", action="store_true",
                         help="exit status 1 when a target of the results table fails (a nusim recording) "
@@ -136,6 +140,8 @@ def summary(result: Any) -> str:
         lines += ["", results_table(run_metrics(metrics), targets=metrics["nusim_recording"]), ""]
         if not metrics["nusim_recording"]:
             lines.append("(not a nusim recording: the demo's targets do not apply)")
+    if "grid_found_fraction" in metrics:
+        lines += [grid_agreement_line(metrics), ""]
     if "smoothed" in metrics:
         lines += smoothed_rows(metrics) + [""]
     rows = ["| count | value |", "|---|---:|"]
@@ -157,13 +163,27 @@ def summary(result: Any) -> str:
         lines.append(hint)
     if "observation_arrays_applied" in metrics:
         grid = "map.yaml map.pgm grid.png " if (Path(result.out_dir) / "map.yaml").exists() else ""
-        errors = "errors.png " if result.accuracy else ""
+        errors = "errors.png estimate.tum odometry.tum reference.tum " if result.accuracy else ""
         smoothed = " smoothed/" if "smoothed" in metrics else ""
         lines.append(f"outputs in {result.out_dir}/: metrics.json trajectory.png map.json {grid}"
                      f"covariance.png {errors}slam/ config.yaml{smoothed}")  # fmt: skip
     else:
         lines.append(f"outputs in {result.out_dir}/: metrics.json")
     return "\n".join(lines)
+
+
+def grid_agreement_line(metrics: dict[str, Any]) -> str:
+    """slam's grid against the scans at the truth's poses (metrics.json's ``grid_*``), in one line."""
+    found, unexplained = metrics["grid_found_fraction"], metrics["grid_unexplained_fraction"]
+    return (
+        f"grid agreement: {_percent(found)} of the {metrics['grid_reference_cells']} cells the scans hit at "
+        f"the truth's poses found, {_percent(unexplained)} of the grid's {metrics['grid_occupied_cells']} "
+        "occupied cells unexplained (within 0.10 m)"
+    )
+
+
+def _percent(fraction: float | None) -> str:
+    return "n/a" if fraction is None else f"{100.0 * fraction:.1f} %"
 
 
 # (metrics.json key, label) compared between the filter and the smoothed run
@@ -230,6 +250,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             foxglove=foxglove,
             domain_id=getattr(args, "domain_id", None),
             smooth=args.smooth,
+            max_range_m=args.max_range_m,
         )
         for path in unfinished_runs(options.out_dir):
             print(f"note: {path}/ holds a replay that was killed (INCOMPLETE)", file=sys.stderr)

@@ -31,8 +31,13 @@ the bag has a truth, SLAM starts at the truth's pose at the first motion sample'
 truth's frame), odometry is placed in that frame by its first sample
 (``T_world_odom = T_world_body(t0) T_odom_body(t0)^-1``), and the demo's accuracy metrics are computed;
 the true cylinders come from the params file's ``nusim`` section (``obstacles.x/y/r``, e.g. a nusim world
-file) or else the bag's ``/nusim/obstacles`` markers. Without it SLAM starts at the params' ``x0, y0,
-theta0``. The demo's pass/fail targets apply to nusim recordings only (the bag has ``/nusim/ground_truth``).
+file) or else the bag's ``/nusim/obstacles`` markers. With the truth and scans, slam's grid is also scored
+against the scans placed at the truth's poses (:mod:`nuturtle_eval.grid_agreement`). Without it SLAM starts
+at the params' ``x0, y0, theta0``. The demo's pass/fail targets apply to nusim recordings only (the bag has
+``/nusim/ground_truth``).
+
+``max_range_m`` cuts the played scans to a shorter-ranged LiDAR's (an LDS-01's 3.5 m on a recording of a
+SICK's 40 m): ``range_max`` lowered to it and every reading beyond it made +inf (REP 117's "no return").
 """
 
 from __future__ import annotations
@@ -51,13 +56,15 @@ import yaml
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
-from rclpy.serialization import deserialize_message
+from rclpy.serialization import deserialize_message, serialize_message
 from rclpy.signals import SignalHandlerOptions
 
 from nuturtle_description.robot_params import resolve_model
+from nuturtle_eval.grid_agreement import scan_grid_agreement
 from nuturtle_eval.metrics import PoseSeries, odom_in_world
 from nuturtle_eval.run_evaluation import (
     GRID_OUTPUTS,
+    TUM_OUTPUTS,
     ProgressBar,
     RunRecord,
     SlamSnapshot,
@@ -76,10 +83,11 @@ from nuturtle_ros_common.shared_clock import share_clock
 from nuturtle_ros_common.stop_signals import StopSignals
 from turtlelib import Transform2D
 from turtlelib.mapping.landmark_map import save_map
+from turtlelib.sensing.range_scan import RangeScan
 from turtlelib.util.timebase import NS_PER_S
 from turtlelib.util.validation import store
 
-from .bag_source import BagError, BagSource, BagTopic
+from .bag_source import BagError, BagMessage, BagSource, BagTopic
 from .foxglove_relay import FoxgloveRelay, slam_view_transforms
 from .monitor import RunMonitor
 from .params import params_file, to_parameters
@@ -104,7 +112,7 @@ SMOOTHED_DIR = "smoothed"
 # Everything a replay writes into its output folder (nuturtle_eval.run_folder)
 OUTPUTS = (
     "metrics.json", "trajectory.png", "errors.png", "covariance.png", "map.json", *GRID_OUTPUTS,
-    "config.yaml", BAG_NAME, SMOOTHED_DIR,
+    *TUM_OUTPUTS, "config.yaml", BAG_NAME, SMOOTHED_DIR,
 )  # fmt: skip
 TRUTH_PLAYED_AS = "nusim/ground_truth"
 # a recording of nusim (the demo's): its pass/fail targets apply
@@ -141,7 +149,8 @@ class ReplayOptions:
     ROS program hears it), ``"env"`` (the shell's ROS_DOMAIN_ID) or a domain id 0-232
     (:mod:`nuturtle_ros_common.dds_domain`; None: private, or env with ``play_only``, whose listeners are
     the user's nodes); ``smooth`` also smooths slam's whole run at the end (its ``smooth_saved_map``) and
-    writes it beside the filter's outputs, in ``smoothed/``."""
+    writes it beside the filter's outputs, in ``smoothed/``; ``max_range_m`` (> 0) cuts the played scans'
+    ranges to it (module docstring; None: as recorded)."""
 
     bag: Path
     out_dir: Path = Path("out/replay")
@@ -165,8 +174,11 @@ class ReplayOptions:
     foxglove: tuple[str, int] | None = None
     domain_id: DomainChoice | None = None
     smooth: bool = False
+    max_range_m: float | None = None
 
     def __post_init__(self) -> None:
+        if self.max_range_m is not None and not (math.isfinite(self.max_range_m) and self.max_range_m > 0.0):
+            raise ValueError(f"max_range_m must be > 0, got {self.max_range_m!r}")
         if self.smooth and self.play_only:
             raise ValueError("smoothing needs the slam node, which --play-only does not run")
         if self.domain_id is not None:
@@ -246,13 +258,33 @@ def node_parameters_from_file(path: Path | None, node: str) -> dict[str, Any]:
 class BagFacts:
     """Read from the bag before playing: ``truth`` (None without ground truth), the first motion sample's
     stamp (ns), the true cylinders ``[x, y, r]`` of /nusim/obstacles (or None), the first scan's
-    ``angle_increment`` and ``range_max``."""
+    ``angle_increment`` and ``range_max``; with the truth, every scan ``(stamp (s), scan)`` as played."""
 
     truth: PoseSeries | None = None
     first_motion_ns: int | None = None
     obstacles: np.ndarray | None = None
     angle_increment: float | None = None
     range_max: float | None = None
+    scans: list[tuple[float, RangeScan]] = field(default_factory=list)
+
+
+def cut_scan(msg: Any, max_range_m: float | None) -> Any:
+    """The LaserScan ``msg`` cut to ``max_range_m`` (module docstring; None: unchanged), in place."""
+    if max_range_m is not None and max_range_m < msg.range_max:
+        msg.range_max = float(max_range_m)
+        ranges = np.asarray(msg.ranges, dtype=np.float32)
+        msg.ranges = np.where(ranges > max_range_m, np.float32(np.inf), ranges).tolist()
+    return msg
+
+
+def _range_scan(msg: Any) -> RangeScan:
+    return RangeScan(
+        np.asarray(msg.ranges, dtype=np.float64),
+        float(msg.angle_min),
+        float(msg.angle_increment),
+        float(msg.range_min),
+        float(msg.range_max),
+    )
 
 
 def _odometry_row(msg: Any) -> list[float]:
@@ -273,9 +305,11 @@ def pose_series(rows: list[list[float]]) -> PoseSeries:
     return PoseSeries(table[:, 0], table[:, 1:])
 
 
-def read_facts(source: BagSource, topics: dict[str, BagTopic], motion_role: str) -> BagFacts:
-    """One pass over the ground truth, the first motion sample (of ``motion_role``) and scan, and the
-    obstacles."""
+def read_facts(
+    source: BagSource, topics: dict[str, BagTopic], motion_role: str, max_range_m: float | None = None
+) -> BagFacts:
+    """One pass over the ground truth, the first motion sample (of ``motion_role``), the scans (all of
+    them, cut to ``max_range_m``, with a truth; else the first) and the obstacles."""
     facts = BagFacts()
     wanted: dict[str, set[str]] = {}
     for role in ("truth", motion_role, "scan"):
@@ -293,9 +327,12 @@ def read_facts(source: BagSource, topics: dict[str, BagTopic], motion_role: str)
         if motion_role in roles and facts.first_motion_ns is None:
             msg = deserialize_message(message.data, message_class(message.type_name))
             facts.first_motion_ns = stamp_nanoseconds(msg.header.stamp)
-        if "scan" in roles and facts.angle_increment is None:
-            msg = deserialize_message(message.data, message_class(message.type_name))
-            facts.angle_increment, facts.range_max = float(msg.angle_increment), float(msg.range_max)
+        if "scan" in roles and (facts.angle_increment is None or "truth" in topics):
+            msg = cut_scan(deserialize_message(message.data, message_class(message.type_name)), max_range_m)
+            if facts.angle_increment is None:
+                facts.angle_increment, facts.range_max = float(msg.angle_increment), float(msg.range_max)
+            if "truth" in topics:
+                facts.scans.append((stamp_nanoseconds(msg.header.stamp) / NS_PER_S, _range_scan(msg)))
         if "obstacles" in roles and facts.obstacles is None:
             msg = deserialize_message(message.data, message_class(message.type_name))
             cylinders = [
@@ -387,7 +424,9 @@ class Replay:
         )
         self.topics = resolve_topics(source, options, self.association, self.motion_source)
         self.facts = (
-            read_facts(source, self.topics, self.motion_source) if not options.play_only else BagFacts()
+            read_facts(source, self.topics, self.motion_source, options.max_range_m)
+            if not options.play_only
+            else BagFacts()
         )
         # a nusim recording (the demo's): its pass/fail targets apply
         self.nusim_recording = NUSIM_TRUTH_TOPIC in source.topics
@@ -578,7 +617,7 @@ class Replay:
                 if pacer is not None:
                     wait_until(executor, self.logger, pacer.deadline_s(message.log_time_ns))
                 self.player.publish_clock(message.log_time_ns)
-                self.player.publish_message(message)
+                self.player.publish_message(self._cut(message))
                 if in_process:
                     step.add(message.topic)
                 elif pacer is None:
@@ -589,6 +628,14 @@ class Replay:
             progress.advance(total_s)
         if self.options.play_only:
             wait_for_acks(self.player.reliable_publishers(), ACK_TIMEOUT_S)
+
+    def _cut(self, message: BagMessage) -> BagMessage:
+        """``message``, a scan cut to ``max_range_m`` (:func:`cut_scan`) when that is set."""
+        scan = self.topics.get("scan")
+        if self.options.max_range_m is None or scan is None or message.topic != scan.name:
+            return message
+        msg = deserialize_message(message.data, message_class(message.type_name))
+        return message._replace(data=serialize_message(cut_scan(msg, self.options.max_range_m)))
 
     # --- outputs -----------------------------------------------------------------------------------------
 
@@ -646,11 +693,29 @@ class Replay:
                 self.logger.warning(f"no accuracy metrics: {error}")
                 metrics = None
             accuracy = metrics is not None
-            values = {**(metrics.as_dict() if metrics is not None else {}), **values}
+            values = {
+                **(metrics.as_dict() if metrics is not None else {}),
+                **self._grid_agreement(record),
+                **values,
+            }
             if self.options.smooth:
                 values["smoothed"] = self._write_smoothed(out_dir / SMOOTHED_DIR, record, bag_seconds)
         write_metrics(out_dir, values)
         return ReplayResult(values, out_dir, accuracy, interrupted)
+
+    def _grid_agreement(self, record: RunRecord) -> dict[str, Any]:
+        """slam's grid against the scans at the truth's poses (:mod:`nuturtle_eval.grid_agreement`) as
+        metrics.json figures; {} without a truth, scans or grid."""
+        grid = record.snapshot.grid
+        if record.truth is None or not self.facts.scans or grid is None:
+            return {}
+        agreement = scan_grid_agreement(self.facts.scans, record.truth, self.slam.config.T_body_sensor, grid)
+        return {
+            "grid_reference_cells": agreement.reference_cells,
+            "grid_occupied_cells": agreement.occupied_cells,
+            "grid_found_fraction": agreement.found_fraction,
+            "grid_unexplained_fraction": agreement.unexplained_fraction,
+        }
 
     def _true_circles(self) -> np.ndarray:
         obstacles = {k: self.nusim_values.get(f"obstacles.{k}") for k in ("x", "y", "r")}

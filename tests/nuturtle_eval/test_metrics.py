@@ -12,6 +12,7 @@ from nuturtle_eval.metrics import (
     RunData,
     associate_landmarks,
     ate_rmse,
+    ate_rmse_aligned,
     evaluate_run,
     landmarks_within_range,
     nees_band,
@@ -74,6 +75,19 @@ def test_pose_errors_and_ate_hand_computed():
     assert ate_rmse(e) == pytest.approx(math.sqrt(12.5), abs=1e-12)
     with pytest.raises(ValueError):
         ate_rmse(np.zeros((0, 3)))
+
+
+def test_aligned_ate_removes_a_rigid_motion_and_keeps_what_none_explains():
+    t = np.arange(4.0)
+    truth = PoseSeries(t, np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=float))
+    T = Transform2D(3.0, -2.0, 1.0)
+    moved = PoseSeries(t, np.array([(T @ Transform2D(*pose)).as_array() for pose in truth.poses]))
+    assert ate_rmse(pose_errors(moved, truth)) > 1.0
+    assert ate_rmse_aligned(moved, truth) == pytest.approx(0.0, abs=1e-12)
+    # a square 1.2 times as large: the best rigid fit leaves 0.1 m at each corner (the centroids coincide)
+    scaled = PoseSeries(t, np.column_stack([1.2 * truth.xy - 0.1, truth.poses[:, 2]]))
+    assert ate_rmse_aligned(scaled, truth) == pytest.approx(0.1 * math.sqrt(2.0))
+    assert math.isnan(ate_rmse_aligned(PoseSeries(t[:1], truth.poses[:1]), truth))
 
 
 def test_association_hand_case_with_duplicate_and_spurious():
@@ -176,6 +190,13 @@ def test_evaluate_run_on_a_synthetic_run():
     assert metrics.final_heading_error_odom_rad == pytest.approx(0.2 * 59.9 / 60, abs=1e-9)
     assert metrics.final_position_error_slam_m < 5 * 0.01
     assert metrics.ate_rmse_slam_m == pytest.approx(math.sqrt(2) * 0.01, rel=0.1)
+    # the best rigid fit can only lower the error
+    assert metrics.ate_rmse_aligned_slam_m <= metrics.ate_rmse_slam_m
+    assert metrics.ate_rmse_aligned_odom_m <= metrics.ate_rmse_odom_m
+    # relative error over 1-10 m of the true path: the drifting odometry's exceeds SLAM's unbiased noise
+    assert metrics.rpe_pairs > 1000
+    assert metrics.rpe_translation_odom_m > metrics.rpe_translation_slam_m
+    assert metrics.rpe_rotation_odom_deg > metrics.rpe_rotation_slam_deg
     assert metrics.landmarks_true == 3 and metrics.landmarks_in_range == 2 and metrics.landmarks_mapped == 4
     assert metrics.landmarks_paired == 2 and metrics.landmarks_in_range_unmapped == 0
     assert metrics.landmarks_duplicate == 1 and metrics.landmarks_spurious == 1

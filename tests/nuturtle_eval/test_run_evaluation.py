@@ -25,10 +25,13 @@ CIRCLES = np.array([[1.2, 0.3, 0.038], [-1.0, 0.8, 0.05]])
 # a run meeting every target of the results table
 FIGURES = dict(
     final_position_error_odom_m=0.3, final_position_error_slam_m=0.01, final_heading_error_odom_rad=0.1,
-    final_heading_error_slam_rad=0.01, ate_rmse_odom_m=0.2, ate_rmse_slam_m=0.01, landmarks_true=8,
+    final_heading_error_slam_rad=0.01, ate_rmse_odom_m=0.2, ate_rmse_slam_m=0.01, ate_rmse_aligned_odom_m=0.1,
+    ate_rmse_aligned_slam_m=0.01, rpe_translation_odom_m=0.05, rpe_rotation_odom_deg=2.0,
+    rpe_translation_slam_m=0.02, rpe_rotation_slam_deg=0.5, rpe_pairs=400, landmarks_true=8,
     landmarks_in_range=8, landmarks_mapped=8, landmarks_paired=8, landmarks_in_range_unmapped=0,
     landmarks_duplicate=0, landmarks_spurious=0, landmark_rmse_m=0.01, nees_pose_mean=3.0,
-    nees_pose_within_95_fraction=0.95, nees_pose_band_95=(1.0, 8.0), sim_seconds=120.0, wall_seconds=20.0,
+    nees_pose_median=2.4, nees_pose_within_95_fraction=0.95, nees_pose_band_95=(1.0, 8.0), sim_seconds=120.0,
+    wall_seconds=20.0,
 )  # fmt: skip
 
 
@@ -59,7 +62,14 @@ def _record(truth=True, odom=True, slam_samples=50):
 def test_with_truth_odometry_and_slam_every_figure_and_the_metrics(tmp_path):
     metrics = evaluate_and_plot(tmp_path, _record(), sim_seconds=6.0, wall_seconds=0.5)
     assert metrics is not None and metrics.landmarks_paired == 2 and metrics.sim_seconds == 6.0
-    assert {path.name for path in tmp_path.iterdir()} == {"trajectory.png", "covariance.png", "errors.png"}
+    assert {path.name for path in tmp_path.iterdir()} == {
+        "trajectory.png",
+        "covariance.png",
+        "errors.png",
+        "estimate.tum",
+        "odometry.tum",
+        "reference.tum",
+    }
     write_metrics(tmp_path, metrics.as_dict())
     assert json.loads((tmp_path / "metrics.json").read_text()) == metrics.as_dict()
 
@@ -91,9 +101,9 @@ def test_failed_targets_are_the_rows_the_table_marks_failed():
 @pytest.mark.parametrize(
     ("record", "figures"),
     [
-        (_record(truth=False), {"trajectory.png", "covariance.png"}),
-        (_record(odom=False), {"trajectory.png", "covariance.png"}),
-        (_record(slam_samples=0), {"covariance.png"}),
+        (_record(truth=False), {"trajectory.png", "covariance.png", "estimate.tum", "odometry.tum"}),
+        (_record(odom=False), {"trajectory.png", "covariance.png", "estimate.tum", "reference.tum"}),
+        (_record(slam_samples=0), {"covariance.png", "odometry.tum", "reference.tum"}),
     ],
 )
 def test_without_truth_odometry_or_slam_poses_no_metrics_and_fewer_figures(tmp_path, record, figures):

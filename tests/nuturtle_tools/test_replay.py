@@ -28,7 +28,7 @@ from nuturtle_demo.run import BAG_NAME, DemoOptions, run_demo
 from nuturtle_tools.bag_source import BagError, BagSource
 from nuturtle_tools.foxglove_relay import tf2_msgs_installed
 from nuturtle_tools.replay import main
-from nuturtle_tools.replay_run import ReplayOptions, run_replay
+from nuturtle_tools.replay_run import ReplayOptions, cut_scan, run_replay
 from turtlelib.mapping.grid_map_file import load_grid_map
 from turtlelib.mapping.landmark_map import load_map
 
@@ -157,6 +157,12 @@ def test_replay_applies_every_scan_and_matches_the_live_accuracy(live, tmp_path,
 
     for name in ("trajectory.png", "errors.png", "covariance.png", "grid.png"):
         assert (out / name).read_bytes().startswith(PNG_MAGIC), name
+    for name in ("estimate.tum", "odometry.tum", "reference.tum"):
+        rows = np.loadtxt(out / name, comments="#")
+        assert rows.shape[1] == 8 and rows.shape[0] > 10 and np.all(np.diff(rows[:, 0]) > 0), name
+    # slam's grid against the scans at the true poses: the arena's walls and cylinders, found
+    assert metrics["grid_found_fraction"] > 0.95 and metrics["grid_unexplained_fraction"] < 0.05
+    assert metrics["rpe_pairs"] > 0 and metrics["rpe_translation_slam_m"] < metrics["rpe_translation_odom_m"]
     assert np.count_nonzero(load_grid_map(out / "map.yaml").occupancy == 100) > 100, "map_server's pair"
     assert load_map(out / "map.json").n_landmarks == metrics["landmarks_mapped"], "a map slam can load"
     with BagSource(out / "slam") as outputs:
@@ -164,6 +170,16 @@ def test_replay_applies_every_scan_and_matches_the_live_accuracy(live, tmp_path,
         assert {"/landmarks", "/slam/odom", "/slam/path", "/slam/map"} <= set(outputs.topics)
         assert not {"/scan", "/joint_states", "/odom", "/clock"} & set(outputs.topics)
         assert outputs.topics["/landmarks"].message_count == scans
+
+
+def test_a_cut_scan_reads_no_return_beyond_the_shorter_range():
+    from sensor_msgs.msg import LaserScan
+
+    msg = cut_scan(LaserScan(range_max=40.0, ranges=[1.0, 3.4, 3.6, 80.0]), 3.5)
+    assert msg.range_max == 3.5 and list(msg.ranges) == [1.0, pytest.approx(3.4), np.inf, np.inf]
+    assert list(cut_scan(msg, 10.0).ranges) == list(msg.ranges) and msg.range_max == 3.5
+    with pytest.raises(ValueError, match="max_range_m"):
+        ReplayOptions(bag=Path("bag"), max_range_m=0.0)
 
 
 def test_a_bag_directory_and_its_single_mcap_file_read_the_same(live):
