@@ -362,7 +362,8 @@ class OccupancyGrid:
             observed[new] = self.observed[old]
         self.log_odds, self.observed = log_odds_grid, observed
         self.col0, self.row0 = col0, row0
-        self._hit_scratch = np.zeros(log_odds_grid.size, dtype=bool)
+        if self._hit_scratch.size != log_odds_grid.size:  # (all false between scans)
+            self._hit_scratch = np.zeros(log_odds_grid.size, dtype=bool)
         return past_x or past_y
 
     def _clipped_traversed_cells(
