@@ -214,6 +214,12 @@ def test_a_scan_longer_than_the_bound_is_clipped_by_hand():
     # not for the sensor in cell -1, but in cell 1, where it is centred again (cells -4..5)
     assert grid.insert_scan(one_beam(3.0), Transform2D(-0.05, 0.05, 0.0)) and grid.col0 == -5
     assert grid.insert_scan(one_beam(3.0), Transform2D(0.15, 0.05, 0.0)) and grid.col0 == -4
+    # a return 1e299 m away (a LiDAR's range_max is only required finite) is cut the same
+    grid = OccupancyGrid(GridConfig(resolution_m=RES, initial_size_m=1.0, max_size_m=1.0))
+    assert grid.insert_scan(
+        RangeScan(np.array([1e299]), 0.0, 0.01, 0.05, 1e300), Transform2D(0.05, 0.05, 0.0)
+    )
+    assert observed_cells(grid) == {(0, 0): 40, (1, 0): 40, (2, 0): 40, (3, 0): 40, (4, 0): 40}
     # along (2, 1) / sqrt(5): crosses x = 0.1 at y = 0.075, y = 0.1 at x = 0.15, x = 0.2 at y = 0.125,
     # x = 0.3 at y = 0.175, y = 0.2 at x = 0.35, x = 0.4 at y = 0.225, then x = 0.5 out of the grid
     grid = OccupancyGrid(GridConfig(resolution_m=RES, initial_size_m=1.0, max_size_m=1.0))

@@ -294,17 +294,15 @@ class OccupancyGrid:
         )
         # cells in the map frame's cell units (independent of the grid's extent), then in the grid
         height, width = self.log_odds.shape
-        start_row, start_col = math.floor(sy) - self.row0, math.floor(sx) - self.col0
-        end_row = np.floor(ey).astype(np.int64) - self.row0
-        end_col = np.floor(ex).astype(np.int64) - self.col0
-        start = start_row * width + start_col
-        if past_bound:
-            inside = (end_row >= 0) & (end_row < height) & (end_col >= 0) & (end_col < width)
-            hit = (end_row * width + end_col)[returns & inside]
+        start = (math.floor(sy) - self.row0) * width + math.floor(sx) - self.col0
+        if past_bound:  # the returns that end inside the grid (compared before any cast to integers)
+            returns = returns & (ex >= self.col0) & (ex < self.col0 + width)
+            returns &= (ey >= self.row0) & (ey < self.row0 + height)
             traversed = self._clipped_traversed_cells(sx, sy, ex, ey)
         else:
-            hit = (end_row * width + end_col)[returns]
             traversed = _traversed_cells(sx, sy, ex, ey, width) + start
+        end_row = np.floor(ey[returns]).astype(np.int64) - self.row0
+        hit = end_row * width + np.floor(ex[returns]).astype(np.int64) - self.col0
         # an end wins over a pass (a cell is updated once per scan)
         is_hit = self._hit_scratch
         is_hit[hit] = True
