@@ -15,6 +15,12 @@ through, sampled every 1 mm) with an occupied cell (>= 65) within one cell (the 
 free cells (inside the arena, centre more than 1.5 cells from every boundary) marked occupied, and those
 known to be free (<= 19).
 
+At the bound: a corridor 3 m wide and 300 m long driven straight along its middle at 1 m/s (1500 scans
+of the same LiDAR), into a grid that starts at the default bound (``max_size_m`` = 100 m: 2000 x 2000
+cells), so that it moves toward the robot every ``grow_margin_m`` or so: ``insert_scan`` per scan
+(median, p99, largest: a move copies the cells it keeps), the moves, the scans past the bound, the
+grid's bytes, and ``grid_map`` of the full grid.
+
 At SLAM poses (``--slam-seeds``): the demo itself (``python -P -m nuturtle_demo --duration 120 --seed S``,
 its default world and unknown association, in a child process: bench/demo_cpu.py's ``run_once``) maps
 with slam's grid; its ``map.yaml`` + ``map.pgm`` (the keyframes re-rendered at slam's poses, in
@@ -79,6 +85,7 @@ ARENA_M = 5.0
 LIDAR = LidarConfig(noise=0.01, resolution=0.01)
 T_BODY_SCAN = Transform2D(-0.032, 0.0, 0.0)
 SCAN_RATE_HZ, DURATION_S, SPEED_MPS, LOOP_RADIUS_M = 5.0, 120.0, 0.14, 0.75
+CORRIDOR_LENGTH_M, CORRIDOR_WIDTH_M, CORRIDOR_SPEED_MPS = 300.0, 3.0, 1.0
 
 
 def route() -> list[Transform2D]:
@@ -190,6 +197,58 @@ def measure(resolution_m: float) -> dict[str, float]:
     }
 
 
+def measure_bound() -> dict[str, float]:
+    """The grid at its bound along the corridor (module docstring)."""
+    grid = OccupancyGrid(GridConfig(initial_size_m=GridConfig().max_size_m))
+    h = 0.5 * CORRIDOR_WIDTH_M
+    walls = np.array([[-5.0, -h, CORRIDOR_LENGTH_M + 5.0, -h], [-5.0, h, CORRIDOR_LENGTH_M + 5.0, h]])
+    rng = np.random.default_rng(0)
+    update_ns, moves, past_bound = [], 0, 0
+    for k in range(round(CORRIDOR_LENGTH_M / CORRIDOR_SPEED_MPS * SCAN_RATE_HZ)):
+        T_map_scan = Transform2D(k * CORRIDOR_SPEED_MPS / SCAN_RATE_HZ, 0.0, 0.0) @ T_BODY_SCAN
+        ranges = simulate_scan(T_map_scan, np.zeros((0, 3)), walls, LIDAR, rng)
+        scan = RangeScan(ranges, LIDAR.angle_min, LIDAR.angle_increment, LIDAR.range_min, LIDAR.range_max)
+        col0 = grid.col0
+        start = time.process_time_ns()
+        past_bound += grid.insert_scan(scan, T_map_scan)
+        update_ns.append(time.process_time_ns() - start)
+        moves += grid.col0 != col0
+    publish_ns = []
+    for _ in range(5):
+        start = time.process_time_ns()
+        grid.grid_map()
+        publish_ns.append(time.process_time_ns() - start)
+    return {
+        "scans": len(update_ns),
+        "median_ms": 1e-6 * float(np.median(update_ns)),
+        "p99_ms": 1e-6 * float(np.percentile(update_ns, 99)),
+        "max_ms": 1e-6 * float(np.max(update_ns)),
+        "moves": moves,
+        "past_bound": past_bound,
+        "shape": grid.log_odds.shape,
+        "megabytes": grid.nbytes / 1e6,
+        "publish_ms": 1e-6 * float(np.median(publish_ns)),
+    }
+
+
+def bound_section(result: dict) -> list[str]:
+    return [
+        "At the bound: a corridor 3 m wide and 300 m long driven straight at 1 m/s (1500 scans of the same",
+        "LiDAR) into a grid that starts at the default bound (`max_size_m` = 100 m), so that it moves toward",
+        "the robot (forgetting its far side) every `grow_margin_m` or so; `insert_scan` per scan (a move",
+        "copies the cells it keeps), the moves, the scans past the bound, the grid's state and `grid_map`",
+        "of the full grid (what slam publishes once per `grid.publish_period_s`).",
+        "",
+        "| grid (cells) | state (MB) | insert_scan median / p99 / largest (ms) | moves "
+        "| scans past the bound | grid_map (ms) |",
+        "|---:|---:|---:|---:|---:|---:|",
+        f"| {result['shape'][1]} x {result['shape'][0]} | {result['megabytes']:.1f} "
+        f"| {result['median_ms']:.3f} / {result['p99_ms']:.2f} / {result['max_ms']:.2f} | {result['moves']} "
+        f"| {result['past_bound']} of {result['scans']} | {result['publish_ms']:.0f} |",
+        "",
+    ]
+
+
 def measure_slam(seed: int, out_dir: Path) -> dict:
     """The demo's grid at SLAM poses after its two minutes (module docstring), with its SLAM errors."""
     from turtlelib.mapping.grid_map_file import load_grid_map
@@ -230,7 +289,7 @@ def slam_section(results: list[dict]) -> list[str]:
     ]
 
 
-def section(results: list[dict], slam_results: list[dict]) -> str:
+def section(results: list[dict], bound: dict, slam_results: list[dict]) -> str:
     threads = os.environ.get("OPENBLAS_NUM_THREADS", "unset")
     versions = f"Python {platform.python_version()}, numpy {np.__version__}"
     machine = f"{platform.machine()}, {os.cpu_count()} cores, {versions}"
@@ -277,6 +336,7 @@ def section(results: list[dict], slam_results: list[dict]) -> str:
             "|---:|---:|---:|---:|---:|",
             *quality,
             "",
+            *bound_section(bound),
             *(slam_section(slam_results) if slam_results else []),
         ]
     )
@@ -311,8 +371,9 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("out/grid_slam"), help="the demo runs' folder")
     arguments = parser.parse_args()
     results = [measure(0.05), measure(0.025)]
+    bound = measure_bound()
     slam_results = [measure_slam(seed, arguments.out) for seed in arguments.slam_seeds]
-    text = section(results, slam_results)
+    text = section(results, bound, slam_results)
     print(text)
     if arguments.write:
         write_section(HEADING, text, ROOT / "docs" / "benchmarks.md")

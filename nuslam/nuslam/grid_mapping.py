@@ -33,9 +33,16 @@ Publishes (reliable + transient local, depth 1, REP 2003: a late RViz, nav2 or F
 
 Bad input (a scan in another frame, one `nuturtle_ros_common.conversions.range_scan_from_message` refuses:
 a layout that contradicts itself, intensities neither empty nor one per range, what `turtlelib.RangeScan`
-refuses; one reaching past ``grid.max_size_m``, one older than the filter's time) is skipped with a
-throttled warning and counted; the grid is unchanged. `/diagnostics` gets `slam: occupancy grid`
-(:meth:`GridMapping.status`): scans mapped and skipped, keyframes, the grid's size; WARN when scans were
+refuses; one older than the filter's time) is skipped with a throttled warning and counted; the grid is
+unchanged.
+
+The bound: the grid grows up to ``grid.max_size_m`` a side (its memory bound, ``max_cells`` cells); a scan
+reaching past it is mapped all the same: the grid moves toward it, forgetting its far side, and clips what
+still lies outside (`turtlelib.mapping.occupancy_grid`, "The bound"). Such scans are counted and warned
+about at most once per ``BOUND_WARN_S`` (with the count since the last warning).
+
+`/diagnostics` gets `slam: occupancy grid` (:meth:`GridMapping.status`): scans mapped, skipped and past
+the bound, keyframes, the grid's size and memory (cells and bytes now, and at most); WARN when scans were
 skipped since the last report.
 """
 
@@ -79,6 +86,8 @@ from turtlelib.util.validation import positive, store
 
 # scans waiting for the motion sample that reaches their stamp (1 s of an LDS-01's 5 Hz)
 MAX_WAITING_SCANS = 5
+# the shortest time between two warnings of scans past the grid's bound (s, steady clock)
+BOUND_WARN_S = 10.0
 PREFIX = "grid."
 # the map files' suffixes: the landmark map must be neither, or a save would write over it
 GRID_SUFFIXES = (".yaml", ".pgm")
@@ -162,6 +171,7 @@ class GridMapping:
         self._T_body_from = {sensor_id: T_body_scan, body_id: Transform2D()}
         self._T_body_scan = T_body_scan
         self._warnings = warnings
+        self._bound_logger = node.get_logger().get_child("grid")
         self._period_ns = round(self.topic_config.publish_period_s * NS_PER_S)
         self.grid = OccupancyGrid(self.config)
         self.keyframes = ScanKeyframes(self.keyframe_config)
@@ -173,6 +183,7 @@ class GridMapping:
         self._newest_ns: int | None = None
         self._published_ns: int | None = None
         self.scans_inserted = self.scans_skipped = self._skipped_reported = 0
+        self.scans_past_bound = self._past_bound_warned = 0
         self.loaded = loaded
 
     def connect(self, node: Node, map_qos: QoSProfile, timeline: SlamTimeline) -> None:
@@ -228,18 +239,37 @@ class GridMapping:
             return status("slam: occupancy grid", "slam", OK, message, {"loaded": str(self.yaml_path)})
         skipped = self.scans_skipped - self._skipped_reported
         self._skipped_reported = self.scans_skipped
-        height, width = self.grid.log_odds.shape
-        message = f"{self.scans_inserted} scans mapped into {width} x {height} cells"
+        grid = self.grid
+        height, width = grid.log_odds.shape
+        message = (
+            f"{self.scans_inserted} scans mapped into {width} x {height} cells "
+            f"({grid.nbytes / 1e6:.1f} of at most {grid.max_nbytes / 1e6:.1f} MB)"
+        )
+        if self.scans_past_bound:
+            message += f"; {self.scans_past_bound} reached past grid.max_size_m (the grid moved or clipped)"
         if skipped:
             message += f"; {skipped} skipped since the last report"
         values = {
             "scans_mapped": self.scans_inserted,
             "scans_skipped": self.scans_skipped,
+            "scans_past_bound": self.scans_past_bound,
             "keyframes": len(self.keyframes),
             "width": width,
             "height": height,
+            **self.memory(),
         }
         return status("slam: occupancy grid", "slam", WARN if skipped else OK, message, values)
+
+    def memory(self) -> dict[str, int]:
+        """The live grid's memory: ``cells`` and ``bytes`` now, ``max_cells`` and ``max_bytes`` at most
+        (``grid.max_size_m``)."""
+        grid = self.grid
+        return {
+            "cells": grid.cells,
+            "bytes": grid.nbytes,
+            "max_cells": grid.max_cells,
+            "max_bytes": grid.max_nbytes,
+        }
 
     def corrected(self, t_ns: int, T_map_body: Transform2D) -> None:
         """slam's posterior pose at ``t_ns`` (after fusing a measurement stamped ``t_ns``): the pose a save
@@ -303,11 +333,8 @@ class GridMapping:
             if T_map_body is None:
                 self._skip(f"scan at {t_ns} ns skipped by the occupancy grid: older than slam's filter time")
                 continue
-            try:
-                self.grid.insert_scan(scan, T_map_body @ T_body_scan)
-            except ValueError as error:
-                self._skip(f"scan skipped by the occupancy grid: {error}")
-                continue
+            if self.grid.insert_scan(scan, T_map_body @ T_body_scan):
+                self._past_bound()
             self.scans_inserted += 1
             if self.keyframes.offer(t_ns, T_map_body, scan):
                 self._keyframe_poses[t_ns] = T_map_body
@@ -321,6 +348,22 @@ class GridMapping:
             or self._newest_ns - self._published_ns >= self._period_ns
         ):
             self._publish(self.grid.grid_map(), self._newest_ns)
+
+    def _past_bound(self) -> None:
+        """Count a scan that reached past the grid's bound; warn (at most once per ``BOUND_WARN_S``) with
+        the count since the last warning."""
+        self.scans_past_bound += 1
+        count = self.scans_past_bound - self._past_bound_warned
+        res = self.config.resolution_m
+        (x0, y0), (height, width) = self.grid.origin_m, self.grid.log_odds.shape
+        x1, y1 = x0 + width * res, y0 + height * res
+        if self._bound_logger.warning(
+            f"scans reaching past grid.max_size_m = {self.config.max_size_m} m: {count} since the last "
+            f"warning; the occupancy grid (now x {x0:.1f}..{x1:.1f} m, y {y0:.1f}..{y1:.1f} m) moved "
+            "toward them, forgetting its far side, and clipped what lay outside",
+            throttle_duration_sec=BOUND_WARN_S,
+        ):
+            self._past_bound_warned = self.scans_past_bound
 
     def _skip(self, text: str) -> None:
         self.scans_skipped += 1

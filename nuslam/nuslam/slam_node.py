@@ -62,8 +62,8 @@ Publishes
         (mode, landmarks mapped and tentative, observations fused, rejected and (localization) unmapped,
         time per applied scan; WARN when
         observations were rejected or skipped since the last report), `slam: occupancy grid`
-        (`nuslam.grid_mapping`: scans mapped and skipped; WARN when scans were skipped since the last
-        report), `slam: motion vs LiDAR`
+        (`nuslam.grid_mapping`: scans mapped, skipped and past the grid's bound, the grid's cells and
+        bytes; WARN when scans were skipped since the last report), `slam: motion vs LiDAR`
         (`turtlelib.estimation.slip_recovery`: WARN naming the cause while scans contradict the wheels' motion
         (slip, bump) and for `slip_report_s` after each relocalization against the map, ERROR when they keep
         coming; scans held and relocalizations so far), `slam: scan registration` (with

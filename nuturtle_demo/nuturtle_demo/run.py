@@ -60,6 +60,7 @@ from nuturtle_eval.run_evaluation import (
     ProgressBar,
     RunRecord,
     evaluate_and_plot,
+    grid_counts,
     sensor_range_m,
     slam_snapshot,
     slip_counts,
@@ -486,6 +487,7 @@ class _DemoRun:
                 {
                     **metrics.as_dict(),
                     **slip_counts(system.slam),
+                    **grid_counts(system.slam),
                     "complete": stop.received is None,
                     "stopped_by": stop.received,
                 },

@@ -99,6 +99,20 @@ def slip_counts(slam_node: Any) -> dict[str, int]:
     return {"slam_scans_held": status.held, "slam_relocalizations": status.relocalized}
 
 
+def grid_counts(slam_node: Any) -> dict[str, int]:
+    """The in-process slam node's live occupancy grid (its ``grid`` attribute:
+    ``nuslam.grid_mapping.GridMapping``) at the end: its cells and bytes, the most bytes it may hold
+    (``grid.max_size_m``) and the scans that reached past that bound."""
+    grid_mapping = slam_node.grid
+    memory = grid_mapping.memory()
+    return {
+        "slam_grid_cells": memory["cells"],
+        "slam_grid_bytes": memory["bytes"],
+        "slam_grid_max_bytes": memory["max_bytes"],
+        "slam_grid_scans_past_bound": grid_mapping.scans_past_bound,
+    }
+
+
 def sensor_range_m(
     association: str,
     fake_sensor_range_m: float,

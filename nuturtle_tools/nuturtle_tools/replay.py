@@ -154,6 +154,11 @@ def summary(result: Any) -> str:
                 "observation_arrays_pending"):  # fmt: skip
         if key in metrics:
             rows.append(f"| {key.replace('_', ' ')} ({metrics['observation_topic']}) | {metrics[key]} |")
+    if "slam_grid_cells" in metrics:
+        megabytes = metrics["slam_grid_bytes"] / 1e6, metrics["slam_grid_max_bytes"] / 1e6
+        rows.append(f"| occupancy grid: cells / MB (at most) / scans past grid.max_size_m | "
+                    f"{metrics['slam_grid_cells']} / {megabytes[0]:.1f} ({megabytes[1]:.1f}) / "
+                    f"{metrics['slam_grid_scans_past_bound']} |")  # fmt: skip
     rows.append(f"| replay wall time (s) / bag time (s) | {metrics['replay_wall_seconds']:.1f} / "
                 f"{metrics['bag_seconds']:.1f} |")  # fmt: skip
     lines += rows

@@ -69,6 +69,7 @@ from nuturtle_eval.run_evaluation import (
     RunRecord,
     SlamSnapshot,
     evaluate_and_plot,
+    grid_counts,
     sensor_range_m,
     slam_snapshot,
     slip_counts,
@@ -665,6 +666,7 @@ class Replay:
                     "map_landmarks": len(self.slam.slam.landmark_ids),
                     "slam_outputs_recorded": self.writer.message_counts,
                     **slip_counts(self.slam),
+                    **grid_counts(self.slam),
                 }
             )
             if self.association == "unknown":

@@ -1,6 +1,7 @@
 """slam's occupancy grid (real rclpy): scans placed at slam's pose at their own stamps and the robot's
 LiDAR mount, `map` and `map_metadata` latched for late subscribers, ~/save_map writing map_server's pair
-beside the landmark map, localization publishing the saved grid, malformed grid files stopping the node.
+beside the landmark map, localization publishing the saved grid, malformed grid files stopping the node,
+scans past the grid's bound warned about and its memory in /diagnostics.
 
 Expected grids come from turtlelib (`OccupancyGrid`, `ScanKeyframes`) fed the same scans at the TRUE
 poses (noise-free wheels: slam's dead-reckoned pose is the true one), never from the node. The grid's
@@ -36,6 +37,7 @@ from turtlelib import (
     simulate_scan,
 )
 from turtlelib.mapping.grid_map_file import load_grid_map
+from turtlelib.mapping.occupancy_grid import BYTES_PER_CELL
 
 pytestmark = pytest.mark.ros
 
@@ -109,6 +111,26 @@ def test_scans_at_slams_pose_and_the_lidar_mount_make_the_latched_grid(ros):
     assert latched(rig, MapMetaData, "map_metadata") == grid.info
     assert np.count_nonzero(np.array(grid.data) >= 65) > 100, "walls and cylinders"
     assert rig.warnings() == []
+
+
+def test_scans_past_the_grids_bound_are_mapped_warned_about_and_its_memory_reported(ros):
+    # a 2 m grid in a 3 m x 2.5 m arena seen up to 3.5 m: every scan reaches past it
+    bound = {"grid.initial_size_m": 2.0, "grid.max_size_m": 2.0, "grid.publish_period_s": 0.3}
+    rig = Rig(ros, observation_timeout=100.0, **bound, **MOUNT)
+    published = []
+    rig.helper.create_subscription(OccupancyGridMsg, "map", published.append, MAP_QOS)
+    scans = drive_and_scan(rig)
+    assert ros.spin_until(lambda: published and published[-1].header.stamp == stamp(scans[-1][0]), 5.0)
+    expected = OccupancyGrid(GridConfig(initial_size_m=2.0, max_size_m=2.0))
+    for _, T_map_body, msg in scans:
+        assert expected.insert_scan(range_scan_from_message(msg), T_map_body @ T_BODY_SCAN)
+    assert_grid(published[-1], expected.grid_map())
+    warnings = rig.warnings(at_least=1)
+    assert len(warnings) == 1 and "grid.max_size_m = 2.0 m: 1 since the last warning" in warnings[0], warnings
+    values = diagnostics_values(rig, "slam: occupancy grid")
+    assert (values["scans_mapped"], values["scans_past_bound"]) == (str(SCANS), str(SCANS))
+    assert (values["cells"], values["bytes"]) == (str(expected.cells), str(expected.nbytes))
+    assert (values["max_cells"], values["max_bytes"]) == ("1600", str(1600 * BYTES_PER_CELL))
 
 
 def test_save_writes_the_grid_beside_the_map_and_localization_publishes_it(ros, tmp_path):

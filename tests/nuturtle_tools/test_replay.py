@@ -31,6 +31,7 @@ from nuturtle_tools.replay import main
 from nuturtle_tools.replay_run import ReplayOptions, cut_scan, run_replay
 from turtlelib.mapping.grid_map_file import load_grid_map
 from turtlelib.mapping.landmark_map import load_map
+from turtlelib.mapping.occupancy_grid import BYTES_PER_CELL
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -143,6 +144,10 @@ def test_replay_applies_every_scan_and_matches_the_live_accuracy(live, tmp_path,
     assert "/landmarks" not in metrics["messages_played"]
     assert metrics["slam_outputs_recorded"]["/landmarks"] == scans
     assert metrics["slam_outputs_recorded"]["/slam/odom"] == bag_count(bag, "/joint_states")
+    # slam's grid: its memory at the end, well inside its bound in the demo's 5 m world
+    assert metrics["slam_grid_bytes"] == metrics["slam_grid_cells"] * BYTES_PER_CELL > 0
+    assert metrics["slam_grid_max_bytes"] == 2000**2 * BYTES_PER_CELL
+    assert metrics["slam_grid_scans_past_bound"] == 0
 
     assert result.accuracy
     for key in ACCURACY_KEYS:

@@ -1,4 +1,5 @@
-"""OccupancyGrid: the cells a beam crosses, the log-odds update, no-return beams, growth, keyframes."""
+"""OccupancyGrid: the cells a beam crosses, the log-odds update, no-return beams, growth, the bound (moving,
+clipping, memory), keyframes."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ from hypothesis import strategies as st
 
 from turtlelib import RangeScan, Transform2D
 from turtlelib.mapping.occupancy_grid import (
+    BYTES_PER_CELL,
     GridConfig,
     KeyframeConfig,
     OccupancyGrid,
@@ -199,15 +201,86 @@ def test_growing_keeps_every_cell_in_place(poses):
     assert (x0, y0) == (small.col0 * RES, small.row0 * RES)
 
 
-def test_a_scan_past_the_largest_grid_is_refused_and_changes_nothing():
-    grid = OccupancyGrid(GridConfig(resolution_m=RES, initial_size_m=1.0, max_size_m=3.0))
-    grid.insert_scan(one_beam(1.0), Transform2D())
-    before = grid.log_odds.copy(), grid.col0, grid.row0
-    with pytest.raises(ValueError, match=r"reaches past max_size_m = 3.0 m of grid in x"):
-        grid.insert_scan(one_beam(3.2), Transform2D(-0.2, 0.0, 0.0))
-    assert np.array_equal(grid.log_odds, before[0]) and (grid.col0, grid.row0) == before[1:]
-    grid.insert_scan(one_beam(2.0), Transform2D())  # 3 m wide at most: the margin gives way
-    assert grid.log_odds.shape[1] <= 30
+def test_a_scan_longer_than_the_bound_is_clipped_by_hand():
+    # a 1 m grid (cells -5..4 each way) cannot hold a 3 m beam: it stays centred on the sensor's cell 0
+    # and clips. Along +x from (0.05, 0.05): 0.32 m ends in cell 3 (occupied), 0.47 m ends at x = 0.52 in
+    # cell 5, just past the grid (not occupied), 3 m is cut at the grid: cells 0..4 passed, nothing hit
+    grid = OccupancyGrid(GridConfig(resolution_m=RES, initial_size_m=1.0, max_size_m=1.0))
+    scan = RangeScan(np.array([0.32, 0.47, 3.0]), 0.0, 1e-9, 0.05, 3.5)
+    assert grid.insert_scan(scan, Transform2D(0.05, 0.05, 0.0))
+    assert (grid.col0, grid.row0, grid.log_odds.shape) == (-5, -5, (10, 10))
+    assert observed_cells(grid) == {(0, 0): 40, (1, 0): 40, (2, 0): 40, (3, 0): 70, (4, 0): 40}
+    # it moves only when the sensor comes within the margin (here 4 cells, half the grid) of its edge:
+    # not for the sensor in cell -1, but in cell 1, where it is centred again (cells -4..5)
+    assert grid.insert_scan(one_beam(3.0), Transform2D(-0.05, 0.05, 0.0)) and grid.col0 == -5
+    assert grid.insert_scan(one_beam(3.0), Transform2D(0.15, 0.05, 0.0)) and grid.col0 == -4
+    # a return 1e299 m away (a LiDAR's range_max is only required finite) is cut the same
+    grid = OccupancyGrid(GridConfig(resolution_m=RES, initial_size_m=1.0, max_size_m=1.0))
+    assert grid.insert_scan(
+        RangeScan(np.array([1e299]), 0.0, 0.01, 0.05, 1e300), Transform2D(0.05, 0.05, 0.0)
+    )
+    assert observed_cells(grid) == {(0, 0): 40, (1, 0): 40, (2, 0): 40, (3, 0): 40, (4, 0): 40}
+    # along (2, 1) / sqrt(5): crosses x = 0.1 at y = 0.075, y = 0.1 at x = 0.15, x = 0.2 at y = 0.125,
+    # x = 0.3 at y = 0.175, y = 0.2 at x = 0.35, x = 0.4 at y = 0.225, then x = 0.5 out of the grid
+    grid = OccupancyGrid(GridConfig(resolution_m=RES, initial_size_m=1.0, max_size_m=1.0))
+    assert grid.insert_scan(one_beam(3.0, math.atan2(1.0, 2.0)), Transform2D(0.05, 0.05, 0.0))
+    assert observed_cells(grid) == {
+        (0, 0): 40, (1, 0): 40, (1, 1): 40, (2, 1): 40, (3, 1): 40, (3, 2): 40, (4, 2): 40
+    }  # fmt: skip
+
+
+def test_past_the_bound_the_grid_moves_toward_the_scan_by_hand():
+    # a 2 m bound (20 cells), 0.3 m margin (3 cells); the grid starts at cells -5..4
+    grid = OccupancyGrid(GridConfig(resolution_m=RES, initial_size_m=1.0, max_size_m=2.0, grow_margin_m=0.3))
+    # from x = 0.05 a 1 m beam ends in cell 10: the grid grows to -5..13 (3 cells to spare), within the bound
+    assert not grid.insert_scan(one_beam(1.0), Transform2D(0.05, 0.05, 0.0))
+    assert (grid.col0, grid.log_odds.shape[1]) == (-5, 19)
+    # from x = 1.05 it ends in cell 20: -5..20 is 26 cells, so the grid (20 cells) moves by the least,
+    # to 1..20, then 3 cells further while 10..20 stay inside: 4..23; cells 0..3 are forgotten
+    assert grid.insert_scan(one_beam(1.0), Transform2D(1.05, 0.05, 0.0))
+    assert (grid.col0, grid.row0, grid.log_odds.shape) == (4, -5, (10, 20))
+    # cell 10 was the first scan's end (l_hit) and is the second's start (l_miss): round(100 p) = 61
+    expected = {(c, 0): 40 for c in range(4, 20)} | {(10, 0): 61, (20, 0): 70}
+    assert observed_cells(grid) == expected
+    assert grid.cells == 200 and grid.nbytes == 200 * BYTES_PER_CELL
+    assert grid.max_cells == 400 and grid.max_nbytes == 400 * BYTES_PER_CELL
+
+
+@settings(max_examples=40, deadline=None)
+@given(coordinate, coordinate, heading, st.floats(0.3, 1.2))
+def test_a_clipped_scan_leaves_the_cells_of_the_whole_scan_inside_the_grid(x, y, theta, max_size_m):
+    """One scan in a grid too small for it marks, inside the grid it ends up as, exactly what it marks
+    in a grid large enough for all of it (the beams' angles are off the axes: no beam through a corner)."""
+    ranges = np.random.default_rng(0).uniform(0.1, 3.0, 37)
+    ranges[::5] = np.inf  # no returns: cleared up to 1 m
+    scan = RangeScan(ranges, 0.0123, 2 * math.pi / 37, 0.05, 3.5)
+    small = OccupancyGrid(GridConfig(resolution_m=RES, initial_size_m=max_size_m, max_size_m=max_size_m))
+    large = OccupancyGrid(GridConfig(resolution_m=RES, initial_size_m=8.0))
+    T_map_scan = Transform2D(x, y, theta)
+    assert small.insert_scan(scan, T_map_scan) and not large.insert_scan(scan, T_map_scan)
+    height, width = small.log_odds.shape
+    in_small = {
+        cell: value
+        for cell, value in observed_cells(large).items()
+        if 0 <= cell[0] - small.col0 < width and 0 <= cell[1] - small.row0 < height
+    }
+    assert observed_cells(small) == in_small
+    assert small.cells <= small.max_cells
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.tuples(st.floats(-20.0, 20.0), st.floats(-20.0, 20.0), heading), min_size=1, max_size=6))
+def test_the_grid_never_holds_more_than_its_bound_and_always_its_sensor(poses):
+    rng = np.random.default_rng(0)
+    grid = OccupancyGrid(GridConfig(resolution_m=RES, initial_size_m=1.0, max_size_m=6.0))
+    for pose in poses:
+        scan = RangeScan(rng.uniform(0.1, 3.5, 36), 0.0, 2 * math.pi / 36, 0.05, 3.5)
+        grid.insert_scan(scan, Transform2D(*pose))
+        height, width = grid.log_odds.shape
+        assert height <= 60 and width <= 60
+        assert grid.nbytes == grid.cells * BYTES_PER_CELL <= grid.max_nbytes == 3600 * BYTES_PER_CELL
+        row, col = grid.cell_of([pose[:2]])[0]
+        assert 0 <= row < height and 0 <= col < width and grid.observed[row, col]
 
 
 @pytest.mark.parametrize(

@@ -1,4 +1,5 @@
-"""Occupancy grid mapping from known poses: log-odds cells, vectorised ray casting, a grid that grows.
+"""Occupancy grid mapping from known poses: log-odds cells, vectorised ray casting, a grid that grows up to
+a bound and then moves with the robot.
 
 The grid
 --------
@@ -6,10 +7,11 @@ Square cells of side ``resolution_m`` (m) aligned with the map frame. Cell ``(ro
 ``x in [(col + col0) res, (col + col0 + 1) res)`` and ``y in [(row + row0) res, (row + row0 + 1) res)``
 where ``(col0, row0)`` are integers: the map frame's cell ``floor(x / res), floor(y / res)`` is the grid's
 ``(row, col) = (floor(y / res) - row0, floor(x / res) - col0)``. So the origin (the corner of cell
-``(0, 0)``) is ``(col0 res, row0 res)`` and growing the grid only changes the integers ``col0, row0``:
-every cell keeps its world position exactly. Rows run along +y and columns along +x, row-major with row 0
-at the origin: the layout of ``nav_msgs/OccupancyGrid`` (``data[row * width + col]``, ``info.origin`` the
-pose of cell (0, 0)'s corner), which :meth:`OccupancyGrid.grid_map` gives as int8 (-1 unknown, 0..100).
+``(0, 0)``) is ``(col0 res, row0 res)`` and growing or moving the grid only changes the integers
+``col0, row0``: every cell keeps its world position exactly. Rows run along +y and columns along +x,
+row-major with row 0 at the origin: the layout of ``nav_msgs/OccupancyGrid`` (``data[row * width +
+col]``, ``info.origin`` the pose of cell (0, 0)'s corner), which :meth:`OccupancyGrid.grid_map` gives as
+int8 (-1 unknown, 0..100).
 
 The inverse sensor model (log odds)
 -----------------------------------
@@ -50,6 +52,30 @@ after the horizontal crossings before it, ``c = #{j: t_y(j) < t_x(k)} = clip(cei
 n_y)`` (and the same for the horizontal crossings, a tie going to the vertical one): the cells entered are
 known without ordering the crossings, and the last is the end cell. (Rounding can only matter where a
 segment passes within rounding of a cell corner: both or neither of the corner's side cells is then listed.)
+
+The bound (memory)
+------------------
+The grid grows by whole cells, ``grow_margin_m`` to spare, as scans reach past it, up to ``n =
+ceil(max_size_m / res)`` cells a side in x and in y: at most ``n^2`` cells of ``BYTES_PER_CELL = 6`` bytes
+(float32 log odds, the observed flag, one scratch flag), 4,000,000 cells and 24 MB at the defaults
+(:attr:`OccupancyGrid.nbytes`, :attr:`OccupancyGrid.max_nbytes`). A scan that reaches past the bound
+(the grid and the scan together longer than ``n`` along an axis) never stops the mapping. Along that axis:
+
+* if the scan's cells ``low..high`` fit in ``n``, the grid (now ``n`` long) moves toward them by the least
+  whole number of cells that brings them inside, then up to ``grow_margin_m`` further while they stay
+  inside (so it moves now and then, not at every scan); the cells it leaves on the far side are forgotten;
+* if the scan alone is longer than ``n`` (a bound shorter than the LiDAR's reach), the grid is centred on
+  the sensor's cell, and moved again only when the sensor comes within ``grow_margin_m`` of its edge.
+
+The grid moves toward the robot because that is where a map is used (a planner plans around the robot),
+and because a save renders the keyframes, which keep the newest: a grid that stayed where it reached its
+bound would leave the rest of the run unmapped, one without a bound would grow with the building and
+its memory with no limit. What then lies past the grid is clipped: beam ``b`` is cut where it leaves the
+grid grown by half a cell, at ``t_b = min(1, t_x, t_y)`` with ``t_x = (X - s_x) / d_x`` (``X`` the grid's
+high x border + 1/2 for ``d_x > 0``, its low border - 1/2 for ``d_x < 0``, ``t_x = inf`` for ``d_x = 0``;
+``t_y`` alike). The cut segment is the beam up to half a cell past the grid, so its cells inside the grid
+are the whole beam's (those past the grid are dropped): the cells up to the bound are traversed as
+usual, and an end past the grid marks nothing occupied. The sensor's cell is always inside.
 """
 
 from __future__ import annotations
@@ -68,7 +94,9 @@ from ..sensing.range_scan import RangeScan
 from ..util.validation import in_range, integer, non_negative, positive, store
 
 UNKNOWN = -1  # nav_msgs/OccupancyGrid's value of a cell never observed
-# Largest side of a grid (cells): 2^15 x 2^15 cells are 5 GB of state, far beyond any TurtleBot's map
+# the state of one cell (bytes): float32 log odds, bool observed, bool scratch (the ends of a scan)
+BYTES_PER_CELL = 6
+# Largest side of a grid (cells): 2^15 x 2^15 cells are 6 GB of state, far beyond any TurtleBot's map
 _MAX_CELLS = 2**15
 
 
@@ -89,9 +117,10 @@ class GridConfig:
     * ``resolution_m`` (m, > 0): the side of a cell;
     * ``initial_size_m`` (m, > 0): side of the square grid at the start, centred on the map origin;
     * ``max_size_m`` (m, >= ``initial_size_m``): the grid grows as scans reach past it, up to this side
-      in x and in y (a scan that would need more raises ValueError and changes nothing);
-    * ``grow_margin_m`` (m, >= 0): the extra space added around a scan that needs a larger grid, so the
-      grid grows now and then rather than at every scan;
+      in x and in y (its memory bound); past it the grid moves toward the scans, forgetting its far side,
+      and clips what still lies outside (module docstring, "The bound");
+    * ``grow_margin_m`` (m, >= 0): the extra space added around a scan that needs a larger (or moved)
+      grid, so the grid grows or moves now and then rather than at every scan;
     * ``hit_probability`` in (1/2, 1), ``miss_probability`` in (0, 1/2): the inverse sensor model of a
       beam's end cell and of the cells it passes through (module docstring);
     * ``min_probability`` in (0, ``miss_probability``], ``max_probability`` in [``hit_probability``, 1):
@@ -177,7 +206,8 @@ class GridMap:
 
 
 class OccupancyGrid:
-    """A log-odds occupancy grid that grows as scans reach past it (module docstring).
+    """A log-odds occupancy grid that grows as scans reach past it, up to ``max_size_m`` a side, then moves
+    toward them (module docstring).
 
     ``log_odds`` (height, width) float32 and ``observed`` (height, width) bool are the state; ``col0``,
     ``row0`` the integer cell offsets of cell (0, 0) (origin ``(col0 res, row0 res)``).
@@ -190,7 +220,7 @@ class OccupancyGrid:
         self._l_miss = float(log_odds(config.miss_probability))
         self._l_min = float(log_odds(config.min_probability))
         self._l_max = float(log_odds(config.max_probability))
-        self._max_cells = math.ceil(config.max_size_m / res)
+        self._max_side = math.ceil(config.max_size_m / res)
         half = math.ceil(0.5 * config.initial_size_m / res)
         self.col0 = self.row0 = -half
         self.log_odds = np.zeros((2 * half, 2 * half), dtype=np.float32)
@@ -198,6 +228,26 @@ class OccupancyGrid:
         self._hit_scratch = np.zeros(self.log_odds.size, dtype=bool)
         self._layout: tuple[int, float, float] | None = None
         self._directions = np.zeros((0, 2))
+
+    @property
+    def cells(self) -> int:
+        """The number of cells now (height x width)."""
+        return self.log_odds.size
+
+    @property
+    def nbytes(self) -> int:
+        """The bytes the grid's state holds now (``BYTES_PER_CELL`` per cell)."""
+        return self.log_odds.nbytes + self.observed.nbytes + self._hit_scratch.nbytes
+
+    @property
+    def max_cells(self) -> int:
+        """The most cells the grid can hold: ``ceil(max_size_m / resolution_m)^2``."""
+        return self._max_side**2
+
+    @property
+    def max_nbytes(self) -> int:
+        """The most bytes the grid's state can hold: ``max_cells BYTES_PER_CELL``."""
+        return self.max_cells * BYTES_PER_CELL
 
     @property
     def origin_m(self) -> tuple[float, float]:
@@ -216,11 +266,12 @@ class OccupancyGrid:
             )
         )
 
-    def insert_scan(self, scan: RangeScan, T_map_scan: Transform2D) -> None:
+    def insert_scan(self, scan: RangeScan, T_map_scan: Transform2D) -> bool:
         """Update the grid with ``scan`` taken from the sensor pose ``T_map_scan`` (module docstring).
 
-        The grid first grows if the scan reaches past it; ValueError (and no change) if it would then be
-        larger than ``max_size_m``.
+        The grid first grows if the scan reaches past it, or moves toward the scan if it would then be
+        larger than ``max_size_m`` (what lies past it even so is clipped); True when the scan reached past
+        that bound. ValueError (and no change) for anything but a RangeScan and a Transform2D.
         """
         if not isinstance(scan, RangeScan) or not isinstance(T_map_scan, Transform2D):
             raise ValueError(
@@ -237,19 +288,21 @@ class OccupancyGrid:
         ex /= res
         ey /= res
         sx, sy = T_map_scan.x / res, T_map_scan.y / res
-        self._grow_to_include(
-            math.floor(min(sx, ex.min())),
-            math.floor(min(sy, ey.min())),
-            math.floor(max(sx, ex.max())),
-            math.floor(max(sy, ey.max())),
+        past_bound = self._fit(
+            (math.floor(min(sx, ex.min())), math.floor(max(sx, ex.max())), math.floor(sx)),
+            (math.floor(min(sy, ey.min())), math.floor(max(sy, ey.max())), math.floor(sy)),
         )
         # cells in the map frame's cell units (independent of the grid's extent), then in the grid
-        width = self.log_odds.shape[1]
-        offset = self.row0 * width + self.col0
-        end_row, end_col = np.floor(ey).astype(np.int64), np.floor(ex).astype(np.int64)
-        hit = (end_row * width + end_col)[returns] - offset
-        start = math.floor(sy) * width + math.floor(sx) - offset
-        traversed = _traversed_cells(sx, sy, ex, ey, width) + start
+        height, width = self.log_odds.shape
+        start = (math.floor(sy) - self.row0) * width + math.floor(sx) - self.col0
+        if past_bound:  # the returns that end inside the grid (compared before any cast to integers)
+            returns = returns & (ex >= self.col0) & (ex < self.col0 + width)
+            returns &= (ey >= self.row0) & (ey < self.row0 + height)
+            traversed = self._clipped_traversed_cells(sx, sy, ex, ey)
+        else:
+            traversed = _traversed_cells(sx, sy, ex, ey, width) + start
+        end_row = np.floor(ey[returns]).astype(np.int64) - self.row0
+        hit = end_row * width + np.floor(ex[returns]).astype(np.int64) - self.col0
         # an end wins over a pass (a cell is updated once per scan)
         is_hit = self._hit_scratch
         is_hit[hit] = True
@@ -264,6 +317,7 @@ class OccupancyGrid:
         flat_l[hit] = np.minimum(flat_l[hit] + self._l_hit, self._l_max)
         flat_observed[free] = True
         flat_observed[hit] = True
+        return past_bound
 
     def grid_map(self) -> GridMap:
         """The grid as ``nav_msgs/OccupancyGrid`` values: ``round(100 p)``, -1 where never observed."""
@@ -281,45 +335,82 @@ class OccupancyGrid:
             self._layout = layout
         return self._directions
 
-    def _grow_to_include(self, col_low: int, row_low: int, col_high: int, row_high: int) -> None:
-        """Grow (by whole cells, ``grow_margin_m`` to spare on each side that grows) so that the map-frame
-        cells from ``(col_low, row_low)`` to ``(col_high, row_high)`` lie inside; ValueError (and no change)
-        if the grid would then be wider or taller than ``max_size_m``."""
+    def _fit(self, x_cells: tuple[int, int, int], y_cells: tuple[int, int, int]) -> bool:
+        """Grow or move the grid (:func:`_extent` along x and y) for a scan whose map-frame cells span
+        ``(low, high, sensor)`` along each axis (the sensor's cell); True when the scan reached past the
+        bound. The cells both extents share keep their values, the others start unknown."""
         height, width = self.log_odds.shape
         margin = math.ceil(self.config.grow_margin_m / self.config.resolution_m)
-        spans = []
-        for axis, low_old, size, low, high in (
-            ("x", self.col0, width, col_low, col_high),
-            ("y", self.row0, height, row_low, row_high),
-        ):
-            new_low, new_end = min(low_old, low), max(low_old + size, high + 1)
-            if new_end - new_low > self._max_cells:
-                raise ValueError(
-                    f"the scan reaches past max_size_m = {self.config.max_size_m} m of grid in {axis} "
-                    f"(cells {low}..{high}, the grid holds {low_old}..{low_old + size - 1})"
-                )
-            if new_low < low_old:
-                new_low = max(new_low - margin, new_end - self._max_cells)
-            if new_end > low_old + size:
-                new_end = min(new_end + margin, new_low + self._max_cells)
-            spans.append((new_low, new_end))
-        (new_col0, col_end), (new_row0, row_end) = spans
-        if (new_col0, col_end, new_row0, row_end) == (
-            self.col0,
-            self.col0 + width,
-            self.row0,
-            self.row0 + height,
-        ):
-            return
-        log_odds_grid = np.zeros((row_end - new_row0, col_end - new_col0), dtype=np.float32)
+        col0, new_width, past_x = _extent(self.col0, width, *x_cells, self._max_side, margin)
+        row0, new_height, past_y = _extent(self.row0, height, *y_cells, self._max_side, margin)
+        if (col0, new_width, row0, new_height) == (self.col0, width, self.row0, height):
+            return past_x or past_y
+        log_odds_grid = np.zeros((new_height, new_width), dtype=np.float32)
         observed = np.zeros(log_odds_grid.shape, dtype=bool)
-        rows = slice(self.row0 - new_row0, self.row0 - new_row0 + height)
-        cols = slice(self.col0 - new_col0, self.col0 - new_col0 + width)
-        log_odds_grid[rows, cols] = self.log_odds
-        observed[rows, cols] = self.observed
+        # the map-frame cells both extents share, then where they are in the old grid and in the new
+        col_low, col_high = max(col0, self.col0), min(col0 + new_width, self.col0 + width)
+        row_low, row_high = max(row0, self.row0), min(row0 + new_height, self.row0 + height)
+        if col_low < col_high and row_low < row_high:
+            old = (
+                slice(row_low - self.row0, row_high - self.row0),
+                slice(col_low - self.col0, col_high - self.col0),
+            )
+            new = slice(row_low - row0, row_high - row0), slice(col_low - col0, col_high - col0)
+            log_odds_grid[new] = self.log_odds[old]
+            observed[new] = self.observed[old]
         self.log_odds, self.observed = log_odds_grid, observed
-        self.col0, self.row0 = new_col0, new_row0
-        self._hit_scratch = np.zeros(log_odds_grid.size, dtype=bool)
+        self.col0, self.row0 = col0, row0
+        if self._hit_scratch.size != log_odds_grid.size:  # (all false between scans)
+            self._hit_scratch = np.zeros(log_odds_grid.size, dtype=bool)
+        return past_x or past_y
+
+    def _clipped_traversed_cells(
+        self, sx: float, sy: float, ex: NDArray[np.float64], ey: NDArray[np.float64]
+    ) -> NDArray[np.int64]:
+        """The grid cells (flat indices) the beams from ``(sx, sy)`` (inside the grid) to ``(ex_b, ey_b)``
+        (cell units) enter, each beam cut where it leaves the grid grown by half a cell (module docstring,
+        "The bound"). The cut beams end at most one cell past the grid: they are traversed in a grid one
+        cell wider on each side, whose border cells are then dropped."""
+        height, width = self.log_odds.shape
+        dx, dy = ex - sx, ey - sy
+        t = np.ones_like(dx)
+        for d, low, size, s in ((dx, self.col0, width, sx), (dy, self.row0, height, sy)):
+            border = np.where(d > 0.0, low + size + 0.5, low - 0.5)
+            np.minimum(t, np.divide(border - s, d, out=np.full_like(d, np.inf), where=d != 0.0), out=t)
+        padded = width + 2
+        start = (math.floor(sy) - self.row0 + 1) * padded + math.floor(sx) - self.col0 + 1
+        row, col = np.divmod(_traversed_cells(sx, sy, sx + t * dx, sy + t * dy, padded) + start, padded)
+        inside = (row >= 1) & (row <= height) & (col >= 1) & (col <= width)
+        return (row[inside] - 1) * width + col[inside] - 1
+
+
+def _extent(
+    low_old: int, size_old: int, low: int, high: int, sensor: int, max_size: int, margin: int
+) -> tuple[int, int, bool]:
+    """Along one axis, the grid's first cell and length (cells) after a scan covering the cells
+    ``low..high`` from the ``sensor``'s cell, when it now covers ``size_old`` cells from ``low_old``: grown
+    to cover the scan (``margin`` cells to spare on each side that grows) within ``max_size`` cells, or
+    moved toward it (module docstring, "The bound"); and whether the scan reached past the bound."""
+    new_low, new_end = min(low_old, low), max(low_old + size_old, high + 1)
+    if new_end - new_low <= max_size:
+        if new_low < low_old:
+            new_low = max(new_low - margin, new_end - max_size)
+        if new_end > low_old + size_old:
+            new_end = min(new_end + margin, new_low + max_size)
+        return new_low, new_end - new_low, False
+    if high + 1 - low <= max_size:
+        # the least move that covers low..high, then up to margin further while it still does
+        first = min(max(low_old, high + 1 - max_size), low)
+        if first > low_old:
+            first = min(first + margin, low)
+        elif first < low_old:
+            first = max(first - margin, high + 1 - max_size)
+        return first, max_size, True
+    # a scan longer than the grid: centred on the sensor, unless that is still margin inside the grid
+    inner = min(margin, (max_size - 1) // 2)
+    if size_old == max_size and low_old + inner <= sensor < low_old + size_old - inner:
+        return low_old, size_old, True
+    return sensor - max_size // 2, max_size, True
 
 
 def _traversed_cells(
