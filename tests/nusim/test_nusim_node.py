@@ -434,3 +434,55 @@ def test_turtlebot3_world_from_its_params_file():
         node.destroy_node()
     finally:
         rclpy.try_shutdown(context=context)
+
+
+def test_rooms_world_from_its_params_file_is_simulated_and_shown():
+    """`--params-file nusim/config/rooms_posts_world.yaml` as rcl reads it: nine interior walls, eight boxes,
+    six pieces on legs (24 legs) and five posts, all on the latched markers (walls and boxes on ~/walls,
+    posts and legs on ~/obstacles)."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+
+    context = Context()
+    rclpy.init(
+        context=context,
+        args=["--ros-args", "--params-file", str(BASIC_WORLD.parent / "rooms_posts_world.yaml")],
+    )
+    executor = SingleThreadedExecutor(context=context)
+    try:
+        node = NusimNode(stepped_by_owner=True, context=context)
+        world = node.simulation.world
+        assert (world.interior.shape, world.boxes.shape) == ((9, 4), (8, 4, 2))
+        assert (world.landmarks.shape, world.legs.shape) == ((5, 3), (24, 3))
+        helper = rclpy.create_node("rooms_listener", context=context)
+        latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        received: dict[str, MarkerArray] = {}
+        for topic in ("nusim/walls", "nusim/obstacles"):
+            helper.create_subscription(
+                MarkerArray, topic, lambda msg, t=topic: received.setdefault(t, msg), latched
+            )
+        executor.add_node(helper)
+        for _ in range(200):
+            if len(received) == 2:
+                break
+            executor.spin_once(timeout_sec=0.05)
+        namespaces = {topic: sorted({(m.ns, m.id) for m in msg.markers}) for topic, msg in received.items()}
+        assert namespaces["nusim/walls"] == sorted(
+            [("walls", k) for k in range(4)]
+            + [("interior_walls", k) for k in range(9)]
+            + [("boxes", b) for b in range(8)]
+        )
+        assert namespaces["nusim/obstacles"] == sorted(
+            [("obstacles", j) for j in range(5)] + [("legs", k) for k in range(24)]
+        )
+        # the sofa: 2.0 m x 0.8 m centred at (-2.6, -2.55)
+        sofa = next(m for m in received["nusim/walls"].markers if (m.ns, m.id) == ("boxes", 0))
+        assert (sofa.pose.position.x, sofa.pose.position.y, sofa.scale.x, sofa.scale.y) == pytest.approx(
+            (-2.6, -2.55, 2.0, 0.8)
+        )
+        helper.destroy_node()
+        node.destroy_node()
+    finally:
+        executor.shutdown()
+        rclpy.try_shutdown(context=context)
