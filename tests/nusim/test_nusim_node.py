@@ -25,6 +25,7 @@ from sensor_msgs.msg import JointState, LaserScan
 from std_srvs.srv import Empty
 from visualization_msgs.msg import Marker, MarkerArray
 
+from nusim.house import Boxes, InteriorWalls, Legs
 from nusim.nusim_node import NusimNode, NusimTiming
 from nusim.simulation import ArenaConfig, NoiseConfig, Obstacles, Walls, default_lidar
 from nuturtle_description.robot_params import burger_params
@@ -42,6 +43,7 @@ MCU_PER_RAD_S = burger_params().motor_cmd_per_rad_sec  # 41.6666667 in models.ya
 HALF_TICK_RAD = 0.5 * 2.0 * math.pi / 4096.0
 QUIET = {"input_noise": 0.0, "slip_fraction": 0.0, "basic_sensor_variance": 0.0}
 EXACT_LIDAR = {"lidar.noise": 0.0, "lidar.resolution": 0.0}
+ROOMS = (("interior_walls", InteriorWalls), ("boxes", Boxes), ("legs", Legs))
 ONE_CYLINDER = {"obstacles.x": [1.0], "obstacles.y": [0.0], "obstacles.r": [0.05]}
 
 
@@ -331,7 +333,7 @@ def test_bad_wheel_commands_are_skipped_with_a_warning(ros, names, velocities, r
 def test_the_default_parameters_are_the_basic_world_yaml():
     world = load_ros_yaml(BASIC_WORLD)
     flat = {k: v for k, v in world.items() if not isinstance(v, dict)}
-    for group in ("obstacles", "lidar", "walls"):
+    for group in ("obstacles", "lidar", "walls", "interior_walls", "boxes", "legs"):
         flat.update({f"{group}.{k}": v for k, v in world[group].items()})
     defaults = {
         **vars(NusimTiming()),
@@ -339,6 +341,7 @@ def test_the_default_parameters_are_the_basic_world_yaml():
         **vars(NoiseConfig()),
         **{f"obstacles.{k}": list(v) for k, v in vars(Obstacles()).items()},
         **{f"walls.{k}": list(v) for k, v in vars(Walls()).items()},
+        **{f"{group}.{k}": list(v) for group, cls in ROOMS for k, v in vars(cls()).items()},
         **{f"lidar.{k}": v for k, v in vars(default_lidar()).items()},
         "lidar_model": "lds01",
         "wheel_left": "wheel_left_joint",
@@ -352,7 +355,7 @@ def test_the_default_parameters_are_the_basic_world_yaml():
 def test_parameters_from_the_world_file_give_the_default_world(ros):
     world = load_ros_yaml(BASIC_WORLD)
     flat = {k: v for k, v in world.items() if not isinstance(v, dict)}
-    for group in ("obstacles", "lidar", "walls"):
+    for group in ("obstacles", "lidar", "walls", "interior_walls", "boxes", "legs"):
         flat.update({f"{group}.{k}": v for k, v in world[group].items()})
     from_file = ros.add(NusimNode(context=ros.context, parameter_overrides=parameters(flat)))
     default = ros.add(NusimNode(context=ros.context))
