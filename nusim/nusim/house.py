@@ -194,9 +194,6 @@ class Legs:
         )
 
 
-_NO_CIRCLES = np.zeros((0, 3))
-
-
 @dataclass(frozen=True)
 class WorldGeometry:
     """Everything solid in the world (nusim/world, m): ``outer`` (N, 4) the arena's closed polygon of walls,
@@ -207,8 +204,8 @@ class WorldGeometry:
     outer: NDArray[np.float64]
     interior: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 4)))
     boxes: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 4, 2)))
-    landmarks: NDArray[np.float64] = field(default_factory=lambda: _NO_CIRCLES)
-    legs: NDArray[np.float64] = field(default_factory=lambda: _NO_CIRCLES)
+    landmarks: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 3)))
+    legs: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 3)))
 
     @property
     def box_walls(self) -> NDArray[np.float64]:
