@@ -1,4 +1,5 @@
-"""`nusim`: a simulated TurtleBot3 (any model) in an arena of cylinders, publishing what the real robot does.
+"""`nusim`: a simulated TurtleBot3 (any model) in an arena of cylinders or in rooms, publishing what the real
+robot does.
 
 A thin ROS wrapper over `nusim.simulation.Simulation` (models in that module's docstring).
 
@@ -21,14 +22,19 @@ Publishes (all stamped with simulation time)
     `~/ground_truth` (nav_msgs/Odometry, `nusim/world` -> `nusim/base_footprint`, true pose and body
         twist) and `~/path` (nav_msgs/Path, decimated by `PathTrailConfig`), with the same stamps as
         `joint_states`; `/tf` `nusim/world` -> `nusim/base_footprint` where tf2_msgs is installed.
-    `~/obstacles`, `~/walls` (visualization_msgs/MarkerArray, frame `nusim/world`, transient local, red).
+    `~/obstacles` (visualization_msgs/MarkerArray, frame `nusim/world`, transient local): the cylinders
+        (namespace `obstacles`, red, id = landmark index) and the placed legs (`legs`, brown).
+    `~/walls` (the same): the arena's walls (`walls`, red), the interior walls (`interior_walls`, red) and
+        the boxes (`boxes`, brown).
 Services
     `~/reset` (std_srvs/Empty): back to (x0, y0, theta0), at rest; the encoders keep their count and time
         runs on (nodes on /clock never see time jump back, odometry sees no wheel motion).
 Parameters
     `NusimTiming` (rate, realtime_factor, joint_states_rate, scan_rate, fake_sensor_rate), `ArenaConfig`
     (x0, y0, theta0, arena_x_length, arena_y_length), `Walls` (walls.x, walls.y: a polygon of walls instead
-    of the rectangle), `Obstacles` (obstacles.x, obstacles.y, obstacles.r),
+    of the rectangle), `Obstacles` (obstacles.x, obstacles.y, obstacles.r), the rooms of `nusim.house`:
+    `InteriorWalls` (interior_walls.x0, .y0, .x1, .y1), `Boxes` (boxes.x, .y, .length, .width, .yaw),
+    `Legs` (legs.x_min, .x_max, .y_min, .y_max, .yaw_min, .yaw_max, .length, .width, .r),
     `NoiseConfig` (input_noise, slip_fraction, basic_sensor_variance, max_range, seed), `LidarChoice`
     (lidar_model), `LidarConfig` (lidar.*, defaults from lidar_model), `model`, then `RobotParams` (that
     model's constants by default), `WheelJoints` (wheel_left, wheel_right), `CommandTimeoutConfig`
@@ -82,6 +88,7 @@ from turtlelib.sensing.scan_model import LidarConfig
 from turtlelib.util.timebase import NS_PER_S
 from turtlelib.util.validation import positive, store
 
+from .house import Boxes, InteriorWalls, Legs, WorldGeometry
 from .simulation import (
     ArenaConfig,
     LidarChoice,
@@ -96,9 +103,11 @@ WORLD_FRAME = "nusim/world"
 TRUE_BODY_FRAME = "nusim/base_footprint"
 BODY_FRAME = "base_footprint"
 SCAN_FRAME = "base_scan"
-# Wall thickness (m): display only.
+# Wall thickness (m): display only (an interior wall has none: it is shown this thin).
 WALL_THICKNESS_M = 0.1
+INTERIOR_WALL_THICKNESS_M = 0.02
 RED = (1.0, 0.0, 0.0, 1.0)
+BROWN = (0.55, 0.35, 0.15, 1.0)
 YELLOW = (1.0, 0.85, 0.0, 1.0)
 
 
@@ -129,6 +138,23 @@ class NusimTiming:
         return math.floor(step * stream_hz / self.rate) > math.floor((step - 1) * stream_hz / self.rate)
 
 
+def box_marker(
+    ns: str, index: int, centre: NDArray[np.float64], yaw: float, size: tuple[float, float], stamp: Time
+) -> Marker:
+    """A CUBE standing on the floor (frame nusim/world): centre ``(x, y)`` (m), turned by ``yaw`` (rad),
+    ``size`` (length along its heading, width across; m), MARKER_HEIGHT_M tall, red."""
+    marker = Marker(ns=ns, id=index, type=Marker.CUBE, action=Marker.ADD)
+    marker.header.frame_id = WORLD_FRAME
+    marker.header.stamp = stamp
+    marker.pose.position.x = float(centre[0])
+    marker.pose.position.y = float(centre[1])
+    marker.pose.position.z = 0.5 * MARKER_HEIGHT_M
+    marker.pose.orientation = quaternion_from_yaw(yaw)
+    marker.scale.x, marker.scale.y, marker.scale.z = float(size[0]), float(size[1]), MARKER_HEIGHT_M
+    set_color(marker, RED)
+    return marker
+
+
 def wall_markers(walls: NDArray[np.float64], stamp: Time) -> MarkerArray:
     """One CUBE of WALL_THICKNESS_M per wall segment ``[x0, y0, x1, y1]`` of the arena's closed polygon, just
     outside its inner face (frame nusim/world): centred on the segment's midpoint moved ``t / 2`` along its
@@ -140,19 +166,33 @@ def wall_markers(walls: NDArray[np.float64], stamp: Time) -> MarkerArray:
     ccw = np.sum(walls[:, 0] * walls[:, 3] - walls[:, 2] * walls[:, 1]) > 0.0
     outward = np.column_stack([e[:, 1], -e[:, 0]]) / length[:, None] * (1.0 if ccw else -1.0)
     centres = 0.5 * (walls[:, :2] + walls[:, 2:]) + 0.5 * t * outward
+    return MarkerArray(
+        markers=[
+            box_marker("walls", k, centre, math.atan2(ey, ex), (length_m + 2 * t, t), stamp)
+            for k, (centre, length_m, (ex, ey)) in enumerate(zip(centres, length, e, strict=True))
+        ]
+    )
+
+
+def house_markers(world: WorldGeometry, stamp: Time) -> list[Marker]:
+    """The interior walls (namespace ``interior_walls``: CUBEs INTERIOR_WALL_THICKNESS_M thick on their
+    segments, red) and the boxes (``boxes``: CUBEs of their size, brown), frame nusim/world."""
     markers = []
-    for index, ((x, y), length_m, (ex, ey)) in enumerate(zip(centres, length, e, strict=True)):
-        marker = Marker(ns="walls", id=index, type=Marker.CUBE, action=Marker.ADD)
-        marker.header.frame_id = WORLD_FRAME
-        marker.header.stamp = stamp
-        marker.pose.position.x = float(x)
-        marker.pose.position.y = float(y)
-        marker.pose.position.z = 0.5 * MARKER_HEIGHT_M
-        marker.pose.orientation = quaternion_from_yaw(math.atan2(ey, ex))
-        marker.scale.x, marker.scale.y, marker.scale.z = float(length_m + 2 * t), t, MARKER_HEIGHT_M
-        set_color(marker, RED)
+    for k, (x0, y0, x1, y1) in enumerate(world.interior):
+        centre = np.array([0.5 * (x0 + x1), 0.5 * (y0 + y1)])
+        length_m = math.hypot(x1 - x0, y1 - y0)
+        yaw = math.atan2(y1 - y0, x1 - x0)
+        markers.append(
+            box_marker("interior_walls", k, centre, yaw, (length_m, INTERIOR_WALL_THICKNESS_M), stamp)
+        )
+    for b, corners in enumerate(world.boxes):
+        # corners counter-clockwise from (-length/2, -width/2) in the box's frame
+        along, across = corners[1] - corners[0], corners[3] - corners[0]
+        size = (float(np.hypot(*along)), float(np.hypot(*across)))
+        marker = box_marker("boxes", b, corners.mean(axis=0), math.atan2(along[1], along[0]), size, stamp)
+        set_color(marker, BROWN)
         markers.append(marker)
-    return MarkerArray(markers=markers)
+    return markers
 
 
 class NusimNode(Node):
@@ -167,6 +207,9 @@ class NusimNode(Node):
             arena=declare_dataclass(self, ArenaConfig),
             obstacles=declare_dataclass(self, Obstacles, prefix="obstacles."),
             walls=declare_dataclass(self, Walls, prefix="walls."),
+            interior_walls=declare_dataclass(self, InteriorWalls, prefix="interior_walls."),
+            boxes=declare_dataclass(self, Boxes, prefix="boxes."),
+            legs=declare_dataclass(self, Legs, prefix="legs."),
             robot=declare_robot(self),
             noise=declare_dataclass(self, NoiseConfig),
             lidar=declare_dataclass(
@@ -204,7 +247,9 @@ class NusimNode(Node):
         self._clock_msg = ClockMsg(clock=start)
         self._clock_publisher.publish(self._clock_msg)
         obstacles_publisher.publish(self._obstacle_markers(start))
-        walls_publisher.publish(wall_markers(self.simulation.walls, start))
+        walls = wall_markers(self.simulation.walls, start)
+        walls.markers += house_markers(self.simulation.world, start)
+        walls_publisher.publish(walls)
         if not stepped_by_owner:
             # a steady (wall) clock, never the ROS clock: this node is what drives /clock
             self.create_timer(
@@ -324,10 +369,15 @@ class NusimNode(Node):
         self._fake_sensor_publisher.publish(MarkerArray(markers=markers))
 
     def _obstacle_markers(self, stamp: Time) -> MarkerArray:
+        """The cylinders (namespace ``obstacles``, red) and the placed legs (``legs``, brown)."""
         return MarkerArray(
             markers=[
                 cylinder_marker(WORLD_FRAME, stamp, "obstacles", j, float(x), float(y), float(r), RED)
                 for j, (x, y, r) in enumerate(self.simulation.circles)
+            ]
+            + [
+                cylinder_marker(WORLD_FRAME, stamp, "legs", k, float(x), float(y), float(r), BROWN)
+                for k, (x, y, r) in enumerate(self.simulation.world.legs)
             ]
         )
 

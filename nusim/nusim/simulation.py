@@ -1,4 +1,4 @@
-"""The simulated TurtleBot3 Burger in an arena of cylinders: pure Python/numpy, no ROS.
+"""The simulated TurtleBot3 Burger in an arena of cylinders, or in rooms: pure Python/numpy, no ROS.
 
 World (frame ``world``, m, rad)
 -------------------------------
@@ -9,7 +9,12 @@ at ``c_j = (obstacles.x[j], obstacles.y[j])`` of radius ``obstacles.r[j]``; and 
 ``collision_radius`` ``R`` centred on ``base_footprint`` with true pose ``T_world_body`` (starting at
 ``(x0, y0, theta0)``). The robot's centre ``p`` is *free* when it is inside the polygon, ``|p - c_j| >=
 R + r_j`` for every cylinder and ``dist(p, wall_k) >= R`` for every wall segment (each wall is a capsule
-of radius ``R`` around its segment for the centre).
+of radius ``R`` around its segment for the centre; :mod:`nusim.free_space`).
+
+Rooms (:mod:`nusim.house`): interior walls (segments), boxes (solid rectangles: furniture the LiDAR sees
+whole) and furniture on legs (four small cylinders each, placed at random in given areas from the
+``seed``) are walls and cylinders too: the LiDAR sees them and the robot cannot pass them. The landmarks
+are the cylinders alone (``obstacles``): legs are never reported by the fake sensor.
 
 Motors (per wheel ``i`` in (left, right), per physics step of ``dt`` s)
 ---------------------------------------------------------------------
@@ -45,15 +50,15 @@ Sensors
 * Fake landmark sensor: every cylinder with ``|p_body_j| <= max_range``, where
   ``p_body_j = T_world_body^-1 @ c_j``, reads ``p_body_j + e``, ``e ~ N(0, basic_sensor_variance I_2)``.
 
-Randomness: one ``numpy.random.SeedSequence(seed)`` spawns four independent streams (wheel noise, slip,
-LiDAR, landmark sensor), so the same seed and the same commands reproduce the same run, and changing
-how often one sensor is read does not change another's noise.
+Randomness: one ``numpy.random.SeedSequence(seed)`` spawns five independent streams (wheel noise, slip,
+LiDAR, landmark sensor, placement of the furniture on legs), so the same seed and the same commands
+reproduce the same run in the same rooms, and changing how often one sensor is read does not change
+another's noise.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import partial
 
@@ -65,9 +70,9 @@ from turtlelib import DiffDrive, Transform2D
 from turtlelib.sensing.scan_model import LidarConfig, arena_walls, polygon_walls, simulate_scan
 from turtlelib.util.validation import finite_real, in_range, integer, non_negative, one_of, positive, store
 
-# How much less than the measured clearance the free ball's radius is (m): far above the rounding of a
-# contact test, far below any distance that matters
-FREE_BALL_MARGIN_M = 1e-6
+from .free_space import FreeBall, first_collision
+from .house import Boxes, InteriorWalls, Legs, WorldGeometry, store_lists
+
 # The default world: eight cylinders of the course's radius, 0.75 to 1.85 m from the centre. On any circle
 # of radius 0.5 to 1.0 m through the origin (centre (0, +-radius)) the robot's disc (0.11 m) clears every
 # cylinder by at least 0.1 m, and sees some of them within the fake sensor's 2 m.
@@ -96,20 +101,6 @@ class ArenaConfig:
         return Transform2D(self.x0, self.y0, self.theta0)
 
 
-def _store_lists(
-    config: object, prefix: str, fields: Sequence[tuple[str, Callable[[str, object], float]]]
-) -> None:
-    """Each of ``config``'s list ``fields`` (name, check) as a tuple of checked floats; ValueError naming
-    the parameter ``<prefix><name>`` (and the entry) otherwise."""
-    for name, check in fields:
-        values = getattr(config, name)
-        if isinstance(values, (str, bytes)) or not isinstance(values, Sequence):
-            raise ValueError(f"{prefix}{name} must be a list of numbers, got {values!r}")
-        object.__setattr__(
-            config, name, tuple(check(f"{prefix}{name}[{k}]", v) for k, v in enumerate(values))
-        )
-
-
 @dataclass(frozen=True)
 class Walls:
     """The arena's walls as a polygon: corner ``k`` at ``(x[k], y[k])`` (m, finite), in order around it,
@@ -122,7 +113,7 @@ class Walls:
     y: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
-        _store_lists(self, "walls.", (("x", finite_real), ("y", finite_real)))
+        store_lists(self, "walls.", (("x", finite_real), ("y", finite_real)))
         if len(self.x) != len(self.y):
             raise ValueError(
                 f"walls.x and walls.y must have the same length, got {len(self.x)} and {len(self.y)}"
@@ -155,7 +146,7 @@ class Obstacles:
     r: tuple[float, ...] = (DEFAULT_OBSTACLE_R_M,) * len(DEFAULT_OBSTACLES_X)
 
     def __post_init__(self) -> None:
-        _store_lists(self, "obstacles.", (("x", finite_real), ("y", finite_real), ("r", positive)))
+        store_lists(self, "obstacles.", (("x", finite_real), ("y", finite_real), ("r", positive)))
         if not len(self.x) == len(self.y) == len(self.r):
             raise ValueError(
                 "obstacles.x, obstacles.y and obstacles.r must have the same length, got "
@@ -173,7 +164,8 @@ class NoiseConfig:
 
     ``input_noise`` (rad/s, >= 0): sigma of the wheel-speed noise; ``slip_fraction`` in [0, 1): bound of
     the uniform slip; ``basic_sensor_variance`` (m^2, >= 0): per-axis variance of the landmark sensor;
-    ``max_range`` (m, > 0): its range; ``seed`` (int >= 0) seeds every noise stream.
+    ``max_range`` (m, > 0): its range; ``seed`` (int >= 0) seeds every noise stream and the placement of
+    the furniture on legs.
     """
 
     input_noise: float = 0.01
@@ -252,12 +244,20 @@ class LidarChoice:
         return LIDAR_MODELS[self.lidar_model]
 
 
+def seed_streams(seed: int) -> list[np.random.SeedSequence]:
+    """The five independent streams of ``seed`` (module docstring): wheel noise, slip, LiDAR, landmark
+    sensor, placement (spawned children: each one's draws do not depend on how many the others make)."""
+    return np.random.SeedSequence(seed).spawn(5)
+
+
 @dataclass(frozen=True)
 class SimulationConfig:
     """The whole simulated world; the defaults are the default world (config/basic_world.yaml).
 
-    Besides each part's own checks, every cylinder must lie inside the arena and the robot's collision
-    disc must start free (inside the walls, clear of every cylinder); ValueError otherwise.
+    Besides each part's own checks, every cylinder must lie inside the arena, outside every box and clear
+    of the interior walls, and the robot's collision disc must start free (inside the walls, clear of
+    every cylinder, box and interior wall); the furniture on legs is then placed (``world``, from the
+    seed's placement stream); ValueError otherwise.
     """
 
     arena: ArenaConfig = field(default_factory=ArenaConfig)
@@ -266,189 +266,41 @@ class SimulationConfig:
     noise: NoiseConfig = field(default_factory=NoiseConfig)
     lidar: LidarConfig = field(default_factory=default_lidar)
     walls: Walls = field(default_factory=Walls)
+    interior_walls: InteriorWalls = field(default_factory=InteriorWalls)
+    boxes: Boxes = field(default_factory=Boxes)
+    legs: Legs = field(default_factory=Legs)
+    # everything solid, the legs placed: set by __post_init__
+    world: WorldGeometry = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         segments = self.wall_segments
         no_circles = np.zeros((0, 3))
+        bare = WorldGeometry(segments, self.interior_walls.segments(), self.boxes.corners())
         for j, (x, y, r) in enumerate(self.obstacles.circles()):
             if first_collision(np.array([x, y]), no_circles, segments, r) is not None:
                 raise ValueError(
                     f"obstacle {j} at ({x}, {y}) m with radius {r} m does not fit inside "
                     f"{self.walls.describe(self.arena)}"
                 )
-        collision = first_collision(
-            self.arena.T_world_start.translation,
-            self.obstacles.circles(),
-            segments,
-            self.robot.collision_radius,
-        )
+            reason = bare.first_collision(np.array([x, y]), r)
+            if reason is not None:
+                raise ValueError(f"obstacle {j} at ({x}, {y}) m with radius {r} m {reason}")
+        world = WorldGeometry(bare.outer, bare.interior, bare.boxes, self.obstacles.circles())
+        start_xy = self.arena.T_world_start.translation
+        collision = world.first_collision(start_xy, self.robot.collision_radius)
         if collision is not None:
             raise ValueError(
                 f"the robot's start (x0, y0) = ({self.arena.x0}, {self.arena.y0}) m with collision_radius "
                 f"{self.robot.collision_radius} m {collision}"
             )
+        placement = np.random.default_rng(seed_streams(self.noise.seed)[4])
+        world = world.with_legs(self.legs, placement, start_xy, self.robot.collision_radius)
+        object.__setattr__(self, "world", world)
 
     @property
     def wall_segments(self) -> NDArray[np.float64]:
         """The arena's walls (K, 4), rows ``[x0, y0, x1, y1]`` (m), a closed polygon (:class:`Walls`)."""
         return self.walls.segments(self.arena)
-
-
-def inside_polygon(p_world: NDArray[np.float64], walls: NDArray[np.float64]) -> bool:
-    """Whether ``p_world`` lies inside the closed polygon whose edges are ``walls`` (K, 4): a ray from it
-    towards +x crosses the edges an odd number of times (each edge counted on its half-open y span)."""
-    x0, y0, x1, y1 = walls.T
-    spans = (y0 > p_world[1]) != (y1 > p_world[1])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        x_cross = x0 + (p_world[1] - y0) * (x1 - x0) / (y1 - y0)
-    return bool(np.count_nonzero(spans & (x_cross > p_world[0])) % 2)
-
-
-def wall_distances(p_world: NDArray[np.float64], walls: NDArray[np.float64]) -> NDArray[np.float64]:
-    """The distance (K,) from ``p_world`` to each wall segment ``[x0, y0, x1, y1]``: to its nearest point
-    ``a + s e``, ``e = b - a``, ``s = clip((p - a).e / e.e, 0, 1)``."""
-    a, e = walls[:, :2], walls[:, 2:] - walls[:, :2]
-    s = np.clip(np.einsum("kd,kd->k", p_world - a, e) / np.einsum("kd,kd->k", e, e), 0.0, 1.0)
-    return np.hypot(*(p_world - a - s[:, None] * e).T)
-
-
-def first_collision(
-    p_world: NDArray[np.float64],
-    circles: NDArray[np.float64],
-    walls: NDArray[np.float64],
-    radius_m: float,
-) -> str | None:
-    """Why a disc of ``radius_m`` centred at ``p_world`` is not free among ``circles`` (M, 3) inside the
-    polygon of ``walls`` (K, 4) (see the module docstring), or None."""
-    if not inside_polygon(p_world, walls):
-        return "is not inside the arena (outside its walls)"
-    distances = wall_distances(p_world, walls)
-    if np.any(distances < radius_m):
-        k = int(np.argmin(distances))
-        return (
-            f"is not inside the arena: {distances[k]:.3f} m from its wall ({walls[k, 0]}, {walls[k, 1]}) -> "
-            f"({walls[k, 2]}, {walls[k, 3]})"
-        )
-    # |p - c_j| < R + r_j
-    overlapping = np.hypot(*(p_world - circles[:, :2]).T) < radius_m + circles[:, 2]
-    if np.any(overlapping):
-        j = int(np.argmax(overlapping))
-        return f"overlaps obstacle {j} at ({circles[j, 0]}, {circles[j, 1]}) m"
-    return None
-
-
-def contact_fraction(
-    p_world: NDArray[np.float64],
-    d_world: NDArray[np.float64],
-    circles: NDArray[np.float64],
-    walls: NDArray[np.float64],
-    radius_m: float,
-) -> float:
-    """The fraction ``s`` in [0, 1] of the move ``p -> p + d`` a disc of ``radius_m`` makes before contact.
-
-    Cylinder ``j`` (inflated to ``rho = radius_m + r_j``): with ``m = p - c_j``, contact where
-    ``|m + s d|^2 = rho^2``, i.e. ``a s^2 + 2 b s + q = 0`` with ``a = d.d``, ``b = m.d``,
-    ``q = |m|^2 - rho^2``; approaching (``b < 0``) and reaching it (``b^2 - a q >= 0``) the near root is
-    ``s = q / (-b + sqrt(b^2 - a q))`` (no cancellation), and ``s = 0`` if already touching (``q <= 0``).
-    Wall ``k`` from ``a_k`` along the unit ``t_k`` (length ``L_k``), normal ``n_k`` (``t_k`` turned by
-    +90 deg): at signed distance ``h = n.(p - a)`` and approaching it (``h (n.d) < 0``) the centre reaches
-    the line offset by ``radius_m`` at ``s = (|h| - radius_m) / |n.d|`` (0 if already nearer), a contact
-    when its foot ``t.(p + s d - a)`` lies in ``[0, L]``; beyond the segment's ends its corners act as
-    cylinders of radius 0. A start slightly inside (rounding at a previous contact) only blocks the motion
-    that goes further in.
-    """
-    a = float(d_world @ d_world)
-    if a == 0.0:
-        return 1.0
-    fraction = 1.0
-    # the walls' corners: cylinders of radius 0
-    circles = np.vstack([circles.reshape(-1, 3), np.column_stack([walls[:, :2], np.zeros(len(walls))])])
-    if circles.shape[0]:
-        m = p_world - circles[:, :2]
-        rho = radius_m + circles[:, 2]
-        b = m @ d_world
-        q = np.einsum("ji,ji->j", m, m) - rho * rho
-        disc = b * b - a * q
-        reaches = (b < 0.0) & (disc >= 0.0)
-        if np.any(reaches):
-            # s = q / (-b + sqrt(b^2 - a q)), clamped at 0 when touching
-            s = np.maximum(q[reaches], 0.0) / (-b[reaches] + np.sqrt(disc[reaches]))
-            fraction = min(fraction, float(np.min(s)))
-    return min(fraction, _wall_contact_fraction(p_world, d_world, walls, radius_m))
-
-
-def _wall_contact_fraction(
-    p_world: NDArray[np.float64], d_world: NDArray[np.float64], walls: NDArray[np.float64], radius_m: float
-) -> float:
-    """The first contact of the centre with a wall's line offset by ``radius_m`` within the segment's span
-    (:func:`contact_fraction`), 1.0 without one."""
-    if walls.shape[0] == 0:
-        return 1.0
-    a = walls[:, :2]
-    e = walls[:, 2:] - a
-    length = np.hypot(e[:, 0], e[:, 1])
-    t = e / length[:, None]
-    n = np.column_stack([-t[:, 1], t[:, 0]])
-    h = np.einsum("kd,kd->k", p_world - a, n)
-    hd = n @ d_world
-    approaching = h * hd < 0.0
-    if not np.any(approaching):
-        return 1.0
-    h, hd, a, t, length = h[approaching], hd[approaching], a[approaching], t[approaching], length[approaching]
-    s = np.maximum((np.abs(h) - radius_m) / np.abs(hd), 0.0)
-    foot = np.einsum("kd,kd->k", p_world + s[:, None] * d_world - a, t)
-    hits = (foot >= 0.0) & (foot <= length) & (s <= 1.0)
-    return float(np.min(s[hits])) if np.any(hits) else 1.0
-
-
-def clearance_m(
-    p_world: NDArray[np.float64], circles: NDArray[np.float64], walls: NDArray[np.float64], radius_m: float
-) -> float:
-    """How far the centre of a disc of ``radius_m`` at ``p_world`` can move in any direction before contact:
-    ``min(min_j |p - c_j| - (radius_m + r_j), min_k dist(p, wall_k) - radius_m)`` (m; <= 0 at or past
-    contact; inf in an empty world). Inside the arena, any move shorter than that is free."""
-    nearest = math.inf
-    if circles.shape[0]:
-        nearest = float(np.min(np.hypot(*(p_world - circles[:, :2]).T) - circles[:, 2]))
-    if walls.shape[0]:
-        nearest = min(nearest, float(np.min(wall_distances(p_world, walls))))
-    return nearest - radius_m
-
-
-class FreeBall:
-    """A ball of free space for the robot's centre, so a step far from everything needs no contact test.
-
-    The ball is centred where the clearance (:func:`clearance_m`) was last measured, ``p0``, with radius
-    ``clearance(p0) - FREE_BALL_MARGIN_M``. A move ``p -> p + d`` with ``|p - p0| + |d|`` below that radius
-    stays inside it (triangle inequality), so no obstacle is within reach: its contact fraction is 1, as
-    :func:`contact_fraction` gives. Otherwise the ball is measured again at ``p`` and, if the move still
-    leaves it, :func:`contact_fraction` decides. Keyed on the position alone, so a teleport needs no
-    reset. On the demo's figure eight in the default world (its disc about 0.45 m clear of every cylinder)
-    the clearance is measured about once per 0.5 m of travel (15 times in 60 s) instead of a contact test
-    per 10 ms step.
-    """
-
-    def __init__(self, circles: NDArray[np.float64], walls: NDArray[np.float64], radius_m: float) -> None:
-        self.circles = circles
-        self.walls = walls
-        self.radius_m = radius_m
-        self._centre = (math.nan, math.nan)
-        self._free_m = -math.inf
-
-    def contact_fraction(self, p_world: NDArray[np.float64], d_world: NDArray[np.float64]) -> float:
-        """:func:`contact_fraction` of the move ``p -> p + d``."""
-        reach_m = math.hypot(d_world[0], d_world[1])
-        if self._reaches_within(p_world, reach_m):
-            return 1.0
-        self._centre = (float(p_world[0]), float(p_world[1]))
-        self._free_m = clearance_m(p_world, self.circles, self.walls, self.radius_m) - FREE_BALL_MARGIN_M
-        if self._reaches_within(p_world, reach_m):
-            return 1.0
-        return contact_fraction(p_world, d_world, self.circles, self.walls, self.radius_m)
-
-    def _reaches_within(self, p_world: NDArray[np.float64], reach_m: float) -> bool:
-        # |p - p0| + |d| < clearance(p0) - margin (False while the ball is unmeasured: NaN compares False)
-        return math.hypot(p_world[0] - self._centre[0], p_world[1] - self._centre[1]) + reach_m < self._free_m
 
 
 @dataclass(frozen=True)
@@ -478,10 +330,12 @@ class Simulation:
     def __init__(self, config: SimulationConfig) -> None:
         self.config = config
         self.drive: DiffDrive = config.robot.diff_drive()
+        # the landmarks and the arena's polygon of walls; world: everything solid (rooms included)
         self.circles = config.obstacles.circles()
         self.walls = config.wall_segments
-        self._free_ball = FreeBall(self.circles, self.walls, config.robot.collision_radius)
-        wheel_seq, slip_seq, lidar_seq, landmark_seq = np.random.SeedSequence(config.noise.seed).spawn(4)
+        self.world = config.world
+        self._free_ball = FreeBall(self.world.circles, self.world.segments, config.robot.collision_radius)
+        wheel_seq, slip_seq, lidar_seq, landmark_seq, _ = seed_streams(config.noise.seed)
         self._wheel_rng = np.random.default_rng(wheel_seq)
         self._slip_rng = np.random.default_rng(slip_seq)
         self._lidar_rng = np.random.default_rng(lidar_seq)
@@ -557,9 +411,7 @@ class Simulation:
 
     def teleport(self, T_world_body: Transform2D) -> None:
         """Put the robot at ``T_world_body`` (the encoders keep their count); ValueError if not free."""
-        collision = first_collision(
-            T_world_body.translation, self.circles, self.walls, self.config.robot.collision_radius
-        )
+        collision = self.world.first_collision(T_world_body.translation, self.config.robot.collision_radius)
         if collision is not None:
             raise ValueError(
                 f"cannot teleport to ({T_world_body.x}, {T_world_body.y}) m: the robot {collision}"
@@ -576,12 +428,13 @@ class Simulation:
     # --- sensors -----------------------------------------------------------------------------------------
 
     def scan(self) -> SimulatedScan:
-        """A LiDAR scan from the true pose: this turn's layout, then the ranges (m; ``no_return`` where
-        nothing is measured)."""
+        """A LiDAR scan from the true pose against every wall and cylinder (rooms included): this turn's
+        layout, then the ranges (m; ``no_return`` where nothing is measured)."""
         T_world_scan = self.T_world_body @ self.config.robot.T_body_scan
         layout = self.config.lidar.scan_layout(self._lidar_rng)
         return SimulatedScan(
-            layout, simulate_scan(T_world_scan, self.circles, self.walls, layout, self._lidar_rng)
+            layout,
+            simulate_scan(T_world_scan, self.world.circles, self.world.segments, layout, self._lidar_rng),
         )
 
     def sense_landmarks(self) -> LandmarkReadings:

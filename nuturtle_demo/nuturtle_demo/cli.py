@@ -17,7 +17,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from nuturtle_description.robot_params import add_model_argument
-from nuturtle_eval.run_evaluation import failed_targets, results_table
+from nuturtle_eval.run_evaluation import Row, failed_targets, results_table
 from nuturtle_eval.run_folder import error_line, unfinished_runs
 from nuturtle_ros_common.dds_domain import add_domain_argument
 from nuturtle_tools.relay_config import add_foxglove_argument, parse_endpoint
@@ -99,7 +99,7 @@ def report(result: DemoResult, options: DemoOptions) -> str:
         else f"INCOMPLETE: interrupted by {result.interrupted} after {result.metrics.sim_seconds:.1f} of "
         f"{options.duration_s:.1f} s; the figures cover the time simulated so far; the last complete run is "
         f"still in {options.out_dir}/",
-        results_table(result.metrics),
+        results_table(result.metrics, more_rows=_grid_rows(result)),
         "",
         f"{result.message_count} messages on {len(result.recorded_topics)} topics recorded in the "
         f"rosbag2 bag {result.out_dir / BAG_NAME}/ (ros2 bag info / ros2 bag play)",
@@ -110,6 +110,10 @@ def report(result: DemoResult, options: DemoOptions) -> str:
         success, message = result.saved_map
         lines.append(f"save_map: {'ok' if success else 'FAILED'}: {message}")
     return "\n".join(line for line in lines if line is not None)
+
+
+def _grid_rows(result: DemoResult) -> list[Row]:
+    return [] if result.grid_score is None else result.grid_score.rows()
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -149,7 +153,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         # a bad input (refused before the run started) is 2, a run that failed 1
         return 1 if getattr(error, "__notes__", None) else 2
     print(report(result, options))
-    failed = failed_targets(result.metrics)
+    failed = failed_targets(result.metrics, _grid_rows(result))
     if result.interrupted is not None:
         failed.insert(0, f"the run is incomplete ({result.interrupted})")
     if args.check and failed:

@@ -1,13 +1,14 @@
 """The driver's figure eight fitted to the world: the largest loop radius, up to the route's own, whose two
-loops keep the robot clear of every cylinder and wall. No ROS.
+loops keep the robot clear of every cylinder, wall, box and leg. No ROS.
 
 The route (``driver.py``) is two circles of radius ``R`` touching at the start pose ``T_world_start``: the
 counter-clockwise one centred at ``T_world_start @ (0, R)``, the clockwise one at ``T_world_start @ (0, -R)``.
 A radius fits when every point of both circles (sampled every ``2 pi / ROUTE_SAMPLES``) leaves the robot's
-disc, grown by ``ROUTE_CLEARANCE_M`` for the tracking error, free in the simulated world
-(:func:`nusim.simulation.first_collision`). Radii are tried from the route's down by ``ROUTE_SHRINK`` at a
-time; in the default world the route's own 0.75 m fits, in turtlebot3_world (spawn at (-2.0, -0.5) between
-the hexagon's south-west side and the first column of cylinders) a smaller one does.
+disc, grown by ``ROUTE_CLEARANCE_M`` for the tracking error, free in the simulated world, rooms and
+furniture included (:meth:`nusim.house.WorldGeometry.first_collision`). Radii are tried from the route's
+down by ``ROUTE_SHRINK`` at a time; in the default world the route's own 0.75 m fits, in turtlebot3_world
+(spawn at (-2.0, -0.5) between the hexagon's south-west side and the first column of cylinders) a smaller
+one does, and in rooms_world the living room holds the route's own.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from nusim.simulation import SimulationConfig, first_collision
+from nusim.simulation import SimulationConfig
 from turtlelib import Transform2D
 
 # Clearance kept between the robot's disc and any cylinder or wall along the route (m)
@@ -42,11 +43,9 @@ def route_points(T_world_start: Transform2D, radius_m: float) -> NDArray[np.floa
 def route_collision(config: SimulationConfig, radius_m: float) -> str | None:
     """Why the figure eight of ``radius_m`` from the world's start is not clear (first blocked point), or
     None."""
-    circles = config.obstacles.circles()
-    walls = config.wall_segments
     clearance_m = config.robot.collision_radius + ROUTE_CLEARANCE_M
     for p in route_points(config.arena.T_world_start, radius_m):
-        collision = first_collision(p, circles, walls, clearance_m)
+        collision = config.world.first_collision(p, clearance_m)
         if collision is not None:
             return f"at ({p[0]:.2f}, {p[1]:.2f}) m the robot {collision}"
     return None
@@ -62,6 +61,6 @@ def fitted_route_radius(config: SimulationConfig, radius_m: float) -> float:
         candidate *= ROUTE_SHRINK
     raise ValueError(
         f"no figure eight of radius {MIN_ROUTE_RADIUS_M} to {radius_m} m from the start pose clears the "
-        f"world's cylinders and walls by {ROUTE_CLEARANCE_M} m ({route_collision(config, radius_m)}): "
-        "choose another start or route radius"
+        f"world's cylinders, walls and furniture by {ROUTE_CLEARANCE_M} m "
+        f"({route_collision(config, radius_m)}): choose another start or route radius"
     )

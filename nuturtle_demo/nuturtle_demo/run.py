@@ -53,6 +53,7 @@ from nuslam.slam_node import MOTION_SOURCES
 from nuturtle_control.odometry import OdometryNode
 from nuturtle_control.turtle_control import TurtleControlNode
 from nuturtle_description.robot_params import resolve_model
+from nuturtle_eval.grid_score import GridScore, WorldOutline, score_grid, seen_points
 from nuturtle_eval.metrics import RunMetrics, odom_in_world
 from nuturtle_eval.run_evaluation import (
     GRID_OUTPUTS,
@@ -205,7 +206,8 @@ class DemoResult:
     """``out_dir`` where the outputs are (``OUT``, or ``OUT.incomplete`` for a run stopped early);
     ``interrupted`` the name of the signal that stopped the run early (``SIGTERM``), None when it ran its
     whole duration; ``saved_map``: slam's ``~/save_map`` answer (success, message) with ``save_map``, else
-    None."""
+    None; ``grid_score``: slam's occupancy grid against the world's true walls (:func:`grid_score`), None
+    without a grid."""
 
     metrics: RunMetrics
     out_dir: Path
@@ -213,6 +215,7 @@ class DemoResult:
     message_count: int
     interrupted: str | None
     saved_map: tuple[bool, str] | None = None
+    grid_score: GridScore | None = None
 
 
 class DemoSystem:
@@ -477,17 +480,18 @@ class _DemoRun:
             # the pace of this run is not part of the world: reusing the file runs nusim at real time
             config = params_file(system.nodes, replace={"nusim": {"realtime_factor": 1.0}})
             (out_dir / "config.yaml").write_text(config, encoding="utf-8")
-            metrics = evaluate_and_plot(
-                out_dir, _run_record(system, options), sim_seconds=sim_seconds, wall_seconds=wall_seconds
-            )
+            record = _run_record(system, options)
+            metrics = evaluate_and_plot(out_dir, record, sim_seconds=sim_seconds, wall_seconds=wall_seconds)
             if metrics is None:
                 raise RuntimeError("the run published no odometry or SLAM pose to evaluate")
+            score = grid_score(system, record)
             write_metrics(
                 out_dir,
                 {
                     **metrics.as_dict(),
                     **slip_counts(system.slam),
                     **grid_counts(system.slam),
+                    **(score.as_dict() if score is not None else {}),
                     "complete": stop.received is None,
                     "stopped_by": stop.received,
                 },
@@ -499,6 +503,7 @@ class _DemoRun:
                 writer.message_count,
                 stop.received,
                 saved_map,
+                score,
             )
         finally:
             try:
@@ -535,5 +540,22 @@ def _run_record(system: DemoSystem, options: DemoOptions) -> RunRecord:
             angle_increment=lidar.angle_increment,
             lidar_range_m=lidar.range_max,
         ),
-        walls=simulation.walls,
+        walls=simulation.world.segments,
     )
+
+
+def grid_score(system: DemoSystem, record: RunRecord) -> GridScore | None:
+    """slam's final occupancy grid scored against everything solid in nusim's world
+    (:mod:`nuturtle_eval.grid_score`), the walls seen being where the LiDAR's exact beams end from the true
+    poses at the scan rate (its nominal beams, the robot's mount); None without a grid or a true pose."""
+    grid = record.snapshot.grid
+    if grid is None or record.truth is None or len(record.truth) < 2:
+        return None
+    simulation = system.nusim.simulation
+    world, lidar = simulation.world, simulation.config.lidar
+    outline = WorldOutline(world.segments, world.circles)
+    t_s = np.arange(record.truth.t_s[0], record.truth.t_s[-1], 1.0 / system.nusim.timing.scan_rate)
+    T_body_scan = simulation.config.robot.T_body_scan
+    # T_world_scan = T_world_body @ T_body_scan
+    T_world_scans = [Transform2D(*pose) @ T_body_scan for pose in record.truth.interpolate(t_s)]
+    return score_grid(grid, outline, seen_points(outline, T_world_scans, lidar.angles(), lidar.range_max))

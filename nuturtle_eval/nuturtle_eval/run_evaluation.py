@@ -14,7 +14,7 @@ import json
 import math
 import sys
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
@@ -39,6 +39,8 @@ GRID_OUTPUTS = (GRID_YAML, "map.pgm", GRID_FIGURE)
 # the trajectories in the TUM format (nuturtle_eval.tum): SLAM's, the odometry's and the reference's
 ESTIMATE_TUM, ODOMETRY_TUM, REFERENCE_TUM = "estimate.tum", "odometry.tum", "reference.tum"
 TUM_OUTPUTS = (ESTIMATE_TUM, ODOMETRY_TUM, REFERENCE_TUM)
+# (label, value text, target text, met) of one row of the results table
+Row = tuple[str, str, str, bool | None]
 
 # (metrics.json key, label, format, target text, check) of the printed table
 TARGETS = (
@@ -272,21 +274,21 @@ def target_rows(metrics: RunMetrics) -> list[tuple[str, str, str, bool | None]]:
     return rows
 
 
-def failed_targets(metrics: RunMetrics) -> list[str]:
-    """The labels of the targets the results table marks failed (✗)."""
-    return [label for label, _, _, ok in target_rows(metrics) if ok is False]
+def failed_targets(metrics: RunMetrics, more_rows: Sequence[Row] = ()) -> list[str]:
+    """The labels of the targets the results table (with ``more_rows``) marks failed (✗)."""
+    return [label for label, _, _, ok in [*target_rows(metrics), *more_rows] if ok is False]
 
 
-def results_table(metrics: RunMetrics, targets: bool = True) -> str:
+def results_table(metrics: RunMetrics, targets: bool = True, more_rows: Sequence[Row] = ()) -> str:
     """A markdown table of the run's figures and, with ``targets``, the demo's targets (✓/✗ where one
     applies); without, the figures alone (a recording of another world, which those targets are not
-    about)."""
+    about). ``more_rows`` follow the metrics' own (the grid's score: :mod:`nuturtle_eval.grid_score`)."""
     rows = (
         ["| metric | value | target | |", "|---|---:|---|---|"]
         if targets
         else ["| metric | value |", "|---|---:|"]
     )
-    for label, text, target, ok in target_rows(metrics):
+    for label, text, target, ok in [*target_rows(metrics), *more_rows]:
         mark = "" if ok is None else ("✓" if ok else "✗")
         rows.append(f"| {label} | {text} | {target} | {mark} |" if targets else f"| {label} | {text} |")
     return "\n".join(rows)

@@ -25,6 +25,7 @@ from sensor_msgs.msg import JointState, LaserScan
 from std_srvs.srv import Empty
 from visualization_msgs.msg import Marker, MarkerArray
 
+from nusim.house import Boxes, InteriorWalls, Legs
 from nusim.nusim_node import NusimNode, NusimTiming
 from nusim.simulation import ArenaConfig, NoiseConfig, Obstacles, Walls, default_lidar
 from nuturtle_description.robot_params import burger_params
@@ -42,6 +43,7 @@ MCU_PER_RAD_S = burger_params().motor_cmd_per_rad_sec  # 41.6666667 in models.ya
 HALF_TICK_RAD = 0.5 * 2.0 * math.pi / 4096.0
 QUIET = {"input_noise": 0.0, "slip_fraction": 0.0, "basic_sensor_variance": 0.0}
 EXACT_LIDAR = {"lidar.noise": 0.0, "lidar.resolution": 0.0}
+ROOMS = (("interior_walls", InteriorWalls), ("boxes", Boxes), ("legs", Legs))
 ONE_CYLINDER = {"obstacles.x": [1.0], "obstacles.y": [0.0], "obstacles.r": [0.05]}
 
 
@@ -331,7 +333,7 @@ def test_bad_wheel_commands_are_skipped_with_a_warning(ros, names, velocities, r
 def test_the_default_parameters_are_the_basic_world_yaml():
     world = load_ros_yaml(BASIC_WORLD)
     flat = {k: v for k, v in world.items() if not isinstance(v, dict)}
-    for group in ("obstacles", "lidar", "walls"):
+    for group in ("obstacles", "lidar", "walls", "interior_walls", "boxes", "legs"):
         flat.update({f"{group}.{k}": v for k, v in world[group].items()})
     defaults = {
         **vars(NusimTiming()),
@@ -339,6 +341,7 @@ def test_the_default_parameters_are_the_basic_world_yaml():
         **vars(NoiseConfig()),
         **{f"obstacles.{k}": list(v) for k, v in vars(Obstacles()).items()},
         **{f"walls.{k}": list(v) for k, v in vars(Walls()).items()},
+        **{f"{group}.{k}": list(v) for group, cls in ROOMS for k, v in vars(cls()).items()},
         **{f"lidar.{k}": v for k, v in vars(default_lidar()).items()},
         "lidar_model": "lds01",
         "wheel_left": "wheel_left_joint",
@@ -352,7 +355,7 @@ def test_the_default_parameters_are_the_basic_world_yaml():
 def test_parameters_from_the_world_file_give_the_default_world(ros):
     world = load_ros_yaml(BASIC_WORLD)
     flat = {k: v for k, v in world.items() if not isinstance(v, dict)}
-    for group in ("obstacles", "lidar", "walls"):
+    for group in ("obstacles", "lidar", "walls", "interior_walls", "boxes", "legs"):
         flat.update({f"{group}.{k}": v for k, v in world[group].items()})
     from_file = ros.add(NusimNode(context=ros.context, parameter_overrides=parameters(flat)))
     default = ros.add(NusimNode(context=ros.context))
@@ -433,4 +436,56 @@ def test_turtlebot3_world_from_its_params_file():
         assert simulation.T_world_body.as_array() == pytest.approx([-2.0, -0.5, 0.0])
         node.destroy_node()
     finally:
+        rclpy.try_shutdown(context=context)
+
+
+def test_rooms_world_from_its_params_file_is_simulated_and_shown():
+    """`--params-file nusim/config/rooms_posts_world.yaml` as rcl reads it: nine interior walls, eight boxes,
+    six pieces on legs (24 legs) and five posts, all on the latched markers (walls and boxes on ~/walls,
+    posts and legs on ~/obstacles)."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+
+    context = Context()
+    rclpy.init(
+        context=context,
+        args=["--ros-args", "--params-file", str(BASIC_WORLD.parent / "rooms_posts_world.yaml")],
+    )
+    executor = SingleThreadedExecutor(context=context)
+    try:
+        node = NusimNode(stepped_by_owner=True, context=context)
+        world = node.simulation.world
+        assert (world.interior.shape, world.boxes.shape) == ((9, 4), (8, 4, 2))
+        assert (world.landmarks.shape, world.legs.shape) == ((5, 3), (24, 3))
+        helper = rclpy.create_node("rooms_listener", context=context)
+        latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        received: dict[str, MarkerArray] = {}
+        for topic in ("nusim/walls", "nusim/obstacles"):
+            helper.create_subscription(
+                MarkerArray, topic, lambda msg, t=topic: received.setdefault(t, msg), latched
+            )
+        executor.add_node(helper)
+        for _ in range(200):
+            if len(received) == 2:
+                break
+            executor.spin_once(timeout_sec=0.05)
+        namespaces = {topic: sorted({(m.ns, m.id) for m in msg.markers}) for topic, msg in received.items()}
+        assert namespaces["nusim/walls"] == sorted(
+            [("walls", k) for k in range(4)]
+            + [("interior_walls", k) for k in range(9)]
+            + [("boxes", b) for b in range(8)]
+        )
+        assert namespaces["nusim/obstacles"] == sorted(
+            [("obstacles", j) for j in range(5)] + [("legs", k) for k in range(24)]
+        )
+        # the sofa: 2.0 m x 0.8 m centred at (-2.6, -2.55)
+        sofa = next(m for m in received["nusim/walls"].markers if (m.ns, m.id) == ("boxes", 0))
+        assert (sofa.pose.position.x, sofa.pose.position.y, sofa.scale.x, sofa.scale.y) == pytest.approx(
+            (-2.6, -2.55, 2.0, 0.8)
+        )
+        helper.destroy_node()
+        node.destroy_node()
+    finally:
+        executor.shutdown()
         rclpy.try_shutdown(context=context)

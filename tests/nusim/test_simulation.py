@@ -15,21 +15,17 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from nusim.free_space import FreeBall, clearance_m, contact_fraction, first_collision, wall_distances
 from nusim.simulation import (
     LIDAR_MODELS,
     ArenaConfig,
-    FreeBall,
     LidarChoice,
     NoiseConfig,
     Obstacles,
     Simulation,
     SimulationConfig,
     Walls,
-    clearance_m,
-    contact_fraction,
     default_lidar,
-    first_collision,
-    wall_distances,
 )
 from nuturtle_description.robot_params import RobotParams
 from turtlelib import Transform2D

@@ -1,6 +1,7 @@
 """The demo's figure eight fitted to the world (nuturtle_demo.route_fit, no ROS): the default world keeps
 the route's 0.75 m loops, nusim's turtlebot3_world (nusim/config/turtlebot3_world.yaml, read as the demo
-reads a world) gets the largest smaller radius whose loops clear its cylinders and hexagon."""
+reads a world) gets the largest smaller radius whose loops clear its cylinders and hexagon, and the rooms
+world's living room holds the route's own."""
 
 from __future__ import annotations
 
@@ -8,8 +9,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from world_files import ROOMS_POSTS_WORLD, world_config
 
-from nusim.simulation import ArenaConfig, Obstacles, SimulationConfig, Walls, wall_distances
+from nusim.free_space import wall_distances
+from nusim.simulation import ArenaConfig, Obstacles, SimulationConfig, Walls
 from nuturtle_demo.driver import RouteConfig
 from nuturtle_demo.route_fit import (
     MIN_ROUTE_RADIUS_M,
@@ -60,6 +63,13 @@ def test_turtlebot3_world_gets_the_largest_clear_smaller_loops():
     for p in route_points(config.arena.T_world_start, fitted):
         assert wall_distances(p, config.wall_segments).min() >= clearance
         assert np.all(np.hypot(*(circles[:, :2] - p).T) >= circles[:, 2] + clearance)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_rooms_world_keeps_the_route_s_radius_in_its_living_room(seed):
+    # the chairs move with the seed, never onto the route; rooms_world.yaml is this world without posts
+    config = world_config(ROOMS_POSTS_WORLD, seed=seed)
+    assert fitted_route_radius(config, RouteConfig().radius) == RouteConfig().radius
 
 
 def test_no_clear_route_is_a_clear_error():
