@@ -238,13 +238,15 @@ class _Episode:
 class SlipStatus:
     """What :class:`SlipRecovery` reports: ``level`` (``"ok"``, ``"warn"``, ``"error"``), ``message``,
     and the totals ``held`` (scans not fused), ``relocalized`` (against the map) and ``stalls`` (scans of a
-    stall)."""
+    stall), and ``last_correction`` (``T_hat^-1 T_new`` of the newest relocalization or stall, body frame;
+    None before any)."""
 
     level: str = "ok"
     message: str = "the LiDAR agrees with the motion"
     held: int = 0
     relocalized: int = 0
     stalls: int = 0
+    last_correction: Transform2D | None = None
     events: list[SlipEvent] = field(default_factory=list)
 
 
@@ -414,6 +416,7 @@ class SlipRecovery:
         cause = "bump or stall" if takes_back_travel and abs(correction.theta) < 0.1 else "wheel slip"
         slam.reset(T_new, covariance, keep_map=True)
         self._T_good = T_new
+        self._status.last_correction = correction
         events = self._status.events
         if events and events[-1].cause == cause and stamp_ns - events[-1].stamp_ns <= EVENT_GAP_S * NS_PER_S:
             events[-1] = events[-1].then(stamp_ns, correction)
