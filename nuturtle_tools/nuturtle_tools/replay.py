@@ -129,7 +129,8 @@ def motion_gate_warning(metrics: dict[str, Any]) -> str | None:
         f"warning: slam refused {refused} {metrics['motion_source']} samples and restarted its motion stream "
         f"{restarts} times (the motion across a restart is lost); the last: "
         f"{metrics['slam_motion_last_refusal']}. A robot that is not the model's describes itself with "
-        "max_linear_speed, max_angular_speed (and wheel_radius, track_width, lidar_x ...; docs/robot.md)"
+        "max_linear_speed, max_angular_speed (and wheel_radius, track_width, lidar_x ...; docs/robot.md); "
+        "a source with long silences needs max_sample_gap, max_bridged_gap"
     )
 
 
