@@ -58,9 +58,10 @@ Publishes
         transient local (with `grid.enabled`): the occupancy grid, at most once per `grid.publish_period_s`
         of scan time while scans are added (`nuslam.grid_mapping`).
     `/diagnostics` (diagnostic_msgs/DiagnosticArray, 1 Hz): `slam: <motion_source>` and `slam: <observation
-        topic>` (rates; ERROR after `STALE_S` of the node's clock without a message), `slam: filter`
-        (mode, landmarks mapped and tentative, observations fused, rejected and (localization) unmapped,
-        time per applied scan; WARN when
+        topic>` (rates; ERROR after `STALE_S` of the node's clock without a message), `slam: motion gate`
+        (motion samples refused and restarts of the stream so far, the last reason; WARN when new),
+        `slam: filter` (mode, landmarks mapped and tentative, observations fused, rejected and
+        (localization) unmapped, time per applied scan; WARN when
         observations were rejected or skipped since the last report), `slam: occupancy grid`
         (`nuslam.grid_mapping`: scans mapped, skipped and past the grid's bound, the grid's cells and
         bytes; WARN when scans were skipped since the last report), `slam: motion vs LiDAR`
@@ -184,7 +185,7 @@ from turtlelib import (
 from turtlelib.estimation.slip_recovery import SlipRecovery, SlipRecoveryConfig, lost_wheel_turn_per_m
 from turtlelib.mapping.landmark_map import LandmarkMap, load_map, save_map
 from turtlelib.motion.pose_twist import PoseTwist
-from turtlelib.motion.sample_gate import GateResult, Verdict
+from turtlelib.motion.sample_gate import GateResult, SampleGate, Verdict
 from turtlelib.motion.wheel_odometry import WheelOdometry
 from turtlelib.smoothing.run_smoothing import SmoothingOutcome, smooth_history
 from turtlelib.util.validation import finite_real, names, non_negative, one_of, positive, store
@@ -292,7 +293,9 @@ class SlamNode(Node):
         )
         topics = (frames.motion_source, "fake_sensor" if known else "landmarks")
         started_ns = self.get_clock().now().nanoseconds
-        self.report = SlamReport(self.slam, self.recovery, self.grid, self._warnings, topics, started_ns)
+        self.report = SlamReport(
+            self.slam, self.recovery, self.grid, self._warnings, topics, started_ns, self.motion_gate.tally
+        )
         self._fused_reported = 0
         self._connect(topics[1])
 
@@ -372,6 +375,12 @@ class SlamNode(Node):
         self.create_service(Trigger, "~/reset", self._on_reset)
         DiagnosticsPublisher(self, self._statuses)
         self.create_subscription(MarkerArray, observation_topic, self._on_observations, 10)
+
+    @property
+    def motion_gate(self) -> SampleGate:
+        """The gate of the motion source's samples (``motion_source``: the wheels' or the odometry's), whose
+        ``tally`` counts what it refused."""
+        return self._odom.gate if self.node_config.motion_source == "odom" else self._wheels.gate
 
     @property
     def observation_counts(self) -> dict[str, int]:

@@ -5,17 +5,22 @@ relocalization, and a robot that moves without observations.
 Statuses (diagnostic_msgs/DiagnosticStatus, hardware id ``slam``)
     `slam: <motion_source>`, `slam: <observation topic>`: rates; ERROR after ``STALE_S`` of the node's clock
         without a message.
+    `slam: motion gate`: the motion samples refused (implausible: a time gap, faster than the robot's
+        speed bounds) and the restarts of the motion stream so far, with the last reason; WARN when some
+        came since the last report.
     `slam: filter`: mode, landmarks mapped and tentative, observations fused, rejected and (localization)
         unmapped, arrays skipped, time per applied scan; WARN when observations were rejected or arrays
         skipped since the last report.
     `slam: motion vs LiDAR` (`turtlelib.estimation.slip_recovery`): WARN naming the cause while scans
         contradict the wheels' motion and for ``slip_report_s`` after each relocalization against the map,
-        ERROR when they keep coming; scans held and relocalizations so far.
+        ERROR when they keep coming; scans held, relocalizations and stalls so far, the last correction's
+        size.
     `slam: occupancy grid` (`nuslam.grid_mapping`), when the grid is on.
 """
 
 from __future__ import annotations
 
+import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
 
 from nuslam.grid_mapping import GridMapping
@@ -32,6 +37,7 @@ from nuturtle_ros_common.diagnostics import status as diagnostic_status
 from nuturtle_ros_common.throttle import SourceWarnings
 from turtlelib import EkfSlam, Outcome, ScanResult
 from turtlelib.estimation.slip_recovery import SlipRecovery
+from turtlelib.motion.sample_gate import GateTally
 
 # SlipStatus.level -> diagnostic level
 SLIP_LEVELS = {"ok": OK, "warn": WARN, "error": ERROR}
@@ -39,7 +45,8 @@ SLIP_LEVELS = {"ok": OK, "warn": WARN, "error": ERROR}
 
 class SlamReport:
     """slam's counts and statuses (module docstring) over its ``slam`` filter, ``recovery`` and ``grid``;
-    the inputs are ``motion_topic`` and ``observation_topic``, watched from ``started_ns`` (node clock)."""
+    the inputs are ``motion_topic`` and ``observation_topic``, watched from ``started_ns`` (node clock), the
+    motion samples gated with the totals ``motion_tally``."""
 
     def __init__(
         self,
@@ -49,14 +56,17 @@ class SlamReport:
         warnings: SourceWarnings,
         topics: tuple[str, str],
         started_ns: int,
+        motion_tally: GateTally,
     ) -> None:
         self._slam, self._recovery, self._grid, self._warnings = slam, recovery, grid, warnings
+        self._motion_tally = motion_tally
+        self._motion_topic = topics[0]
         motion_topic, self.observation_topic = topics
         self.motion_input = InputMonitor(motion_topic, started_ns, STALE_S)
         self.observation_input = InputMonitor(self.observation_topic, started_ns, STALE_S)
         self._update_time = DurationMonitor()
         self.counts = {"fused": 0, "rejected": 0, "unmapped": 0, "skipped": 0, "arrays_applied": 0}
-        self._reported = {"skipped": 0, "rejected": 0}
+        self._reported = {"skipped": 0, "rejected": 0, "motion": (0, 0)}
 
     def applied(self, results: list[ScanResult], elapsed_ms: float) -> None:
         """Count the observation arrays among the applied measurements (a pose source's have no association)
@@ -102,7 +112,9 @@ class SlamReport:
         """The statuses (module docstring) at ``now_ns`` (node clock)."""
         skipped = self.counts["skipped"] - self._reported["skipped"]
         rejected = self.counts["rejected"] - self._reported["rejected"]
-        self._reported = {"skipped": self.counts["skipped"], "rejected": self.counts["rejected"]}
+        motion = self._motion_status()
+        self._reported = {"skipped": self.counts["skipped"], "rejected": self.counts["rejected"],
+                          "motion": (self._motion_tally.refused, self._motion_tally.restarts)}  # fmt: skip
         slam = self._slam
         mapped, tentative = len(slam.landmark_ids), len(slam.tentative_ids)
         message = f"{slam.config.mode}: {mapped} landmarks mapped, {tentative} tentative"
@@ -119,10 +131,15 @@ class SlamReport:
             **self._update_time.values("scan_update"),
         }
         slip = self._recovery.status
-        slip_values = {"scans_held": slip.held, "relocalizations": slip.relocalized}
+        slip_values = {"scans_held": slip.held, "relocalizations": slip.relocalized, "stalls": slip.stalls}
+        if slip.last_correction is not None:
+            c = slip.last_correction
+            slip_values["last_correction_m"] = round(float(np.hypot(c.x, c.y)), 3)
+            slip_values["last_correction_rad"] = round(c.theta, 3)
         grid = self._grid.status()
         return [
             self.motion_input.status("slam", now_ns),
+            motion,
             self.observation_input.status("slam", now_ns),
             diagnostic_status("slam: filter", "slam", WARN if skipped or rejected else OK, message, values),
             diagnostic_status(
@@ -130,3 +147,16 @@ class SlamReport:
             ),
             *([grid] if grid is not None else []),
         ]
+
+    def _motion_status(self) -> DiagnosticStatus:
+        """`slam: motion gate`: the refused motion samples and restarts so far, WARN when some are new."""
+        tally, topic = self._motion_tally, self._motion_topic
+        new = (tally.refused, tally.restarts) != self._reported["motion"]
+        message = f"every {topic} sample plausible"
+        if tally.refused or tally.restarts:
+            message = (
+                f"{tally.refused} {topic} samples refused, {tally.restarts} restarts of the stream so far; "
+                f"the last: {tally.last_reason}"
+            )
+        values = {"motion_samples_refused": tally.refused, "motion_restarts": tally.restarts}
+        return diagnostic_status("slam: motion gate", "slam", WARN if new else OK, message, values)

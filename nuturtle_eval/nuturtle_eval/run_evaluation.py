@@ -94,11 +94,23 @@ def slam_snapshot(slam_node: Any) -> SlamSnapshot:
     )
 
 
-def slip_counts(slam_node: Any) -> dict[str, int]:
+def slip_counts(slam_node: Any) -> dict[str, int | float | str | None]:
     """The in-process slam node's slip recovery totals (its ``recovery`` attribute): scans held because they
-    contradicted the motion, and relocalizations against the map."""
-    status = slam_node.recovery.status
-    return {"slam_scans_held": status.held, "slam_relocalizations": status.relocalized}
+    contradicted the motion, relocalizations against the map, stalls and the size of the last correction
+    (m, rad; None before any); and what its motion gate (its ``motion_gate`` attribute) refused: motion
+    samples, restarts of the motion stream, the last reason (None: nothing refused)."""
+    status, tally = slam_node.recovery.status, slam_node.motion_gate.tally
+    correction = status.last_correction
+    return {
+        "slam_scans_held": status.held,
+        "slam_relocalizations": status.relocalized,
+        "slam_stalls": status.stalls,
+        "slam_last_correction_m": None if correction is None else math.hypot(correction.x, correction.y),
+        "slam_last_correction_rad": None if correction is None else correction.theta,
+        "slam_motion_samples_refused": tally.refused,
+        "slam_motion_restarts": tally.restarts,
+        "slam_motion_last_refusal": tally.last_reason or None,
+    }
 
 
 def grid_counts(slam_node: Any) -> dict[str, int]:

@@ -122,6 +122,22 @@ def no_landmarks_hint(metrics: dict[str, Any]) -> str | None:
     )
 
 
+def motion_gate_warning(metrics: dict[str, Any]) -> str | None:
+    """What slam's motion gate refused, from ``metrics`` (metrics.json): every refused sample and restart of
+    the motion stream loses motion (a robot faster than the bounds slam was given is refused sample after
+    sample). None when nothing was refused."""
+    refused, restarts = metrics.get("slam_motion_samples_refused", 0), metrics.get("slam_motion_restarts", 0)
+    if not refused and not restarts:
+        return None
+    return (
+        f"warning: slam refused {refused} {metrics['motion_source']} samples and restarted its motion stream "
+        f"{restarts} times (the motion across a restart is lost); the last: "
+        f"{metrics['slam_motion_last_refusal']}. A robot that is not the model's describes itself with "
+        "max_linear_speed, max_angular_speed (and wheel_radius, track_width, lidar_x ...; docs/robot.md); "
+        "a source with long silences needs max_sample_gap, max_bridged_gap"
+    )
+
+
 def summary(result: Any) -> str:
     """The printed report: the results table when there is ground truth (with the demo's targets for a
     nusim recording only), then the counts, the notes and why there are no landmarks if so."""
@@ -159,13 +175,20 @@ def summary(result: Any) -> str:
         rows.append(f"| occupancy grid: cells / MB (at most) / scans past grid.max_size_m | "
                     f"{metrics['slam_grid_cells']} / {megabytes[0]:.1f} ({megabytes[1]:.1f}) / "
                     f"{metrics['slam_grid_scans_past_bound']} |")  # fmt: skip
+    for key in ("slam_motion_samples_refused", "slam_motion_restarts", "slam_scans_held",
+                "slam_relocalizations", "slam_stalls"):  # fmt: skip
+        if key in metrics:
+            rows.append(f"| {key.replace('_', ' ')} | {metrics[key]} |")
+    if metrics.get("slam_last_correction_m") is not None:
+        rows.append(f"| slam last correction (m, rad) | {metrics['slam_last_correction_m']:.3f}, "
+                    f"{metrics['slam_last_correction_rad']:+.3f} |")  # fmt: skip
     rows.append(f"| replay wall time (s) / bag time (s) | {metrics['replay_wall_seconds']:.1f} / "
                 f"{metrics['bag_seconds']:.1f} |")  # fmt: skip
     lines += rows
     lines += [f"note: {note}" for note in metrics["notes"]]
-    hint = no_landmarks_hint(metrics)
-    if hint is not None:
-        lines.append(hint)
+    for hint in (no_landmarks_hint(metrics), motion_gate_warning(metrics)):
+        if hint is not None:
+            lines.append(hint)
     if "observation_arrays_applied" in metrics:
         grid = "map.yaml map.pgm grid.png " if (Path(result.out_dir) / "map.yaml").exists() else ""
         errors = "errors.png estimate.tum odometry.tum reference.tum " if result.accuracy else ""

@@ -696,6 +696,13 @@ def test_a_restarted_simulator_restarts_the_timeline_after_restart_samples_keepi
         assert (marker.pose.position.x, marker.pose.position.y) == pytest.approx(xy, abs=1e-9)
     warnings = rig.warnings(at_least=2)
     assert len(warnings) == 2 and "not after" in warnings[0] and "restarted" in warnings[1]
+    # and counted in /diagnostics: two samples refused (the third restarted the stream), one restart
+    gate = {status.name: status for status in rig.node.report.statuses(0)}["slam: motion gate"]
+    values = {pair.key: pair.value for pair in gate.values}
+    assert gate.level == DiagnosticStatus.WARN and "restarted" in gate.message
+    assert (values["motion_samples_refused"], values["motion_restarts"]) == ("2", "1")
+    gate = {status.name: status for status in rig.node.report.statuses(0)}["slam: motion gate"]
+    assert gate.level == DiagnosticStatus.OK and "2 joint_states samples refused" in gate.message
 
 
 def test_a_restart_while_driving_keeps_the_motion_up_to_the_newest_sample(ros):
@@ -913,10 +920,11 @@ def test_diagnostics_report_the_inputs_and_an_error_when_observations_stop(ros):
     drive(1.5, observe=True)
     statuses = latest()
     assert set(statuses) == {
-        "slam: joint_states", "slam: landmarks", "slam: filter", "slam: occupancy grid",
+        "slam: joint_states", "slam: motion gate", "slam: landmarks", "slam: filter", "slam: occupancy grid",
         "slam: motion vs LiDAR",
     }  # fmt: skip
     assert statuses["slam: joint_states"].level == DiagnosticStatus.OK
+    assert statuses["slam: motion gate"].level == DiagnosticStatus.OK
     assert statuses["slam: motion vs LiDAR"].level == DiagnosticStatus.OK
     assert statuses["slam: occupancy grid"].level == DiagnosticStatus.OK
     assert statuses["slam: landmarks"].level == DiagnosticStatus.OK

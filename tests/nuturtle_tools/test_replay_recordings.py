@@ -20,7 +20,7 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
 from nuturtle_tools.bag_source import BagSource
-from nuturtle_tools.replay import main, no_landmarks_hint
+from nuturtle_tools.replay import main, motion_gate_warning, no_landmarks_hint
 from turtlelib.mapping.grid_map_file import load_grid_map
 from turtlelib.mapping.landmark_map import load_map
 
@@ -215,6 +215,16 @@ def test_the_no_landmarks_hint_tells_the_cases_apart(counts, expected):
         assert hint is None
     else:
         assert hint is not None and expected in hint
+
+
+def test_refused_motion_samples_are_warned_about_with_the_last_reason_and_what_to_set():
+    counts = {"motion_source": "odom", "slam_motion_samples_refused": 0, "slam_motion_restarts": 0}
+    assert motion_gate_warning(counts) is None
+    reason = "value 0 moved 0.3 in 0.100 s, more than 0.2 (...); max rate 0.447 m/s"
+    counts.update(slam_motion_samples_refused=40, slam_motion_restarts=13, slam_motion_last_refusal=reason)
+    warning = motion_gate_warning(counts)
+    assert warning is not None and "refused 40 odom samples" in warning and "13 times" in warning
+    assert reason in warning and "max_linear_speed" in warning
 
 
 def test_a_bad_params_file_is_one_error_line_and_the_output_folder_untouched(tmp_path, capsys):

@@ -144,8 +144,9 @@ def test_unknown_association_maps_each_landmark_once(association, seed):
     _, slam, history = run(
         seed, known=False, config=config, on_scan=lambda slam: separations.append(min_separation_sigmas(slam))
     )
-    # the premise: the mapped landmarks are at least 5 sigma apart in the association metric, all along
-    assert min(separations) >= 5.0
+    # the premise: the mapped landmarks are at least 4 sigma apart in the association metric, all along
+    # (4.4 at the first confirmations: the sightings of a tentative landmark leave the pose as it is)
+    assert min(separations) >= 4.0
     origin_of = origins(history)
     truth_of = {int(i): origin_of[int(i)] for i in slam.landmark_ids}
     assert sorted(truth_of.values()) == list(range(len(LANDMARKS)))
@@ -192,7 +193,9 @@ GOLDEN = Path(__file__).parent / "data" / "diff_drive_golden.npz"
 def test_diff_drive_filter_is_unchanged_to_rounding(name, known, clutter):
     # diff_drive_golden.npz holds the final state, covariance and landmark ids of run(7, ...) computed by the
     # filter of commit 59b6b40 (before motion models were passed in; it had no known-association gate,
-    # hence gate_known=1, and counted the tentative timeout in scans: 10 scans of 0.2 s = the 2 s default)
+    # hence gate_known=1, and counted the tentative timeout in scans: 10 scans of 0.2 s = the 2 s default);
+    # its unknown-association entries were computed again when the sightings of tentative landmarks stopped
+    # moving the pose (test_unconfirmed_detections.py; the map 0.7 mm further from the truth on average)
     _, slam, _ = run(7, known, config=dataclasses.replace(CONFIG, gate_known=1.0), clutter=clutter)
     # Bit for bit on the numpy/BLAS build that wrote it; other builds round the matrix products differently
     # (about 1e-16 relative after 300 scans), so the comparison allows 1e-12 of each value's scale: far

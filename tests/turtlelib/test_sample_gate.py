@@ -118,6 +118,24 @@ def test_a_silence_longer_than_max_bridged_gap_restarts_instead_of_making_up_an_
     assert results[-1].samples == tuple(after)
 
 
+def test_every_refused_sample_and_every_restart_is_counted_with_the_last_reason():
+    # nothing refused goes unreported: a bridged silence (2 refused, then accepted), a lone hostile
+    # sample, a restart (2 refused, then restarted); duplicates are not refusals; reset keeps the totals
+    g = gate(max_sample_gap=0.5, restart_samples=3)
+    offer_all(g, stream(5))
+    assert (g.tally.refused, g.tally.restarts, g.tally.last_reason) == (0, 0, "")
+    g.offer(*stream(5)[-1])
+    offer_all(g, stream(3, t0_ms=200 + 1_900, phi0=0.2 + 0.5))
+    assert (g.tally.refused, g.tally.restarts) == (2, 0) and "max_sample_gap" in g.tally.last_reason
+    t, s = g.accepted
+    g.offer(t + 50 * MS, (s[0] + 5.0, s[1]))
+    assert (g.tally.refused, g.tally.restarts) == (3, 0) and "max rate" in g.tally.last_reason
+    offer_all(g, stream(3))
+    assert (g.tally.refused, g.tally.restarts) == (5, 1) and "restarted" in g.tally.last_reason
+    g.reset()
+    assert (g.tally.refused, g.tally.restarts) == (5, 1)
+
+
 def test_a_corrupt_first_sample_is_left_behind_by_the_real_stream():
     g = gate(restart_samples=3)
     g.offer(0, (1e200, 1e200))

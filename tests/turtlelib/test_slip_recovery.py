@@ -220,3 +220,37 @@ def test_a_contradiction_beyond_the_reported_motion_is_not_relocalized():
     for k in range(3):
         recovery.apply(slam, _checked(slam, turned, False), (10 + k) * 200_000_000)
     assert recovery.status.relocalized == 0 and recovery.status.held == 0
+
+
+def test_a_body_further_from_the_last_confirmed_pose_than_the_wheels_reported_is_not_relocalized():
+    """The wheels report 0.3 m forward; the scans put the body 0.5 m behind where the map last confirmed
+    it (carried, or a false alignment on clutter): slip only takes motion away, so no slip explains it and
+    nothing is relocalized (before, the search reached 1.6 m: the heading slip can invent per metre made
+    the heading bound, and with it the position bound, grow without limit)."""
+    recovery = SlipRecovery()
+    slam = _mapped_filter(recovery)
+    slam.predict(_wheels(0.3, 0.0))
+    behind = Transform2D(-0.5, 0.0, 0.0)
+    for k in range(3):
+        recovery.apply(slam, _checked(slam, behind, False), (10 + k) * 200_000_000)
+    assert recovery.status.relocalized == 0 and recovery.status.last_correction is None
+
+
+def test_contradicting_scans_that_disagree_are_held_and_the_relocalization_is_reported():
+    """Two contradicting scans whose alignments moved further apart than the wheels reported between them
+    (false alignments on clutter do) hold the scans and relocalize nothing; a third agreeing with the second
+    relocalizes, and the correction is reported."""
+    recovery = SlipRecovery()
+    slam = _mapped_filter(recovery)
+    slam.predict(_wheels(0.3, 0.75))
+    first = recovery.apply(slam, _checked(slam, Transform2D(0.3, 0.0, 0.0), False), 2_000_000_000)
+    assert first.outcome is Outcome.HELD
+    slam.predict(_wheels(0.05, 0.0))
+    # the filter moved on by 5 cm, the alignment by 0.25 m back: the corrections differ by about 0.3 m
+    second = recovery.apply(slam, _checked(slam, Transform2D(0.05, 0.0, 0.0), False), 2_200_000_000)
+    assert second.outcome is Outcome.HELD and recovery.status.relocalized == 0
+    slam.predict(_wheels(0.05, 0.0))
+    third = recovery.apply(slam, _checked(slam, Transform2D(0.1, 0.0, 0.0), False), 2_400_000_000)
+    assert third.outcome is Outcome.RELOCALIZED and recovery.status.relocalized == 1
+    correction = recovery.status.last_correction
+    assert correction is not None and abs(correction.theta + 0.75) < 0.01

@@ -135,7 +135,10 @@ landmark only if ``D2 > chi2_2^-1(gate_new)`` for every landmark, and is discard
 landmark is confirmed once seen in ``confirm_count`` scans (its first sighting included; sightings at one
 stamp count once, so copies of a scan confirm nothing) and is dropped
 (marginalised out) if still unconfirmed ``tentative_timeout`` seconds after the scan that created it (scan
-stamps in integer ns), so a single spurious detection never enters the map.
+stamps in integer ns), so a single spurious detection never enters the map. Until it is confirmed, its
+observations refine that landmark alone: the pose and the other landmarks are considered, as the Schmidt
+update of localization considers the map (below), so a detection that never becomes a landmark never moves
+the pose (an office's chair legs, tracked for a few scans, would otherwise steer it).
 
 Localization (``mode = 'localization'``): a fixed map
 -----------------------------------------------------
@@ -636,9 +639,37 @@ class EkfSlam:
         the slots fused. Observations beyond the plan's gate are rejected (their status and id in the plan)
         and the others fused.
 
+        Observations of tentative landmarks are fused first, into those landmarks alone (the pose and the
+        other landmarks considered, :meth:`SlamState.correct` with ``observed_only``): a detection that never
+        becomes a landmark never moves the pose. That update leaves the pose and the confirmed landmarks as
+        they were, so the others' innovations and Jacobians still hold, and they follow in one stacked
+        update (the sum of the two NIS is the joint NIS).
+
         With correlated errors each one's ``R`` is scaled by ``(1 + rho) / (1 - rho)`` for the sensor's
         distance from its landmark's last view (module docstring); the gate takes ``R`` itself."""
+        if len(plan.slots) == 0:
+            return 0.0, plan.slots
+        tentative = ~self._state.tracks.confirmed[plan.slots]
+        if not tentative.any():  # the usual scan: every observation of a confirmed landmark
+            return self._fuse_rows(model, plan, R, None, observed_only=False)
+        nis_tentative, fused_tentative = self._fuse_rows(model, plan, R, tentative.nonzero()[0], True)
+        nis, fused = self._fuse_rows(model, plan, R, (~tentative).nonzero()[0], False)
+        return nis_tentative + nis, np.concatenate([fused_tentative, fused])
+
+    def _fuse_rows(
+        self,
+        model: MeasurementModel,
+        plan: Plan,
+        R: NDArray[np.float64],
+        subset: NDArray[np.int64] | None,
+        observed_only: bool,
+    ) -> tuple[float, NDArray[np.int64]]:
+        """:meth:`_fuse` of the plan's fusions ``subset`` (None: all), all of the pose and the map or (with
+        ``observed_only``) into their landmarks alone."""
         slots, H_robot, H_landmark, nu, rows = plan.slots, plan.H_robot, plan.H_landmark, plan.nu, plan.rows
+        if subset is not None:
+            slots, H_robot, H_landmark = slots[subset], H_robot[subset], H_landmark[subset]
+            nu, rows, R = nu[subset], rows[subset], R[subset]
         if len(slots) == 0:
             return 0.0, slots
         R_fused = R
@@ -646,13 +677,15 @@ class EkfSlam:
             sensor_xy = model.sensor_xy(self._state.mean)
             moved_m = np.linalg.norm(sensor_xy - self._state.tracks.last_view_xy[slots], axis=1)
             R_fused = R * self._config.fusion_scale(moved_m)[:, None, None]
-        consider = self._localization
-        nis, outside = self._state.correct(slots, H_robot, H_landmark, nu, R_fused, consider, plan.gate, R)
+        consider, only = self._localization, {"observed_only": observed_only}
+        nis, outside = self._state.correct(
+            slots, H_robot, H_landmark, nu, R_fused, consider, plan.gate, R, **only
+        )
         if outside.any():
             plan.status[rows[outside]], plan.landmark_ids[rows[outside]] = REJECTED, -1
             inside = ~outside
             slots, H_robot, H_landmark, nu = slots[inside], H_robot[inside], H_landmark[inside], nu[inside]
-            nis, _ = self._state.correct(slots, H_robot, H_landmark, nu, R_fused[inside], consider)
+            nis, _ = self._state.correct(slots, H_robot, H_landmark, nu, R_fused[inside], consider, **only)
         if not self._independent_noise:
             self._state.tracks.viewed(slots, sensor_xy)
         self._linearization.fused(self._state, slots)

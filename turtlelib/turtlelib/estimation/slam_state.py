@@ -261,6 +261,7 @@ class SlamState:
         consider_landmarks: bool = False,
         gate: float = math.inf,
         R_gate: NDArray[np.float64] | None = None,
+        observed_only: bool = False,
     ) -> tuple[float, NDArray[np.bool_]]:
         """EKF update with ``k`` observations of distinct ``slots``; returns the joint NIS ``nu^T S^-1 nu``
         and ``outside`` (k,), the observations beyond ``gate``.
@@ -302,6 +303,20 @@ class SlamState:
 
         Only the robot rows and columns change, O(N m) (no ``dsyrk``); the robot rows are written, and
         ``P_rr`` takes its upper triangle into its lower one.
+
+        ``observed_only=True``: the observed landmarks alone are estimated, the pose and every other
+        landmark considered (the same Schmidt update with the roles turned: tentative landmarks, whose
+        observations must never move the pose). With ``W_o`` the columns of ``W`` of the observed
+        landmarks' indices ``o``, ``K_s = [0; K_o; 0]``, ``K_o = W_o^T L^-1``::
+
+            x_o <- x_o + W_o^T (L^-1 nu),      x_r, other x_m unchanged
+            P_o. <- P_o. - W_o^T W,            P_.o = P_o.^T, the rest unchanged (bit for bit)
+
+        O(N m) (no ``dsyrk``). In invariant coordinates the gain is the one above in standard coordinates
+        (the best estimate of the landmarks themselves, not of their error relative to a rotation):
+        ``K_o = (W_o + W_theta c_o^T)^T L^-1 = G^T L^-1`` with ``c_o = J m_o``, so ``xi`` is zero but on
+        ``o``, whose exponential moves those landmarks by ``xi_o = G^T (L^-1 nu)`` alone, and
+        ``P_o. <- P_o. - G^T W`` with ``(G - W_o)^T G`` added to ``P_oo`` (the Joseph form of that gain).
         """
         dim, k = self.dim, len(slots)
         outside = np.zeros(k, dtype=bool)
@@ -309,8 +324,8 @@ class SlamState:
             return 0.0, outside
         self._apply_pending()
         m = LANDMARK_DIM * k
-        # the full update's dsyrk spans the storage's capacity (step 1); the consider update only dim
-        width = dim if consider_landmarks else self._cov.shape[0]
+        # the full update's dsyrk spans the storage's capacity (step 1); the consider updates only dim
+        width = dim if consider_landmarks or observed_only else self._cov.shape[0]
         cols, H = self._compressed_jacobian(slots, H_robot, H_landmark)
         # right-hand sides [H P, 0, nu] (m, width + 1); H P = (P H^T)^T needs only the rows `cols` of P
         rhs = np.zeros((m, width + 1), order="F")
@@ -329,6 +344,8 @@ class SlamState:
                 return 0.0, outside
         # add R_i to the diagonal block i
         S_flat[diagonal_blocks] = S_ii
+        if observed_only:
+            return self._observed_update(S, rhs, cols[ROBOT_DIM:]), outside
         return self._kalman_update(S, rhs, dim, width, consider_landmarks), outside
 
     def correct_pose(
@@ -389,6 +406,32 @@ class SlamState:
         self._rank_update(W_pad, -1.0)
         # the robot block is kept whole: its upper triangle into its lower one
         self._fill_robot_block()
+        return float(w @ w)
+
+    def _observed_update(
+        self, S: NDArray[np.float64], rhs: NDArray[np.float64], observed: NDArray[np.int64]
+    ) -> float:
+        """The update of :meth:`correct` with ``observed_only``: only the state indices ``observed`` (m,)
+        are estimated, from ``S`` (m, m) and ``rhs = [H P, nu]`` (m, N + 1); returns the NIS."""
+        dim = self.dim
+        L, info = dpotrf(S, lower=1, clean=1, overwrite_a=1)
+        if info != 0:
+            raise np.linalg.LinAlgError("the innovation covariance S is not positive definite")
+        # [W, w] = L^-1 [H P, nu]
+        solved, info = dtrtrs(L, rhs, lower=1, overwrite_b=1)
+        W, w = solved[:, :dim], solved[:, dim]
+        W_o = W[:, observed]
+        # G = W_o (+ W_theta c_o^T in invariant coordinates)
+        G = W_o + np.outer(W[:, HEADING], self._rotation_column()[observed]) if self._invariant else W_o
+        # x_o <- x_o + G^T w
+        self._mean[observed] += G.T @ w
+        # P_o. <- P_o. - G^T W (+ (G - W_o)^T G on P_oo), its own block symmetrised so that row and column
+        # agree bit for bit
+        rows = self._rows(observed) - G.T @ W
+        block = rows[:, observed] + (G - W_o).T @ G if self._invariant else rows[:, observed]
+        rows[:, observed] = 0.5 * (block + block.T)
+        self._cov[observed, :dim] = rows
+        self._cov[:dim, observed] = rows.T
         return float(w @ w)
 
     def _retract(self, xi: NDArray[np.float64]) -> None:

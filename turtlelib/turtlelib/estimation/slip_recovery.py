@@ -34,8 +34,11 @@ Contradiction: the map puts the body elsewhere
   distance from ``p_good`` to ``p_hat``, a heading within ``|theta_hat - theta_good| + turn_per_m d +
   margin_rad`` of ``theta_hat`` (``turn_per_m``: the heading a lost wheel invents per metre of travel, ``2 /
   track_width`` for a differential drive whose one wheel spins in place) and a position within ``d (1 +
-  that heading bound) + margin_m`` of ``p_hat``. A repetitive world (a grid of cylinders) has other
-  alignments further away; these are never candidates while the map confirms the scans.
+  that heading bound, at most pi) + margin_m`` of ``p_hat``, and no further than ``d + margin_m`` from
+  ``p_good`` (slip only takes motion away: the body cannot be further from where the map last confirmed it
+  than the wheels reported; a pose beyond is a false alignment on clutter, or a robot carried). A
+  repetitive world (a grid of cylinders) has other alignments further away; these are never candidates
+  while the map confirms the scans.
 * A scan *contradicts the motion* when ``T*`` explains at least ``min_matches`` detections and two more than
   ``T_hat``, and lies outside ``T_hat``'s uncertainty: ``d^T (P_rr + Sigma*)^-1 d > chi2_3^-1(0.999)`` for
   ``d = [t* - t_hat, theta* (-) theta_hat]`` (``Sigma*`` the fit's covariance). It *agrees* when all its
@@ -59,6 +62,7 @@ the robot is stuck or the wheels keep slipping.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 from enum import Enum
 from functools import partial
@@ -238,13 +242,15 @@ class _Episode:
 class SlipStatus:
     """What :class:`SlipRecovery` reports: ``level`` (``"ok"``, ``"warn"``, ``"error"``), ``message``,
     and the totals ``held`` (scans not fused), ``relocalized`` (against the map) and ``stalls`` (scans of a
-    stall)."""
+    stall), and ``last_correction`` (``T_hat^-1 T_new`` of the newest relocalization or stall, body frame;
+    None before any)."""
 
     level: str = "ok"
     message: str = "the LiDAR agrees with the motion"
     held: int = 0
     relocalized: int = 0
     stalls: int = 0
+    last_correction: Transform2D | None = None
     events: list[SlipEvent] = field(default_factory=list)
 
 
@@ -364,10 +370,12 @@ class SlipRecovery:
                 return _Evidence.AGREES
         T_good = self._T_good if self._T_good is not None else T_hat
         travel = float(np.linalg.norm(T_hat.translation - T_good.translation))
-        max_turn = (
+        # no heading is further than pi away: the bound (and the position's with it) stops growing there
+        max_turn = min(
             abs(normalize_angle(T_hat.theta - T_good.theta))
             + config.slip_turn_per_m * travel
-            + config.slip_margin_rad
+            + config.slip_margin_rad,
+            math.pi,
         )
         max_offset = travel * (1.0 + max_turn) + config.slip_margin_m
         landmark_var = float(np.trace(slam.landmark_covariances, axis1=1, axis2=2).mean()) / 2.0
@@ -377,7 +385,10 @@ class SlipRecovery:
             alignment = align_to_map(p_body, landmarks, search)
         else:
             n_hat, alignment = align_known(ids[usable], slam.landmark_ids, p_body, landmarks, search)
-        if alignment is None:
+        # slip only takes motion away: the body is no further from the last confirmed pose than the wheels
+        # reported (a pose beyond is a false alignment, or a robot carried: no slip explains it)
+        beyond = np.linalg.norm(alignment.T_map_body.translation - T_good.translation) if alignment else 0.0
+        if alignment is None or beyond > travel + config.slip_margin_m:
             return _Evidence.NOTHING
         if len(alignment.pairs) < max(config.slip_min_matches, n_hat + 2):
             return _Evidence.AGREES
@@ -414,6 +425,7 @@ class SlipRecovery:
         cause = "bump or stall" if takes_back_travel and abs(correction.theta) < 0.1 else "wheel slip"
         slam.reset(T_new, covariance, keep_map=True)
         self._T_good = T_new
+        self._status.last_correction = correction
         events = self._status.events
         if events and events[-1].cause == cause and stamp_ns - events[-1].stamp_ns <= EVENT_GAP_S * NS_PER_S:
             events[-1] = events[-1].then(stamp_ns, correction)

@@ -23,7 +23,9 @@ The gate holds the newest accepted sample ``a``. A new sample
   one arc); otherwise the stream **restarted** at the first candidate, and the motion along the others
   follows (over a longer silence nobody knows how the robot moved: one arc would be made up).
 
-Values are compared as plain differences (unwrapped angles, as encoders report them).
+Values are compared as plain differences (unwrapped angles, as encoders report them). Every refusal and
+restart is counted (:class:`GateTally`), so that a source the bounds do not fit (a robot faster than the
+one described) is reported, never silent.
 """
 
 from __future__ import annotations
@@ -88,6 +90,17 @@ class GateResult:
     reason: str = ""
 
 
+@dataclass
+class GateTally:
+    """What a :class:`SampleGate` refused so far (never reset): ``refused`` offers (a sample later taken in a
+    bridged or restarted candidate stream was refused when offered, and counts), ``restarts`` of the
+    stream, and ``last_reason`` (why the newest refusal or restart happened; empty before any)."""
+
+    refused: int = 0
+    restarts: int = 0
+    last_reason: str = ""
+
+
 class SampleGate:
     """The gate of the module docstring over samples of ``len(max_rates)`` values.
 
@@ -114,6 +127,7 @@ class SampleGate:
         self._bridged_gap_ns = round(config.max_bridged_gap * NS_PER_S)
         self._accepted: TimedSample | None = None
         self._candidates: list[TimedSample] = []
+        self.tally = GateTally()
 
     @property
     def accepted(self) -> TimedSample | None:
@@ -143,17 +157,19 @@ class SampleGate:
             self._candidates.clear()
         self._candidates.append(new)
         if len(self._candidates) < self.config.restart_samples:
+            self.tally.refused += 1
+            self.tally.last_reason = reason
             return GateResult(Verdict.REFUSED, reason=reason)
         candidates, previous = tuple(self._candidates), self._accepted
         self._candidates.clear()
         self._accepted = candidates[-1]
         if self._discontinuity(previous, candidates[0], self._bridged_gap_ns) is None:
             return GateResult(Verdict.ACCEPTED, candidates)
-        return GateResult(
-            Verdict.RESTARTED,
-            candidates,
-            f"{len(candidates)} samples in a row do not continue the stream ({reason}): restarted",
+        self.tally.restarts += 1
+        self.tally.last_reason = (
+            f"{len(candidates)} samples in a row do not continue the stream ({reason}): restarted"
         )
+        return GateResult(Verdict.RESTARTED, candidates, self.tally.last_reason)
 
     def _discontinuity(self, a: TimedSample, b: TimedSample, gap_ns: int | None = None) -> str | None:
         """Why ``b`` does not continue ``a`` (None when it does), allowing ``gap_ns`` between them
