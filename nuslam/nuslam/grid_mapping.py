@@ -48,6 +48,7 @@ skipped since the last report.
 
 from __future__ import annotations
 
+import time
 from array import array
 from collections import deque
 from collections.abc import Callable
@@ -171,7 +172,10 @@ class GridMapping:
         self._T_body_from = {sensor_id: T_body_scan, body_id: Transform2D()}
         self._T_body_scan = T_body_scan
         self._warnings = warnings
-        self._bound_logger = node.get_logger().get_child("grid")
+        # the node's own logger: a child logger of a node name used again in one process (tests) can lose
+        # its /rosout link when the older one is collected
+        self._bound_logger = node.get_logger()
+        self._bound_warned_s: float | None = None
         self._period_ns = round(self.topic_config.publish_period_s * NS_PER_S)
         self.grid = OccupancyGrid(self.config)
         self.keyframes = ScanKeyframes(self.keyframe_config)
@@ -357,13 +361,17 @@ class GridMapping:
         res = self.config.resolution_m
         (x0, y0), (height, width) = self.grid.origin_m, self.grid.log_odds.shape
         x1, y1 = x0 + width * res, y0 + height * res
-        if self._bound_logger.warning(
+        # this grid's own throttle: rclpy's throttles per call site, so one node's warning would silence
+        # another's in the same process
+        now_s = time.monotonic()
+        if self._bound_warned_s is not None and now_s - self._bound_warned_s < BOUND_WARN_S:
+            return
+        self._bound_logger.warning(
             f"scans reaching past grid.max_size_m = {self.config.max_size_m} m: {count} since the last "
             f"warning; the occupancy grid (now x {x0:.1f}..{x1:.1f} m, y {y0:.1f}..{y1:.1f} m) moved "
-            "toward them, forgetting its far side, and clipped what lay outside",
-            throttle_duration_sec=BOUND_WARN_S,
-        ):
-            self._past_bound_warned = self.scans_past_bound
+            "toward them, forgetting its far side, and clipped what lay outside"
+        )
+        self._bound_warned_s, self._past_bound_warned = now_s, self.scans_past_bound
 
     def _skip(self, text: str) -> None:
         self.scans_skipped += 1
