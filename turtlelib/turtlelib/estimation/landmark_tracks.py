@@ -23,9 +23,12 @@ stamp count once) only when both tests pass, with ``p`` the association's gate p
   moves) scatters far more than its noise and never confirms.
 * **several viewpoints**: the robot moved between the sightings far enough that such an artefact would
   have shown itself: the baseline ``b = max_i |v_i - v_1|`` is at least ``sqrt(chi2_2^-1(p)) sigma``, with
-  ``sigma^2`` the largest eigenvalue of one sighting's mean covariance ``n Lambda^-1``: an artefact bound to
-  the viewpoint moves about as far as the robot, so after ``b`` it has moved outside the gate of its first
-  sightings. The robot's position, not the sensor's, is the viewpoint: turning on the spot is not a new one.
+  ``sigma^2`` the smallest eigenvalue of one sighting's mean covariance ``n Lambda^-1`` (a LiDAR's range
+  noise): an artefact bound to the viewpoint moves about as far as the robot, so after ``b`` it has left
+  the gate of its first sightings at least along their best-measured direction. (The largest eigenvalue,
+  the bearing noise times the range, would ask a slow robot for more travel than a tentative landmark's
+  lifetime allows at a few metres.) The robot's position, not the sensor's, is the viewpoint: turning on
+  the spot is not a new one.
 
 Evidence is kept as these sums (O(1) per slot and sighting, vectorised over the slots).
 
@@ -221,8 +224,8 @@ class LandmarkTracks:
         # T = c - eta^T Lambda^-1 eta
         scatter = self._information_square[slots] - np.einsum("ki,kij,kj->k", eta, covariance_of_mean, eta)
         one_place = scatter <= chi2_gate(gate_prob, 2 * np.maximum(n - 1, 1))
-        # sigma^2 = lambda_max(n Lambda^-1); b >= sqrt(chi2_2^-1(p)) sigma
-        sigma2 = n * np.linalg.eigvalsh(covariance_of_mean)[:, -1]
+        # sigma^2 = lambda_min(n Lambda^-1); b >= sqrt(chi2_2^-1(p)) sigma
+        sigma2 = n * np.linalg.eigvalsh(covariance_of_mean)[:, 0]
         several_views = self._baseline[slots] ** 2 >= chi2_gate(gate_prob, 2) * sigma2
         return (n >= 2) & one_place & several_views
 
