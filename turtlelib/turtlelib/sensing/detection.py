@@ -6,14 +6,21 @@ Pipeline (all in the sensor frame; m, rad)
    (:func:`beams_in_one_turn`) with a valid range ``rho_b`` (finite, ``> 0`` and inside ``[range_min,
    range_max]``: 0.0, NaN and inf mean no return) gives ``p_b = rho_b [cos(phi_b), sin(phi_b)]``; other
    beams are dropped.
-2. Clustering: consecutive valid points ``p_i, p_{i+1}`` belong to the same cluster when
-   ``|p_{i+1} - p_i| < cluster_threshold``. When the scan covers a full turn the point sequence is
-   cyclic: the last and the first cluster are merged if the gap across the seam is under the threshold.
+2. Clustering: consecutive valid points ``p_i, p_{i+1}`` with ``k`` beams without a return between them
+   belong to the same cluster when ``|p_{i+1} - p_i| < cluster_threshold + k min(rho_i, rho_{i+1})
+   |angle_increment|`` and ``k <= max_dropout_beams``: a missing beam is taken as a dropout (the LDS-02
+   loses points on dark and glancing surfaces) and adds the width it would have covered, so dropouts
+   neither split a post nor cut a wall into post-sized fragments. When the scan covers a full turn the
+   point sequence is cyclic: the last and the first cluster are merged if the gap across the seam passes
+   the same test.
 3. Candidates: clusters with ``n >= min_points`` points and a chord ``|p_n - p_1| <= 2 max_radius``
    (no cylinder is wider than its diameter).
-4. Silhouette: the beam just before a cluster and the one just after it *saw past* the cluster when
-   they have no return or a longer range than the cluster's end; the cylinder's outline (a ray from the
-   sensor tangent to it) then lies between that beam and the cluster's end beam.
+4. Beyond each end (:func:`_cluster_sides`): the first return within ``max_dropout_beams + 1`` beams past
+   the end *saw past* the cluster when its range jumps away by more than the gap across the beams (a
+   silhouette edge), hides it when it jumps towards the sensor (an occluder), and otherwise continues
+   the same surface (the cluster is a fragment of something larger: rejected); no return in all those
+   beams is open space (saw past). The cylinder's outline (a ray from the sensor tangent to it) lies
+   between the end beam and the beam that saw past.
 5. Circle fit, all candidates in one batched pass: the hyper fit
    (:func:`turtlelib.sensing.circle_fit.fit_circles`), then one Gauss-Newton step of the LiDAR likelihood
    (:func:`turtlelib.sensing.circle_fit.refine_for_range_sensor`): range noise ``beam_range_std`` along each
@@ -22,7 +29,9 @@ Pipeline (all in the sensor frame; m, rad)
    silhouette fixes the radius far better than the ranges do.
 6. Classification: a candidate is a cylinder when every test passes:
    * it shows at least ``min_silhouette_edges`` silhouette edges (a wall seen between two nearer
-     objects shows none);
+     objects shows none) and no end where the surface goes on;
+   * its ``n`` returns are at least ``min_return_fraction`` of the beams from its first to its last
+     (a cluster made mostly of bridged dropouts is no evidence of a shape);
    * the radius lies in ``[min_radius, max_radius]`` and the RMS residual is ``<= max_residual``;
    * the centre lies beyond the points, ``|c| > mean_i |p_i|`` (the sensor sees a cylinder's outside;
      an arena corner or any concave curve has its centre on the sensor's side);
@@ -70,7 +79,10 @@ class DetectorConfig:
     Clustering and candidates:
 
     * ``cluster_threshold`` (m, > 0): largest gap between consecutive points of one cluster;
-    * ``min_points`` (int >= 3): fewest points of a cylinder.
+    * ``max_dropout_beams`` (int >= 0): most beams without a return in a row taken as dropouts (bridged
+      inside a cluster, looked past beside it: :func:`_cluster_sides`);
+    * ``min_points`` (int >= 3): fewest points (returns) of a cylinder;
+    * ``min_return_fraction`` (in [0, 1]): fewest returns per beam the cluster spans.
 
     Classification (see the module docstring):
 
