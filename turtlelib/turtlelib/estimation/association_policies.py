@@ -347,6 +347,7 @@ class GatedTracks:
     def plan(
         self, view: SlamView, z: NDArray[np.float64], R: NDArray[np.float64], ids: NDArray[np.int64] | None
     ) -> Plan:
+        self._evidence = None
         usable = view.model.usable(z).nonzero()[0]
         z_usable, R_usable = (z, R) if len(usable) == len(z) else (z[usable], R[usable])
         n_landmarks = view.n_landmarks
