@@ -4,14 +4,17 @@ motion, with its covariance, is what the filter predicts with (`turtlelib.Measur
 
 Timing: a scan stamped ``t_s`` is registered once the motion input reaches ``t_s`` (its pose there is the
 prior's anchor; the input's poses are kept, interpolated between samples, ``INPUT_POSES`` of them), in stamp
-order; it waits for that up to ``MAX_WAITING_SCANS`` newer scans. Its registered pose becomes the filter's
-next motion sample, so the filter runs at the newest registered scan, and the pose slam publishes at a
-newer input stamp ``t`` is the filter's at ``t_s`` moved on by the input's own motion from ``t_s`` to ``t``
-(:meth:`ScanOdometry.moved_on`).
+order; it waits for that up to ``MAX_WAITING_SCANS`` newer scans. While the LiDAR is quiet (no scan within
+``QUIET_NS`` of the newest input: not started, unplugged, a recording without scans) each input sample is the
+filter's next motion sample itself, so slam is then exactly as without registration. A registered scan's pose
+becomes the filter's next motion sample, so the filter runs at the newest registered scan, and the pose slam
+publishes at a newer input stamp ``t`` is the filter's at ``t_s`` moved on by the input's own motion from
+``t_s`` to ``t`` (:meth:`ScanOdometry.moved_on`).
 
 `/diagnostics` (`slam: scan registration`): what the pose rests on since the last report - scans
 registered, scans degenerate (registered, but weak along a direction, as in a long corridor: WARN), scans
-on the motion input alone (nothing to match: no map yet, too few returns) - and, with the landmark
+on the motion input alone (nothing to match: no map yet, too few returns), input samples taken alone
+while the LiDAR is quiet - and, with the landmark
 observations fused in that time, ERROR when neither registration nor landmarks held the pose (the wheels
 alone: the estimate drifts as they do).
 """
@@ -39,6 +42,8 @@ from turtlelib.util.timebase import NS_PER_S
 INPUT_POSES = 1000
 # Scans that may wait for the motion input to reach their stamp
 MAX_WAITING_SCANS = 10
+# The LiDAR is quiet when no scan is stamped within this of the newest motion input (ns): 5 scans at 5 Hz
+QUIET_NS = 1_000_000_000
 
 
 class ScanOdometry:
@@ -61,8 +66,9 @@ class ScanOdometry:
         self._inputs = PoseBuffer(INPUT_POSES)
         self._waiting: deque[tuple[int, RangeScan, str]] = deque()
         self._last_ns: int | None = None
+        self._newest_scan_ns: int | None = None
         self._restarting = False
-        self.counts = {basis.value: 0 for basis in Basis} | {"skipped": 0}
+        self.counts = {basis.value: 0 for basis in Basis} | {"input_only": 0, "skipped": 0}
         self._reported = dict(self.counts)
         self.last: OdometryStep | None = None
 
@@ -93,6 +99,7 @@ class ScanOdometry:
             self._skip(f"scan skipped by the scan registration: {error}")
             return
         self._waiting.append((t_ns, scan, msg.header.frame_id))
+        self._newest_scan_ns = t_ns if self._newest_scan_ns is None else max(self._newest_scan_ns, t_ns)
         if len(self._waiting) > MAX_WAITING_SCANS:
             dropped_ns, _, _ = self._waiting.popleft()
             self._skip(
@@ -101,36 +108,57 @@ class ScanOdometry:
             )
 
     def reached(self) -> list[tuple[int, tuple[float, ...], bool]]:
-        """Register the waiting scans the motion input reaches, oldest first: ``(t_ns, sample, restart)``
-        each, ``sample`` the filter's next motion sample (`turtlelib.MeasuredPoses`) and ``restart`` True
-        for the first after a :meth:`restart` of the clock (stamped no later than the last). A scan not
-        after the last registered one (but after a restart), or older than the kept input poses, is skipped
-        with a throttled warning."""
+        """The filter's next motion samples (`turtlelib.MeasuredPoses`), oldest first, as ``(t_ns, sample,
+        restart)``: the waiting scans the motion input reaches, registered; and, while the LiDAR is quiet
+        (no scan stamped within ``QUIET_S`` of the newest input, or none yet), the newest input pose itself,
+        so that without scans slam goes on with its motion input alone. ``restart`` is True for the first
+        after a :meth:`restart` of the clock (stamped no later than the last). A scan not after the last
+        sample (but after a restart), or older than the kept input poses, is skipped with a throttled
+        warning."""
         samples = []
         latest = self._inputs.latest_time_ns
         while self._waiting and latest is not None and self._waiting[0][0] <= latest:
             t_ns, scan, frame = self._waiting.popleft()
-            T_input_body = self._inputs.at(t_ns)
-            went_back = self._last_ns is not None and t_ns <= self._last_ns
-            if T_input_body is None or (went_back and not self._restarting):
-                self._skip(f"scan at {t_ns} ns skipped by the scan registration: older than the last one")
-                continue
-            try:
-                step = self._odometry.step(t_ns, T_input_body, scan, self._T_body_from[frame])
-            except (ValueError, np.linalg.LinAlgError) as error:
-                self._skip(f"scan at {t_ns} ns skipped by the scan registration: {error}")
-                continue
-            self._last_ns, self.last = t_ns, step
-            self.counts[step.basis.value] += 1
-            if step.basis is Basis.DEGENERATE:
-                self._warnings.warn(
-                    "registration",
-                    f"scan registration degenerate: the scan constrains one direction to only "
-                    f"{step.registration.weakest_std_m:.2f} m (a long corridor?); the motion input holds it",
-                )
-            samples.append((t_ns, step.sample, went_back))
-            self._restarting = False
+            sample = self._sample(t_ns, scan, frame)
+            if sample is not None:
+                samples.append(sample)
+        quiet = self._newest_scan_ns is None or (
+            latest is not None and latest - self._newest_scan_ns > QUIET_NS
+        )
+        if (
+            quiet
+            and not self._waiting
+            and latest is not None
+            and (self._last_ns is None or latest > self._last_ns)
+        ):
+            sample = self._sample(latest, None, None)
+            if sample is not None:
+                samples.append(sample)
         return samples
+
+    def _sample(self, t_ns: int, scan: RangeScan | None, frame: str | None) -> tuple[int, tuple, bool] | None:
+        """The LiDAR odometry's step at ``t_ns`` (registering ``scan``, or the input alone for None) as a
+        motion sample, counted; None (skipped with a warning) when it cannot be one."""
+        T_input_body = self._inputs.at(t_ns)
+        went_back = self._last_ns is not None and t_ns <= self._last_ns
+        if T_input_body is None or (went_back and not self._restarting):
+            self._skip(f"scan at {t_ns} ns skipped by the scan registration: older than the last one")
+            return None
+        mount = None if frame is None else self._T_body_from[frame]
+        try:
+            step = self._odometry.step(t_ns, T_input_body, scan, mount)
+        except (ValueError, np.linalg.LinAlgError) as error:
+            self._skip(f"scan at {t_ns} ns skipped by the scan registration: {error}")
+            return None
+        self._last_ns, self.last, self._restarting = t_ns, step, False
+        self.counts[step.basis.value if scan is not None else "input_only"] += 1
+        if step.basis is Basis.DEGENERATE:
+            self._warnings.warn(
+                "registration",
+                f"scan registration degenerate: the scan constrains one direction to only "
+                f"{step.registration.weakest_std_m:.2f} m (a long corridor?); the motion input holds it",
+            )
+        return t_ns, step.sample, went_back
 
     def moved_on(
         self, t_from_ns: int, T_map_body: Transform2D, P_pose: NDArray[np.float64], t_ns: int
@@ -157,7 +185,7 @@ class ScanOdometry:
         since = {key: self.counts[key] - self._reported[key] for key in self.counts}
         self._reported = dict(self.counts)
         registered = since[Basis.REGISTERED.value] + since[Basis.DEGENERATE.value]
-        motion_only = since[Basis.MOTION.value]
+        motion_only = since[Basis.MOTION.value] + since["input_only"]
         sources = [
             name for name, used in (("scan registration", registered), ("landmarks", fused_since)) if used
         ]

@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 import pytest
+from diagnostic_msgs.msg import DiagnosticStatus
 from test_slam_grid import scan_message
 from test_slam_maps import diagnostics
 from test_slam_node import Arc, Rig, S, joint_state, pose_of
@@ -29,8 +30,12 @@ def test_registered_scans_correct_drifting_wheels_and_diagnostics_say_so(ros):
     for k in range(STEPS):
         t_ns = S + k * S // 5
         count = len(rig.odoms)
-        rig.joint_states.publish(joint_state(t_ns, wheels.angles(t_ns)))
+        # the scan first: the first one reaches slam before the first joint_states, so the map starts at the
+        # start pose (joint_states alone, with the LiDAR quiet, would move the filter on by the wheels)
         rig.scans.publish(scan_message(truth.pose(t_ns), t_ns, rng))
+        if k == 0:
+            ros.spin_for(0.2)
+        rig.joint_states.publish(joint_state(t_ns, wheels.angles(t_ns)))
         # the pose starts at the first registered scan: from the second step on, each joint_states gives one
         assert k == 0 or ros.spin_until(lambda c=count: len(rig.odoms) > c, 5.0), f"no odom at step {k}"
     # a joint_states sample 1 ms after the last scan (registered by then): the pose there is that scan's
@@ -48,3 +53,17 @@ def test_registered_scans_correct_drifting_wheels_and_diagnostics_say_so(ros):
     values = {pair.key: pair.value for pair in status.values}
     assert "the pose rests on scan registration" in status.message
     assert int(values["scans_registered"]) >= STEPS - 2 and values["scans_skipped"] == "0"
+
+
+def test_with_the_lidar_quiet_slam_goes_on_with_the_wheels_and_says_so(ros):
+    """No scan at all: every joint_states gets its pose, the wheels' dead reckoning exactly (never worse than
+    the input), and /diagnostics says the pose rests on the motion input alone (ERROR)."""
+    rig = Rig(ros, scan_registration=True)
+    wheels = Arc(Transform2D(), S, vx=0.15, omega=0.8)
+    for k in range(6):
+        t_ns = S + k * S // 5
+        odom = rig.wheels(t_ns, wheels.angles(t_ns))
+        assert pose_of(odom) == pytest.approx(wheels.pose(t_ns).as_array(), abs=1e-9)
+    status = diagnostics(rig, "slam: scan registration")
+    assert status.level == DiagnosticStatus.ERROR
+    assert "the motion input alone" in status.message

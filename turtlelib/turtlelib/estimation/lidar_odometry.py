@@ -176,13 +176,21 @@ class LidarOdometry:
         self._start = Transform2D() if T_odom_body is None else T_odom_body
 
     def step(
-        self, t_ns: int, T_input_body: Transform2D, scan: RangeScan, T_body_lidar: Transform2D
+        self,
+        t_ns: int,
+        T_input_body: Transform2D,
+        scan: RangeScan | None,
+        T_body_lidar: Transform2D | None = None,
     ) -> OdometryStep:
         """Register the scan stamped ``t_ns`` (integer ns, after the previous one), taken by the LiDAR
-        mounted at ``T_body_lidar``, at which the motion input's pose is ``T_input_body``; ValueError for a
-        stamp not after the previous scan's."""
+        mounted at ``T_body_lidar``, at which the motion input's pose is ``T_input_body``; with no scan
+        (``None``: the LiDAR is silent) the motion input alone moves the pose on to ``t_ns``. ValueError for
+        a stamp not after the previous one's."""
         t_ns = integer("scan stamp (ns)", t_ns)
-        points = voxel_centroids(scan_points(scan, T_body_lidar), self.config.registration.voxel_m)
+        points = np.zeros((0, 2))
+        if scan is not None:
+            mount = Transform2D() if T_body_lidar is None else T_body_lidar
+            points = voxel_centroids(scan_points(scan, mount), self.config.registration.voxel_m)
         if self._last is None:
             step = OdometryStep(t_ns, self._start, np.zeros((3, 3)), Basis.MOTION, None, 0)
         else:
@@ -197,7 +205,7 @@ class LidarOdometry:
             raise ValueError(f"scan stamp {t_ns} ns is not after the previous scan's, {t_prev} ns")
         # T_prior = T_k-1 U_k,  P_prior = Q(T_k-1, log U_k, dt) + P_floor
         U, dt_s = T_input_prev.inverse() @ T_input_body, (t_ns - t_prev) / NS_PER_S
-        P_prior = _PRIOR_FLOOR
+        P_motion = np.zeros((3, 3))
         if self._input_restarted:
             config = self.config
             plausible = (
@@ -206,18 +214,18 @@ class LidarOdometry:
                 and abs(U.theta) <= self._max_turn * dt_s + config.resume_std_rad
             )
             U = U if plausible else Transform2D()
-            P_prior = P_prior + np.diag(
-                [config.resume_std_m**2, config.resume_std_m**2, config.resume_std_rad**2]
-            )
+            P_motion = np.diag([config.resume_std_m**2, config.resume_std_m**2, config.resume_std_rad**2])
             t_prev = min(t_prev, t_ns)
             self._input_restarted = False
         T_prior = T_prev @ U
-        P_prior = P_prior + self.noise.covariance(T_prev, U.log(), max(dt_s, 0.0))
+        P_motion = P_motion + self.noise.covariance(T_prev, U.log(), max(dt_s, 0.0))
         registration = None
         if self._map is not None and len(points) >= self.config.registration.min_points:
-            registration = register(points, self._map, T_prior, P_prior, self.config.registration)
+            registration = register(
+                points, self._map, T_prior, P_motion + _PRIOR_FLOOR, self.config.registration
+            )
         if registration is None:
-            return OdometryStep(t_ns, T_prior, P_prior, Basis.MOTION, None, t_ns - t_prev)
+            return OdometryStep(t_ns, T_prior, P_motion, Basis.MOTION, None, t_ns - t_prev)
         basis = Basis.DEGENERATE if registration.degenerate else Basis.REGISTERED
         return OdometryStep(
             t_ns, registration.T_map_body, registration.Sigma, basis, registration, t_ns - t_prev

@@ -66,8 +66,8 @@ from ..util.validation import covariance, finite_array, integer, positive, store
 
 # the map's spread widened by these factors of sigma, then the LiDAR's own (coarse to fine)
 _STAGES = (4.0, 2.0, 1.0)
-# Gauss-Newton has converged when a step moves less than this (m, rad)
-_STEP_TOL = (1e-5, 1e-6)
+# Gauss-Newton has converged when a step moves less than this (m, rad: 0.1 mm at 3.5 m)
+_STEP_TOL = (1e-4, 3e-5)
 # heading scale of the weakest-direction measure (m per rad)
 _HEADING_SCALE_M = 1.0
 # neighbours of a map point that give its local covariance C_j
@@ -123,10 +123,10 @@ def voxel_centroids(p: NDArray[np.float64], voxel_m: float) -> NDArray[np.float6
     if len(p) == 0:
         return np.zeros((0, 2))
     keys = np.floor(p / voxel_m).astype(np.int64)
-    _, cell, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
-    cell = cell.ravel()
-    sums = np.zeros((len(counts), 2))
-    np.add.at(sums, cell, p)
+    # one integer per cell (cells within 2^31 of the origin: 100,000 km at 5 cm)
+    key = (keys[:, 0] << 32) + (keys[:, 1] & 0xFFFFFFFF)
+    _, cell, counts = np.unique(key, return_inverse=True, return_counts=True)
+    sums = np.column_stack([np.bincount(cell, p[:, 0], len(counts)), np.bincount(cell, p[:, 1], len(counts))])
     return sums / counts[:, None]
 
 
@@ -135,6 +135,8 @@ class LocalMap:
     spread, and a k-d tree to find the nearest (module docstring)."""
 
     def __init__(self, q_map: NDArray[np.float64], config: RegistrationConfig) -> None:
+        """``omega[stage]`` (m, 3): each point's information ``[a, b, c]`` of ``[[a, b], [b, c]]`` at the
+        stage's widened spread."""
         self.q_map = finite_array("map points", q_map, (len(q_map), 2))
         self.tree = cKDTree(self.q_map)
         C, count = self._spread(config.neighbour_radius_m)
@@ -151,9 +153,9 @@ class LocalMap:
         for factor in _STAGES:
             var = (factor * config.point_std_m) ** 2
             # Omega_j = n n^T / (lambda_n + sigma^2) + [not a line] t t^T / (lambda_t + sigma^2)
-            self.omega.append(
-                nn / (lam[:, 0] + var)[:, None, None] + tt * (along / (lam[:, 1] + var))[:, None, None]
-            )
+            omega = nn / (lam[:, 0] + var)[:, None, None] + tt * (along / (lam[:, 1] + var))[:, None, None]
+            # the three entries [a, b, c] of each symmetric [[a, b], [b, c]] (m, 3)
+            self.omega.append(np.column_stack([omega[:, 0, 0], omega[:, 0, 1], omega[:, 1, 1]]))
 
     def __len__(self) -> int:
         return len(self.q_map)
@@ -271,23 +273,26 @@ def _gauss_newton(
     if matched < 3:
         return None
     j = j[found]
-    # d_i = R p_i + t - q_j,  Omega_j
-    d = p_map[found] - local_map.q_map[j]
-    omega = omega_all[j]
-    omega_d = np.einsum("nij,nj->ni", omega, d)
-    m2 = np.einsum("ni,ni->n", d, omega_d)
+    # d_i = R p_i + t - q_j;  Omega_j = [[a, b], [b, c]] as its three entries (n, 3)
+    dx, dy = (p_map[found] - local_map.q_map[j]).T
+    a, b, c = omega_all[j].T
+    # Omega d, m^2 = d^T Omega d
+    od_x, od_y = a * dx + b * dy, b * dx + c * dy
+    m2 = dx * od_x + dy * od_y
     # w_i = (c^2 / (c^2 + m_i^2))^2
     w = (c2 / (c2 + m2)) ** 2
     # J_i = [I_2, S R p_i],  S R p = [-(R p)_y, (R p)_x]
-    Jtheta = np.column_stack([-p_rot[found, 1], p_rot[found, 0]])
-    H = np.zeros((3, 3))
-    H[:2, :2] = np.einsum("n,nij->ij", w, omega)
-    omega_Jtheta = np.einsum("nij,nj->ni", omega, Jtheta)
-    H[:2, 2] = H[2, :2] = np.einsum("n,ni->i", w, omega_Jtheta)
-    H[2, 2] = float(np.einsum("n,ni,ni->", w, Jtheta, omega_Jtheta))
-    g = np.empty(3)
-    g[:2] = np.einsum("n,ni->i", w, omega_d)
-    g[2] = float(np.einsum("n,ni,ni->", w, Jtheta, omega_d))
+    jx, jy = -p_rot[found, 1], p_rot[found, 0]
+    oj_x, oj_y = a * jx + b * jy, b * jx + c * jy
+    # H = sum w J^T Omega J,  g = sum w J^T Omega d
+    H = np.array(
+        [
+            [w @ a, w @ b, w @ oj_x],
+            [w @ b, w @ c, w @ oj_y],
+            [w @ oj_x, w @ oj_y, w @ (jx * oj_x + jy * oj_y)],
+        ]
+    )
+    g = np.array([w @ od_x, w @ od_y, w @ (jx * od_x + jy * od_y)])
     r_p = _prior_residual(x, x_prior)
     # (H_s + P_p^-1) delta = -(g + P_p^-1 r_p)
     delta = np.linalg.solve(H + P_prior_inv, -(g + P_prior_inv @ r_p))
