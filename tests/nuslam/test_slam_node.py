@@ -394,11 +394,14 @@ def test_an_array_with_a_malformed_noise_text_is_skipped_with_a_warning(ros):
 
 def test_confirm_count_sets_the_sightings_that_confirm_a_landmark(ros):
     rig = Rig(ros, confirm_count=2)
+    # driving straight at 0.4 m/s: the second sighting is from a viewpoint 8 cm on
+    arc = Arc(Transform2D(), S, vx=0.4, omega=0.0)
     counts = []
     for k in range(3):  # three scans (distinct stamps: copies of one scan count once)
         t_ns = S + k * S // 5
-        rig.wheels(t_ns, (0.0, 0.0))
-        counts.append(len(mapped(rig.observe(cylinder_array("base_scan", t_ns, relative(T_BODY_SENSOR))))))
+        rig.wheels(t_ns, arc.angles(t_ns))
+        seen = relative(arc.pose(t_ns) @ T_BODY_SENSOR)
+        counts.append(len(mapped(rig.observe(cylinder_array("base_scan", t_ns, seen)))))
     assert counts == [0, 3, 3]
 
 
@@ -949,19 +952,25 @@ def test_a_phantom_turn_is_reported_and_undone_against_the_map(ros):
     turn_wheel = 0.75 * 0.5 * DRIVE.track_width / R_WHEEL
     levels: list[tuple[int, str]] = []
 
-    def run(seconds: float, phi_at) -> None:
+    def run(seconds: float, phi_at, x_at=lambda f: 0.0) -> None:
         for k in range(1, round(seconds * 10) + 1):
             run.t_ns += S // 10
-            rig.joint_states.publish(joint_state(run.t_ns, phi_at(k / round(seconds * 10))))
-            if k % 2 == 0:  # scans at 5 Hz, always from the true pose (at rest at the origin)
-                rig.observations.publish(cylinder_array("base_scan", run.t_ns, relative(T_BODY_SENSOR)))
+            f = k / round(seconds * 10)
+            rig.joint_states.publish(joint_state(run.t_ns, phi_at(f)))
+            if k % 2 == 0:  # scans at 5 Hz, always from the true pose (x_at along x, then at the origin)
+                seen = relative(Transform2D(x_at(f), 0.0, 0.0) @ T_BODY_SENSOR)
+                rig.observations.publish(cylinder_array("base_scan", run.t_ns, seen))
             ros.spin_for(0.1)
             if arrays:
                 motion = {s.name: s for s in arrays[-1].status}["slam: motion vs LiDAR"]
                 levels.append((motion.level, motion.message))
 
     run.t_ns = S
-    run(3.0, lambda f: (0.0, 0.0))  # three landmarks mapped at rest
+    # three landmarks mapped driving 0.1 m ahead and back (several viewpoints), then at rest
+    ahead = 0.1 / R_WHEEL
+    run(1.0, lambda f: (ahead * f, ahead * f), lambda f: 0.1 * f)
+    run(1.0, lambda f: (ahead * (1.0 - f), ahead * (1.0 - f)), lambda f: 0.1 * (1.0 - f))
+    run(1.0, lambda f: (0.0, 0.0))
     run(1.0, lambda f: (-turn_wheel * f, turn_wheel * f))  # the phantom turn, over a second
     run(2.0, lambda f: (-turn_wheel, turn_wheel))
     x, y, yaw = pose_of(rig.odoms[-1])

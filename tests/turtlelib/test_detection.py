@@ -383,3 +383,69 @@ def test_detection_quality_on_synthetic_lds01_scans():
     # over the scenes): E[e^2] <= sigma^2 for range and bearing
     assert math.sqrt(np.mean(np.square(quality.range_error_m))) <= CONFIG.range_std
     assert math.sqrt(np.mean(np.square(quality.bearing_error_rad))) <= CONFIG.bearing_std
+
+
+# --- what is not a post: dropout fragments, door frames, wall ends ----------------------------------------
+
+# the LDS-02 as nusim simulates it (nusim.simulation.LIDAR_MODELS["lds02"]): 0.94 deg beams, a layout per
+# turn, NaN for no return, 1 cm noise and 1 mm resolution, reach 0.16-8 m
+LDS02 = LidarConfig(
+    range_min=0.16,
+    range_max=8.0,
+    angle_increment=2.0 * PI * 6.0 / 2300.0,
+    samples=383,
+    noise=0.01,
+    resolution=0.001,
+    no_return=math.nan,
+    spin_spread=0.02,
+)
+
+
+def phantoms(detections: Detections, scene: Scene, margin_m: float = 0.03) -> int:
+    """Detections whose centre is not within a cylinder grown by ``margin_m`` (m)."""
+    p_world = scene.T_world_sensor @ detections.p_sensor
+    gap = np.linalg.norm(p_world[:, None, :] - scene.circles[None, :, :2], axis=2) - scene.circles[:, 2]
+    return int(np.count_nonzero((gap > margin_m).all(axis=1))) if len(scene.circles) else len(p_world)
+
+
+def test_lds02_dropouts_of_every_third_beam_make_no_phantom_posts():
+    # every third beam without a return (a dark floor-level surface for the LDS-02): walls cut into
+    # fragments of two returns and a gap, which looked like posts where a missing beam counted as a
+    # silhouette edge. Bridging the missing beams and reading past them leaves none; with no beam taken
+    # as a dropout (max_dropout_beams = 0) the same scans give phantoms, so this scene can tell.
+    rng = np.random.default_rng(11)
+    detector = LandmarkDetector(CONFIG)
+    naive = LandmarkDetector(dataclasses.replace(CONFIG, max_dropout_beams=0))
+    found = naive_phantoms = 0
+    for _ in range(150):
+        scene = random_scene(rng)
+        lidar = LDS02.scan_layout(rng)
+        ranges = simulate_scan(scene.T_world_sensor, scene.circles, scene.walls, lidar, rng)
+        ranges[int(rng.integers(3)) :: 3] = math.nan
+        detections = detector.detect(lidar.range_scan(ranges))
+        assert phantoms(detections, scene) == 0
+        found += len(detections)
+        naive_phantoms += phantoms(naive.detect(lidar.range_scan(ranges)), scene)
+    assert naive_phantoms >= 1
+    assert found >= 4 * 150  # the posts are still found (about 5.5 per scene)
+
+
+def test_lds02_dropouts_keep_a_post_whole():
+    # a 0.15 m post 2.5 m ahead, every third beam missing: its returns form one cluster with the dropouts
+    # bridged (not three fragments) and one detection at its place
+    lidar = dataclasses.replace(LDS02, spin_spread=0.0, noise=0.0, resolution=0.0)
+    ranges = simulate_scan(Transform2D(), [[2.5, 0.0, 0.15]], arena_walls(8.0, 8.0), lidar)
+    ranges[::3] = math.nan
+    detections = LandmarkDetector(EXACT).detect(lidar.range_scan(ranges))
+    assert len(detections) == 1
+    np.testing.assert_allclose(detections.p_sensor[0], [2.5, 0.0], rtol=0.0, atol=0.01)
+
+
+def test_too_few_real_returns_are_no_post():
+    # the post above with two beams of three missing: 5 returns over 13 beams, under min_return_fraction
+    lidar = dataclasses.replace(LDS02, spin_spread=0.0, noise=0.0, resolution=0.0)
+    ranges = simulate_scan(Transform2D(), [[1.2, 0.0, 0.15]], arena_walls(8.0, 8.0), lidar)
+    ranges[(np.arange(len(ranges)) % 3) != 0] = math.nan
+    relaxed = dataclasses.replace(EXACT, min_return_fraction=0.0, max_dropout_beams=2)
+    assert len(LandmarkDetector(relaxed).detect(lidar.range_scan(ranges))) == 1
+    assert len(LandmarkDetector(EXACT).detect(lidar.range_scan(ranges))) == 0

@@ -34,6 +34,11 @@ def observe(slam_or_pose, landmarks, config=BURGER_CONFIG):
     return z
 
 
+def drive(slam: EkfSlam, forward_m: float = 0.05) -> None:
+    """Drive ``forward_m`` straight ahead: a new viewpoint, as a tentative landmark needs to confirm."""
+    slam.predict((forward_m / BURGER.wheel_radius, forward_m / BURGER.wheel_radius))
+
+
 def snapshot(slam: EkfSlam):
     return (
         slam.state,
@@ -219,7 +224,7 @@ def test_observations_beyond_max_range_are_rejected():
 
 
 def test_tentative_landmark_is_confirmed_after_confirm_count_sightings():
-    # a timeout of 5 scans at 5 Hz
+    # a timeout of 5 scans at 5 Hz; the robot drives 5 cm between scans (several viewpoints)
     config = SlamConfig(sensor_x=-0.032, confirm_count=3, tentative_timeout=1.0)
     slam = EkfSlam(config, MOTION)
     landmark = [[1.0, 0.5]]
@@ -231,10 +236,12 @@ def test_tentative_landmark_is_confirmed_after_confirm_count_sightings():
     assert slam.covariance.shape == (3, 3)  # tentative landmarks are not in the public state
 
     slam.update_unknown(np.zeros((0, 2)), stamp_ns=SCAN_NS)  # a scan without detections
+    drive(slam)
     second = slam.update_unknown(observe(slam, landmark), stamp_ns=2 * SCAN_NS)
     np.testing.assert_array_equal(second.status, [MATCHED])
     np.testing.assert_array_equal(second.landmark_ids, [new_id])
     assert second.confirmed_ids.shape == (0,)
+    drive(slam)
     third = slam.update_unknown(observe(slam, landmark), stamp_ns=3 * SCAN_NS)
     np.testing.assert_array_equal(third.confirmed_ids, [new_id])
     np.testing.assert_array_equal(slam.landmark_ids, [new_id])
@@ -254,7 +261,8 @@ def test_sightings_at_one_stamp_count_once_so_a_flood_confirms_nothing():
         np.testing.assert_array_equal(again.landmark_ids, [new_id])
         assert again.confirmed_ids.shape == (0,)
     np.testing.assert_array_equal(slam.tentative_ids, [new_id])
-    # the next scan confirms it
+    # the next scan, from 10 cm further on, confirms it
+    drive(slam, 0.1)
     np.testing.assert_array_equal(
         slam.update_unknown(observe(slam, landmark), stamp_ns=SCAN_NS).confirmed_ids, [new_id]
     )
@@ -275,7 +283,8 @@ def test_unconfirmed_landmark_is_dropped_after_the_timeout():
     landmarks = [[1.0, 0.5], [-1.0, 2.0]]
     first = slam.update_unknown(observe(slam, landmarks), stamp_ns=0)
     keep, lonely = (int(i) for i in first.landmark_ids)
-    # the first landmark is seen again and confirmed; the second never again
+    # the first landmark is seen again from 10 cm further on and confirmed; the second never again
+    drive(slam, 0.1)
     confirming = slam.update_unknown(observe(slam, landmarks[:1]), stamp_ns=SCAN_NS)
     assert confirming.confirmed_ids.tolist() == [keep]
     assert slam.update_unknown([], stamp_ns=2 * SCAN_NS).dropped_ids.tolist() == []
@@ -372,14 +381,16 @@ def test_tentative_landmarks_do_not_steal_from_confirmed_ones():
         sensor_x=-0.032, confirm_count=2, tentative_timeout=0.6, range_std=0.01, bearing_std=0.01
     )
     slam = EkfSlam(config, MOTION)
+    # a landmark 1 m ahead of the sensor, confirmed from 5 cm further on
     slam.update_unknown([[1.0, 0.0]], stamp_ns=0)
-    confirmed = int(slam.update_unknown([[1.0, 0.0]], stamp_ns=SCAN_NS).confirmed_ids[0])
-    # far enough (in sigmas) to start a tentative landmark
-    ghost = slam.update_unknown([[1.1, 0.0]], stamp_ns=2 * SCAN_NS)
+    drive(slam)
+    confirmed = int(slam.update_unknown(observe(slam, [[0.968, 0.0]]), stamp_ns=SCAN_NS).confirmed_ids[0])
+    # 10 cm behind it: far enough (in sigmas) to start a tentative landmark
+    ghost = slam.update_unknown(observe(slam, [[1.068, 0.0]]), stamp_ns=2 * SCAN_NS)
     np.testing.assert_array_equal(ghost.status, [NEW])
     # observations between the two are compatible with both; they go to the confirmed landmark
     for k in range(3, 6):
-        result = slam.update_unknown([[1.02, 0.0]], stamp_ns=k * SCAN_NS)
+        result = slam.update_unknown(observe(slam, [[0.988, 0.0]]), stamp_ns=k * SCAN_NS)
         np.testing.assert_array_equal(result.landmark_ids, [confirmed])
     np.testing.assert_array_equal(slam.landmark_ids, [confirmed])
     assert slam.tentative_ids.shape == (0,)

@@ -126,12 +126,16 @@ def _checked(slam: EkfSlam, T_world_body: Transform2D, known: bool):
 
 
 def _mapped_filter(recovery: SlipRecovery | None = None, known: bool = False) -> EkfSlam:
-    """A filter at rest at the origin that has mapped LANDMARKS (five scans confirm them), through
-    ``recovery`` if given, with known association if ``known``."""
+    """A filter back at rest at the origin that has mapped LANDMARKS (five scans confirm them, from
+    viewpoints up to 12 cm apart: 6 cm forward twice, then back), through ``recovery`` if given, with
+    known association if ``known``."""
     config = SlamConfig(sensor_x=SENSOR.x, sensor_y=SENSOR.y, sensor_theta=SENSOR.theta)
     slam = EkfSlam(config, DiffDriveMotion(DRIVE, 0.05))
-    for k in range(5):
-        checked = _checked(slam, Transform2D(), known)
+    step = 0.06 / DRIVE.wheel_radius
+    for k, forward_m in enumerate((0.0, 0.06, 0.12, 0.06, 0.0)):
+        if k:
+            slam.predict((step, step) if k < 3 else (-step, -step))
+        checked = _checked(slam, Transform2D(forward_m, 0.0, 0.0), known)
         stamp_ns = k * 200_000_000
         if recovery is None:
             slam.update(checked, stamp_ns=stamp_ns)

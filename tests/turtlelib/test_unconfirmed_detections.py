@@ -100,11 +100,12 @@ def test_observations_of_tentative_landmarks_refine_them_and_leave_the_pose_and_
 
     def start() -> EkfSlam:
         slam = EkfSlam(dataclasses.replace(config, initial_xy_std=0.05, initial_theta_std=0.05), model)
-        pose = slam.pose.as_array()
-        for scan in range(2):  # the first two seen twice: confirmed
-            z, _, _ = predict_observations(pose, confirmed_xy, config.T_body_sensor)
+        for scan in range(2):  # the first two seen twice, from two viewpoints 0.2 m apart: confirmed
+            if scan:
+                slam.predict((0.2, 0.0, 0.0, 100 * MS))
+            z, _, _ = predict_observations(slam.pose.as_array(), confirmed_xy, config.T_body_sensor)
             slam.update_unknown(z, stamp_ns=scan * 100 * MS)
-        z, _, _ = predict_observations(pose, tentative_xy, config.T_body_sensor)
+        z, _, _ = predict_observations(slam.pose.as_array(), tentative_xy, config.T_body_sensor)
         slam.update_unknown(z + offset, stamp_ns=200 * MS)
         slam.predict((0.3, 0.05, 0.1, 100 * MS))
         assert len(slam.landmark_ids) == 2 and len(slam.tentative_ids) == 2

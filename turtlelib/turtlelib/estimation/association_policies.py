@@ -14,8 +14,9 @@ JCBB is in :mod:`turtlelib.estimation.matching`.
   maps only against those that may come near it, :meth:`SlamView.gate_near`); compatible pairs
   (``D2 < chi2_2^-1(gate_associate)``) are matched by a :class:`Matcher` (:data:`MATCHERS`: nearest
   neighbour or JCBB), confirmed landmarks first; an observation beyond ``gate_new`` of every landmark starts
-  a tentative one, confirmed after ``confirm_count`` sightings or dropped ``tentative_timeout`` after its
-  first.
+  a tentative one, confirmed after ``confirm_count`` sightings that agree on one place seen from several
+  viewpoints (:mod:`turtlelib.estimation.landmark_tracks`, at the probability ``gate_associate``) or
+  dropped ``tentative_timeout`` after its first.
 
 A new matcher is one class with :meth:`Matcher.match` and one entry in :data:`MATCHERS`.
 """
@@ -29,7 +30,7 @@ from typing import NamedTuple, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from .landmark_tracks import LandmarkTracks
+from .landmark_tracks import LandmarkTracks, Sightings
 from .linearization import Linearization
 from .matching import (
     gate_2d,
@@ -80,6 +81,11 @@ class SlamView:
     @property
     def n_landmarks(self) -> int:
         return self._state.n_landmarks
+
+    @property
+    def robot_pose(self) -> NDArray[np.float64]:
+        """The robot's pose ``[x, y, theta]`` (3,) (m, rad), a copy."""
+        return self._state.mean[:ROBOT_DIM].copy()
 
     @property
     def map_full(self) -> bool:
@@ -318,8 +324,12 @@ class KnownIds:
 
 class GatedTracks:
     """Unknown association: gated matching (``gate_associate``), births beyond ``gate_new``, tentative tracks
-    confirmed after ``confirm_count`` sightings or dropped ``timeout_ns`` after their first (module
-    docstring)."""
+    confirmed after ``confirm_count`` sightings at one place from several viewpoints or dropped
+    ``timeout_ns`` after their first (module docstring).
+
+    Its plan notes the evidence of the observations it pairs with tentative landmarks (where the robot
+    stands, where each observation alone puts its landmark: :class:`Sightings`), and :meth:`sighted`
+    counts those of them the update fused."""
 
     tentative = True
 
@@ -327,13 +337,17 @@ class GatedTracks:
         self, matcher: Matcher, gate_associate: float, gate_new: float, confirm_count: int, timeout_ns: int
     ) -> None:
         self._matcher = matcher
+        self._gate_prob = gate_associate
         self._gate_associate = gate_2d(gate_associate)
         self._gate_new = gate_2d(gate_new)
         self._confirm_count, self._timeout_ns = confirm_count, timeout_ns
+        # the slots of the last plan's pairs with tentative landmarks and their evidence
+        self._evidence: tuple[NDArray[np.int64], Sightings] | None = None
 
     def plan(
         self, view: SlamView, z: NDArray[np.float64], R: NDArray[np.float64], ids: NDArray[np.int64] | None
     ) -> Plan:
+        self._evidence = None
         usable = view.model.usable(z).nonzero()[0]
         z_usable, R_usable = (z, R) if len(usable) == len(z) else (z[usable], R[usable])
         n_landmarks = view.n_landmarks
@@ -358,6 +372,7 @@ class GatedTracks:
                 landmark_ids[matched] = view.tracks.ids[slots]
                 status[matched] = MATCHED
             fused = (matched, slots, gating.nu[rows, columns], gating.H_robot[columns])
+            self._note_evidence(view, slots, z_usable[rows], R_usable[rows])
             H_landmark = gating.H_landmark[columns]
             # births: the unmatched observations beyond gate_new of every landmark (none when all matched)
             unmatched = (match < 0).nonzero()[0]
@@ -373,6 +388,22 @@ class GatedTracks:
         return Plan(
             status, landmark_ids, *fused, H_landmark, births, None, birth_confirmed=self._confirm_count == 1
         )
+
+    def _note_evidence(
+        self, view: SlamView, slots: NDArray[np.int64], z: NDArray[np.float64], R: NDArray[np.float64]
+    ) -> None:
+        """Keep the evidence of the observations ``z`` (m, 2) with noise ``R`` (m, 2, 2) paired with
+        ``slots`` (m,) that are tentative: the robot's position and ``m = g(q, z)`` with ``Sigma = G_z R
+        G_z^T`` (the inverse model at the pose before the update)."""
+        tentative = (~view.tracks.confirmed[slots]).nonzero()[0]
+        if len(tentative) == 0:
+            self._evidence = None
+            return
+        pose = view.robot_pose
+        p_map, _, G_z = view.model.inverse(pose, z[tentative])
+        covariance = G_z @ R[tentative] @ G_z.transpose(0, 2, 1)
+        view_xy = np.broadcast_to(pose[:2], p_map.shape)
+        self._evidence = (slots[tentative], Sightings(view_xy, p_map, covariance))
 
     def _associate(self, gating: Gating, R: NDArray[np.float64], view: SlamView) -> NDArray[np.int64]:
         """The column (or -1) for each observation: confirmed landmarks first; tentative landmarks only take
@@ -391,7 +422,15 @@ class GatedTracks:
         return match
 
     def sighted(self, tracks: LandmarkTracks, slots: NDArray[np.int64], stamp_ns: int) -> NDArray[np.int64]:
-        return tracks.sighted(slots, self._confirm_count, stamp_ns)
+        """Count the sightings of the fused tentative ``slots`` with the evidence the plan noted."""
+        evidence, self._evidence = self._evidence, None
+        if evidence is None:
+            return np.zeros(0, dtype=np.int64)
+        noted, sightings = evidence
+        fused = np.isin(noted, slots).nonzero()[0]
+        return tracks.sighted(
+            noted[fused], sightings.take(fused), self._confirm_count, self._gate_prob, stamp_ns
+        )
 
     def admits(
         self, view: SlamView, z: NDArray[np.float64], R: NDArray[np.float64], started: list[int]

@@ -80,7 +80,7 @@ from scipy.linalg.blas import dsyrk
 from scipy.linalg.lapack import dpotrf, dtrtrs
 
 from ..geometry.se2 import normalize_angle
-from .landmark_tracks import LandmarkTracks
+from .landmark_tracks import LandmarkTracks, Sightings
 from .matching import mahalanobis_d2
 
 ROBOT_DIM = 3
@@ -480,8 +480,9 @@ class SlamState:
         """Add a landmark ``m = g(q, z)`` (2,) from the inverse observation model; returns its slot.
 
         Its record: ``landmark_id`` (default: the tracks' ``next_id``), first seen at ``stamp_ns``,
-        ``confirmed`` or tentative. ``G_robot = dg/dq`` (2, 3), ``G_z = dg/dz`` (2, 2), ``R`` (2, 2) the
-        observation noise::
+        ``confirmed`` or tentative, with the evidence of this first sighting (the robot's position,
+        ``m`` and ``G_z R G_z^T``: :class:`turtlelib.estimation.landmark_tracks.Sightings`).
+        ``G_robot = dg/dq`` (2, 3), ``G_z = dg/dz`` (2, 2), ``R`` (2, 2) the observation noise::
 
             P_mx = G_robot P_qx              (cross-covariance with the pose and every landmark)
             P_mm = G_robot P_qq G_robot^T + G_z R G_z^T
@@ -504,7 +505,9 @@ class SlamState:
         self._lower_filled = False
         self._mean[new] = p_map
         landmark_id = self._tracks.next_id if landmark_id is None else landmark_id
-        self._tracks.append(np.array([landmark_id]), stamp_ns, confirmed)
+        # the first sighting's evidence: the robot's position, m, and Sigma = G_z R G_z^T
+        sighting = Sightings(self._mean[None, :2].copy(), p_map[None], (G_z @ R @ G_z.T)[None])
+        self._tracks.append(np.array([landmark_id]), stamp_ns, confirmed, sighting)
         self._n += 1
         return self._n - 1
 
