@@ -33,6 +33,7 @@ from functools import partial
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import sparse
 
 from ..geometry.se2 import Transform2D, normalize_angle, normalize_angles
 from ..util.validation import covariance, integer, positive, store
@@ -69,7 +70,7 @@ class GraphLinearisation:
     per edge), each edge's squared Mahalanobis distance ``s`` (E,) and kernel weight ``w`` (E,), the cost."""
 
     e: NDArray[np.float64]
-    J: object
+    J: sparse.csr_matrix
     s: NDArray[np.float64]
     w: NDArray[np.float64]
     cost: float
