@@ -14,7 +14,7 @@ ALLOWED = {
     "sensing": {"geometry", "util"},
     "mapping": {"sensing", "geometry", "util"},
     "estimation": {"motion", "sensing", "mapping", "geometry", "util"},
-    "smoothing": {"estimation", "motion", "mapping", "geometry", "util"},
+    "smoothing": {"estimation", "motion", "sensing", "mapping", "geometry", "util"},
 }
 
 

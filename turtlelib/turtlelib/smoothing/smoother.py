@@ -21,9 +21,8 @@ weights ``w_j = rho'(s_j) = 1 / (1 + s_j / c^2)`` and ``W`` their block diagonal
 
 ``J`` (M, N) is sparse (a motion factor touches two poses, an observation one pose and one landmark), so
 ``J^T W J`` is too; it is factorised by SuperLU (:func:`scipy.sparse.linalg.splu`) with a minimum-degree
-ordering of its symmetric pattern. ``x <- x (+) dx`` adds, with headings wrapped. A step that lowers ``F``
-is taken and ``lambda`` divided by 10, else ``lambda`` is multiplied by 10; the solver stops when a taken
-step lowers ``F`` by less than ``tolerance F`` or after ``max_iterations`` linearisations. It starts
+ordering of its symmetric pattern (:mod:`turtlelib.smoothing.sparse_least_squares`, with the damping
+schedule and the stopping rule). ``x <- x (+) dx`` adds, with headings wrapped. It starts
 without the kernel (plain Gauss-Newton least squares) from the warm start - the filter's estimates, whose
 early poses may be far from the smoothed ones - and turns the kernel on from that optimum, so that a
 distant warm start does not mark good observations as outliers.
@@ -44,12 +43,18 @@ from functools import cached_property, partial
 import numpy as np
 from numpy.typing import NDArray
 from scipy import sparse
-from scipy.sparse.linalg import splu
 
 from ..estimation.measurement_models import MeasurementModel
 from ..geometry.se2 import normalize_angle, normalize_angles
 from ..util.validation import integer, positive, store
 from .smoothing_problem import SmoothingProblem
+from .sparse_least_squares import (
+    factorise,
+    levenberg_marquardt,
+    relative_pose_residuals,
+    sparse_blocks,
+    whitening,
+)
 
 # right-hand sides per solve when the landmark covariance is recovered from the factorisation
 _COLUMNS_PER_SOLVE = 64
@@ -124,7 +129,7 @@ class SmoothedRun:
 
     @cached_property
     def _factor(self):
-        return _factorise(self.information)
+        return factorise(self.information)
 
 
 class Smoother:
@@ -172,7 +177,13 @@ class Smoother:
         iterations = 0
         widths = (self._config.kernel_width,) if near_optimum else (np.inf, self._config.kernel_width)
         for width in widths:
-            x, lin, used = system.minimise(x, width, self._config.max_iterations, self._config.tolerance)
+            x, lin, used = levenberg_marquardt(
+                partial(system.linearise, width=width),
+                system.retract,
+                x,
+                self._config.max_iterations,
+                self._config.tolerance,
+            )
             iterations += used
         return SmoothedRun(
             poses=x[: system.n_pose_vars].reshape(-1, 3),
@@ -209,9 +220,9 @@ class _System:
         self.n_pose_vars = 3 * problem.n_poses
         self.n_vars = self.n_pose_vars + 2 * n
         # whitening L^-1 of every factor's covariance S = L L^T
-        self.U_prior = _whitening(problem.prior_covariance[None])[0]
-        self.U_motion = _whitening(problem.motion_covariance)
-        self.U_obs = _whitening(problem.observation_covariance)
+        self.U_prior = whitening(problem.prior_covariance[None])[0]
+        self.U_motion = whitening(problem.motion_covariance)
+        self.U_obs = whitening(problem.observation_covariance)
         self.slot = slot
         n_motion = problem.n_poses - 1
         self.motion_row0 = 3
@@ -222,43 +233,20 @@ class _System:
         problem = self.problem
         q = x[: self.n_pose_vars].reshape(-1, 3)
         m = x[self.n_pose_vars :].reshape(-1, 2)
-        rows, cols, vals = [], [], []
-
-        def block(values: NDArray, row0: NDArray, col0: NDArray) -> None:
-            _, a, b = values.shape
-            rows.append(
-                (row0[:, None, None] + np.arange(a)[None, :, None] + np.zeros((1, 1, b), int)).ravel()
-            )
-            cols.append(
-                (col0[:, None, None] + np.zeros((1, a, 1), int) + np.arange(b)[None, None, :]).ravel()
-            )
-            vals.append(values.ravel())
-
+        # dense blocks (values, first row, first column) of the sparse Jacobian
+        blocks = []
         # start prior: r = q_0 (-) q0_bar, dr/dq_0 = I
         r_prior = _pose_difference(q[0], problem.prior_mean)
         e_prior = self.U_prior @ r_prior
-        block(self.U_prior[None], np.array([0]), np.array([0]))
+        blocks.append((self.U_prior[None], np.array([0]), np.array([0])))
 
-        # motion: r = [R_k^T (p_(k+1) - p_k) - delta_xy, theta_(k+1) - theta_k - delta_theta]
+        # motion: r = (q_k^-1 q_(k+1)) (-) delta_k (sparse_least_squares.relative_pose_residuals)
         q0, q1 = q[:-1], q[1:]
-        c, s = np.cos(q0[:, 2]), np.sin(q0[:, 2])
-        dx, dy = q1[:, 0] - q0[:, 0], q1[:, 1] - q0[:, 1]
-        r_motion = (
-            np.column_stack([c * dx + s * dy, -s * dx + c * dy, q1[:, 2] - q0[:, 2]]) - problem.motion_delta
-        )
-        r_motion[:, 2] = normalize_angles(r_motion[:, 2])
-        # dr/dq_k = [[-c, -s, -s dx + c dy], [s, -c, -c dx - s dy], [0, 0, -1]]
-        # dr/dq_(k+1) = blkdiag(R_k^T, 1)
-        A = np.zeros((len(q0), 3, 3))
-        A[:, 0, 0], A[:, 0, 1], A[:, 0, 2] = -c, -s, -s * dx + c * dy
-        A[:, 1, 0], A[:, 1, 1], A[:, 1, 2] = s, -c, -c * dx - s * dy
-        A[:, 2, 2] = -1.0
-        B = np.zeros((len(q0), 3, 3))
-        B[:, 0, 0], B[:, 0, 1], B[:, 1, 0], B[:, 1, 1], B[:, 2, 2] = c, s, -s, c, 1.0
+        r_motion, A, B = relative_pose_residuals(q0, q1, problem.motion_delta)
         e_motion = np.einsum("kij,kj->ki", self.U_motion, r_motion)
         motion_rows = self.motion_row0 + 3 * np.arange(len(q0))
-        block(self.U_motion @ A, motion_rows, 3 * np.arange(len(q0)))
-        block(self.U_motion @ B, motion_rows, 3 * np.arange(1, len(q0) + 1))
+        blocks.append((self.U_motion @ A, motion_rows, 3 * np.arange(len(q0))))
+        blocks.append((self.U_motion @ B, motion_rows, 3 * np.arange(1, len(q0) + 1)))
 
         # observations: r = z (-) h(q, m), dr/dq = -dh/dq, dr/dm = -dh/dm, all at once through the relative
         # model: h(q, m) = h(0, p) with p = R(theta)^T (m - p_body) the landmark in the body frame, so
@@ -281,43 +269,14 @@ class _System:
         weights = np.ones(K) if np.isinf(width) else 1.0 / (1.0 + s_obs / width**2)
         root_w = np.sqrt(weights)[:, None]
         obs_rows = self.obs_row0 + 2 * np.arange(K)
-        block(-(self.U_obs @ H_q) * root_w[:, :, None], obs_rows, 3 * problem.observation_pose)
-        block(-(self.U_obs @ H_m) * root_w[:, :, None], obs_rows, self.n_pose_vars + 2 * self.slot)
+        blocks.append((-(self.U_obs @ H_q) * root_w[:, :, None], obs_rows, 3 * problem.observation_pose))
+        blocks.append((-(self.U_obs @ H_m) * root_w[:, :, None], obs_rows, self.n_pose_vars + 2 * self.slot))
 
         e = np.concatenate([e_prior, e_motion.ravel(), (e_obs * root_w).ravel()])
-        J = sparse.csr_matrix(
-            (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-            shape=(self.n_rows, self.n_vars),
-        )
+        J = sparse_blocks(blocks, (self.n_rows, self.n_vars))
         robust = np.sum(s_obs) if np.isinf(width) else width**2 * np.sum(np.log1p(s_obs / width**2))
         cost = 0.5 * (e_prior @ e_prior + np.sum(e_motion * e_motion) + robust)
         return _Linearisation(e, J, weights, s_obs, float(cost))
-
-    def minimise(
-        self, x: NDArray[np.float64], width: float, max_iterations: int, tolerance: float
-    ) -> tuple[NDArray[np.float64], _Linearisation, int]:
-        """Levenberg-Marquardt from ``x`` with kernel width ``width`` (module docstring); returns the
-        optimum, the linearisation there and the number of linearisations."""
-        lam = 1e-6
-        lin = self.linearise(x, width)
-        for iteration in range(1, max_iterations + 1):
-            H = (lin.J.T @ lin.J).tocsc()
-            g = lin.J.T @ lin.e
-            diagonal = H.diagonal()
-            while True:
-                step = _factorise(H + sparse.diags(lam * diagonal, format="csc")).solve(-g)
-                candidate = self.retract(x, step)
-                trial = self.linearise(candidate, width)
-                if trial.cost < lin.cost:
-                    break
-                lam *= 10.0
-                if lam > 1e12:
-                    return x, lin, iteration
-            decrease = lin.cost - trial.cost
-            x, lin, lam = candidate, trial, max(lam / 10.0, 1e-12)
-            if decrease < tolerance * lin.cost:
-                return x, lin, iteration
-        return x, lin, max_iterations
 
     def retract(self, x: NDArray[np.float64], step: NDArray[np.float64]) -> NDArray[np.float64]:
         """``x (+) dx``: added, with the headings wrapped."""
@@ -326,24 +285,8 @@ class _System:
         return moved
 
 
-def _whitening(S: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``L^-1`` (k, d, d) for covariances ``S = L L^T`` (k, d, d): ``e = L^-1 r`` has unit covariance."""
-    L = np.linalg.cholesky(S)
-    return np.linalg.solve(L, np.broadcast_to(np.eye(S.shape[-1]), S.shape))
-
-
 def _pose_difference(q: NDArray[np.float64], q_ref: NDArray[np.float64]) -> NDArray[np.float64]:
     """``q (-) q_ref``: componentwise, the heading wrapped."""
     r = q - q_ref
     r[2] = normalize_angle(r[2])
     return r
-
-
-def _factorise(H: sparse.csc_matrix):
-    """SuperLU of the symmetric positive definite ``H``: a minimum-degree ordering of its pattern, the
-    diagonal as pivots (no row exchanges, so the ordering is kept). ValueError for a singular ``H`` (a
-    variable no factor constrains)."""
-    try:
-        return splu(H, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
-    except RuntimeError as error:
-        raise ValueError(f"the smoothing problem has no unique optimum ({error})") from error
