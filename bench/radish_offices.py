@@ -78,10 +78,15 @@ def main() -> None:
         help="cut the scans to this range, as an LDS-01 (3.5) would see the buildings",
     )
     parser.add_argument("--rate", type=float, default=None, help="the replay's --rate (default: as fast)")
+    parser.add_argument(
+        "--scan-registration", action="store_true", help="slam with scan_registration: true (LiDAR odometry)"
+    )
     args = parser.parse_args()  # fmt: skip
     args.out.mkdir(parents=True, exist_ok=True)
     params = args.out / "params.yaml"
-    params.write_text(yaml.safe_dump(PARAMS, sort_keys=False), encoding="utf-8")
+    slam = {**PARAMS["slam"]["ros__parameters"], "scan_registration": args.scan_registration}
+    chosen = {**PARAMS, "slam": {"ros__parameters": slam}}
+    params.write_text(yaml.safe_dump(chosen, sort_keys=False), encoding="utf-8")
     table = [HEADER]
     for folder in args.folders:
         name = folder.name

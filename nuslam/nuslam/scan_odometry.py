@@ -4,19 +4,19 @@ motion, with its covariance, is what the filter predicts with (`turtlelib.Measur
 
 Timing: a scan stamped ``t_s`` is registered once the motion input reaches ``t_s`` (its pose there is the
 prior's anchor; the input's poses are kept, interpolated between samples, ``INPUT_POSES`` of them), in stamp
-order; it waits for that up to ``MAX_WAITING_SCANS`` newer scans. While the LiDAR is quiet (no scan within
-``QUIET_NS`` of the newest input: not started, unplugged, a recording without scans) each input sample is the
-filter's next motion sample itself, so slam is then exactly as without registration. A registered scan's pose
-becomes the filter's next motion sample, so the filter runs at the newest registered scan, and the pose slam
-publishes at a newer input stamp ``t`` is the filter's at ``t_s`` moved on by the input's own motion from
-``t_s`` to ``t`` (:meth:`ScanOdometry.moved_on`).
+order; it waits for that up to ``MAX_WAITING_SCANS`` newer scans. While the LiDAR is quiet (none yet, or none
+stamped within ``QUIET_SCANS`` of its usual intervals and at least ``QUIET_MIN_NS`` of the newest input:
+unplugged, stopped) the input's samples, ``LAG_NS`` behind the newest, are the filter's next motion samples
+themselves, so slam is then exactly as without registration. A registered scan's pose becomes the filter's
+next motion sample, so the filter runs at the newest registered scan, and the pose slam publishes at a newer
+input stamp ``t`` is the filter's at ``t_s`` moved on by the input's own motion from ``t_s`` to ``t``
+(:meth:`ScanOdometry.moved_on`).
 
-`/diagnostics` (`slam: scan registration`): what the pose rests on since the last report - scans
-registered, scans degenerate (registered, but weak along a direction, as in a long corridor: WARN), scans
-on the motion input alone (nothing to match: no map yet, too few returns), input samples taken alone
-while the LiDAR is quiet - and, with the landmark
-observations fused in that time, ERROR when neither registration nor landmarks held the pose (the wheels
-alone: the estimate drifts as they do).
+`/diagnostics` (`slam: scan registration`): what the pose rests on since the last report - scans registered,
+scans degenerate (registered, but weak along a direction, as in a long corridor: WARN), scans on the motion
+input alone (nothing to match: no map yet, too few returns), input samples taken alone while the LiDAR is
+quiet - and, with the landmark observations fused in that time, ERROR when neither registration nor landmarks
+held the pose (the wheels alone: the estimate drifts as they do).
 """
 
 from __future__ import annotations
@@ -42,8 +42,14 @@ from turtlelib.util.timebase import NS_PER_S
 INPUT_POSES = 1000
 # Scans that may wait for the motion input to reach their stamp
 MAX_WAITING_SCANS = 10
-# The LiDAR is quiet when no scan is stamped within this of the newest motion input (ns): 5 scans at 5 Hz
-QUIET_NS = 1_000_000_000
+# The LiDAR is quiet when no scan is stamped within QUIET_SCANS of its own intervals (their running mean)
+# and at least QUIET_MIN_NS of the newest motion input; the input alone then drives the filter, LAG_NS
+# behind the newest input (the scans' transport delay may be up to this: a later scan must still register)
+QUIET_SCANS = 3.0
+QUIET_MIN_NS = 1_000_000_000
+LAG_NS = 500_000_000
+# weight of the newest interval in the running mean of the scans' intervals
+INTERVAL_GAIN = 0.1
 
 
 class ScanOdometry:
@@ -67,6 +73,7 @@ class ScanOdometry:
         self._waiting: deque[tuple[int, RangeScan, str]] = deque()
         self._last_ns: int | None = None
         self._newest_scan_ns: int | None = None
+        self._interval_ns: float | None = None
         self._restarting = False
         self.counts = {basis.value: 0 for basis in Basis} | {"input_only": 0, "skipped": 0}
         self._reported = dict(self.counts)
@@ -99,6 +106,11 @@ class ScanOdometry:
             self._skip(f"scan skipped by the scan registration: {error}")
             return
         self._waiting.append((t_ns, scan, msg.header.frame_id))
+        if self._newest_scan_ns is not None and t_ns > self._newest_scan_ns:
+            # running mean of the scans' intervals
+            interval_ns = t_ns - self._newest_scan_ns
+            mean = interval_ns if self._interval_ns is None else self._interval_ns
+            self._interval_ns = mean + INTERVAL_GAIN * (interval_ns - mean)
         self._newest_scan_ns = t_ns if self._newest_scan_ns is None else max(self._newest_scan_ns, t_ns)
         if len(self._waiting) > MAX_WAITING_SCANS:
             dropped_ns, _, _ = self._waiting.popleft()
@@ -110,8 +122,8 @@ class ScanOdometry:
     def reached(self) -> list[tuple[int, tuple[float, ...], bool]]:
         """The filter's next motion samples (`turtlelib.MeasuredPoses`), oldest first, as ``(t_ns, sample,
         restart)``: the waiting scans the motion input reaches, registered; and, while the LiDAR is quiet
-        (no scan stamped within ``QUIET_S`` of the newest input, or none yet), the newest input pose itself,
-        so that without scans slam goes on with its motion input alone. ``restart`` is True for the first
+        (module docstring), the input's pose ``LAG_NS`` before its newest (before any scan, the newest), so
+        that without scans slam goes on with its motion input alone. ``restart`` is True for the first
         after a :meth:`restart` of the clock (stamped no later than the last). A scan not after the last
         sample (but after a restart), or older than the kept input poses, is skipped with a throttled
         warning."""
@@ -122,16 +134,15 @@ class ScanOdometry:
             sample = self._sample(t_ns, scan, frame)
             if sample is not None:
                 samples.append(sample)
-        quiet = self._newest_scan_ns is None or (
-            latest is not None and latest - self._newest_scan_ns > QUIET_NS
-        )
-        if (
-            quiet
-            and not self._waiting
-            and latest is not None
-            and (self._last_ns is None or latest > self._last_ns)
-        ):
-            sample = self._sample(latest, None, None)
+        if latest is None or self._waiting:
+            return samples
+        if self._newest_scan_ns is None:
+            t_coast = latest  # no LiDAR yet: the input drives the filter at once
+        else:
+            quiet_ns = max(QUIET_MIN_NS, QUIET_SCANS * (self._interval_ns or 0.0))
+            t_coast = latest - LAG_NS if latest - self._newest_scan_ns > quiet_ns else None
+        if t_coast is not None and (self._last_ns is None or t_coast > self._last_ns):
+            sample = self._sample(t_coast, None, None)
             if sample is not None:
                 samples.append(sample)
         return samples

@@ -8,7 +8,8 @@ covariance given ``T_k-1`` are::
     T_prior = T_k-1 U_k,     P_prior = Q(T_k-1, log U_k, t_k - t_k-1) + P_floor
 
 (``Q`` the motion input's :class:`~turtlelib.motion.motion_models.TwistNoise`; ``P_floor`` keeps a robot
-that stands still from pinning the registration exactly). After the input restarted (a gap in it, another
+that stands still from pinning the registration exactly; after steps on the input alone, ``Q`` is what
+they accumulated since the last registered scan). After the input restarted (a gap in it, another
 odometry frame, a clock that jumped: :meth:`LidarOdometry.forget_input`) its motion to the next scan is
 taken only if a robot within its speed bounds could have made it in the time (``|U_xy| <= v_max dt +
 s_m``, ``|U_theta| <= omega_max dt + s_rad``: a gap in an odometry that goes on in its frame), else the
@@ -158,6 +159,8 @@ class LidarOdometry:
         self._keyframe_pose: Transform2D | None = None
         self._map: LocalMap | None = None
         self._last: tuple[int, Transform2D, Transform2D] | None = None
+        # the covariance of the motion since the last registered scan (the next registration's prior)
+        self._P_since = np.zeros((3, 3))
         self._start = Transform2D()
 
     def forget_input(self) -> None:
@@ -173,6 +176,7 @@ class LidarOdometry:
         self._map = None
         self._last = None
         self._input_restarted = False
+        self._P_since = np.zeros((3, 3))
         self._start = Transform2D() if T_odom_body is None else T_odom_body
 
     def step(
@@ -219,13 +223,20 @@ class LidarOdometry:
             self._input_restarted = False
         T_prior = T_prev @ U
         P_motion = P_motion + self.noise.covariance(T_prev, U.log(), max(dt_s, 0.0))
+        # the uncertainty since the last registered scan (steps on the input alone in between):
+        # P_acc' = G P_acc G^T + P_motion,  G = [[1, 0, -dy], [0, 1, dx], [0, 0, 1]]
+        G = np.eye(3)
+        G[0, 2], G[1, 2] = -(T_prior.y - T_prev.y), T_prior.x - T_prev.x
+        P_since = G @ self._P_since @ G.T + P_motion
         registration = None
         if self._map is not None and len(points) >= self.config.registration.min_points:
             registration = register(
-                points, self._map, T_prior, P_motion + _PRIOR_FLOOR, self.config.registration
+                points, self._map, T_prior, P_since + _PRIOR_FLOOR, self.config.registration
             )
         if registration is None:
+            self._P_since = P_since
             return OdometryStep(t_ns, T_prior, P_motion, Basis.MOTION, None, t_ns - t_prev)
+        self._P_since = np.zeros((3, 3))
         basis = Basis.DEGENERATE if registration.degenerate else Basis.REGISTERED
         return OdometryStep(
             t_ns, registration.T_map_body, registration.Sigma, basis, registration, t_ns - t_prev
