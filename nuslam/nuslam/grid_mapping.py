@@ -63,10 +63,9 @@ from rclpy.qos import QoSProfile, qos_profile_sensor_data
 from sensor_msgs.msg import LaserScan
 
 from nuturtle_ros_common.conversions import (
+    mounted_range_scan,
     pose_from_transform,
-    range_scan_from_message,
     stamp_from_nanoseconds,
-    stamp_nanoseconds,
 )
 from nuturtle_ros_common.diagnostics import OK, WARN, status
 from nuturtle_ros_common.ros_params import declare_dataclass
@@ -213,13 +212,7 @@ class GridMapping:
     def on_scan(self, msg: LaserScan) -> None:
         """Queue the scan for slam's pose at its stamp (inserted now if slam's poses already reach it)."""
         try:
-            t_ns = stamp_nanoseconds(msg.header.stamp)
-            T_body_scan = self._T_body_from.get(msg.header.frame_id)
-            if T_body_scan is None:
-                raise ValueError(
-                    f"it is in frame {msg.header.frame_id!r}, expected one of {sorted(self._T_body_from)}"
-                )
-            scan = range_scan_from_message(msg)
+            t_ns, scan, T_body_scan = mounted_range_scan(msg, self._T_body_from)
         except ValueError as error:
             self._skip(f"scan skipped by the occupancy grid: {error}")
             return

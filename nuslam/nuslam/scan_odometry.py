@@ -29,7 +29,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from numpy.typing import NDArray
 from sensor_msgs.msg import LaserScan
 
-from nuturtle_ros_common.conversions import range_scan_from_message, stamp_nanoseconds
+from nuturtle_ros_common.conversions import mounted_range_scan
 from nuturtle_ros_common.diagnostics import ERROR, OK, WARN, status
 from nuturtle_ros_common.throttle import SourceWarnings
 from turtlelib import Transform2D, TwistNoise
@@ -70,7 +70,7 @@ class ScanOdometry:
         self.noise = noise
         self._warnings = warnings
         self._inputs = PoseBuffer(INPUT_POSES)
-        self._waiting: deque[tuple[int, RangeScan, str]] = deque()
+        self._waiting: deque[tuple[int, RangeScan, Transform2D]] = deque()
         self._last_ns: int | None = None
         self._newest_scan_ns: int | None = None
         self._interval_ns: float | None = None
@@ -96,16 +96,11 @@ class ScanOdometry:
     def on_scan(self, msg: LaserScan) -> None:
         """Queue a scan (skipped with a throttled warning when it cannot be read)."""
         try:
-            t_ns = stamp_nanoseconds(msg.header.stamp)
-            if msg.header.frame_id not in self._T_body_from:
-                raise ValueError(
-                    f"it is in frame {msg.header.frame_id!r}, expected one of {sorted(self._T_body_from)}"
-                )
-            scan = range_scan_from_message(msg)
+            t_ns, scan, T_body_scan = mounted_range_scan(msg, self._T_body_from)
         except ValueError as error:
             self._skip(f"scan skipped by the scan registration: {error}")
             return
-        self._waiting.append((t_ns, scan, msg.header.frame_id))
+        self._waiting.append((t_ns, scan, T_body_scan))
         if self._newest_scan_ns is not None and t_ns > self._newest_scan_ns:
             # running mean of the scans' intervals
             interval_ns = t_ns - self._newest_scan_ns
@@ -130,8 +125,8 @@ class ScanOdometry:
         samples = []
         latest = self._inputs.latest_time_ns
         while self._waiting and latest is not None and self._waiting[0][0] <= latest:
-            t_ns, scan, frame = self._waiting.popleft()
-            sample = self._sample(t_ns, scan, frame)
+            t_ns, scan, T_body_scan = self._waiting.popleft()
+            sample = self._sample(t_ns, scan, T_body_scan)
             if sample is not None:
                 samples.append(sample)
         if latest is None or self._waiting:
@@ -147,17 +142,19 @@ class ScanOdometry:
                 samples.append(sample)
         return samples
 
-    def _sample(self, t_ns: int, scan: RangeScan | None, frame: str | None) -> tuple[int, tuple, bool] | None:
-        """The LiDAR odometry's step at ``t_ns`` (registering ``scan``, or the input alone for None) as a
-        motion sample, counted; None (skipped with a warning) when it cannot be one."""
+    def _sample(
+        self, t_ns: int, scan: RangeScan | None, T_body_scan: Transform2D | None
+    ) -> tuple[int, tuple, bool] | None:
+        """The LiDAR odometry's step at ``t_ns`` (registering ``scan`` from the mount ``T_body_scan``, or the
+        input alone for None) as a motion sample, counted; None (skipped with a warning) when it cannot be
+        one."""
         T_input_body = self._inputs.at(t_ns)
         went_back = self._last_ns is not None and t_ns <= self._last_ns
         if T_input_body is None or (went_back and not self._restarting):
             self._skip(f"scan at {t_ns} ns skipped by the scan registration: older than the last one")
             return None
-        mount = None if frame is None else self._T_body_from[frame]
         try:
-            step = self._odometry.step(t_ns, T_input_body, scan, mount)
+            step = self._odometry.step(t_ns, T_input_body, scan, T_body_scan)
         except (ValueError, np.linalg.LinAlgError) as error:
             self._skip(f"scan at {t_ns} ns skipped by the scan registration: {error}")
             return None

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 
 import numpy as np
 from builtin_interfaces.msg import Time
@@ -156,3 +157,15 @@ def range_scan_from_message(msg: LaserScan) -> RangeScan:
     if len(msg.intensities) not in (0, len(ranges)):
         raise ValueError(f"{len(msg.intensities)} intensities for {len(ranges)} ranges")
     return RangeScan(ranges, msg.angle_min, msg.angle_increment, msg.range_min, msg.range_max)
+
+
+def mounted_range_scan(
+    msg: LaserScan, T_body_from: Mapping[str, Transform2D]
+) -> tuple[int, RangeScan, Transform2D]:
+    """``(stamp_ns, scan, T_body_frame)`` of a LaserScan in one of the frames of ``T_body_from`` (frame id ->
+    the LiDAR's mount in the body frame); ValueError for another frame or what
+    :func:`range_scan_from_message` refuses."""
+    T_body_frame = T_body_from.get(msg.header.frame_id)
+    if T_body_frame is None:
+        raise ValueError(f"it is in frame {msg.header.frame_id!r}, expected one of {sorted(T_body_from)}")
+    return stamp_nanoseconds(msg.header.stamp), range_scan_from_message(msg), T_body_frame

@@ -42,7 +42,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..geometry.se2 import Transform2D, normalize_angle
-from ..motion.motion_models import TwistNoise
+from ..motion.motion_models import TwistNoise, upper_triangle
 from ..motion.motion_signals import Sample
 from ..sensing.range_scan import RangeScan
 from ..sensing.scan_registration import (
@@ -107,19 +107,8 @@ class OdometryStep:
     @property
     def sample(self) -> Sample:
         """This step as a :class:`~turtlelib.motion.motion_signals.MeasuredPoses` sample."""
-        T, S = self.T_odom_body, self.Sigma
-        return (
-            T.x,
-            T.y,
-            T.theta,
-            float(self.interval_ns),
-            S[0, 0],
-            S[0, 1],
-            S[0, 2],
-            S[1, 1],
-            S[1, 2],
-            S[2, 2],
-        )
+        T = self.T_odom_body
+        return T.x, T.y, T.theta, float(self.interval_ns), *upper_triangle(self.Sigma)
 
 
 def scan_points(scan: RangeScan, T_body_lidar: Transform2D) -> NDArray[np.float64]:

@@ -354,11 +354,20 @@ class MeasuredMotion:
     @staticmethod
     def _unpack(u: tuple) -> tuple[Transform2D, NDArray[np.float64]]:
         names = ("dx_m", "dy_m", "dtheta_rad", "dt_ns", "s_xx", "s_xy", "s_xtheta", "s_yy", "s_ytheta")
-        dx_m, dy_m, dtheta_rad, _, s_xx, s_xy, s_xt, s_yy, s_yt, s_tt = _unpack(u, (*names, "s_thetatheta"))
-        Sigma_u = np.array([[s_xx, s_xy, s_xt], [s_xy, s_yy, s_yt], [s_xt, s_yt, s_tt]])
-        return Transform2D(dx_m, dy_m, dtheta_rad), covariance(
-            "motion covariance", Sigma_u, (3, 3), definite=False
-        )
+        dx_m, dy_m, dtheta_rad, _, *upper = _unpack(u, (*names, "s_thetatheta"))
+        Sigma_u = covariance("motion covariance", from_upper_triangle(upper), (3, 3), definite=False)
+        return Transform2D(dx_m, dy_m, dtheta_rad), Sigma_u
+
+
+def upper_triangle(S: NDArray[np.float64]) -> tuple[float, ...]:
+    """The upper triangle ``(s_xx, s_xy, s_xtheta, s_yy, s_ytheta, s_thetatheta)`` of a symmetric (3, 3)."""
+    return float(S[0, 0]), float(S[0, 1]), float(S[0, 2]), float(S[1, 1]), float(S[1, 2]), float(S[2, 2])
+
+
+def from_upper_triangle(upper: Sequence[float]) -> NDArray[np.float64]:
+    """The symmetric (3, 3) of its upper triangle (:func:`upper_triangle`)."""
+    s_xx, s_xy, s_xt, s_yy, s_yt, s_tt = upper
+    return np.array([[s_xx, s_xy, s_xt], [s_xy, s_yy, s_yt], [s_xt, s_yt, s_tt]])
 
 
 def rotation_block(theta_rad: float) -> NDArray[np.float64]:

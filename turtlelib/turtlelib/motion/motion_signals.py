@@ -32,11 +32,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
-import numpy as np
-
 from ..geometry.se2 import Transform2D, integrate_twist
 from ..util.validation import finite_real, integer
-from .motion_models import rotation_block
+from .motion_models import from_upper_triangle, rotation_block, upper_triangle
 
 Sample = tuple[float, ...]
 TimedSample = tuple[int, Sample]
@@ -122,23 +120,10 @@ class MeasuredPoses:
             return None
         interval_ns = s_to[3]
         fraction = 1.0 if interval_ns <= 0.0 else dt_ns / interval_ns
-        s_xx, s_xy, s_xt, s_yy, s_yt, s_tt = s_to[4:]
-        Sigma = fraction * np.array([[s_xx, s_xy, s_xt], [s_xy, s_yy, s_yt], [s_xt, s_yt, s_tt]])
+        Sigma = fraction * from_upper_triangle(s_to[4:])
         B = rotation_block(s_from[2])
         # B(theta_from)^T Sigma B(theta_from)
-        S = B.T @ Sigma @ B
-        return (
-            T_delta.x,
-            T_delta.y,
-            T_delta.theta,
-            dt_ns,
-            S[0, 0],
-            S[0, 1],
-            S[0, 2],
-            S[1, 1],
-            S[1, 2],
-            S[2, 2],
-        )
+        return T_delta.x, T_delta.y, T_delta.theta, dt_ns, *upper_triangle(B.T @ Sigma @ B)
 
 
 @dataclass(frozen=True)
