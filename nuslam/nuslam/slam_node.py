@@ -458,11 +458,7 @@ class SlamNode(Node):
     def _on_scan(self, msg: LaserScan) -> None:
         """A scan for the registration (``scan_registration``): registered once the motion reaches it."""
         self.scan_odometry.on_scan(msg)
-        try:
-            applied = self._add_registered_scans()
-        except (ValueError, np.linalg.LinAlgError) as error:
-            self._warnings.warn("scan", f"scan registration skipped: {error}")
-            return
+        applied = self._add_registered_scans()
         self.grid.insert_reached()
         if applied:
             self._publish_map(stamp_from_nanoseconds(applied[-1].t_ns))
@@ -472,10 +468,14 @@ class SlamNode(Node):
         restart of the input restarts the timeline); the measurements they apply."""
         applied = []
         for t_ns, sample, restart in self.scan_odometry.reached():
-            if restart:
-                self.timeline.restart(t_ns, sample)
-            else:
-                applied += self._timed_add_motion(t_ns, sample)
+            try:
+                if restart:
+                    self.timeline.restart(t_ns, sample)
+                else:
+                    applied += self._timed_add_motion(t_ns, sample)
+            except (ValueError, np.linalg.LinAlgError) as error:
+                # the timeline changed nothing; the next sample moves on from the last it took
+                self._warnings.warn("scan", f"registered scan at {t_ns} ns skipped by the filter: {error}")
         return applied
 
     def _statuses(self, now_ns: int) -> list[DiagnosticStatus]:
