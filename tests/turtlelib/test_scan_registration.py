@@ -185,3 +185,21 @@ def test_scans_must_come_in_time_order():
     odometry.step(10, Transform2D(), scan, Transform2D())
     with pytest.raises(ValueError, match="not after the previous scan's"):
         odometry.step(10, Transform2D(), scan, Transform2D())
+
+
+def test_a_step_adds_the_priors_share_and_at_a_keyframe_the_maps_too():
+    """Sigma = Sigma (H_s + P^-1) Sigma: a keyframe's step adds all of it, another scan's only the prior's
+    share Sigma P^-1 Sigma = Sigma - Sigma H_s Sigma, less than all of it."""
+    odometry = LidarOdometry(LidarOdometryConfig(), NOISE)
+    rng = np.random.default_rng(4)
+    T = Transform2D(-1.5, 0.0, 0.0)
+    steps = []
+    for k in range(8):  # 4.4 cm a scan: a keyframe every 0.2 m
+        scan = LIDAR.range_scan(simulate_scan(T, PILLAR, ROOM, LIDAR, rng))
+        steps.append(odometry.step(k * 200_000_000, T, scan, Transform2D()))
+        T = T @ Transform2D(0.044, 0.0, 0.0)
+    keyframe, other = steps[5], steps[2]  # 0.22 m and 0.088 m from the first keyframe
+    np.testing.assert_allclose(keyframe.Sigma, keyframe.registration.Sigma, rtol=1e-6, atol=1e-12)
+    Sigma, H = other.registration.Sigma, other.registration.H_scan
+    np.testing.assert_allclose(other.Sigma, Sigma - Sigma @ H @ Sigma, rtol=1e-6, atol=1e-12)
+    assert np.trace(other.Sigma) < 0.5 * np.trace(Sigma)

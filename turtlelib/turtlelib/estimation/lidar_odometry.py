@@ -24,10 +24,15 @@ the prior: the estimate is then the motion input's own. A scan that moved ``keyf
 them, thinned to one point per ``voxel_m`` cell.
 
 Each scan gives a sample of :class:`turtlelib.motion.motion_signals.MeasuredPoses` for the filter's
-timeline: the pose ``T_k`` and the covariance ``Sigma_k`` of the motion since ``t_k-1`` (map frame, additive
-``[x, y, theta]``), so the filter's prediction from scan to scan is the registered motion with its
-registered uncertainty (:class:`turtlelib.motion.motion_models.MeasuredMotion`): independent increments,
-which is what a chain of registrations given the previous pose is.
+timeline: the pose ``T_k`` and the covariance of the motion since ``t_k-1`` (map frame, additive ``[x, y,
+theta]``), so the filter predicts from scan to scan with the registered motion
+(:class:`turtlelib.motion.motion_models.MeasuredMotion`) as independent increments. Scans registered to the
+same keyframes are not independent: their errors share the map's anchor, which moves only when a keyframe is
+added. So the registration's covariance ``Sigma = Sigma (H_s + P_prior^-1) Sigma`` is split into the prior's
+share ``Sigma P_prior^-1 Sigma`` (what the scan left to the motion input: it accrues at every scan, all of it
+along a degenerate direction) and the map's ``Sigma H_s Sigma``, added only when the scan becomes a keyframe;
+a step on the motion input alone carries its whole ``P``. (Still underconfident in a small room: see
+docs/benchmarks.md, "Scan registration".)
 """
 
 from __future__ import annotations
@@ -94,8 +99,9 @@ class Basis(enum.Enum):
 @dataclass(frozen=True)
 class OdometryStep:
     """One scan's result: its stamp, its pose ``T_odom_body`` (frame ``lidar_odom``), the covariance
-    ``Sigma`` (3, 3) of the motion since the previous scan, what it rests on (``basis``) and the
-    registration (None for ``Basis.MOTION``)."""
+    ``Sigma`` (3, 3) the step adds to the pose's (module docstring: the registration's prior share, and its
+    map share at a keyframe), what it rests on (``basis``) and the registration (None for
+    ``Basis.MOTION``)."""
 
     t_ns: int
     T_odom_body: Transform2D
@@ -227,19 +233,26 @@ class LidarOdometry:
             return OdometryStep(t_ns, T_prior, P_motion, Basis.MOTION, None, t_ns - t_prev)
         self._P_since = np.zeros((3, 3))
         basis = Basis.DEGENERATE if registration.degenerate else Basis.REGISTERED
-        return OdometryStep(
-            t_ns, registration.T_map_body, registration.Sigma, basis, registration, t_ns - t_prev
-        )
+        # Sigma = Sigma (H_s + P^-1) Sigma: the prior's share accrues at every scan, the map's only when the
+        # scan becomes a keyframe (the map's anchor moves with it)
+        Sigma, P_inv = registration.Sigma, np.linalg.inv(P_since + _PRIOR_FLOOR)
+        Sigma_step = Sigma @ P_inv @ Sigma
+        if len(points) and self._is_keyframe(registration.T_map_body):
+            Sigma_step = Sigma_step + Sigma @ registration.H_scan @ Sigma
+        Sigma_step = 0.5 * (Sigma_step + Sigma_step.T)
+        return OdometryStep(t_ns, registration.T_map_body, Sigma_step, basis, registration, t_ns - t_prev)
+
+    def _is_keyframe(self, T_odom_body: Transform2D) -> bool:
+        """True when a scan at ``T_odom_body`` moved or turned far enough from the newest keyframe."""
+        if self._keyframe_pose is None:
+            return True
+        moved = self._keyframe_pose.inverse() @ T_odom_body
+        far = math.hypot(moved.x, moved.y) >= self.config.keyframe_distance_m
+        return far or abs(normalize_angle(moved.theta)) >= self.config.keyframe_angle_rad
 
     def _keep(self, T_odom_body: Transform2D, points: NDArray[np.float64]) -> None:
         """Make the scan a keyframe if it moved or turned far enough from the newest one."""
-        if self._keyframe_pose is not None:
-            moved = self._keyframe_pose.inverse() @ T_odom_body
-            far = math.hypot(moved.x, moved.y) >= self.config.keyframe_distance_m
-            turned = abs(normalize_angle(moved.theta)) >= self.config.keyframe_angle_rad
-            if not (far or turned):
-                return
-        if len(points) == 0:
+        if len(points) == 0 or not self._is_keyframe(T_odom_body):
             return
         self._keyframe_pose = T_odom_body
         self._keyframes.append(T_odom_body @ points)
