@@ -149,7 +149,6 @@ def drive(walls, circles, wheel_bias: float, steps: int = 40):
     rng = np.random.default_rng(3)
     truth, inputs, registered, bases = [], [], [], []
     T_true, T_input = Transform2D(-1.5, 0.0, 0.0), Transform2D(-1.5, 0.0, 0.0)
-    odometry.restart(T_input)
     U = Transform2D(0.05, 0.0, 0.02)
     for k in range(steps):
         scan = LIDAR.range_scan(simulate_scan(T_true, circles, walls, LIDAR, rng))

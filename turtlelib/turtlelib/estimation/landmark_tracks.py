@@ -243,23 +243,25 @@ class LandmarkTracks:
         slots = (self._confirmed[: self._n] == confirmed).nonzero()[0]
         return slots[np.argsort(self._ids[slots], kind="stable")]
 
+    # the per-slot arrays, besides the columns
+    _SLOT_ARRAYS = (
+        "_ids",
+        "_seen",
+        "_born",
+        "_sighted_ns",
+        "_last_view_xy",
+        "_confirmed",
+        "_views",
+        "_first_view_xy",
+        "_baseline",
+        "_information",
+        "_information_mean",
+        "_information_square",
+    )
+
     def _arrays(self) -> list[NDArray]:
-        """Every per-slot array, full capacity."""
-        return [
-            self._ids,
-            self._seen,
-            self._born,
-            self._sighted_ns,
-            self._last_view_xy,
-            self._confirmed,
-            self._views,
-            self._first_view_xy,
-            self._baseline,
-            self._information,
-            self._information_mean,
-            self._information_square,
-            *self._columns.values(),
-        ]
+        """Every per-slot array, full capacity: ``_SLOT_ARRAYS``, then the columns."""
+        return [getattr(self, name) for name in self._SLOT_ARRAYS] + list(self._columns.values())
 
     def _reserve(self, n: int) -> None:
         """Grow the arrays (at least doubling) so that ``n`` slots fit."""
@@ -271,18 +273,6 @@ class LandmarkTracks:
             array = np.zeros((capacity, *old.shape[1:]), dtype=old.dtype)
             array[: self._n] = old[: self._n]
             grown.append(array)
-        (
-            self._ids,
-            self._seen,
-            self._born,
-            self._sighted_ns,
-            self._last_view_xy,
-            self._confirmed,
-            self._views,
-            self._first_view_xy,
-            self._baseline,
-            self._information,
-            self._information_mean,
-            self._information_square,
-        ) = grown[:12]
-        self._columns = dict(zip(self._columns, grown[12:], strict=True))
+        for name, array in zip(self._SLOT_ARRAYS, grown, strict=False):
+            setattr(self, name, array)
+        self._columns = dict(zip(self._columns, grown[len(self._SLOT_ARRAYS) :], strict=True))

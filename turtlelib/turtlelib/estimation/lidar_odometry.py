@@ -156,23 +156,11 @@ class LidarOdometry:
         self._last: tuple[int, Transform2D, Transform2D] | None = None
         # the covariance of the motion since the last registered scan (the next registration's prior)
         self._P_since = np.zeros((3, 3))
-        self._start = Transform2D()
 
     def forget_input(self) -> None:
         """The motion input restarted: its motion to the next scan is taken only if plausible (module
         docstring); that scan's stamp may be any."""
         self._input_restarted = self._last is not None
-
-    def restart(self, T_odom_body: Transform2D | None = None) -> None:
-        """Forget the local map and the last scan (a reset, a relocalization, a time jump): the next scan
-        starts again from ``T_odom_body`` (identity by default)."""
-        self._keyframes.clear()
-        self._keyframe_pose = None
-        self._map = None
-        self._last = None
-        self._input_restarted = False
-        self._P_since = np.zeros((3, 3))
-        self._start = Transform2D() if T_odom_body is None else T_odom_body
 
     def step(
         self,
@@ -191,7 +179,8 @@ class LidarOdometry:
             mount = Transform2D() if T_body_lidar is None else T_body_lidar
             points = voxel_centroids(scan_points(scan, mount), self.config.registration.voxel_m)
         if self._last is None:
-            step = OdometryStep(t_ns, self._start, np.zeros((3, 3)), Basis.MOTION, None, 0)
+            # the first scan: frame lidar_odom starts as the input's own
+            step = OdometryStep(t_ns, T_input_body, np.zeros((3, 3)), Basis.MOTION, None, 0)
         else:
             step = self._registered(t_ns, T_input_body, points)
         self._last = (t_ns, step.T_odom_body, T_input_body)
@@ -233,13 +222,12 @@ class LidarOdometry:
             return OdometryStep(t_ns, T_prior, P_motion, Basis.MOTION, None, t_ns - t_prev)
         self._P_since = np.zeros((3, 3))
         basis = Basis.DEGENERATE if registration.degenerate else Basis.REGISTERED
-        # Sigma = Sigma (H_s + P^-1) Sigma: the prior's share accrues at every scan, the map's only when the
-        # scan becomes a keyframe (the map's anchor moves with it)
-        Sigma, P_inv = registration.Sigma, np.linalg.inv(P_since + _PRIOR_FLOOR)
-        Sigma_step = Sigma @ P_inv @ Sigma
-        if len(points) and self._is_keyframe(registration.T_map_body):
-            Sigma_step = Sigma_step + Sigma @ registration.H_scan @ Sigma
-        Sigma_step = 0.5 * (Sigma_step + Sigma_step.T)
+        # Sigma = Sigma (H_s + P^-1) Sigma: the prior's share Sigma P^-1 Sigma = Sigma - Sigma H_s Sigma
+        # accrues at every scan, all of Sigma when the scan becomes a keyframe (the map's anchor moves)
+        Sigma_step = registration.Sigma
+        if not self._is_keyframe(registration.T_map_body):
+            Sigma_step = Sigma_step - Sigma_step @ registration.H_scan @ Sigma_step
+            Sigma_step = 0.5 * (Sigma_step + Sigma_step.T)
         return OdometryStep(t_ns, registration.T_map_body, Sigma_step, basis, registration, t_ns - t_prev)
 
     def _is_keyframe(self, T_odom_body: Transform2D) -> bool:
