@@ -4,19 +4,23 @@ motion, with its covariance, is what the filter predicts with (`turtlelib.Measur
 
 Timing: a scan stamped ``t_s`` is registered once the motion input reaches ``t_s`` (its pose there is the
 prior's anchor; the input's poses are kept, interpolated between samples, ``INPUT_POSES`` of them), in stamp
-order; it waits for that up to ``MAX_WAITING_SCANS`` newer scans. While the LiDAR is quiet (none yet, or none
-stamped within ``QUIET_SCANS`` of its usual intervals and at least ``QUIET_MIN_NS`` of the newest input:
-unplugged, stopped) the input's samples, ``LAG_NS`` behind the newest, are the filter's next motion samples
-themselves, so slam is then exactly as without registration. A registered scan's pose becomes the filter's
-next motion sample, so the filter runs at the newest registered scan, and the pose slam publishes at a newer
-input stamp ``t`` is the filter's at ``t_s`` moved on by the input's own motion from ``t_s`` to ``t``
+order; it waits for that up to ``MAX_WAITING_SCANS`` newer scans. A scan older than the filter's newest
+sample is skipped, but for the first ones (the input drives the filter at once until the first scan comes,
+and a LiDAR's messages often arrive after the wheels'): they start the local map
+(`turtlelib.LidarOdometry.seed_map`). While the LiDAR is quiet (none yet, or none stamped within
+``QUIET_SCANS`` of its usual intervals and at least ``QUIET_MIN_NS`` of the newest input: unplugged,
+stopped) the input's samples, ``LAG_NS`` behind the newest, are the filter's next motion samples themselves,
+so slam is then exactly as without registration. A registered scan's pose becomes the filter's next motion
+sample, so the filter runs at the newest registered scan, and the pose slam publishes at a newer input stamp
+``t`` is the filter's at ``t_s`` moved on by the input's own motion from ``t_s`` to ``t``
 (:meth:`ScanOdometry.moved_on`).
 
 `/diagnostics` (`slam: scan registration`): what the pose rests on since the last report - scans registered,
 scans degenerate (registered, but weak along a direction, as in a long corridor: WARN), scans on the motion
 input alone (nothing to match: no map yet, too few returns), input samples taken alone while the LiDAR is
-quiet - and, with the landmark observations fused in that time, ERROR when neither registration nor landmarks
-held the pose (the wheels alone: the estimate drifts as they do).
+quiet, scans that only started the map (seeded) - and, with the landmark observations fused in that time,
+ERROR when neither registration nor landmarks held the pose (the wheels alone: the estimate drifts as they
+do).
 """
 
 from __future__ import annotations
@@ -75,7 +79,7 @@ class ScanOdometry:
         self._newest_scan_ns: int | None = None
         self._interval_ns: float | None = None
         self._restarting = False
-        self.counts = {basis.value: 0 for basis in Basis} | {"input_only": 0, "skipped": 0}
+        self.counts = {basis.value: 0 for basis in Basis} | {"input_only": 0, "seeded": 0, "skipped": 0}
         self._reported = dict(self.counts)
         self.last: OdometryStep | None = None
 
@@ -85,13 +89,15 @@ class ScanOdometry:
 
     def restart(self) -> None:
         """The motion input restarted (a gap, another odometry frame, a clock that jumped back): forget its
-        poses and the waiting scans; the next scan is registered to the kept local map from the last
-        registered pose (`turtlelib.LidarOdometry.forget_input`), and restarts the filter's timeline if
-        its stamp is not after the last one's."""
+        poses and the waiting scans; the next scan (or, until one comes, the input's next pose) is registered
+        to the kept local map from the last registered pose (`turtlelib.LidarOdometry.forget_input`), and
+        restarts the filter's timeline if its stamp is not after the last one's."""
         self._inputs.clear()
         self._waiting.clear()
         self._odometry.forget_input()
         self._restarting = True
+        # the scans' stamps on the old time base say nothing of the LiDAR on the new one
+        self._newest_scan_ns = None
 
     def on_scan(self, msg: LaserScan) -> None:
         """Queue a scan (skipped with a throttled warning when it cannot be read)."""
@@ -136,7 +142,7 @@ class ScanOdometry:
         else:
             quiet_ns = max(QUIET_MIN_NS, QUIET_SCANS * (self._interval_ns or 0.0))
             t_coast = latest - LAG_NS if latest - self._newest_scan_ns > quiet_ns else None
-        if t_coast is not None and (self._last_ns is None or t_coast > self._last_ns):
+        if t_coast is not None and (self._last_ns is None or t_coast > self._last_ns or self._restarting):
             sample = self._sample(t_coast, None, None)
             if sample is not None:
                 samples.append(sample)
@@ -151,6 +157,11 @@ class ScanOdometry:
         T_input_body = self._inputs.at(t_ns)
         went_back = self._last_ns is not None and t_ns <= self._last_ns
         if T_input_body is None or (went_back and not self._restarting):
+            # the first scans, when the input alone drove the filter on past them, still start the map
+            if scan is not None and T_input_body is not None:
+                if self._odometry.seed_map(t_ns, T_input_body, scan, T_body_scan):
+                    self.counts["seeded"] += 1
+                    return None
             self._skip(f"scan at {t_ns} ns skipped by the scan registration: older than the last one")
             return None
         try:

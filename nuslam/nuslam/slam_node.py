@@ -246,7 +246,7 @@ class SlamNodeConfig:
     wheel_noise: float = WHEEL_NOISE
     map_file: str = ""
     observation_timeout: float = 3.0
-    scan_registration: bool = False
+    scan_registration: bool = True
     smooth_saved_map: bool = False
 
     def __post_init__(self) -> None:

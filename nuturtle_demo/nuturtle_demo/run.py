@@ -87,8 +87,8 @@ from turtlelib.util.validation import finite_real, integer, one_of, positive, st
 
 from .driver import FigureEightDriver, RouteConfig
 from .lockstep import Pace, run_cycle
+from .matched_noise import matched_point_std, matched_wheel_noise
 from .route_fit import fitted_route_radius
-from .slip_noise import matched_wheel_noise
 
 ASSOCIATIONS = ("known", "unknown")
 # Wall time for slam to take the initialpose, and for its ~/save_map service to appear and answer (s)
@@ -288,7 +288,7 @@ def _relay(system: DemoSystem, endpoint: tuple[str, int]) -> FoxgloveRelay:
 
 def _slam_nodes(system: DemoSystem, options: DemoOptions, context: Context, sim_time: list[Parameter]):
     """The landmarks and slam nodes, SLAM started at nusim's start pose (localization: at the map origin)
-    with matched process noise."""
+    with matched process noise and LiDAR noise (the scan registration's)."""
     from nuslam.landmarks_node import LandmarksNode
     from nuslam.slam_node import SlamNode
 
@@ -310,6 +310,9 @@ def _slam_nodes(system: DemoSystem, options: DemoOptions, context: Context, sim_
         "wheel_noise": wheel_noise,
         "motion_source": options.motion_source,
         "mode": options.mode,
+        "registration.point_std_m": matched_point_std(
+            simulation.config.lidar.noise, simulation.config.lidar.resolution
+        ),
     }
     if options.map_file is not None:
         slam_values["map_file"] = str(options.map_file)

@@ -37,6 +37,8 @@ from turtlelib import (
     DiffDriveMotion,
     EkfSlam,
     LidarConfig,
+    MeasuredMotion,
+    MeasuredPoses,
     Outcome,
     SlamConfig,
     SlamTimeline,
@@ -44,6 +46,7 @@ from turtlelib import (
     TimelineConfig,
     Transform2D,
     Twist2D,
+    TwistNoise,
     WheelAngles,
     simulate_scan,
 )
@@ -122,11 +125,13 @@ class Rig:
     """slam plus a helper node publishing joint_states and observations and recording every output.
 
     Most tests step the wheels once a second, so ``max_sample_gap`` is 1 s unless given (the default
-    0.5 s is tested in the hostile-input tests)."""
+    0.5 s is tested in the hostile-input tests). The filter's own behaviour is tested with its motion
+    input as the prediction, so ``scan_registration`` is off unless given (on: test_slam_registration.py)."""
 
     def __init__(self, ros, **parameters) -> None:
         self.ros = ros
         parameters.setdefault("max_sample_gap", 1.0)
+        parameters.setdefault("scan_registration", False)
         overrides = [Parameter(name, value=value) for name, value in parameters.items()]
         self.node = ros.add(SlamNode(context=ros.context, parameter_overrides=overrides))
         helper = ros.node("slam_test_helper")
@@ -769,10 +774,13 @@ def test_the_default_parameters(ros):
     assert node.get_parameter("tentative_timeout").value == 2.0  # s
     assert node.get_parameter("gate_known").value == 0.9999
     assert node.get_parameter("linearization").value == "standard"
-    # the motion model: the robot's wheels with the node's wheel_noise
+    # the motion: each scan registered with the robot's wheels (the node's wheel_noise) as its prior, the
+    # filter predicting with the registered motion
     assert node.get_parameter("wheel_noise").value == WHEEL_NOISE
-    assert node.slam.motion == DiffDriveMotion(DRIVE, WHEEL_NOISE)
-    assert node.timeline.signal == WheelAngles()
+    assert node.get_parameter("scan_registration").value is True
+    assert node.scan_odometry.noise == TwistNoise.from_wheel_slip(DRIVE, WHEEL_NOISE)
+    assert node.slam.motion == MeasuredMotion()
+    assert node.timeline.signal == MeasuredPoses()
     assert node.timeline.config == TimelineConfig()
     assert node.get_parameter("wheel_radius").value == R_WHEEL
 
@@ -780,6 +788,7 @@ def test_the_default_parameters(ros):
 @pytest.mark.parametrize("linearization", ["fej", "invariant"])
 def test_the_filter_parameters_reach_the_filter(ros, linearization):
     overrides = [
+        Parameter("scan_registration", value=False),  # the wheels' own motion model, then
         Parameter("wheel_noise", value=0.2),
         Parameter("tentative_timeout", value=0.5),
         Parameter("gate_known", value=1.0),

@@ -1,5 +1,5 @@
-"""nuturtle_tools.params: parameter files in and out, and SLAM's wheel noise matched to nusim's slip by Monte
-Carlo on the simulator itself."""
+"""nuturtle_tools.params: parameter files in and out, and SLAM's wheel noise and the registration's point
+noise matched to nusim's slip and LiDAR by Monte Carlo on the simulator's own models."""
 
 import math
 
@@ -10,11 +10,13 @@ from rclpy.context import Context
 from rclpy.node import Node
 
 from nusim.simulation import NoiseConfig, Simulation, SimulationConfig
+from nuturtle_demo.matched_noise import matched_point_std, matched_wheel_noise
 from nuturtle_demo.run import default_world
-from nuturtle_demo.slip_noise import matched_wheel_noise
 from nuturtle_description.robot_params import burger_params
 from nuturtle_ros_common.ros_files import load_ros_parameters
 from nuturtle_tools.params import params_file, to_parameters
+from turtlelib import Transform2D
+from turtlelib.sensing.scan_model import LidarConfig, arena_walls, cast_beams, simulate_scan
 
 
 def test_demo_world_loads_flat():
@@ -60,6 +62,25 @@ def test_matched_wheel_noise_hand_computed():
     assert matched_wheel_noise(0.0, 4.5, 100.0) == 0.0
     with pytest.raises(ValueError):
         matched_wheel_noise(0.3, 4.5, 0.0)
+
+
+def test_matched_point_std_hand_computed_and_monte_carlo_on_the_lidar_model():
+    # sqrt(0.01^2 + 0.01^2 / 12)
+    assert matched_point_std(0.01, 0.01) == pytest.approx(math.sqrt(1.0e-4 + 1.0e-4 / 12.0), rel=1e-12)
+    assert matched_point_std(0.0, 0.01) == pytest.approx(0.01 / math.sqrt(12.0), rel=1e-12)
+    with pytest.raises(ValueError):
+        matched_point_std(0.0, 0.0)
+    # nusim's range model: a wall 1.2345 m ahead of every beam of a 360-beam scan, 200 scans
+    config = LidarConfig(noise=0.01, resolution=0.01, range_max=3.5)
+    walls = arena_walls(2.469, 2.469)
+    rng = np.random.default_rng(7)
+    errors = []
+    for _ in range(200):
+        range_m = simulate_scan(Transform2D(), np.empty((0, 3)), walls, config, rng)
+        true_m, _ = cast_beams(Transform2D(), config.angles(), np.empty((0, 3)), walls)
+        errors.append(range_m - true_m)
+    # 72,000 samples: the std's relative standard error is about 1 / sqrt(2 n) = 0.3 %
+    assert np.std(np.concatenate(errors)) == pytest.approx(matched_point_std(0.01, 0.01), rel=0.02)
 
 
 def test_matched_wheel_noise_monte_carlo_on_nusim():

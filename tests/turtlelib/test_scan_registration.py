@@ -186,19 +186,49 @@ def test_scans_must_come_in_time_order():
         odometry.step(10, Transform2D(), scan, Transform2D())
 
 
-def test_a_step_adds_the_priors_share_and_at_a_keyframe_the_maps_too():
-    """Sigma = Sigma (H_s + P^-1) Sigma: a keyframe's step adds all of it, another scan's only the prior's
-    share Sigma P^-1 Sigma = Sigma - Sigma H_s Sigma, less than all of it."""
+def test_a_first_scan_older_than_the_input_driven_steps_seeds_the_map_where_the_input_was():
+    """The input alone drove on to 1 s; the first scan, stamped 0.5 s, starts the map at the pose then
+    (T_last T_input_last^-1 T_input(t)): the next scan registers to it, at its true pose."""
+    odometry = LidarOdometry(LidarOdometryConfig(), NOISE)
+    rng = np.random.default_rng(2)
+    T_at = {
+        0: Transform2D(-1.5, 0.0, 0.0),
+        5: Transform2D(-1.4, 0.02, 0.05),
+        10: Transform2D(-1.3, 0.04, 0.1),
+    }
+    odometry.step(0, T_at[0], None)
+    odometry.step(1_000_000_000, T_at[10], None)
+    scan = LIDAR.range_scan(simulate_scan(T_at[5], PILLAR, ROOM, LIDAR, rng))
+    assert odometry.seed_map(500_000_000, T_at[5], scan, Transform2D())
+    # a map exists: the next older scan is not a seed
+    assert not odometry.seed_map(600_000_000, T_at[5], scan, Transform2D())
+    T_true = Transform2D(-1.25, 0.05, 0.12)
+    scan = LIDAR.range_scan(simulate_scan(T_true, PILLAR, ROOM, LIDAR, rng))
+    step = odometry.step(1_200_000_000, Transform2D(-1.2, 0.05, 0.12), scan, Transform2D())
+    assert step.basis is Basis.REGISTERED
+    error = T_true.inverse() @ step.T_odom_body
+    assert math.hypot(error.x, error.y) < 0.01 and abs(error.theta) < math.radians(0.5)
+
+
+def test_the_steps_since_a_keyframe_add_up_to_the_envelope_of_their_registrations():
+    """Q_k = [Sigma_k - A]_+, A the sum since the newest keyframe: the first scan after a keyframe adds all
+    of its Sigma, and the sum always covers the newest scan's Sigma while adding far less than the Sigmas'
+    sum."""
     odometry = LidarOdometry(LidarOdometryConfig(), NOISE)
     rng = np.random.default_rng(4)
     T = Transform2D(-1.5, 0.0, 0.0)
     steps = []
-    for k in range(8):  # 4.4 cm a scan: a keyframe every 0.2 m
+    for k in range(8):  # 4.4 cm a scan: keyframes at scans 0 and 5 (0.22 m)
         scan = LIDAR.range_scan(simulate_scan(T, PILLAR, ROOM, LIDAR, rng))
         steps.append(odometry.step(k * 200_000_000, T, scan, Transform2D()))
         T = T @ Transform2D(0.044, 0.0, 0.0)
-    keyframe, other = steps[5], steps[2]  # 0.22 m and 0.088 m from the first keyframe
-    np.testing.assert_allclose(keyframe.Sigma, keyframe.registration.Sigma, rtol=1e-6, atol=1e-12)
-    Sigma, H = other.registration.Sigma, other.registration.H_scan
-    np.testing.assert_allclose(other.Sigma, Sigma - Sigma @ H @ Sigma, rtol=1e-6, atol=1e-12)
-    assert np.trace(other.Sigma) < 0.5 * np.trace(Sigma)
+    for first in (1, 6):
+        np.testing.assert_allclose(steps[first].Sigma, steps[first].registration.Sigma, rtol=1e-9, atol=1e-15)
+    A = np.zeros((3, 3))
+    for step in steps[1:6]:
+        Sigma = step.registration.Sigma
+        eigenvalues, V = np.linalg.eigh(Sigma - A)
+        np.testing.assert_allclose(step.Sigma, V @ np.diag(np.maximum(eigenvalues, 0.0)) @ V.T, atol=1e-15)
+        A = A + step.Sigma
+        assert np.linalg.eigvalsh(A - Sigma).min() > -1e-15
+    assert np.trace(A) < 0.5 * sum(np.trace(step.registration.Sigma) for step in steps[1:6])

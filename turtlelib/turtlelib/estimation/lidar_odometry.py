@@ -27,12 +27,18 @@ Each scan gives a sample of :class:`turtlelib.motion.motion_signals.MeasuredPose
 timeline: the pose ``T_k`` and the covariance of the motion since ``t_k-1`` (map frame, additive ``[x, y,
 theta]``), so the filter predicts from scan to scan with the registered motion
 (:class:`turtlelib.motion.motion_models.MeasuredMotion`) as independent increments. Scans registered to the
-same keyframes are not independent: their errors share the map's anchor, which moves only when a keyframe is
-added. So the registration's covariance ``Sigma = Sigma (H_s + P_prior^-1) Sigma`` is split into the prior's
-share ``Sigma P_prior^-1 Sigma`` (what the scan left to the motion input: it accrues at every scan, all of it
-along a degenerate direction) and the map's ``Sigma H_s Sigma``, added only when the scan becomes a keyframe;
-a step on the motion input alone carries its whole ``P``. (Still underconfident in a small room: see
-docs/benchmarks.md, "Scan registration".)
+same local map are not independent: each one's error is its error against the map's anchor (the newest
+keyframe), ``e_k ~ N(0, Sigma_k)``, whatever the scans before it gave; the anchor moves only when a keyframe
+is added. Summing each scan's ``Sigma_k`` as an increment would grow the covariance with the number of scans
+while the error stays bounded. So the increments since the newest keyframe add up to the envelope of the
+``Sigma``'s seen since it: with ``A`` their sum so far, a registered scan's increment is::
+
+    Q_k = [Sigma_k - A]_+,     A <- A + Q_k      ([.]_+: the positive semi-definite part)
+
+so ``A >= Sigma_k`` after each scan (the filter's pose covariance covers the newest error against the anchor),
+and ``A`` restarts at 0 after a keyframe (the new anchor's own error, ``Sigma`` of that scan, is in the
+covariance then: the next scans' errors add to it). A step on the motion input alone carries its whole
+motion covariance (and adds it to ``A``: the next registration's prior covers it).
 """
 
 from __future__ import annotations
@@ -156,6 +162,8 @@ class LidarOdometry:
         self._last: tuple[int, Transform2D, Transform2D] | None = None
         # the covariance of the motion since the last registered scan (the next registration's prior)
         self._P_since = np.zeros((3, 3))
+        # A: the steps' covariances summed since the newest keyframe
+        self._A = np.zeros((3, 3))
 
     def forget_input(self) -> None:
         """The motion input restarted: its motion to the next scan is taken only if plausible (module
@@ -186,6 +194,30 @@ class LidarOdometry:
         self._last = (t_ns, step.T_odom_body, T_input_body)
         self._keep(step.T_odom_body, points)
         return step
+
+    def seed_map(
+        self,
+        t_ns: int,
+        T_input_body: Transform2D,
+        scan: RangeScan,
+        T_body_lidar: Transform2D | None = None,
+    ) -> bool:
+        """A scan stamped ``t_ns`` at or before the newest step, while there is no local map yet (the
+        motion input alone drove the pose on past the first scans, e.g. a LiDAR whose messages arrive
+        later than the wheels'): it becomes the map's first keyframe at the pose of that stamp, the newest
+        step's moved back by the input's own motion::
+
+            T_odom_body(t) = T_last T_input_last^-1 T_input(t)
+
+        and no step is made. False (nothing done) once a map exists, before any step, after the input
+        restarted, or for a stamp after the newest step's (then :meth:`step` takes the scan)."""
+        if self._map is not None or self._last is None or self._input_restarted or t_ns > self._last[0]:
+            return False
+        _, T_last, T_input_last = self._last
+        mount = Transform2D() if T_body_lidar is None else T_body_lidar
+        points = voxel_centroids(scan_points(scan, mount), self.config.registration.voxel_m)
+        self._keep(T_last @ T_input_last.inverse() @ T_input_body, points)
+        return self._map is not None
 
     def _registered(self, t_ns: int, T_input_body: Transform2D, points: NDArray[np.float64]) -> OdometryStep:
         t_prev, T_prev, T_input_prev = self._last
@@ -219,16 +251,14 @@ class LidarOdometry:
             )
         if registration is None:
             self._P_since = P_since
+            self._A = self._A + P_motion
             return OdometryStep(t_ns, T_prior, P_motion, Basis.MOTION, None, t_ns - t_prev)
         self._P_since = np.zeros((3, 3))
         basis = Basis.DEGENERATE if registration.degenerate else Basis.REGISTERED
-        # Sigma = Sigma (H_s + P^-1) Sigma: the prior's share Sigma P^-1 Sigma = Sigma - Sigma H_s Sigma
-        # accrues at every scan, all of Sigma when the scan becomes a keyframe (the map's anchor moves)
-        Sigma_step = registration.Sigma
-        if not self._is_keyframe(registration.T_map_body):
-            Sigma_step = Sigma_step - Sigma_step @ registration.H_scan @ Sigma_step
-            Sigma_step = 0.5 * (Sigma_step + Sigma_step.T)
-        return OdometryStep(t_ns, registration.T_map_body, Sigma_step, basis, registration, t_ns - t_prev)
+        # Q_k = [Sigma_k - A]_+,  A <- A + Q_k
+        Q = _positive_part(registration.Sigma - self._A)
+        self._A = self._A + Q
+        return OdometryStep(t_ns, registration.T_map_body, Q, basis, registration, t_ns - t_prev)
 
     def _is_keyframe(self, T_odom_body: Transform2D) -> bool:
         """True when a scan at ``T_odom_body`` moved or turned far enough from the newest keyframe."""
@@ -243,6 +273,13 @@ class LidarOdometry:
         if len(points) == 0 or not self._is_keyframe(T_odom_body):
             return
         self._keyframe_pose = T_odom_body
+        self._A = np.zeros((3, 3))
         self._keyframes.append(T_odom_body @ points)
         q_map = voxel_centroids(np.concatenate(list(self._keyframes)), self.config.registration.voxel_m)
         self._map = LocalMap(q_map, self.config.registration) if len(q_map) >= 3 else None
+
+
+def _positive_part(M: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``[M]_+ = V max(Lambda, 0) V^T`` for the symmetric part of ``M = V Lambda V^T``."""
+    eigenvalues, V = np.linalg.eigh(0.5 * (M + M.T))
+    return (V * np.maximum(eigenvalues, 0.0)) @ V.T

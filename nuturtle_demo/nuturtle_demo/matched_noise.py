@@ -1,4 +1,4 @@
-"""SLAM's process noise matched to the simulated world's wheel slip."""
+"""SLAM's noise models matched to the simulated world's: wheel slip, LiDAR range noise."""
 
 from __future__ import annotations
 
@@ -20,3 +20,16 @@ def matched_wheel_noise(slip_fraction: float, wheel_speed_rad_s: float, physics_
             f"{slip_fraction!r}, {wheel_speed_rad_s!r}, {physics_rate_hz!r}"
         )
     return slip_fraction * math.sqrt(wheel_speed_rad_s / physics_rate_hz / 3.0)
+
+
+def matched_point_std(range_noise_m: float, resolution_m: float) -> float:
+    """The registration's ``point_std_m`` (m) for nusim's LiDAR: a range is the true one plus
+    ``N(0, noise^2)``, rounded to ``resolution`` (a uniform error of variance ``resolution^2 / 12``)::
+
+        point_std_m = sqrt(noise^2 + resolution^2 / 12)
+    """
+    if not (range_noise_m >= 0.0 and resolution_m >= 0.0 and range_noise_m + resolution_m > 0.0):
+        raise ValueError(
+            f"need range_noise_m, resolution_m >= 0, not both 0, got {range_noise_m!r}, {resolution_m!r}"
+        )
+    return math.sqrt(range_noise_m**2 + resolution_m**2 / 12.0)
