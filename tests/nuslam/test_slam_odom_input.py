@@ -121,6 +121,19 @@ def test_an_odometry_silent_for_3_4_s_while_the_robot_drove_on_is_bridged_warned
         rig.odom.publish(odom_at(13_900_000_000 + k * S // 2, T_odom_body))
     assert rig.ros.spin_until(lambda: len(rig.odoms) == 5)
     assert close_pose(rig.odoms[-1], after[-1], 1e-9), pose_of(rig.odoms[-1])
+    # the silence is one step of the motion model, with its noise over the whole step
+    reference = EkfSlam(SlamConfig(), OdometryMotion(TwistNoise.from_wheel_slip(DRIVE, WHEEL_NOISE)))
+    T_before = Transform2D(0.1, 0.0, 0.0)
+    T_across = T_before.inverse() @ after[0]
+    for T_step, dt_ns in [
+        (T_before, S // 2),
+        (T_across, 3_400_000_000),
+        *[(Transform2D(0.1, 0.0, 0.0), S // 2)] * 2,
+    ]:
+        reference.predict((T_step.x, T_step.y, T_step.theta, dt_ns))
+    np.testing.assert_allclose(
+        assert_covariance(rig.odoms[-1]), reference.pose_covariance, rtol=1e-9, atol=1e-15
+    )
     warnings = rig.warnings(at_least=2)
     assert len(warnings) == 2 and "odom refused" in warnings[0] and "bridged" in warnings[1]
     gate = {status.name: status for status in rig.node.report.statuses(0)}["slam: motion gate"]

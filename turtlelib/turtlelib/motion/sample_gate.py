@@ -37,7 +37,7 @@ arc guesses (the arc's end and the robot's both lie within the travel bound
 A restart instead keeps the estimate where it was: it takes the motion across the silence as zero with no
 noise added, wrong by the whole change, which the source measured. ``max_bridged_gap`` (10 s) bounds the
 silence so that the rate bound still tells a restart from a source that went on: a stall of a driver,
-network or recorder takes seconds (ACES's odometry: 3.4 s), a reboot of the robot longer.
+network or recorder takes seconds (the Radish ACES odometry's: 3.0 s), a reboot of the robot longer.
 
 Why a return to the origin is a restart even when the rate bound allows it: a restarted integrating source
 starts at its origin (encoders reset to zero at a reboot, an odometry node at the identity), while a robot
