@@ -104,9 +104,10 @@ Parameters
 Observations that arrive before the first motion sample are dropped quietly (start-up order). Bad input
 never stops the node and never changes the estimate: invalid or implausible joint_states
 (`nuturtle_ros_common.wheel_stream`: a stamp not after the last, more than `max_sample_gap` after it, or
-wheels faster than the motors) are refused with a throttled warning, and only `restart_samples` refused
-messages in a row that continue each other restart the timeline at the first of them (a restarted
-simulator, a looped recording), the motion along the others kept. Observation arrays that are stale,
+wheels faster than the motors) are refused with a throttled warning; `restart_samples` refused messages in
+a row that continue each other either bridge a silence (`max_bridged_gap`: the source's net change across
+it applied as one step) or restart the timeline at the first of them (a restarted simulator, a looped
+recording, a source reset to zero), the motion along the others kept. Observation arrays that are stale,
 stamped beyond `max_observation_lead`, non-finite, in an unknown frame, larger than `max_observations` or
 otherwise refused by the filter are skipped with a throttled warning; single observations nearer than
 `min_range`, farther than `max_range`, outside the innovation gates, or new while the map holds

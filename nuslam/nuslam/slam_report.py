@@ -6,8 +6,8 @@ Statuses (diagnostic_msgs/DiagnosticStatus, hardware id ``slam``)
     `slam: <motion_source>`, `slam: <observation topic>`: rates; ERROR after ``STALE_S`` of the node's clock
         without a message.
     `slam: motion gate`: the motion samples refused (implausible: a time gap, faster than the robot's
-        speed bounds) and the restarts of the motion stream so far, with the last reason; WARN when some
-        came since the last report.
+        speed bounds), the silences of the motion stream bridged (and the longest) and its restarts so far,
+        with the last reason; WARN when some came since the last report.
     `slam: filter`: mode, landmarks mapped and tentative, observations fused, rejected and (localization)
         unmapped, arrays skipped, time per applied scan; WARN when observations were rejected or arrays
         skipped since the last report.
@@ -66,7 +66,7 @@ class SlamReport:
         self.observation_input = InputMonitor(self.observation_topic, started_ns, STALE_S)
         self._update_time = DurationMonitor()
         self.counts = {"fused": 0, "rejected": 0, "unmapped": 0, "skipped": 0, "arrays_applied": 0}
-        self._reported = {"skipped": 0, "rejected": 0, "motion": (0, 0)}
+        self._reported = {"skipped": 0, "rejected": 0, "motion": (0, 0, 0)}
 
     def applied(self, results: list[ScanResult], elapsed_ms: float) -> None:
         """Count the observation arrays among the applied measurements (a pose source's have no association)
@@ -114,7 +114,7 @@ class SlamReport:
         rejected = self.counts["rejected"] - self._reported["rejected"]
         motion = self._motion_status()
         self._reported = {"skipped": self.counts["skipped"], "rejected": self.counts["rejected"],
-                          "motion": (self._motion_tally.refused, self._motion_tally.restarts)}  # fmt: skip
+                          "motion": self._motion_counts()}  # fmt: skip
         slam = self._slam
         mapped, tentative = len(slam.landmark_ids), len(slam.tentative_ids)
         message = f"{slam.config.mode}: {mapped} landmarks mapped, {tentative} tentative"
@@ -148,15 +148,27 @@ class SlamReport:
             *([grid] if grid is not None else []),
         ]
 
+    def _motion_counts(self) -> tuple[int, int, int]:
+        """The motion gate's refused samples, bridged silences and restarts so far."""
+        tally = self._motion_tally
+        return tally.refused, tally.bridged, tally.restarts
+
     def _motion_status(self) -> DiagnosticStatus:
-        """`slam: motion gate`: the refused motion samples and restarts so far, WARN when some are new."""
+        """`slam: motion gate`: the refused motion samples, bridged silences and restarts so far, WARN when
+        some are new."""
         tally, topic = self._motion_tally, self._motion_topic
-        new = (tally.refused, tally.restarts) != self._reported["motion"]
+        new = self._motion_counts() != self._reported["motion"]
         message = f"every {topic} sample plausible"
-        if tally.refused or tally.restarts:
+        if any(self._motion_counts()):
             message = (
-                f"{tally.refused} {topic} samples refused, {tally.restarts} restarts of the stream so far; "
-                f"the last: {tally.last_reason}"
+                f"{tally.refused} {topic} samples refused, {tally.bridged} silences bridged (the longest "
+                f"{tally.longest_bridge_s:.3f} s), {tally.restarts} restarts of the stream so far; the last: "
+                f"{tally.last_reason}"
             )
-        values = {"motion_samples_refused": tally.refused, "motion_restarts": tally.restarts}
+        values = {
+            "motion_samples_refused": tally.refused,
+            "motion_silences_bridged": tally.bridged,
+            "motion_longest_bridge_s": round(tally.longest_bridge_s, 3),
+            "motion_restarts": tally.restarts,
+        }
         return diagnostic_status("slam: motion gate", "slam", WARN if new else OK, message, values)

@@ -21,10 +21,13 @@ the pose along the exact arc ``T_odom_body_k = T_odom_body_{k-1} @ exp([F dphi])
 Invalid messages (missing or repeated wheel joints, names and positions of different lengths,
 non-finite angles, an invalid stamp) are logged (throttled) and skipped. Implausible ones are refused
 (`nuturtle_ros_common.wheel_stream`): a stamp not after the last (an exact copy is ignored), more than
-`max_sample_gap` after it, or wheels that would have turned faster than the motors can; only when
-`restart_samples` refused messages in a row continue each other has the source restarted (a restarted
-simulator, a looped bag): the first of them becomes the new reference without moving the pose, and the
-motion along the others is integrated. An `initialpose` whose quaternion is not a rotation is refused.
+`max_sample_gap` after it, or wheels that would have turned faster than the motors can. Once
+`restart_samples` refused messages in a row continue each other, either the wheels went on after a silence
+(at most `max_bridged_gap`, a turn the motors could make over it, not back at zero): the silence is
+integrated as one arc of the measured net turn (bridged); or the source restarted (a restarted simulator, a
+looped bag, encoders reset to zero): the first of them becomes the new reference without moving the pose,
+and the motion along the others is integrated. An `initialpose` whose quaternion is not a rotation is
+refused.
 """
 
 from __future__ import annotations

@@ -97,8 +97,9 @@ def slam_snapshot(slam_node: Any) -> SlamSnapshot:
 def slip_counts(slam_node: Any) -> dict[str, int | float | str | None]:
     """The in-process slam node's slip recovery totals (its ``recovery`` attribute): scans held because they
     contradicted the motion, relocalizations against the map, stalls and the size of the last correction
-    (m, rad; None before any); and what its motion gate (its ``motion_gate`` attribute) refused: motion
-    samples, restarts of the motion stream, the last reason (None: nothing refused)."""
+    (m, rad; None before any); and what its motion gate (its ``motion_gate`` attribute) refused, bridged
+    and restarted: motion samples refused, silences bridged and the longest (s), restarts of the motion
+    stream, the last reason (None: nothing refused)."""
     status, tally = slam_node.recovery.status, slam_node.motion_gate.tally
     correction = status.last_correction
     return {
@@ -108,6 +109,8 @@ def slip_counts(slam_node: Any) -> dict[str, int | float | str | None]:
         "slam_last_correction_m": None if correction is None else math.hypot(correction.x, correction.y),
         "slam_last_correction_rad": None if correction is None else correction.theta,
         "slam_motion_samples_refused": tally.refused,
+        "slam_motion_silences_bridged": tally.bridged,
+        "slam_motion_longest_bridge_s": tally.longest_bridge_s,
         "slam_motion_restarts": tally.restarts,
         "slam_motion_last_refusal": tally.last_reason or None,
     }

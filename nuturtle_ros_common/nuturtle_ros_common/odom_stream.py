@@ -10,13 +10,16 @@ with wheel radius ``r``, track ``b`` and fastest wheel speed ``w`` (rad/s, the r
     |dtheta|   <= (1 + speed_margin) 2 r w / b dt + HEADING_SLACK_RAD
 
 The heading is unwrapped against the last accepted sample (``theta_acc + wrap(theta - theta_acc)``), so
-crossing +-pi is motion, not a jump. A replayed or corrupt message, a time jump or a pose jump (an
-odometry source reset to the origin) is refused without moving anything; a source that really restarted
-is followed after ``restart_samples`` messages (`turtlelib.motion.sample_gate`).
+crossing +-pi is motion, not a jump (and the gate reads it modulo 2 pi to tell the source's origin). A
+replayed or corrupt message, a time jump or a pose jump (an odometry source reset to the origin) is refused
+without moving anything; after ``restart_samples`` messages a silence the robot could have driven across
+is bridged (the odometry's net change over it is measured), and a source that really restarted is
+followed (`turtlelib.motion.sample_gate`).
 """
 
 from __future__ import annotations
 
+import math
 from typing import Protocol
 
 from nav_msgs.msg import Odometry
@@ -67,14 +70,15 @@ class OdomStream:
             [max_speed_mps, max_speed_mps, max_turn_rate],
             [POSITION_SLACK_M, POSITION_SLACK_M, HEADING_SLACK_RAD],
             speed_hint(f"{max_speed_mps:.4g} m/s, {max_turn_rate:.4g} rad/s"),
+            periods=(None, None, 2.0 * math.pi),
         )
         self._warnings = warnings
         self._source = source
 
     def offer(self, msg: Odometry) -> GateResult | None:
-        """The samples ``(t_ns, (x, y, theta))`` to apply for ``msg`` (``ACCEPTED``: motion on from the last
-        one; ``RESTARTED``: start again at the first), or None when there is nothing to apply (invalid,
-        refused: warned; an exact duplicate: quietly)."""
+        """The samples ``(t_ns, (x, y, theta))`` to apply for ``msg`` (``ACCEPTED``, ``BRIDGED``: motion on
+        from the last one; ``RESTARTED``: start again at the first), or None when there is nothing to apply
+        (invalid, refused: warned; an exact duplicate: quietly)."""
         try:
             frames = (msg.header.frame_id, msg.child_frame_id)
             if frames != self.frames:

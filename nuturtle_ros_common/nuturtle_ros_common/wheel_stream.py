@@ -5,8 +5,10 @@ A JointState is read (`wheel_joints.wheel_values`: names, lengths, finite angles
 robot's: each wheel turns at most ``(1 + speed_margin) wheel_speed_bound`` (rad/s; the robot description's
 ``RobotParams.wheel_speed_bound``, which its ``model`` sets), with a slack of ``ENCODER_SLACK_TICKS``
 encoder ticks. So a replayed, future-stamped or corrupt message is refused without moving anything (the
-warning names the parameters that set the bound), and a source that really restarted (a restarted
-simulator, a looped recording) is followed after ``restart_samples`` messages.
+warning names the parameters that set the bound). After ``restart_samples`` messages a silence the wheels
+could have turned across is bridged (their net turn over it is measured), and a source that really
+restarted (a restarted simulator, a looped recording, encoders reset to zero) is followed
+(`turtlelib.motion.sample_gate`).
 """
 
 from __future__ import annotations
@@ -58,9 +60,9 @@ class WheelStream:
         self._source = source
 
     def offer(self, msg: JointState) -> GateResult | None:
-        """The samples to apply for ``msg`` (``ACCEPTED``: motion on from the last one; ``RESTARTED``: start
-        again at the first), or None when there is nothing to apply (invalid, refused: warned; an exact
-        duplicate: quietly)."""
+        """The samples to apply for ``msg`` (``ACCEPTED``, ``BRIDGED``: motion on from the last one;
+        ``RESTARTED``: start again at the first), or None when there is nothing to apply (invalid, refused:
+        warned; an exact duplicate: quietly)."""
         try:
             angles = wheel_values(self.joints, msg.name, msg.position)
             result = self.gate.offer(stamp_nanoseconds(msg.header.stamp), angles)
@@ -71,13 +73,15 @@ class WheelStream:
 
 
 def to_apply(result: GateResult, warnings: SourceWarnings, source: str) -> GateResult | None:
-    """``result`` when it has samples to apply (accepted, restarted: warned), None otherwise (refused:
-    warned; an exact duplicate: quietly). Warnings go to ``warnings`` under ``source``."""
+    """``result`` when it has samples to apply (accepted; bridged, restarted: warned), None otherwise
+    (refused: warned; an exact duplicate: quietly). Warnings go to ``warnings`` under ``source``."""
     if result.verdict is Verdict.REFUSED:
         warnings.warn(source, f"{source} refused: {result.reason}")
         return None
+    # each its own logger: the refusals before it must not throttle it away
+    if result.verdict is Verdict.BRIDGED:
+        warnings.warn(f"{source}_bridge", f"{source}: {result.reason}")
     if result.verdict is Verdict.RESTARTED:
-        # its own logger: the refusals before it must not throttle it away
         warnings.warn(f"{source}_restart", f"{source}: {result.reason} at the first of them")
     return None if result.verdict is Verdict.DUPLICATE else result
 

@@ -123,15 +123,20 @@ def no_landmarks_hint(metrics: dict[str, Any]) -> str | None:
 
 
 def motion_gate_warning(metrics: dict[str, Any]) -> str | None:
-    """What slam's motion gate refused, from ``metrics`` (metrics.json): every refused sample and restart of
-    the motion stream loses motion (a robot faster than the bounds slam was given is refused sample after
-    sample). None when nothing was refused."""
+    """What slam's motion gate refused, bridged and restarted, from ``metrics`` (metrics.json): a refused
+    sample or a restart of the motion stream loses motion (a robot faster than the bounds slam was given is
+    refused sample after sample); a bridged silence keeps the source's net motion across it, in one step.
+    None when nothing was refused."""
     refused, restarts = metrics.get("slam_motion_samples_refused", 0), metrics.get("slam_motion_restarts", 0)
     if not refused and not restarts:
         return None
+    bridged, longest_s = (
+        metrics.get(k, 0) for k in ("slam_motion_silences_bridged", "slam_motion_longest_bridge_s")
+    )
     return (
-        f"warning: slam refused {refused} {metrics['motion_source']} samples and restarted its motion stream "
-        f"{restarts} times (the motion across a restart is lost); the last: "
+        f"warning: slam refused {refused} {metrics['motion_source']} samples, bridged {bridged} silences of "
+        f"the stream (the longest {longest_s:.1f} s; the net motion across each kept as one step) and "
+        f"restarted it {restarts} times (the motion across a restart is lost); the last: "
         f"{metrics['slam_motion_last_refusal']}. A robot that is not the model's describes itself with "
         "max_linear_speed, max_angular_speed (and wheel_radius, track_width, lidar_x ...; docs/robot.md); "
         "a source with long silences needs max_sample_gap, max_bridged_gap"
@@ -175,8 +180,8 @@ def summary(result: Any) -> str:
         rows.append(f"| occupancy grid: cells / MB (at most) / scans past grid.max_size_m | "
                     f"{metrics['slam_grid_cells']} / {megabytes[0]:.1f} ({megabytes[1]:.1f}) / "
                     f"{metrics['slam_grid_scans_past_bound']} |")  # fmt: skip
-    for key in ("slam_motion_samples_refused", "slam_motion_restarts", "slam_scans_held",
-                "slam_relocalizations", "slam_stalls"):  # fmt: skip
+    for key in ("slam_motion_samples_refused", "slam_motion_silences_bridged", "slam_motion_restarts",
+                "slam_scans_held", "slam_relocalizations", "slam_stalls"):  # fmt: skip
         if key in metrics:
             rows.append(f"| {key.replace('_', ' ')} | {metrics[key]} |")
     if metrics.get("slam_last_correction_m") is not None:

@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 import pytest
+from diagnostic_msgs.msg import DiagnosticStatus
 from nav_msgs.msg import Odometry
 from ros_test_messages import cylinder_array, stamp
 from test_slam_node import LANDMARKS, Rig, S, assert_covariance, close_pose, mapped, pose_of, relative
@@ -109,28 +110,61 @@ def test_an_odom_stamped_back_in_time_is_refused_with_a_warning_and_changes_noth
     assert len(warnings) == 1 and "odom refused" in warnings[0] and "not after" in warnings[0]
 
 
+def test_an_odometry_silent_for_3_4_s_while_the_robot_drove_on_is_bridged_warned_and_counted(ros):
+    # as the Radish ACES recording's odometry does: slam keeps the odometry's motion across the silence
+    rig = OdomRig(ros, observation_timeout=100.0)
+    rig.moved(10 * S, Transform2D())
+    rig.moved(10 * S + S // 2, Transform2D(0.1, 0.0, 0.0))
+    # 3.4 s later the robot has driven about 1 m on (the Burger could drive 0.67 m/s x 3.4 s)
+    after = [Transform2D(1.0, 0.2, 0.5) @ Transform2D(0.1 * k, 0.0, 0.0) for k in range(3)]
+    for k, T_odom_body in enumerate(after):
+        rig.odom.publish(odom_at(13_900_000_000 + k * S // 2, T_odom_body))
+    assert rig.ros.spin_until(lambda: len(rig.odoms) == 5)
+    assert close_pose(rig.odoms[-1], after[-1], 1e-9), pose_of(rig.odoms[-1])
+    # the silence is one step of the motion model, with its noise over the whole step
+    reference = EkfSlam(SlamConfig(), OdometryMotion(TwistNoise.from_wheel_slip(DRIVE, WHEEL_NOISE)))
+    T_before = Transform2D(0.1, 0.0, 0.0)
+    T_across = T_before.inverse() @ after[0]
+    for T_step, dt_ns in [
+        (T_before, S // 2),
+        (T_across, 3_400_000_000),
+        *[(Transform2D(0.1, 0.0, 0.0), S // 2)] * 2,
+    ]:
+        reference.predict((T_step.x, T_step.y, T_step.theta, dt_ns))
+    np.testing.assert_allclose(
+        assert_covariance(rig.odoms[-1]), reference.pose_covariance, rtol=1e-9, atol=1e-15
+    )
+    warnings = rig.warnings(at_least=2)
+    assert len(warnings) == 2 and "odom refused" in warnings[0] and "bridged" in warnings[1]
+    gate = {status.name: status for status in rig.node.report.statuses(0)}["slam: motion gate"]
+    values = {pair.key: pair.value for pair in gate.values}
+    assert gate.level == DiagnosticStatus.WARN and "1 silences bridged" in gate.message
+    assert (values["motion_silences_bridged"], values["motion_longest_bridge_s"]) == ("1", "3.4")
+    assert values["motion_restarts"] == "0"
+
+
 def test_an_odometry_reset_restarts_from_the_estimate_with_a_warning_and_keeps_the_map(ros):
-    rig = OdomRig(ros, association="known")
+    rig = OdomRig(ros, association="known", observation_timeout=100.0)
     rig.moved(10 * S, Transform2D(1.0, 2.0, 0.5))
     rig.moved(10 * S + S // 2, Transform2D(1.0, 2.0, 0.5) @ Transform2D(0.1, 0.0, 0.0))
     rig.moved(11 * S, Transform2D(1.0, 2.0, 0.5) @ Transform2D(0.1, 0.0, 0.0))  # standing
     rig.observe(cylinder_array("base_footprint", 11 * S, relative(Transform2D(0.1, 0.0, 0.0))))
-    # the base reboots: its odometry starts again at the origin while time goes on; the third message
-    # (restart_samples) restarts the timeline at the first and moves on along the others
-    rig.odom.publish(odom_at(11 * S + S // 2, Transform2D()))
-    rig.odom.publish(odom_at(12 * S, Transform2D(0.1, 0.0, 0.0)))
-    rig.odom.publish(odom_at(12 * S + S // 2, Transform2D(0.2, 0.0, 0.0)))
+    # the base reboots for 5 s: its odometry starts again at the origin. The Burger could have driven
+    # there (2.3 m at most 0.67 m/s x 5 s), but a robot that drove on is not back at the origin: the third
+    # message (restart_samples) restarts the timeline at the first and moves on along the others
+    rig.odom.publish(odom_at(16 * S, Transform2D()))
+    rig.odom.publish(odom_at(16 * S + S // 2, Transform2D(0.1, 0.0, 0.0)))
+    rig.odom.publish(odom_at(17 * S, Transform2D(0.2, 0.0, 0.0)))
     assert rig.ros.spin_until(lambda: len(rig.odoms) == 5)
     assert close_pose(rig.odoms[-1], Transform2D(0.3, 0.0, 0.0), 1e-9), pose_of(rig.odoms[-1])
     # the map is the one before the reset, and observations go on being applied
-    array = rig.observe(
-        cylinder_array("base_footprint", 12 * S + S // 2, relative(Transform2D(0.3, 0.0, 0.0)))
-    )
+    array = rig.observe(cylinder_array("base_footprint", 17 * S, relative(Transform2D(0.3, 0.0, 0.0))))
     for landmark_id, xy in LANDMARKS.items():
         marker = mapped(array)[landmark_id]
         assert (marker.pose.position.x, marker.pose.position.y) == pytest.approx(xy, abs=1e-9)
     warnings = rig.warnings(at_least=2)
     assert len(warnings) == 2 and "odom refused" in warnings[0] and "restarted" in warnings[1]
+    assert "origin" in warnings[1]
 
 
 def test_odom_moving_faster_than_the_robot_is_refused(ros):

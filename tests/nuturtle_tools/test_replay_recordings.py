@@ -222,8 +222,10 @@ def test_refused_motion_samples_are_warned_about_with_the_last_reason_and_what_t
     assert motion_gate_warning(counts) is None
     reason = "value 0 moved 0.3 in 0.100 s, more than 0.2 (...); max rate 0.447 m/s"
     counts.update(slam_motion_samples_refused=40, slam_motion_restarts=13, slam_motion_last_refusal=reason)
+    counts.update(slam_motion_silences_bridged=2, slam_motion_longest_bridge_s=3.4)
     warning = motion_gate_warning(counts)
     assert warning is not None and "refused 40 odom samples" in warning and "13 times" in warning
+    assert "bridged 2 silences" in warning and "3.4 s" in warning
     assert reason in warning and "max_linear_speed" in warning
 
 
