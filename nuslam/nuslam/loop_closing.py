@@ -207,6 +207,15 @@ class LoopClosing:
             newest = max(kept, default=-1)
             self._scan_poses = {t: v for t, v in self._scan_poses.items() if t in kept or t > newest}
 
+    def loop_segments(self) -> NDArray[np.float64]:
+        """(L, 2, 2): each loop closed as its two keyframes' positions ``[[x_i, y_i], [x_j, y_j]]`` (m) at the
+        graph's poses in the filter's frame (the figures mark them)."""
+        i, j, loop = self.loops.graph.edges()
+        B = self._filter_from_graph()
+        B = Transform2D() if B is None else B
+        xy = self.loops.graph.poses[:, :2]
+        return np.stack([B @ xy[i[loop]], B @ xy[j[loop]]], axis=1).reshape(-1, 2, 2)
+
     # --- reports -------------------------------------------------------------------------------------------
 
     def refused(self) -> dict[str, int]:
