@@ -17,10 +17,12 @@ slam had when the scan arrived (predicted from the motion, before the landmarks 
 were fused); the timeline tells the grid (a `turtlelib.PoseListener`) the posterior pose at the stamp of
 every measurement it applies, which replaces the keyframe's of that stamp
 (:meth:`GridMapping.corrected`), and that the run starts again without its map
-(:meth:`GridMapping.cleared`, slam's ``~/reset``). ``~/save_map`` re-renders the keyframes at these poses
-(`ScanKeyframes.render`) and writes ``<stem>.yaml`` +
-``<stem>.pgm`` beside ``map_file`` (`turtlelib.mapping.grid_map_file.save_grid_map`: map_server's trinary
-format, each file written atomically).
+(:meth:`GridMapping.cleared`, slam's ``~/reset``). With slam's loop closure (`nuslam.loop_closing`) the
+keyframes are placed at its pose graph's poses instead (:attr:`GridMapping.pose_source`), and the live
+grid is rendered again from them after a loop closes (:meth:`GridMapping.render_again`). ``~/save_map``
+re-renders the keyframes at these poses (`ScanKeyframes.render`) and writes ``<stem>.yaml`` + ``<stem>.pgm``
+beside ``map_file`` (`turtlelib.mapping.grid_map_file.save_grid_map`: map_server's trinary format, each
+file written atomically).
 
 Localization (``mode: localization``): the grid saved beside ``map_file`` is loaded at start-up, if there,
 and published once; no scan is mapped. A malformed grid file stops the node at start-up with the reason.
