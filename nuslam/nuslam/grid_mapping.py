@@ -17,10 +17,12 @@ slam had when the scan arrived (predicted from the motion, before the landmarks 
 were fused); the timeline tells the grid (a `turtlelib.PoseListener`) the posterior pose at the stamp of
 every measurement it applies, which replaces the keyframe's of that stamp
 (:meth:`GridMapping.corrected`), and that the run starts again without its map
-(:meth:`GridMapping.cleared`, slam's ``~/reset``). ``~/save_map`` re-renders the keyframes at these poses
-(`ScanKeyframes.render`) and writes ``<stem>.yaml`` +
-``<stem>.pgm`` beside ``map_file`` (`turtlelib.mapping.grid_map_file.save_grid_map`: map_server's trinary
-format, each file written atomically).
+(:meth:`GridMapping.cleared`, slam's ``~/reset``). With slam's loop closure (`nuslam.loop_closing`) the
+keyframes are placed at its pose graph's poses instead (:attr:`GridMapping.pose_source`), and the live
+grid is rendered again from them after a loop closes (:meth:`GridMapping.render_again`). ``~/save_map``
+re-renders the keyframes at these poses (`ScanKeyframes.render`) and writes ``<stem>.yaml`` + ``<stem>.pgm``
+beside ``map_file`` (`turtlelib.mapping.grid_map_file.save_grid_map`: map_server's trinary format, each
+file written atomically).
 
 Localization (``mode: localization``): the grid saved beside ``map_file`` is loaded at start-up, if there,
 and published once; no scan is mapped. A malformed grid file stops the node at start-up with the reason.
@@ -180,6 +182,9 @@ class GridMapping:
         self.keyframes = ScanKeyframes(self.keyframe_config)
         # the pose each keyframe's scan is rendered at by a save: T_map_body by stamp (ns)
         self._keyframe_poses: dict[int, Transform2D] = {}
+        # a better pose of a keyframe's scan by its stamp, before the kept one (None where it has none):
+        # slam's loop closure, the graph's poses (nuslam.loop_closing)
+        self.pose_source: Callable[[int], Transform2D | None] | None = None
         # slam's timeline: the poses scans are placed at (set by connect)
         self._timeline: SlamTimeline | None = None
         self._waiting: deque[tuple[int, RangeScan, Transform2D]] = deque()
@@ -286,15 +291,32 @@ class GridMapping:
 
     def render(self, pose_at: Callable[[int], Transform2D | None] | None = None) -> GridMap:
         """The grid of the keyframes at their poses (module docstring), or at ``pose_at(stamp_ns)`` where
-        that gives one (a smoothed run's poses); the loaded one in localization."""
+        that gives one (a smoothed run's poses), else at :attr:`pose_source`'s; the loaded one in
+        localization."""
         if self.loaded is not None:
             return self.loaded
+        return self._rendered(pose_at).grid_map()
+
+    def render_again(self) -> None:
+        """Replace the live grid by its keyframes rendered at :attr:`pose_source`'s poses (slam's loop
+        closure corrected them) and publish it; nothing unless mapping."""
+        if not self.mapping:
+            return
+        self.grid = self._rendered(None)
+        if self._newest_ns is not None:
+            self._publish(self.grid.grid_map(), self._newest_ns)
+
+    def _rendered(self, pose_at: Callable[[int], Transform2D | None] | None) -> OccupancyGrid:
+        sources = [source for source in (pose_at, self.pose_source) if source is not None]
 
         def keyframe_pose(t_ns: int) -> Transform2D | None:
-            T_map_body = None if pose_at is None else pose_at(t_ns)
-            return self._keyframe_poses.get(t_ns) if T_map_body is None else T_map_body
+            for source in sources:
+                T_map_body = source(t_ns)
+                if T_map_body is not None:
+                    return T_map_body
+            return self._keyframe_poses.get(t_ns)
 
-        return self.keyframes.render(keyframe_pose, self._T_body_scan, self.config).grid_map()
+        return self.keyframes.render(keyframe_pose, self._T_body_scan, self.config)
 
     def save(self, pose_at: Callable[[int], Transform2D | None] | None = None) -> str:
         """Write :meth:`render` (with ``pose_at``) beside ``map_file`` (``<stem>.yaml`` + ``<stem>.pgm``,

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Callable
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -37,7 +38,13 @@ from nuturtle_ros_common.conversions import mounted_range_scan
 from nuturtle_ros_common.diagnostics import ERROR, OK, WARN, status
 from nuturtle_ros_common.throttle import SourceWarnings
 from turtlelib import Transform2D, TwistNoise
-from turtlelib.estimation.lidar_odometry import Basis, LidarOdometry, LidarOdometryConfig, OdometryStep
+from turtlelib.estimation.lidar_odometry import (
+    Basis,
+    LidarOdometry,
+    LidarOdometryConfig,
+    OdometryStep,
+    scan_points,
+)
 from turtlelib.geometry.pose_buffer import PoseBuffer
 from turtlelib.sensing.range_scan import RangeScan
 from turtlelib.util.timebase import NS_PER_S
@@ -82,6 +89,9 @@ class ScanOdometry:
         self.counts = {basis.value: 0 for basis in Basis} | {"input_only": 0, "seeded": 0, "skipped": 0}
         self._reported = dict(self.counts)
         self.last: OdometryStep | None = None
+        # told each step and its scan's body-frame points (n, 2; none for the input alone): slam's loop
+        # closure (nuslam.loop_closing)
+        self.step_listener: Callable[[OdometryStep, NDArray[np.float64]], None] | None = None
 
     def input(self, t_ns: int, T_input_body: Transform2D) -> None:
         """The motion input's pose at ``t_ns`` (after the previous one's)."""
@@ -170,6 +180,9 @@ class ScanOdometry:
             self._skip(f"scan at {t_ns} ns skipped by the scan registration: {error}")
             return None
         self._last_ns, self.last, self._restarting = t_ns, step, False
+        if self.step_listener is not None:
+            p_body = np.zeros((0, 2)) if scan is None else scan_points(scan, T_body_scan)
+            self.step_listener(step, p_body)
         self.counts[step.basis.value if scan is not None else "input_only"] += 1
         if step.basis is Basis.DEGENERATE:
             self._warnings.warn(

@@ -13,6 +13,9 @@ Motion (`motion_source`, `scan_registration`)
     as its prior (`nuslam.scan_odometry`, `turtlelib.LidarOdometry`, parameters `registration.*`), and
     the filter predicts with the registered motion and its covariance (`turtlelib.MeasuredMotion`): the
     pose rests on the walls and furniture wherever the scans see any, on the wheels where they do not.
+    With `loop_closure` (off by default: its CPU, docs/loop_closure.md) the registered scans' keyframes
+    also close loops on a revisit (`nuslam.loop_closing`, parameters `loops.*`): the filter moves by the
+    correction, the grid is drawn again at the corrected poses.
 Maps (`map_file`, `mode`)
     `map_file` (a `turtlelib.mapping.landmark_map` JSON file) is loaded at start-up when it exists; in `mode:
     localization` it must, and its landmarks stay fixed (a Schmidt update: only the pose is estimated,
@@ -68,7 +71,8 @@ Publishes
         (`turtlelib.estimation.slip_recovery`: WARN naming the cause while scans contradict the wheels' motion
         (slip, bump) and for `slip_report_s` after each relocalization against the map, ERROR when they keep
         coming; scans held and relocalizations so far), `slam: scan registration` (with
-        `scan_registration`: what the pose rests on, `nuslam.scan_odometry`).
+        `scan_registration`: what the pose rests on, `nuslam.scan_odometry`), `slam: loop closure` (with
+        `loop_closure` too: loops closed, candidates refused by reason, the last correction).
     `/tf` `map_id` -> `odom_id` where tf2_msgs is installed: ``T_map_odom = T_map_body T_odom_body^-1``
         at each pose's stamp, with ``T_odom_body`` the transform the odometry source broadcasts (read from
         its `odom` topic, interpolated between its samples), so that composing the two transforms on /tf
@@ -91,7 +95,8 @@ Parameters
     slip_match_radius, slip_confirm_scans, slip_margin_m, slip_margin_rad, slip_stall_tolerance,
     slip_report_s), `model`, then
     `turtlelib.LidarOdometryConfig` and `turtlelib.RegistrationConfig` prefixed `registration.` (used with
-    `scan_registration`),
+    `scan_registration`), `turtlelib.smoothing.loop_closure.LoopClosureConfig` prefixed `loops.` (used with
+    `scan_registration` and `loop_closure`),
     `RobotParams` (that model's constants by default), `WheelJoints`, `PathTrailConfig`,
     `turtlelib.SampleGateConfig` (speed_margin, max_sample_gap, max_bridged_gap, restart_samples),
     `nuslam.grid_mapping.GridTopicConfig`, `turtlelib.GridConfig` and `turtlelib.KeyframeConfig` prefixed
@@ -135,6 +140,7 @@ from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
 from nuslam.grid_mapping import GridMapping
+from nuslam.loop_closing import LoopClosing, declare_loop_closure
 from nuslam.map_to_odom import MapToOdom
 from nuslam.observation_reader import ObservationReader
 from nuslam.scan_odometry import ScanOdometry
@@ -227,6 +233,8 @@ class SlamNodeConfig:
       observation arriving gives a (throttled) warning: slam is only dead-reckoning;
     * ``scan_registration``: register each scan to a local map of recent scans with the motion as its prior,
       and predict with the registered motion (:mod:`nuslam.scan_odometry`);
+    * ``loop_closure`` (with ``scan_registration``): close the loops of the registered scans on a revisit,
+      moving the filter and drawing the grid at the corrected poses (:mod:`nuslam.loop_closing`, ``loops.*``);
     * ``smooth_saved_map``: keep the run's history (since start-up, the last reset or relocalization;
       memory grows with the run) and have ``~/save_map`` save the landmark map of the whole run smoothed
       and the occupancy grid of its keyframes at the smoothed poses (:mod:`turtlelib.smoothing.run_smoothing`;
@@ -248,6 +256,7 @@ class SlamNodeConfig:
     map_file: str = ""
     observation_timeout: float = 3.0
     scan_registration: bool = True
+    loop_closure: bool = False
     smooth_saved_map: bool = False
 
     def __post_init__(self) -> None:
@@ -298,6 +307,10 @@ class SlamNode(Node):
             self.slam, self.recovery, self.grid, self._warnings, topics, started_ns, self.motion_gate.tally
         )
         self._fused_reported = 0
+        self.loop_closing = None
+        if self.scan_odometry is not None and frames.loop_closure:
+            self.loop_closing = LoopClosing(self._loops, self.timeline, self.grid, self, self._warnings)
+            self.scan_odometry.step_listener = self.loop_closing.add_step
         self._connect(topics[1])
 
     def _estimator(self, robot: RobotParams) -> SlamTimeline:
@@ -349,6 +362,7 @@ class SlamNode(Node):
         config = declare_dataclass(
             self, LidarOdometryConfig, prefix="registration.", fixed={"registration": registration}
         )
+        self._loops = declare_loop_closure(self, registration)
         self.scan_odometry = None
         if not frames.scan_registration:
             return model, signal, odometry
@@ -480,12 +494,14 @@ class SlamNode(Node):
         return applied
 
     def _statuses(self, now_ns: int) -> list[DiagnosticStatus]:
-        """/diagnostics: the report's, and the registration's (``scan_registration``)."""
+        """/diagnostics: the report's, the registration's (``scan_registration``) and the loop closure's."""
         statuses = self.report.statuses(now_ns)
         if self.scan_odometry is not None:
             fused = self.report.counts["fused"]
             statuses.append(self.scan_odometry.status(fused - self._fused_reported))
             self._fused_reported = fused
+        if self.loop_closing is not None:
+            statuses.append(self.loop_closing.status())
         return statuses
 
     def _on_observations(self, msg: MarkerArray) -> None:

@@ -28,6 +28,7 @@ from .metrics import PoseSeries, pose_errors
 TRUTH_COLOR = "tab:red"
 ODOM_COLOR = "tab:blue"
 SLAM_COLOR = "tab:green"
+LOOP_COLOR = "tab:purple"
 LANDMARK_SIGMAS = 2.0
 DPI = 130
 
@@ -63,12 +64,14 @@ def plot_trajectory(
     mapped_xy: NDArray[np.float64],
     mapped_covariances: NDArray[np.float64],
     walls: NDArray[np.float64] | None,
+    loops: NDArray[np.float64] | None = None,
 ) -> None:
     """trajectory.png: the arena walls, the true cylinders (rows ``[x, y, r]``), the ground truth (red),
-    odometry (blue) and SLAM (green) paths in the world frame, and the mapped landmarks (n, 2) with their
-    2-sigma ellipses from ``mapped_covariances`` (n, 2, 2). Without ``truth`` or ``odom`` (None) or true
-    cylinders (no rows) those are left out. ``walls`` (K, 4) rows ``[x0, y0, x1, y1]`` are drawn and frame
-    the axes; without them (None) the axes fit the data."""
+    odometry (blue) and SLAM (green) paths in the world frame, the mapped landmarks (n, 2) with their
+    2-sigma ellipses from ``mapped_covariances`` (n, 2, 2) and SLAM's loop closures (:func:`draw_loops`).
+    Without ``truth`` or ``odom`` (None), true cylinders (no rows) or ``loops`` (None) those are left out.
+    ``walls`` (K, 4) rows ``[x0, y0, x1, y1]`` are drawn and frame the axes; without them (None) the axes
+    fit the data."""
     from matplotlib.patches import Circle
 
     figure = new_figure(7.0, 7.0)
@@ -94,6 +97,7 @@ def plot_trajectory(
     for center, covariance in zip(mapped_xy, covariances, strict=True):
         axes.plot(*ellipse_points(center, covariance, LANDMARK_SIGMAS).T, color=SLAM_COLOR, linewidth=1.0)
     axes.plot(*mapped_xy.T, "+", color=SLAM_COLOR, markersize=9, label="mapped landmarks (2σ)")
+    draw_loops(axes, loops)
     axes.set_aspect("equal")
     margin = 0.15
     if walls is not None:
@@ -117,11 +121,15 @@ def plot_trajectory(
 
 
 def plot_grid(
-    path: str | Path, grid: GridMap, path_xy: NDArray[np.float64], landmarks_xy: NDArray[np.float64]
+    path: str | Path,
+    grid: GridMap,
+    path_xy: NDArray[np.float64],
+    landmarks_xy: NDArray[np.float64],
+    loops: NDArray[np.float64] | None = None,
 ) -> None:
     """grid.png: the occupancy grid as map_saver's trinary image shows it (occupied >= 65 black, free <= 19
-    white, the rest grey: :mod:`turtlelib.mapping.grid_map_file`) with the SLAM path ``path_xy`` (K, 2) and
-    the mapped landmarks (n, 2) over it, in the map frame (m)."""
+    white, the rest grey: :mod:`turtlelib.mapping.grid_map_file`) with the SLAM path ``path_xy`` (K, 2),
+    the mapped landmarks (n, 2) and the loop closures (:func:`draw_loops`) over it, in the map frame (m)."""
     figure = new_figure(7.0, 7.0)
     axes = figure.add_subplot()
     draw_grid(axes, grid)
@@ -130,6 +138,7 @@ def plot_grid(
     landmarks_xy = np.asarray(landmarks_xy, dtype=np.float64).reshape(-1, 2)
     axes.plot(*path_xy.T, color=SLAM_COLOR, linewidth=1.0, label="SLAM path")
     axes.plot(*landmarks_xy.T, "+", color="tab:orange", markersize=9, mew=2, label="mapped landmarks")
+    draw_loops(axes, loops)
     observed = np.argwhere(grid.occupancy >= 0)
     if observed.size:
         (row_low, col_low), (row_high, col_high) = observed.min(axis=0), observed.max(axis=0) + 1
@@ -142,6 +151,19 @@ def plot_grid(
     axes.set_title(f"Occupancy grid ({res:g} m cells)")
     axes.legend(loc="upper right", fontsize="small")
     figure.savefig(path)
+
+
+def draw_loops(axes: Any, loops: NDArray[np.float64] | None) -> None:
+    """SLAM's loop closures ``loops`` (L, 2, 2), each the positions of its two keyframes ``[[x_i, y_i],
+    [x_j, y_j]]`` (m): a line between them and a circle at the newer, counted in the legend; nothing for
+    None."""
+    if loops is None:
+        return
+    loops = np.asarray(loops, dtype=np.float64).reshape(-1, 2, 2)
+    for (x_i, y_i), (x_j, y_j) in loops:
+        axes.plot([x_i, x_j], [y_i, y_j], color=LOOP_COLOR, linewidth=1.5)
+    axes.plot(*loops[:, 1].T, "o", color=LOOP_COLOR, markersize=5, fillstyle="none",
+              label=f"loop closures ({len(loops)})")  # fmt: skip
 
 
 def draw_grid(axes: Any, grid: GridMap) -> None:

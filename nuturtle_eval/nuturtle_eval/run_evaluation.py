@@ -72,25 +72,30 @@ TARGETS = (
 class SlamSnapshot:
     """The filter's final state: ``covariance`` (N, N) of ``[x, y, theta, m_0x, m_0y, ...]``,
     ``landmarks_xy`` (n, 2) and their ``landmark_covariances`` (n, 2, 2); slam's occupancy ``grid`` as a
-    save writes it (None: no grid, e.g. no scan)."""
+    save writes it (None: no grid, e.g. no scan); the ``loops`` slam closed (L, 2, 2), each as the
+    positions of its two keyframes in the map frame (None: no loop closure)."""
 
     covariance: np.ndarray
     landmarks_xy: np.ndarray
     landmark_covariances: np.ndarray
     grid: GridMap | None = None
+    loops: np.ndarray | None = None
 
 
 def slam_snapshot(slam_node: Any) -> SlamSnapshot:
     """Read the final state straight from the in-process slam node's filter (its ``slam`` attribute) and
     its occupancy grid (its ``grid`` attribute: ``nuslam.grid_mapping.GridMapping``, re-rendered as a save
-    would)."""
+    would) and the loops its loop closure closed (its ``loop_closing`` attribute, None without:
+    ``nuslam.loop_closing.LoopClosing``)."""
     ekf = slam_node.slam
     grid_mapping = slam_node.grid
+    loop_closing = slam_node.loop_closing
     return SlamSnapshot(
         covariance=np.array(ekf.covariance),
         landmarks_xy=np.array(ekf.landmarks).reshape(-1, 2),
         landmark_covariances=np.array(ekf.landmark_covariances).reshape(-1, 2, 2),
         grid=grid_mapping.render() if grid_mapping.has_grid else None,
+        loops=None if loop_closing is None else loop_closing.loop_segments(),
     )
 
 
@@ -114,6 +119,14 @@ def slip_counts(slam_node: Any) -> dict[str, int | float | str | None]:
         "slam_motion_restarts": tally.restarts,
         "slam_motion_last_refusal": tally.last_reason or None,
     }
+
+
+def loop_counts(slam_node: Any) -> dict[str, Any]:
+    """The in-process slam node's loop closure totals (its ``loop_closing`` attribute:
+    ``nuslam.loop_closing.LoopClosing.counts``: keyframes, loops closed, candidates refused by reason, the
+    last correction, CPU time); {} without loop closure."""
+    loop_closing = slam_node.loop_closing
+    return {} if loop_closing is None else loop_closing.counts()
 
 
 def grid_counts(slam_node: Any) -> dict[str, int]:
@@ -191,11 +204,11 @@ def evaluate_and_plot(
     if len(record.slam):
         plots.plot_trajectory(
             out_dir / "trajectory.png", record.truth, odom, record.slam, record.circles,
-            snapshot.landmarks_xy, snapshot.landmark_covariances, record.walls,
+            snapshot.landmarks_xy, snapshot.landmark_covariances, record.walls, snapshot.loops,
         )  # fmt: skip
     plots.plot_covariance(out_dir / "covariance.png", snapshot.covariance)
     if snapshot.grid is not None:
-        write_grid(out_dir, snapshot.grid, record.slam.xy, snapshot.landmarks_xy)
+        write_grid(out_dir, snapshot.grid, record.slam.xy, snapshot.landmarks_xy, snapshot.loops)
     if record.truth is None or odom is None or not len(record.slam):
         return None
     circles = np.asarray(record.circles, dtype=np.float64).reshape(-1, 3)
@@ -226,12 +239,17 @@ def write_tums(
 
 
 def write_grid(
-    out_dir: Path, grid: GridMap, path_xy: NDArray[np.float64], landmarks_xy: NDArray[np.float64]
+    out_dir: Path,
+    grid: GridMap,
+    path_xy: NDArray[np.float64],
+    landmarks_xy: NDArray[np.float64],
+    loops: NDArray[np.float64] | None = None,
 ) -> None:
     """``map.yaml`` + ``map.pgm`` (:func:`turtlelib.mapping.grid_map_file.save_grid_map`) and ``grid.png``:
-    the grid with the SLAM path ``path_xy`` (K, 2) and the landmarks (n, 2) over it, all in the map frame."""
+    the grid with the SLAM path ``path_xy`` (K, 2), the landmarks (n, 2) and the loops closed (L, 2, 2; None:
+    none) over it, all in the map frame."""
     save_grid_map(out_dir / GRID_YAML, grid)
-    plots.plot_grid(out_dir / GRID_FIGURE, grid, path_xy, landmarks_xy)
+    plots.plot_grid(out_dir / GRID_FIGURE, grid, path_xy, landmarks_xy, loops)
 
 
 def json_value(value: Any) -> Any:

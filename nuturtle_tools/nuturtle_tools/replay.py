@@ -184,6 +184,19 @@ def summary(result: Any) -> str:
                 "slam_scans_held", "slam_relocalizations", "slam_stalls"):  # fmt: skip
         if key in metrics:
             rows.append(f"| {key.replace('_', ' ')} | {metrics[key]} |")
+    if "slam_loops_closed" in metrics:
+        refused = metrics["slam_loop_candidates_refused"]
+        reasons = ", ".join(f"{reason} {count}" for reason, count in refused.items())
+        rows.append(f"| slam loops closed / candidates refused ({reasons or 'none'}) / keyframes | "
+                    f"{metrics['slam_loops_closed']} / {sum(refused.values())} / "
+                    f"{metrics['slam_loop_keyframes']} |")  # fmt: skip
+        renders = metrics["slam_loop_grid_renders"]
+        cpu_s = metrics["slam_loop_cpu_seconds"], metrics["slam_loop_grid_render_cpu_seconds"]
+        rows.append(f"| slam loop closure CPU (s): steps / {renders} grid renderings | "
+                    f"{cpu_s[0]:.1f} / {cpu_s[1]:.1f} |")  # fmt: skip
+    if metrics.get("slam_loop_last_correction_m") is not None:
+        rows.append(f"| slam last loop correction (m, rad) | {metrics['slam_loop_last_correction_m']:.3f}, "
+                    f"{metrics['slam_loop_last_correction_rad']:+.3f} |")  # fmt: skip
     if metrics.get("slam_last_correction_m") is not None:
         rows.append(f"| slam last correction (m, rad) | {metrics['slam_last_correction_m']:.3f}, "
                     f"{metrics['slam_last_correction_rad']:+.3f} |")  # fmt: skip

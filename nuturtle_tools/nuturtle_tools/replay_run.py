@@ -70,6 +70,7 @@ from nuturtle_eval.run_evaluation import (
     SlamSnapshot,
     evaluate_and_plot,
     grid_counts,
+    loop_counts,
     sensor_range_m,
     slam_snapshot,
     slip_counts,
@@ -667,6 +668,7 @@ class Replay:
                     "slam_outputs_recorded": self.writer.message_counts,
                     **slip_counts(self.slam),
                     **grid_counts(self.slam),
+                    **loop_counts(self.slam),
                 }
             )
             if self.association == "unknown":

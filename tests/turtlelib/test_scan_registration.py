@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import math
+from itertools import pairwise
 
 import numpy as np
 import pytest
@@ -210,25 +211,31 @@ def test_a_first_scan_older_than_the_input_driven_steps_seeds_the_map_where_the_
     assert math.hypot(error.x, error.y) < 0.01 and abs(error.theta) < math.radians(0.5)
 
 
-def test_the_steps_since_a_keyframe_add_up_to_the_envelope_of_their_registrations():
-    """Q_k = [Sigma_k - A]_+, A the sum since the newest keyframe: the first scan after a keyframe adds all
-    of its Sigma, and the sum always covers the newest scan's Sigma while adding far less than the Sigmas'
-    sum."""
+def test_the_steps_since_a_keyframe_add_up_to_the_envelope_of_the_errors_against_it():
+    """C_k = Sigma_k + M C_k-1 M^T (M = Sigma_k P_prior^-1 = I - Sigma_k H_s, C carried by G to the new
+    pose), Q_k = [C_k - A]_+, A the sum since the newest keyframe: the first scan after a keyframe adds its
+    Sigma, the sum always covers C_k, and it adds far less than the Sigmas' sum in a room that pins every
+    direction."""
     odometry = LidarOdometry(LidarOdometryConfig(), NOISE)
     rng = np.random.default_rng(4)
+    U = Transform2D(0.044, 0.0, 0.0)
     T = Transform2D(-1.5, 0.0, 0.0)
     steps = []
     for k in range(8):  # 4.4 cm a scan: keyframes at scans 0 and 5 (0.22 m)
         scan = LIDAR.range_scan(simulate_scan(T, PILLAR, ROOM, LIDAR, rng))
         steps.append(odometry.step(k * 200_000_000, T, scan, Transform2D()))
-        T = T @ Transform2D(0.044, 0.0, 0.0)
+        T = T @ U
     for first in (1, 6):
         np.testing.assert_allclose(steps[first].Sigma, steps[first].registration.Sigma, rtol=1e-9, atol=1e-15)
-    A = np.zeros((3, 3))
-    for step in steps[1:6]:
-        Sigma = step.registration.Sigma
-        eigenvalues, V = np.linalg.eigh(Sigma - A)
-        np.testing.assert_allclose(step.Sigma, V @ np.diag(np.maximum(eigenvalues, 0.0)) @ V.T, atol=1e-15)
+    A, C = np.zeros((3, 3)), np.zeros((3, 3))
+    for previous, step in pairwise(steps[:6]):
+        T_prev, T_prior = previous.T_odom_body, previous.T_odom_body @ U
+        G = np.array([[1.0, 0.0, -(T_prior.y - T_prev.y)], [0.0, 1.0, T_prior.x - T_prev.x], [0.0, 0.0, 1.0]])
+        Sigma, H = step.registration.Sigma, step.registration.H_scan
+        M = np.eye(3) - Sigma @ H
+        C = Sigma + M @ G @ C @ G.T @ M.T
+        eigenvalues, V = np.linalg.eigh(0.5 * (C - A + (C - A).T))
+        np.testing.assert_allclose(step.Sigma, V @ np.diag(np.maximum(eigenvalues, 0.0)) @ V.T, atol=1e-14)
         A = A + step.Sigma
-        assert np.linalg.eigvalsh(A - Sigma).min() > -1e-15
+        assert np.linalg.eigvalsh(A - C).min() > -1e-14
     assert np.trace(A) < 0.5 * sum(np.trace(step.registration.Sigma) for step in steps[1:6])

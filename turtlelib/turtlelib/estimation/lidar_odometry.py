@@ -27,18 +27,26 @@ Each scan gives a sample of :class:`turtlelib.motion.motion_signals.MeasuredPose
 timeline: the pose ``T_k`` and the covariance of the motion since ``t_k-1`` (map frame, additive ``[x, y,
 theta]``), so the filter predicts from scan to scan with the registered motion
 (:class:`turtlelib.motion.motion_models.MeasuredMotion`) as independent increments. Scans registered to the
-same local map are not independent: each one's error is its error against the map's anchor (the newest
-keyframe), ``e_k ~ N(0, Sigma_k)``, whatever the scans before it gave; the anchor moves only when a keyframe
-is added. Summing each scan's ``Sigma_k`` as an increment would grow the covariance with the number of scans
-while the error stays bounded. So the increments since the newest keyframe add up to the envelope of the
-``Sigma``'s seen since it: with ``A`` their sum so far, a registered scan's increment is::
+same local map are not independent: their errors are errors against the same anchor (the newest keyframe),
+which moves only when a keyframe is added; summing each scan's ``Sigma_k`` as an increment would grow the
+covariance with the number of scans while the error stays bounded wherever the scans constrain it. The
+registered pose is ``Sigma_k (H_s z + P_prior^-1 (T_k-1 U_k))``: the scan's part errs against the anchor,
+the prior's carries the previous scan's error ``e_k-1`` on. So the error against the anchor has the
+covariance::
 
-    Q_k = [Sigma_k - A]_+,     A <- A + Q_k      ([.]_+: the positive semi-definite part)
+    C_k = Sigma_k + M C_k-1 M^T,     M = Sigma_k P_prior^-1
 
-so ``A >= Sigma_k`` after each scan (the filter's pose covariance covers the newest error against the anchor),
-and ``A`` restarts at 0 after a keyframe (the new anchor's own error, ``Sigma`` of that scan, is in the
-covariance then: the next scans' errors add to it). A step on the motion input alone carries its whole
-motion covariance (and adds it to ``A``: the next registration's prior covers it).
+(where the scan pins a direction, ``M ~ 0`` there and ``C_k ~ Sigma_k``: bounded; along a degenerate one
+``M ~ I`` and ``C_k ~ C_k-1 + P_prior``: the motion input's random walk), and the steps since the newest
+keyframe add up to the envelope of the ``C``'s: with ``A`` their sum so far, a registered scan's increment
+is::
+
+    Q_k = [C_k - A]_+,     A <- A + Q_k      ([.]_+: the positive semi-definite part)
+
+so ``A >= C_k`` after each scan (the filter's pose covariance covers the newest error against the anchor).
+``A`` and ``C`` restart at 0 after a keyframe (the new anchor's own error is in the covariance then: the next
+scans' errors add to it). A step on the motion input alone carries its whole motion covariance (and adds it
+to ``A``; ``C`` is carried to the new pose, the next registration's prior covering the motion).
 """
 
 from __future__ import annotations
@@ -162,8 +170,10 @@ class LidarOdometry:
         self._last: tuple[int, Transform2D, Transform2D] | None = None
         # the covariance of the motion since the last registered scan (the next registration's prior)
         self._P_since = np.zeros((3, 3))
-        # A: the steps' covariances summed since the newest keyframe
+        # A: the steps' covariances summed since the newest keyframe; C: the newest registered scan's error
+        # covariance against that keyframe
         self._A = np.zeros((3, 3))
+        self._C = np.zeros((3, 3))
 
     def forget_input(self) -> None:
         """The motion input restarted: its motion to the next scan is taken only if plausible (module
@@ -245,18 +255,22 @@ class LidarOdometry:
         G[0, 2], G[1, 2] = -(T_prior.y - T_prev.y), T_prior.x - T_prev.x
         P_since = G @ self._P_since @ G.T + P_motion
         registration = None
+        P_prior = P_since + _PRIOR_FLOOR
         if self._map is not None and len(points) >= self.config.registration.min_points:
-            registration = register(
-                points, self._map, T_prior, P_since + _PRIOR_FLOOR, self.config.registration
-            )
+            registration = register(points, self._map, T_prior, P_prior, self.config.registration)
+        self._C = G @ self._C @ G.T
         if registration is None:
             self._P_since = P_since
             self._A = self._A + P_motion
             return OdometryStep(t_ns, T_prior, P_motion, Basis.MOTION, None, t_ns - t_prev)
         self._P_since = np.zeros((3, 3))
         basis = Basis.DEGENERATE if registration.degenerate else Basis.REGISTERED
-        # Q_k = [Sigma_k - A]_+,  A <- A + Q_k
-        Q = _positive_part(registration.Sigma - self._A)
+        # C_k = Sigma_k + M C_k-1 M^T,  M = Sigma_k P_prior^-1
+        Sigma = registration.Sigma
+        M = np.linalg.solve(P_prior, Sigma).T
+        self._C = Sigma + M @ self._C @ M.T
+        # Q_k = [C_k - A]_+,  A <- A + Q_k
+        Q = _positive_part(self._C - self._A)
         self._A = self._A + Q
         return OdometryStep(t_ns, registration.T_map_body, Q, basis, registration, t_ns - t_prev)
 
@@ -274,6 +288,7 @@ class LidarOdometry:
             return
         self._keyframe_pose = T_odom_body
         self._A = np.zeros((3, 3))
+        self._C = np.zeros((3, 3))
         self._keyframes.append(T_odom_body @ points)
         q_map = voxel_centroids(np.concatenate(list(self._keyframes)), self.config.registration.voxel_m)
         self._map = LocalMap(q_map, self.config.registration) if len(q_map) >= 3 else None
