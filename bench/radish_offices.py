@@ -10,6 +10,7 @@ estimate.tum, odometry.tum, reference.tum for evo, map.yaml, grid.png, ...) and 
 --out/<name>.log. Prints one markdown table and writes it to --out/results.md.
 
 Usage: python -P bench/radish_offices.py [FOLDER ...] [--max-range-m 3.5] [--out DIR] [--rate R]
+       [--no-scan-registration] [--loop-closure]
 """
 
 from __future__ import annotations
@@ -79,12 +80,20 @@ def main() -> None:
     )
     parser.add_argument("--rate", type=float, default=None, help="the replay's --rate (default: as fast)")
     parser.add_argument(
-        "--scan-registration", action="store_true", help="slam with scan_registration: true (LiDAR odometry)"
+        "--no-scan-registration",
+        dest="scan_registration",
+        action="store_false",
+        help="slam with scan_registration: false (the motion input alone between landmarks)",
     )
+    parser.add_argument("--loop-closure", action="store_true", help="slam with loop_closure: true")
     args = parser.parse_args()  # fmt: skip
     args.out.mkdir(parents=True, exist_ok=True)
     params = args.out / "params.yaml"
-    slam = {**PARAMS["slam"]["ros__parameters"], "scan_registration": args.scan_registration}
+    slam = {
+        **PARAMS["slam"]["ros__parameters"],
+        "scan_registration": args.scan_registration,
+        "loop_closure": args.loop_closure,
+    }
     chosen = {**PARAMS, "slam": {"ros__parameters": slam}}
     params.write_text(yaml.safe_dump(chosen, sort_keys=False), encoding="utf-8")
     table = [HEADER]
