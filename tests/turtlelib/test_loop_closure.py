@@ -91,7 +91,7 @@ def test_a_drifting_loop_is_closed_and_the_graph_lands_on_the_truth():
     rng = np.random.default_rng(3)
     lap = [[-3.75, -2.75], [3.75, -2.75], [3.75, 2.75], [-3.75, 2.75], [-3.75, -2.75]]
     truth = path_through(lap + [[3.75, -2.75], [3.75, 0.0]])
-    loops = LoopClosure(LoopClosureConfig(drift_m2_per_m=0.0, drift_rad2_per_m=0.0))
+    loops = LoopClosure(LoopClosureConfig())
     # a heading drift of 1.5 mrad per step: 0.16 rad over the lap, the end of it 0.9 m off
     odometry, accepted = drive(loops, truth, RING, RING_PILLARS, rng, bias_rad=0.0015)
     assert len(accepted) >= 2

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from itertools import pairwise
 
 import numpy as np
@@ -215,8 +216,8 @@ def test_the_steps_since_a_keyframe_add_up_to_the_envelope_of_the_errors_against
     """C_k = Sigma_k + M C_k-1 M^T (M = Sigma_k P_prior^-1 = I - Sigma_k H_s, C carried by G to the new
     pose), Q_k = [C_k - A]_+, A the sum since the newest keyframe: the first scan after a keyframe adds its
     Sigma, the sum always covers C_k, and it adds far less than the Sigmas' sum in a room that pins every
-    direction."""
-    odometry = LidarOdometry(LidarOdometryConfig(), NOISE)
+    direction (without the maps' drift per metre: the next test)."""
+    odometry = LidarOdometry(LidarOdometryConfig(drift_m2_per_m=0.0, drift_rad2_per_m=0.0), NOISE)
     rng = np.random.default_rng(4)
     U = Transform2D(0.044, 0.0, 0.0)
     T = Transform2D(-1.5, 0.0, 0.0)
@@ -239,3 +240,28 @@ def test_the_steps_since_a_keyframe_add_up_to_the_envelope_of_the_errors_against
         A = A + step.Sigma
         assert np.linalg.eigvalsh(A - C).min() > -1e-14
     assert np.trace(A) < 0.5 * sum(np.trace(step.registration.Sigma) for step in steps[1:6])
+
+
+def test_a_registered_step_adds_the_maps_drift_over_its_length():
+    """Q_k + d_k diag(q_xy, q_xy, q_theta): the same scans with and without the drift differ by exactly that;
+    a step on the motion input alone (the first) carries none."""
+    config = LidarOdometryConfig(drift_m2_per_m=0.03**2, drift_rad2_per_m=0.02**2)
+    steps = {}
+    for name, odometry in (
+        ("drift", LidarOdometry(config, NOISE)),
+        ("none", LidarOdometry(replace(config, drift_m2_per_m=0.0, drift_rad2_per_m=0.0), NOISE)),
+    ):
+        rng = np.random.default_rng(6)
+        T, steps[name] = Transform2D(-1.5, 0.0, 0.0), []
+        for k in range(4):
+            scan = LIDAR.range_scan(simulate_scan(T, PILLAR, ROOM, LIDAR, rng))
+            steps[name].append(odometry.step(k * 200_000_000, T, scan, Transform2D()))
+            T = T @ Transform2D(0.05, 0.0, 0.02)
+    np.testing.assert_array_equal(steps["drift"][0].Sigma, steps["none"][0].Sigma)
+    for previous, drifting, plain in zip(steps["drift"], steps["drift"][1:], steps["none"][1:], strict=False):
+        d_m = math.hypot(
+            drifting.T_odom_body.x - previous.T_odom_body.x, drifting.T_odom_body.y - previous.T_odom_body.y
+        )
+        assert d_m == pytest.approx(0.05, abs=0.005)
+        expected = plain.Sigma + d_m * np.diag([0.03**2, 0.03**2, 0.02**2])
+        np.testing.assert_allclose(drifting.Sigma, expected, rtol=1e-9, atol=1e-15)

@@ -47,6 +47,12 @@ so ``A >= C_k`` after each scan (the filter's pose covariance covers the newest 
 ``A`` and ``C`` restart at 0 after a keyframe (the new anchor's own error is in the covariance then: the next
 scans' errors add to it). A step on the motion input alone carries its whole motion covariance (and adds it
 to ``A``; ``C`` is carried to the new pose, the next registration's prior covering the motion).
+
+The local map is itself made of registered scans: its error against the world, which no registration
+against it can see, grows with the distance travelled (the anchors chain: each keyframe's error against the
+one before; biases of real scans: a wall seen at a glancing angle, glass, a LiDAR's range bias). Each
+registered step of ``d_k`` metres adds ``d_k diag(q_xy, q_xy, q_theta)`` (``drift_m2_per_m``,
+``drift_rad2_per_m``) for it; 0 where the scans are unbiased, as in a simulator.
 """
 
 from __future__ import annotations
@@ -72,7 +78,7 @@ from ..sensing.scan_registration import (
     voxel_centroids,
 )
 from ..util.timebase import NS_PER_S
-from ..util.validation import integer, positive, store
+from ..util.validation import integer, non_negative, positive, store
 
 # P_floor: (1 mm)^2 and (0.001 rad)^2
 _PRIOR_FLOOR = np.diag([1e-6, 1e-6, 1e-6])
@@ -83,19 +89,23 @@ class LidarOdometryConfig:
     """``keyframe_distance_m`` (m, > 0), ``keyframe_angle_rad`` (rad, > 0): how far a scan must be from the
     newest keyframe to become one; ``keyframes`` (int >= 1): keyframes in the local map; ``resume_std_m``
     (m, > 0), ``resume_std_rad`` (rad, > 0): the prior's standard deviations for the first scan after the
-    motion input restarted; ``registration``: the matcher's (:class:`RegistrationConfig`). ValueError for
-    invalid values."""
+    motion input restarted; ``drift_m2_per_m`` (m^2/m), ``drift_rad2_per_m`` (rad^2/m), >= 0: the local
+    maps' own drift per metre of a registered step (module docstring); ``registration``: the matcher's
+    (:class:`RegistrationConfig`). ValueError for invalid values."""
 
     keyframe_distance_m: float = 0.2
     keyframe_angle_rad: float = 0.2
     keyframes: int = 20
     resume_std_m: float = 0.5
     resume_std_rad: float = 0.3
+    drift_m2_per_m: float = 0.02**2
+    drift_rad2_per_m: float = 0.01**2
     registration: RegistrationConfig = field(default_factory=RegistrationConfig)
 
     def __post_init__(self) -> None:
         store(self, ("keyframe_distance_m", "keyframe_angle_rad", "resume_std_m", "resume_std_rad"), positive)
         store(self, ("keyframes",), partial(integer, minimum=1))
+        store(self, ("drift_m2_per_m", "drift_rad2_per_m"), non_negative)
         if not isinstance(self.registration, RegistrationConfig):
             raise ValueError(f"registration must be a RegistrationConfig, got {self.registration!r}")
 
@@ -272,6 +282,10 @@ class LidarOdometry:
         # Q_k = [C_k - A]_+,  A <- A + Q_k
         Q = _positive_part(self._C - self._A)
         self._A = self._A + Q
+        # + d_k diag(q_xy, q_xy, q_theta): the local map's own drift over the step's d_k metres
+        d_m = math.hypot(registration.T_map_body.x - T_prev.x, registration.T_map_body.y - T_prev.y)
+        q = self.config
+        Q = Q + d_m * np.diag([q.drift_m2_per_m, q.drift_m2_per_m, q.drift_rad2_per_m])
         return OdometryStep(t_ns, registration.T_map_body, Q, basis, registration, t_ns - t_prev)
 
     def _is_keyframe(self, T_odom_body: Transform2D) -> bool:

@@ -14,11 +14,10 @@ registration's ``voxel_m``), pose and stamp. Between keyframes ``a`` and ``b`` t
 
 (a heading error at scan ``k-1`` swings scan ``k`` about it), and the odometry edge is::
 
-    Z_ab = T_a^-1 T_b,   S_ab = B Sigma_w B^T + d_ab diag(q_xy, q_xy, q_theta),   B = blkdiag(R(theta_a)^T, 1)
+    Z_ab = T_a^-1 T_b,   S_ab = B Sigma_w B^T,   B = blkdiag(R(theta_a)^T, 1)
 
-``d_ab`` (m) the path between them and ``q_xy`` (``drift_m2_per_m``), ``q_theta`` (``drift_rad2_per_m``)
-the drift of the local maps themselves: a registration's covariance is *given* its local map, whose own
-error (made of the same scans) it cannot see; that error grows with the distance travelled.
+(the steps' covariances carry the local maps' own drift, which a registration cannot see:
+:class:`~turtlelib.estimation.lidar_odometry.LidarOdometryConfig`'s ``drift_m2_per_m``, ``drift_rad2_per_m``).
 
 Detection
 ---------
@@ -82,7 +81,7 @@ from ..sensing.scan_registration import (
     register,
     voxel_centroids,
 )
-from ..util.validation import in_range, integer, non_negative, positive, store
+from ..util.validation import in_range, integer, positive, store
 from .pose_graph import PoseGraph, PoseGraphConfig
 
 
@@ -91,7 +90,6 @@ class LoopClosureConfig:
     """Loop closure (module docstring); lengths in m, angles in rad, all > 0 unless said (ValueError).
 
     * ``keyframe_distance_m``, ``keyframe_angle_rad``: how far a scan must be from the newest keyframe;
-    * ``drift_m2_per_m`` (m^2/m), ``drift_rad2_per_m`` (rad^2/m), >= 0: the local maps' drift;
     * ``min_travel_m``: a candidate is at least this far back along the path;
     * ``max_distance_m``: and at most this far from the new keyframe (estimated);
     * ``window_sigmas``, ``min_window_m``, ``max_window_m``, ``min_window_rad``, ``max_window_rad``: the
@@ -105,8 +103,6 @@ class LoopClosureConfig:
 
     keyframe_distance_m: float = 1.0
     keyframe_angle_rad: float = 0.5
-    drift_m2_per_m: float = 0.02**2
-    drift_rad2_per_m: float = 0.01**2
     min_travel_m: float = 10.0
     max_distance_m: float = 3.0
     window_sigmas: float = 3.0
@@ -147,7 +143,6 @@ class LoopClosureConfig:
             ),
             positive,
         )
-        store(self, ("drift_m2_per_m", "drift_rad2_per_m"), non_negative)
         store(self, ("submap_keyframes",), partial(integer, minimum=0))
         store(
             self,
@@ -260,7 +255,6 @@ class LoopClosure:
         return self._add_keyframe(step.t_ns, T, points)
 
     def _add_keyframe(self, t_ns: int, T: Transform2D, points: NDArray[np.float64]) -> list[LoopCandidate]:
-        config = self.config
         if not self.keyframes:
             self.keyframes.append(Keyframe(t_ns, T, points, 0.0))
             self.graph.add_pose(T)
@@ -269,13 +263,11 @@ class LoopClosure:
         previous = self.keyframes[-1]
         path_m = previous.path_m + self._path_m
         a = len(self.keyframes) - 1
-        # Z_ab = T_a^-1 T_b,  S_ab = B Sigma_w B^T + d diag(q_xy, q_xy, q_theta)
+        # Z_ab = T_a^-1 T_b,  S_ab = B Sigma_w B^T
         Z = previous.T_odom_body.inverse() @ T
         B = np.eye(3)
         B[:2, :2] = previous.T_odom_body.rotation_matrix().T
-        S = B @ self._Sigma_w @ B.T + self._path_m * np.diag(
-            [config.drift_m2_per_m, config.drift_m2_per_m, config.drift_rad2_per_m]
-        )
+        S = B @ self._Sigma_w @ B.T
         # a floor so that a robot standing still keeps an invertible edge: (1 mm, 1 mrad)^2
         S = 0.5 * (S + S.T) + 1e-6 * np.eye(3)
         self.keyframes.append(Keyframe(t_ns, T, points, path_m))
