@@ -123,9 +123,9 @@ class Basis(enum.Enum):
 @dataclass(frozen=True)
 class OdometryStep:
     """One scan's result: its stamp, its pose ``T_odom_body`` (frame ``lidar_odom``), the covariance
-    ``Sigma`` (3, 3) the step adds to the pose's (module docstring: the registration's prior share, and its
-    map share at a keyframe), what it rests on (``basis``) and the registration (None for
-    ``Basis.MOTION``)."""
+    ``Sigma`` (3, 3) the step adds to the pose's (module docstring: what the newest error against the
+    keyframe exceeds of the steps since it, plus the map's drift over the step), what it rests on
+    (``basis``) and the registration (None for ``Basis.MOTION``)."""
 
     t_ns: int
     T_odom_body: Transform2D
