@@ -79,8 +79,11 @@ COMMANDS = {
     "circle": ("stops/circle_cmd_vel", Twist),
     "driver": ("stops/driver_cmd_vel", Twist),
 }
-# the second SIGINT, this long after the first: while the node stops (measured 0.1-1.5 s)
-SECOND_SIGNAL_AFTER_S = 0.2
+# the second SIGINT comes once the node has logged that it stops on its first signal (its stop then takes
+# 0.1-1.5 s), at most this long after the first: sent sooner, on a loaded machine both could be pending
+# before the node's main thread runs a handler, and Python runs pending handlers in signal-number order
+# (SIGINT, 2, before SIGTERM, 15)
+SECOND_SIGNAL_AFTER_S = 10.0
 # a node still running this long after its signal hangs (launch sends SIGTERM after 5 s, SIGKILL 5 s later)
 HANG_S = 10.0
 
@@ -177,7 +180,15 @@ def stopped(tmp_path_factory) -> tuple[dict[str, Run], dict[str, list]]:
         assert ros.spin_until(moving, 20.0), {topic: len(messages) for topic, messages in received.items()}
         for k, run in enumerate(runs.values()):
             os.killpg(run.process.pid, STOP_SIGNALS[k % len(STOP_SIGNALS)])
-        ros.spin_for(SECOND_SIGNAL_AFTER_S)
+
+        def stopping() -> bool:
+            return all(
+                f"{STOP_SIGNALS[k % len(STOP_SIGNALS)].name}: stopping" in run.text
+                or run.process.poll() is not None
+                for k, run in enumerate(runs.values())
+            )
+
+        ros.spin_until(stopping, SECOND_SIGNAL_AFTER_S)
         for run in runs.values():
             if run.process.poll() is None:
                 os.killpg(run.process.pid, signal.SIGINT)
