@@ -136,6 +136,7 @@ class LoopClosing:
             self._lidar_poses.add(step.t_ns, step.T_odom_body)
         if len(p_body) and self._grid.mapping:
             self._scan_poses[step.t_ns] = (len(self.loops.keyframes) - 1, step.T_odom_body)
+            self._forget_dropped_scans()
         if accepted:
             self._closed(accepted, C_old)
         self._step_time.add(1e3 * (time.perf_counter() - start))
@@ -195,13 +196,17 @@ class LoopClosing:
         return self._timeline.slam.pose @ (self.loops.map_from_odom() @ T_l).inverse()
 
     def _render(self, t_ns: int) -> None:
-        """The grid rendered again at the graph's poses; the poses of scans the grid dropped forgotten."""
+        """The grid rendered again at the graph's poses."""
         start_cpu, start = time.process_time(), time.perf_counter()
         self._grid.render_again()
         self._render_time.add(1e3 * (time.perf_counter() - start))
         self.cpu_s["renders"] += time.process_time() - start_cpu
         self.renders += 1
         self._render_due, self._rendered_ns = False, t_ns
+
+    def _forget_dropped_scans(self) -> None:
+        """Past ``SCAN_POSES_SLACK`` more scan poses than the grid has keyframes, forget those of the scans
+        the grid did not keep (memory bounded whether or not a loop ever closes)."""
         if len(self._scan_poses) > len(self._grid.keyframes) + SCAN_POSES_SLACK:
             kept = set(self._grid.keyframes.stamps_ns)
             newest = max(kept, default=-1)

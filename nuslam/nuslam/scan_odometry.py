@@ -168,10 +168,10 @@ class ScanOdometry:
         went_back = self._last_ns is not None and t_ns <= self._last_ns
         if T_input_body is None or (went_back and not self._restarting):
             # the first scans, when the input alone drove the filter on past them, still start the map
-            if scan is not None and T_input_body is not None:
-                if self._odometry.seed_map(t_ns, T_input_body, scan, T_body_scan):
-                    self.counts["seeded"] += 1
-                    return None
+            seeded = T_input_body is not None and scan is not None
+            if seeded and self._odometry.seed_map(t_ns, T_input_body, scan, T_body_scan):
+                self.counts["seeded"] += 1
+                return None
             self._skip(f"scan at {t_ns} ns skipped by the scan registration: older than the last one")
             return None
         try:
