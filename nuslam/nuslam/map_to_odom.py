@@ -6,7 +6,9 @@ transform the odometry source broadcasts at the same stamp (read from its `odom`
 between its samples by `turtlelib.geometry.pose_buffer.PoseBuffer`), so that composing the two transforms
 on /tf gives slam's pose exactly, however late slam started. A pose whose stamp odom does not cover yet
 waits for the odom sample that does (the newest one only); after a restart of the odometry source its
-frame is another, so the kept samples go. Nothing is sent where tf2_msgs is not installed.
+frame is another, so the kept samples go. A pose at the stamp of the transform sent last (slam publishes a
+pose again when a late scan corrects it) waits for the next stamp: tf2 drops a transform whose stamp it
+holds already, with a TF_REPEATED_DATA warning. Nothing is sent where tf2_msgs is not installed.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ class MapToOdom:
         self._odom_poses = PoseBuffer(ODOM_BUFFER_SAMPLES)
         # the newest pose not yet paired with odom: (t_ns, T_map_body, stamp)
         self._pending: tuple[int, Transform2D, Time] | None = None
+        self._sent_ns: int | None = None
 
     def odom(self, samples: list[tuple[int, tuple[float, float, float]]], restarted: bool) -> None:
         """The odometry source's plausible samples ``(t_ns, (x, y, theta))`` (``restarted``: its frame is
@@ -44,7 +47,7 @@ class MapToOdom:
 
     def pose(self, t_ns: int, T_map_body: Transform2D, stamp: Time) -> None:
         """slam's pose at ``t_ns``: its transform is sent once odom covers the stamp."""
-        if self._tf.available:
+        if self._tf.available and t_ns != self._sent_ns:
             self._pending = (t_ns, T_map_body, stamp)
             self._send()
 
@@ -57,4 +60,4 @@ class MapToOdom:
             return
         # T_map_odom = T_map_body T_odom_body^-1
         self._tf.send(transform_stamped(T_map_body @ T_odom_body.inverse(), *self._frames, stamp))
-        self._pending = None
+        self._pending, self._sent_ns = None, t_ns

@@ -51,7 +51,10 @@ Subscribes
         ``R = J Sigma J^T`` (`turtlelib.estimation.range_bearing.observations_from_points`).
 Publishes
     `~/odom` (nav_msgs/Odometry, `map_id` -> `body_id`, stamped with the joint_states stamp): the pose at
-        that stamp with its (x, y, yaw) covariance in the 6x6, and the wheels' body twist.
+        that stamp with its (x, y, yaw) covariance in the 6x6, and the wheels' body twist. With
+        `scan_registration`, a scan that arrives once the motion input has passed its stamp (a LiDAR's
+        messages come after the wheels') is registered then, and the pose at the newest input stamp is
+        published again, corrected by it (the same stamp twice: after the prediction and after the update).
     `~/path` (nav_msgs/Path, frame `map_id`), decimated by `PathTrailConfig`.
     `~/map` (visualization_msgs/MarkerArray, frame `map_id`, after each applied scan, stamped with it;
         reliable + transient local, REP 2003, so a late RViz or Foxglove gets the last one):
@@ -295,6 +298,8 @@ class SlamNode(Node):
         self._reader = ObservationReader(
             known, frames.fake_sensor_std, frames.sensor_id, frames.body_id, T_body_sensor
         )
+        # the stamp (ns) and body twist of the newest pose published
+        self._published: tuple[int, Twist2D] | None = None
         # the stamp and value of the first motion sample since the last observation
         self._observed_at: tuple[int, tuple[float, ...]] | None = None
         self._wheels = declare_wheel_stream(self, self.joints, robot, self._warnings)
@@ -439,11 +444,7 @@ class SlamNode(Node):
                 applied = self._add_registered_scans()
                 if self.timeline.latest_time_ns is None:
                     return  # no scan registered yet: no pose
-            T_map_body, P_pose = self.timeline.latest_pose()
-            if self.scan_odometry is not None:
-                T_map_body, P_pose = self.scan_odometry.moved_on(
-                    self.timeline.latest_time_ns, T_map_body, P_pose, t_ns
-                )
+            T_map_body, P_pose = self._pose_at(t_ns)
         except (ValueError, np.linalg.LinAlgError) as error:
             # a motion the filter's model refuses (a step turning the body by more than 1000 rad, ...):
             # add_motion changed nothing, so the samples after it drive on from the last good one (the
@@ -452,9 +453,18 @@ class SlamNode(Node):
             return
         self._check_observations_arrive(t_ns, sample)
         self._publish_pose(stamp_from_nanoseconds(t_ns), V_body, T_map_body, P_pose)
+        self._published = (t_ns, V_body)
         self.grid.insert_reached()
         if applied:
             self._publish_map(stamp_from_nanoseconds(applied[-1].t_ns))
+
+    def _pose_at(self, t_ns: int) -> tuple[Transform2D, NDArray[np.float64]]:
+        """The pose at the newest motion sample ``t_ns`` and its covariance: the timeline's, or with
+        ``scan_registration`` the filter's at the newest registered scan moved on by the input since."""
+        T_map_body, P_pose = self.timeline.latest_pose()
+        if self.scan_odometry is None:
+            return T_map_body, P_pose
+        return self.scan_odometry.moved_on(self.timeline.latest_time_ns, T_map_body, P_pose, t_ns)
 
     def _timed_add_motion(self, t_ns: int, sample: tuple[float, ...]) -> list[ScanResult]:
         """``timeline.add_motion``, its applied measurements counted and timed."""
@@ -473,7 +483,12 @@ class SlamNode(Node):
     def _on_scan(self, msg: LaserScan) -> None:
         """A scan for the registration (``scan_registration``): registered once the motion reaches it."""
         self.scan_odometry.on_scan(msg)
+        registered_to = self.timeline.latest_time_ns
         applied = self._add_registered_scans()
+        if self._published is not None and registered_to != self.timeline.latest_time_ns:
+            t_ns, V_body = self._published
+            if t_ns >= self.timeline.latest_time_ns:  # the published pose, corrected by the scan
+                self._publish_pose(stamp_from_nanoseconds(t_ns), V_body, *self._pose_at(t_ns))
         self.grid.insert_reached()
         if applied:
             self._publish_map(stamp_from_nanoseconds(applied[-1].t_ns))
@@ -607,6 +622,7 @@ class SlamNode(Node):
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         """Start again as at start-up: the start pose, and the map loaded then (or none)."""
         self.timeline.reset(self.node_config.T_map_body0, self._start_map)
+        self._published = None
         count = 0 if self._start_map is None else self._start_map.n_landmarks
         response.success, response.message = True, f"reset to the start pose with {count} landmarks"
         self.get_logger().info(response.message)
@@ -664,6 +680,7 @@ class SlamNode(Node):
         else:
             self.scan_odometry.restart()
         self.odometry.set_reference(t_ns * 1e-9, *sample)
+        self._published = None  # a pose of the old time base
 
     # --- outputs -----------------------------------------------------------------------------------------
 

@@ -10,11 +10,13 @@ import math
 import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticStatus
+from ros_test_messages import stamp, stamp_ns
 from test_slam_grid import scan_message
 from test_slam_maps import diagnostics
-from test_slam_node import Arc, Rig, S, joint_state, pose_of
+from test_slam_node import Arc, Rig, S, TfRecorder, joint_state, pose_of
 
-from turtlelib import Transform2D
+from nuturtle_ros_common.conversions import odometry_message
+from turtlelib import Transform2D, Twist2D
 
 pytestmark = pytest.mark.ros
 
@@ -67,3 +69,38 @@ def test_with_the_lidar_quiet_slam_goes_on_with_the_wheels_and_says_so(ros):
     status = diagnostics(rig, "slam: scan registration")
     assert status.level == DiagnosticStatus.ERROR
     assert "the motion input alone" in status.message
+
+
+def test_a_scan_that_comes_after_the_wheels_corrects_the_pose_published_at_its_stamp(ros):
+    """A LiDAR's messages reach slam after the wheels' of the same instant: the scan is registered then, and
+    slam publishes the pose at that stamp again, corrected (the last pose at a stamp is the best one);
+    map -> odom goes out once per stamp (tf2 drops a repeated one with a warning)."""
+    rig = Rig(ros, scan_registration=True, lidar_x=0.25, lidar_y=-0.1, lidar_yaw=0.5)  # scan_message's mount
+    recorder = rig.node._map_to_odom._tf = TfRecorder()
+    truth = Arc(Transform2D(), S, vx=0.15, omega=0.5)
+    wheels = Arc(Transform2D(), S, vx=0.15, omega=0.8)  # 0.06 rad too much turn per step
+    rng = np.random.default_rng(4)
+    rig.scans.publish(scan_message(truth.pose(S), S, rng))  # the map starts at the start pose
+    ros.spin_for(0.2)
+    for k in range(STEPS):
+        t_ns = S + k * S // 5
+        count = len(rig.odoms)
+        rig.odom.publish(
+            odometry_message(wheels.pose(t_ns), Twist2D(), "odom", "base_footprint", stamp(t_ns))
+        )
+        rig.joint_states.publish(joint_state(t_ns, wheels.angles(t_ns)))
+        assert ros.spin_until(lambda c=count: len(rig.odoms) > c, 5.0), f"no odom at step {k}"
+        if k == 0:
+            continue
+        rig.scans.publish(scan_message(truth.pose(t_ns), t_ns, rng))
+        assert ros.spin_until(lambda c=count: len(rig.odoms) > c + 1, 5.0), f"no corrected odom at step {k}"
+        predicted, corrected = rig.odoms[-2:]
+        assert stamp_ns(predicted.header.stamp) == stamp_ns(corrected.header.stamp) == t_ns
+        heading_error = [
+            abs((truth.pose(t_ns).inverse() @ Transform2D(*pose_of(odom))).theta)
+            for odom in (predicted, corrected)
+        ]
+        assert heading_error[0] > math.radians(2.0), "the wheels' prediction turned too far"
+        assert heading_error[1] < math.radians(1.0), "the scan corrected it"
+    stamps = [stamp_ns(sent.header.stamp) for sent in recorder.sent]
+    assert len(stamps) == len(set(stamps)) == STEPS, "one map -> odom per stamp"
