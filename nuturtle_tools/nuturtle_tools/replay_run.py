@@ -28,7 +28,8 @@ Ground truth (``truth_topic``, nav_msgs/Odometry, default ``/nusim/ground_truth`
 ``nusim/ground_truth``, which only the monitor hears. One bag topic may have several roles: a Gazebo
 ``/odom`` (the model's true pose) given as ``truth_topic`` is played as both ``odom`` and the truth. When
 the bag has a truth, SLAM starts at the truth's pose at the first motion sample's stamp (so ``map`` = the
-truth's frame), odometry is placed in that frame by its first sample
+truth's frame; a truth that starts later, as a reference made at the scans, is moved back to it by the bag's
+odometry: :func:`truth_pose_at`), odometry is placed in that frame by its first sample
 (``T_world_odom = T_world_body(t0) T_odom_body(t0)^-1``), and the demo's accuracy metrics are computed;
 the true cylinders come from the params file's ``nusim`` section (``obstacles.x/y/r``, e.g. a nusim world
 file) or else the bag's ``/nusim/obstacles`` markers. With the truth and scans, slam's grid is also scored
@@ -260,7 +261,9 @@ def node_parameters_from_file(path: Path | None, node: str) -> dict[str, Any]:
 class BagFacts:
     """Read from the bag before playing: ``truth`` (None without ground truth), the first motion sample's
     stamp (ns), the true cylinders ``[x, y, r]`` of /nusim/obstacles (or None), the first scan's
-    ``angle_increment`` and ``range_max``; with the truth, every scan ``(stamp (s), scan)`` as played."""
+    ``angle_increment`` and ``range_max``; with the truth, every scan ``(stamp (s), scan)`` as played, and the
+    odometry (the bag's odom) up to the first sample at or past the truth's first stamp (None without
+    them)."""
 
     truth: PoseSeries | None = None
     first_motion_ns: int | None = None
@@ -268,6 +271,7 @@ class BagFacts:
     angle_increment: float | None = None
     range_max: float | None = None
     scans: list[tuple[float, RangeScan]] = field(default_factory=list)
+    odom_lead: PoseSeries | None = None
 
 
 def cut_scan(msg: Any, max_range_m: float | None) -> Any:
@@ -314,16 +318,25 @@ def read_facts(
     them, cut to ``max_range_m``, with a truth; else the first) and the obstacles."""
     facts = BagFacts()
     wanted: dict[str, set[str]] = {}
-    for role in ("truth", motion_role, "scan"):
+    for role in ("truth", motion_role, "scan", "odom"):
         if role in topics:
             wanted.setdefault(topics[role].name, set()).add(role)
     if OBSTACLES_TOPIC in source.topics:
         wanted.setdefault(OBSTACLES_TOPIC, set()).add("obstacles")
     truth_rows: list[list[float]] = []
+    odom_rows: list[list[float]] = []
     for message in source.messages(wanted):
         roles = wanted[message.topic]
         if "truth" in roles:
             truth_rows.append(
+                _odometry_row(deserialize_message(message.data, message_class(message.type_name)))
+            )
+        if (
+            "odom" in roles
+            and "truth" in topics
+            and not (truth_rows and odom_rows and odom_rows[-1][0] >= truth_rows[0][0])
+        ):
+            odom_rows.append(
                 _odometry_row(deserialize_message(message.data, message_class(message.type_name)))
             )
         if motion_role in roles and facts.first_motion_ns is None:
@@ -345,12 +358,29 @@ def read_facts(
             facts.obstacles = np.asarray(cylinders, dtype=np.float64).reshape(-1, 3)
     if truth_rows:
         facts.truth = pose_series(truth_rows)
+    if odom_rows:
+        facts.odom_lead = pose_series(odom_rows)
     return facts
 
 
-def truth_pose_at(truth: PoseSeries, t_ns: int | None) -> Transform2D:
-    """The truth at ``t_ns`` (clamped to its span; its first pose without a time)."""
-    t_s = truth.t_s[0] if t_ns is None else float(np.clip(t_ns * 1e-9, truth.t_s[0], truth.t_s[-1]))
+def truth_pose_at(truth: PoseSeries, t_ns: int | None, odom: PoseSeries | None = None) -> Transform2D:
+    """The truth at ``t_ns`` (its first pose without a time). Before the truth's first stamp ``t_1`` (a
+    reference that starts with the first scan, after the robot has moved), the truth's first pose moved
+    back by the odometry's motion from ``t_ns`` to ``t_1`` where ``odom`` covers both::
+
+        T_world_body(t) = T_truth(t_1) T_odom_body(t_1)^-1 T_odom_body(t)
+
+    else clamped to the truth's span."""
+    t_1 = truth.t_s[0]
+    if (
+        t_ns is not None
+        and odom is not None
+        and len(odom)
+        and odom.t_s[0] <= t_ns * 1e-9 < t_1 <= odom.t_s[-1]
+    ):
+        T_odom_t, T_odom_1 = (Transform2D(*pose) for pose in odom.interpolate(np.array([t_ns * 1e-9, t_1])))
+        return Transform2D(*truth.poses[0]) @ T_odom_1.inverse() @ T_odom_t
+    t_s = t_1 if t_ns is None else float(np.clip(t_ns * 1e-9, t_1, truth.t_s[-1]))
     return Transform2D(*truth.interpolate(np.array([t_s]))[0])
 
 
@@ -448,7 +478,7 @@ class Replay:
             self.slam_values["model"] = options.model
         self.landmarks_values = node_parameters_from_file(options.params, "landmarks")
         if self.facts.truth is not None:
-            T0 = truth_pose_at(self.facts.truth, self.facts.first_motion_ns)
+            T0 = truth_pose_at(self.facts.truth, self.facts.first_motion_ns, self.facts.odom_lead)
             self.slam_values.update(x0=T0.x, y0=T0.y, theta0=T0.theta)
         self.nusim_values = node_parameters_from_file(options.params, "nusim")
         for values in (self.slam_values, self.landmarks_values):
@@ -741,7 +771,7 @@ class Replay:
         odom_raw = self.monitor.odom()
         T_world_body0 = T_start
         if truth is not None and len(odom_raw):
-            T_world_body0 = truth_pose_at(truth, round(odom_raw.t_s[0] * 1e9))
+            T_world_body0 = truth_pose_at(truth, round(odom_raw.t_s[0] * 1e9), odom_raw)
         circles = self._true_circles() if truth is not None else np.zeros((0, 3))
         slam_range_m = float(self.slam.config.max_range)
         return RunRecord(

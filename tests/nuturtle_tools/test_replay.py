@@ -25,10 +25,12 @@ from rosbags.typesys import Stores, get_typestore
 from bag_reading import read_bag
 from foxglove_client import FoxgloveClient
 from nuturtle_demo.run import BAG_NAME, DemoOptions, run_demo
+from nuturtle_eval.metrics import PoseSeries
 from nuturtle_tools.bag_source import BagError, BagSource
 from nuturtle_tools.foxglove_relay import tf2_msgs_installed
 from nuturtle_tools.replay import main
-from nuturtle_tools.replay_run import ReplayOptions, cut_scan, run_replay
+from nuturtle_tools.replay_run import ReplayOptions, cut_scan, run_replay, truth_pose_at
+from turtlelib import Transform2D
 from turtlelib.mapping.grid_map_file import load_grid_map
 from turtlelib.mapping.landmark_map import load_map
 from turtlelib.mapping.occupancy_grid import BYTES_PER_CELL
@@ -143,7 +145,10 @@ def test_replay_applies_every_scan_and_matches_the_live_accuracy(live, tmp_path,
     # the recorded SLAM outputs of the input were not played: the new ones are slam's own, one per scan
     assert "/landmarks" not in metrics["messages_played"]
     assert metrics["slam_outputs_recorded"]["/landmarks"] == scans
-    assert metrics["slam_outputs_recorded"]["/slam/odom"] == bag_count(bag, "/joint_states")
+    # one pose per joint_states, and again at the newest one for each scan registered after it (a LiDAR's
+    # messages come after the wheels')
+    poses = metrics["slam_outputs_recorded"]["/slam/odom"]
+    assert bag_count(bag, "/joint_states") <= poses <= bag_count(bag, "/joint_states") + scans
     # slam's grid: its memory at the end, well inside its bound in the demo's 5 m world
     assert metrics["slam_grid_bytes"] == metrics["slam_grid_cells"] * BYTES_PER_CELL > 0
     assert metrics["slam_grid_max_bytes"] == 2000**2 * BYTES_PER_CELL
@@ -185,6 +190,25 @@ def test_a_cut_scan_reads_no_return_beyond_the_shorter_range():
     assert list(cut_scan(msg, 10.0).ranges) == list(msg.ranges) and msg.range_max == 3.5
     with pytest.raises(ValueError, match="max_range_m"):
         ReplayOptions(bag=Path("bag"), max_range_m=0.0)
+
+
+def test_a_truth_that_starts_after_the_motion_is_moved_back_to_it_by_the_odometry():
+    """A reference made at the scans (Radish's) starts after the robot has moved: slam's start pose is the
+    truth's first pose moved back by the odometry's motion since the first motion sample."""
+    truth = PoseSeries(np.array([10.0, 11.0]), np.array([[1.0, 2.0, 0.5], [1.5, 2.0, 0.5]]))
+    # the odometry (its own frame) drives 1 m along its x and turns by 0.2 rad from t = 2 s to t = 10 s
+    odom = PoseSeries(
+        np.array([2.0, 6.0, 14.0]), np.array([[0.0, 0.0, 0.0], [0.5, 0.0, 0.1], [1.5, 0.0, 0.3]])
+    )
+    # at t = 10 s the odometry reads (1.0, 0, 0.2): the truth there, (1, 2, 0.5), minus that motion
+    expected = Transform2D(1.0, 2.0, 0.5) @ Transform2D(1.0, 0.0, 0.2).inverse()
+    np.testing.assert_allclose(
+        truth_pose_at(truth, 2_000_000_000, odom).as_array(), expected.as_array(), atol=1e-12
+    )
+    # inside the truth's span, or without odometry covering the gap: the truth, clamped to its span
+    np.testing.assert_allclose(truth_pose_at(truth, 10_500_000_000, odom).as_array(), [1.25, 2.0, 0.5])
+    np.testing.assert_allclose(truth_pose_at(truth, 1_000_000_000, odom).as_array(), [1.0, 2.0, 0.5])
+    np.testing.assert_allclose(truth_pose_at(truth, 2_000_000_000).as_array(), [1.0, 2.0, 0.5])
 
 
 def test_a_bag_directory_and_its_single_mcap_file_read_the_same(live):
