@@ -10,7 +10,7 @@ estimate.tum, odometry.tum, reference.tum for evo, map.yaml, grid.png, ...) and 
 --out/<name>.log. Prints one markdown table and writes it to --out/results.md.
 
 Usage: python -P bench/radish_offices.py [FOLDER ...] [--max-range-m 3.5] [--out DIR] [--rate R]
-       [--no-scan-registration] [--loop-closure]
+       [--no-scan-registration] [--loop-closure] [--smooth]
 """
 
 from __future__ import annotations
@@ -49,23 +49,32 @@ def _figure(value: float | None, fmt: str) -> str:
     return "n/a" if value is None else fmt.format(value)
 
 
+def _estimate(name: str, label: str, m: dict) -> list[str]:
+    """The accuracy cells of SLAM's estimate in the metrics ``m`` (the replay's, or its smoothed run's)."""
+    grid = [_figure(m.get(k), "{:.1%}") for k in ("grid_found_fraction", "grid_unexplained_fraction")]
+    return [
+        name, label, _figure(m["ate_rmse_aligned_slam_m"], "{:.3f}"),
+        _figure(m["rpe_translation_slam_m"], "{:.3f}"), _figure(m["rpe_rotation_slam_deg"], "{:.2f}"), *grid,
+        str(m["landmarks_mapped"]),
+    ]  # fmt: skip
+
+
 def rows(name: str, m: dict, wall_s: float) -> list[str]:
-    """SLAM's row and its odometry's of one replay's metrics.json (``m``), replayed in ``wall_s``."""
+    """SLAM's row (live, then smoothed with --smooth) and its odometry's of one replay's metrics.json
+    (``m``), replayed in ``wall_s``."""
     if "rpe_translation_slam_m" not in m:
         return [f"| {name} | (no accuracy metrics: see {name}/metrics.json) |" + " |" * 9]
-    grid = [_figure(m.get(k), "{:.1%}") for k in ("grid_found_fraction", "grid_unexplained_fraction")]
     pace = f"{m['bag_seconds'] / wall_s:.1f}x"
-    slam = [
-        name, "SLAM", _figure(m["ate_rmse_aligned_slam_m"], "{:.3f}"),
-        _figure(m["rpe_translation_slam_m"], "{:.3f}"), _figure(m["rpe_rotation_slam_deg"], "{:.2f}"),
-        *grid, str(m["landmarks_mapped"]), _figure(m["nees_pose_median"], "{:.1f}"), f"{wall_s:.1f}", pace,
-    ]  # fmt: skip
-    odometry = [
+    table = [[*_estimate(name, "SLAM", m), _figure(m["nees_pose_median"], "{:.1f}"), f"{wall_s:.1f}", pace]]
+    smoothed = m.get("smoothed", {})
+    if "rpe_translation_slam_m" in smoothed:
+        table.append([*_estimate(name, "SLAM, smoothed", smoothed), "", "", ""])
+    table.append([
         name, "odometry", _figure(m["ate_rmse_aligned_odom_m"], "{:.3f}"),
         _figure(m["rpe_translation_odom_m"], "{:.3f}"), _figure(m["rpe_rotation_odom_deg"], "{:.2f}"),
         "", "", "", "", "", "",
-    ]  # fmt: skip
-    return ["| " + " | ".join(cells) + " |" for cells in (slam, odometry)]
+    ])  # fmt: skip
+    return ["| " + " | ".join(cells) + " |" for cells in table]
 
 
 def main() -> None:
@@ -86,6 +95,11 @@ def main() -> None:
         help="slam with scan_registration: false (the motion input alone between landmarks)",
     )
     parser.add_argument("--loop-closure", action="store_true", help="slam with loop_closure: true")
+    parser.add_argument(
+        "--smooth",
+        action="store_true",
+        help="the replay's --smooth: the whole run smoothed too, a row of its own",
+    )
     args = parser.parse_args()  # fmt: skip
     args.out.mkdir(parents=True, exist_ok=True)
     params = args.out / "params.yaml"
@@ -108,6 +122,8 @@ def main() -> None:
             command += ["--max-range-m", str(args.max_range_m)]
         if args.rate is not None:
             command += ["--rate", str(args.rate)]
+        if args.smooth:
+            command.append("--smooth")
         print(f"replaying {folder} ...", file=sys.stderr, flush=True)
         start = time.monotonic()
         # the replay's report and slam's warnings, kept beside the outputs

@@ -167,7 +167,7 @@ class LoopClosing:
         T_new = T_map_body @ D
         G = np.eye(3)
         G[0, 2], G[1, 2] = -(T_new.y - T_map_body.y), T_new.x - T_map_body.x
-        self._timeline.relocalize(T_new, G @ slam.pose_covariance @ G.T)
+        self._timeline.relocalize(T_new, G @ slam.pose_covariance @ G.T, explained=True)
         self.last_correction = D
         path_m = self.loops.keyframes[-1].path_m - self.loops.keyframes[accepted[0].i].path_m
         self._logger.info(

@@ -566,8 +566,8 @@ class SlamNode(Node):
         self.get_logger().info(f"relocalized at {T_map_body} from initialpose")
 
     def smooth_run(self) -> SmoothingOutcome:
-        """The run so far smoothed as a whole (``smooth_saved_map``: the history is kept); ValueError
-        without a history or before the first motion sample."""
+        """The run so far smoothed as a whole (``smooth_saved_map``: the history is kept), with the loops
+        closed (``loop_closure``); ValueError without a history or before the first motion sample."""
         if self.timeline.history is None:
             raise ValueError("no run history: smooth_saved_map is false")
         return smooth_history(
@@ -578,6 +578,7 @@ class SlamNode(Node):
             self.slam.landmark_ids,
             self.slam.landmarks,
             revise=self.node_config.association == "unknown",
+            loops=() if self.loop_closing is None else self.loop_closing.loops.loop_edges(),
         )
 
     def map_to_save(self, outcome: SmoothingOutcome | None = None) -> LandmarkMap:

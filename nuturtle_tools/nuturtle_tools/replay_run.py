@@ -796,7 +796,8 @@ class Replay:
         """``folder``: slam's whole run smoothed (:meth:`nuslam.slam_node.SlamNode.smooth_run`) in place of
         the filter's in its run ``record``, as a replay's outputs: map.json (the smoothed map), trajectory.png
         and covariance.png (of the last pose and the landmarks), the grid of slam's keyframes at the smoothed
-        poses (map.yaml, map.pgm, grid.png) and, with ground truth, errors.png; returns its metrics (the
+        poses (map.yaml, map.pgm, grid.png) and, with ground truth, errors.png; returns its metrics (with the
+        scans, the grid's agreement too; the
         smoothed poses have no covariance: no NEES), what the smoother decided and its CPU time."""
         folder.mkdir()
         cpu_start, wall_start = time.process_time(), time.monotonic()
@@ -822,6 +823,7 @@ class Replay:
             metrics = None
         return {
             **(metrics.as_dict() if metrics is not None else {}),
+            **self._grid_agreement(record),
             **outcome.decisions(),
             "smoother_cpu_seconds": cpu_seconds,
         }

@@ -13,6 +13,7 @@ from turtlelib.motion.motion_models import TwistNoise, UnicycleMotion
 from turtlelib.motion.motion_signals import HeldInputs
 from turtlelib.smoothing.history_problem import problem_from_history
 from turtlelib.smoothing.run_smoothing import smooth_history
+from turtlelib.smoothing.smoothing_problem import LoopEdge
 
 MOTION = UnicycleMotion(TwistNoise(forward_m2_per_m=1e-3, heading_rad2_per_rad=1e-3, lateral_m2_per_m=1e-4))
 CONFIG = SlamConfig(range_std=0.02, bearing_std=0.01, confirm_count=1)
@@ -64,6 +65,27 @@ def test_the_timeline_records_the_run():
     np.testing.assert_allclose(problem.motion_delta[:, 2], 0.002)
     np.testing.assert_array_equal(rescale(problem), np.ones(20))  # independent errors (the default)
     assert len(unassigned.z) == 0
+
+
+def test_a_loop_gets_a_pose_at_each_of_its_stamps_and_its_factor():
+    line = timeline()
+    scan_poses = drive(line, range(0, 200, 10))
+    Z, S = Transform2D(0.03, 0.001, 0.015), np.diag([1e-4, 1e-4, 1e-5])
+    loops = [
+        LoopEdge(0, 150 * MS, Z, S),  # 150 ms: a motion sample's stamp, between two scans
+        LoopEdge(40 * MS, 250 * MS, Z, S),  # past the history's motion: left out
+    ]
+    problem, poses, _, _ = problem_from_history(
+        line.history, MOTION, HeldInputs(), CONFIG, np.array([0, 1]), loops
+    )
+    np.testing.assert_array_equal(problem.pose_t_ns, np.r_[np.arange(0, 160, 20), 150, 160, 180] * MS)
+    np.testing.assert_array_equal(problem.loop_pose, [[0, 8]])
+    np.testing.assert_array_equal(problem.loop_delta, [Z.as_array()])
+    np.testing.assert_array_equal(problem.loop_covariance, [S])
+    # the warm start at 150 ms: the pose at the scan of 140 ms moved on by the 10 ms of motion between them
+    expected = Transform2D(*scan_poses[7]) @ Transform2D(*problem.motion_delta[7])
+    np.testing.assert_allclose(poses[8], expected.as_array())
+    np.testing.assert_array_equal(poses[9:], scan_poses[8:])
 
 
 def test_only_landmarks_of_the_final_map_are_kept():

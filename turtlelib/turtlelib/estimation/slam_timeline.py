@@ -289,12 +289,16 @@ class SlamTimeline:
         for listener in self._listeners:
             listener.cleared()
 
-    def relocalize(self, T_map_body: Transform2D, pose_covariance: ArrayLike) -> None:
+    def relocalize(
+        self, T_map_body: Transform2D, pose_covariance: ArrayLike, *, explained: bool = False
+    ) -> None:
         """The filter's pose becomes ``T_map_body`` with ``pose_covariance`` (3, 3), independent of the map,
         which is kept (:meth:`EkfSlam.reset` with ``keep_map``): every step hears it and the history starts
-        again."""
+        again, unless the move is ``explained`` by factors a smoother of the history is given (a loop
+        closure's: :func:`turtlelib.smoothing.run_smoothing.smooth_history`'s ``loops``), so that the
+        smoother still sees the run before it."""
         self.slam.reset(T_map_body, pose_covariance, keep_map=True)
-        self._moved_from_outside()
+        self._moved_from_outside(keep_history=explained)
 
     def pose_at(self, t_ns: int) -> Transform2D | None:
         """``T_map_body`` at ``t_ns`` in ``[t_f, t_w]``: the filter moved on by the motion from ``t_f``, one
@@ -304,13 +308,14 @@ class SlamTimeline:
         pieces = signal_pieces(self.signal, self._times, self._samples, self._t_f, self._s_f, t_ns)
         return self.slam.propagated_pose_along([u for _, _, u in pieces if u is not None])[0]
 
-    def _moved_from_outside(self, by: ScanStep | None = None) -> None:
+    def _moved_from_outside(self, by: ScanStep | None = None, keep_history: bool = False) -> None:
         """The filter's pose was set from outside the steps (or by the step ``by``): the other steps hear
-        it, the history starts again."""
+        it, the history starts again (unless ``keep_history``)."""
         for step in self._steps:
             if step is not by:
                 step.relocalized(self.slam.pose)
-        self._break_history()
+        if not keep_history:
+            self._break_history()
 
     def _break_history(self) -> None:
         """Start the kept history again from the filter as it is now (at ``t_f``); nothing without

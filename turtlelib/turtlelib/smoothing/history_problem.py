@@ -6,6 +6,9 @@ into the factors of :mod:`turtlelib.smoothing.smoothing_problem` with the filter
   ``MIN_FACTOR_STD``, as the motion factors', so that an exactly known start stays invertible);
 * the motion between them from the motion model and signal
   (:func:`~turtlelib.smoothing.smoothing_problem.relative_motions`);
+* the loops (:class:`~turtlelib.smoothing.smoothing_problem.LoopEdge`) whose stamps the history's motion
+  covers, with a pose at each of their stamps (at a stamp that is not a scan's, the warm start is the pose
+  before it moved on by the motion between them);
 * the observations of the landmarks that are in the final map (those of tentative landmarks that were
   dropped are left out), each ``R`` scaled for errors correlated over the viewpoint as the filter does
   (:func:`~turtlelib.smoothing.smoothing_problem.viewpoint_scales` with ``SlamConfig.fusion_scale``).
@@ -13,7 +16,7 @@ into the factors of :mod:`turtlelib.smoothing.smoothing_problem` with the filter
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 
 import numpy as np
@@ -21,10 +24,11 @@ from numpy.typing import NDArray
 
 from ..estimation.ekf_slam import SlamConfig
 from ..estimation.run_history import RunHistory
+from ..geometry.se2 import Transform2D
 from ..motion.motion_models import MotionModel
 from ..motion.motion_signals import MotionSignal
 from .association_revision import Unassigned
-from .smoothing_problem import SmoothingProblem, relative_motions, viewpoint_scales
+from .smoothing_problem import LoopEdge, SmoothingProblem, relative_motions, viewpoint_scales
 
 # (m, rad) added to the standard deviations of each motion factor and of the start prior: keeps the factor
 # of a standing robot and of an exactly known start invertible, far below every sensor's resolution
@@ -39,6 +43,7 @@ def problem_from_history(
     signal: MotionSignal,
     config: SlamConfig,
     landmark_ids: NDArray[np.int64],
+    loops: Sequence[LoopEdge] = (),
 ) -> tuple[SmoothingProblem, NDArray[np.float64], Rescale, Unassigned]:
     """``(problem, poses (P, 3), rescale, unassigned)``: the factors of ``history`` (module docstring) for
     the final map's ``landmark_ids``, the filter's poses at the problem's stamps (the warm start: at a stamp
@@ -49,8 +54,15 @@ def problem_from_history(
     if history.start_pose is None:
         raise ValueError("the run has not started: no motion sample yet")
     scan_t_ns = np.array(history.scan_t_ns, dtype=np.int64)
-    pose_t_ns = np.unique(np.r_[history.motion_t_ns[0], scan_t_ns])
-    poses = np.empty((len(pose_t_ns), 3))
+    t_first, t_last = history.motion_t_ns[0], history.motion_t_ns[-1]
+    loops = [
+        loop
+        for loop in loops
+        if t_first <= min(loop.t_a_ns, loop.t_b_ns) and max(loop.t_a_ns, loop.t_b_ns) <= t_last
+    ]
+    loop_t_ns = np.array([(loop.t_a_ns, loop.t_b_ns) for loop in loops], dtype=np.int64).reshape(-1, 2)
+    pose_t_ns = np.unique(np.r_[t_first, scan_t_ns, loop_t_ns.ravel()])
+    poses = np.full((len(pose_t_ns), 3), np.nan)
     poses[0] = history.start_pose
     scan_pose = np.searchsorted(pose_t_ns, scan_t_ns)
     if history.n_scans:
@@ -58,6 +70,8 @@ def problem_from_history(
     delta, Q = relative_motions(
         motion, signal, history.motion_t_ns, history.motion_samples, pose_t_ns, MIN_FACTOR_STD
     )
+    for k in np.flatnonzero(np.isnan(poses[:, 0])):  # a loop's stamp between scans: q_k = q_k-1 delta_k-1
+        poses[k] = (Transform2D(*poses[k - 1]) @ Transform2D(*delta[k - 1])).as_array()
     per_scan = [len(z) for z in history.scan_z]
     observation_pose = np.repeat(scan_pose, per_scan)
     associated = np.concatenate([np.zeros(0, dtype=np.int64), *history.scan_landmark_ids])
@@ -74,6 +88,9 @@ def problem_from_history(
         observation_landmark=associated[kept],
         z=all_z[kept],
         R=all_R[kept],
+        loop_pose=np.searchsorted(pose_t_ns, loop_t_ns),
+        loop_delta=np.array([loop.Z.as_array() for loop in loops]).reshape(-1, 3),
+        loop_covariance=np.array([loop.S for loop in loops]).reshape(-1, 3, 3),
     )
     measurement = config.measurement_model()
     sensor_xy = np.array([measurement.sensor_xy(q) for q in poses])

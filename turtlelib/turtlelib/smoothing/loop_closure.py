@@ -83,6 +83,7 @@ from ..sensing.scan_registration import (
 )
 from ..util.validation import in_range, integer, positive, store
 from .pose_graph import PoseGraph, PoseGraphConfig
+from .smoothing_problem import LoopEdge
 
 
 @dataclass(frozen=True)
@@ -385,6 +386,15 @@ class LoopClosure:
     def _in_graph(self, candidate: LoopCandidate) -> bool:
         i, j, loop = self.graph.edges()
         return bool(np.any(loop & (i == candidate.i) & (j == candidate.j)))
+
+    def loop_edges(self) -> list[LoopEdge]:
+        """The loops in the graph, each between its keyframes' stamps (for a smoother of the whole run:
+        :func:`turtlelib.smoothing.run_smoothing.smooth_history`)."""
+        i, j, loop = self.graph.edges()
+        return [
+            LoopEdge(self.keyframes[i[e]].t_ns, self.keyframes[j[e]].t_ns, *self.graph.measurement(e))
+            for e in np.flatnonzero(loop)
+        ]
 
     def map_from_odom(self, k: int = -1) -> Transform2D:
         """``T_map_odom`` at keyframe ``k`` (the newest by default): the graph's pose of the keyframe over

@@ -123,6 +123,10 @@ class PoseGraph:
         """``(i (E,), j (E,), loop (E,))``: each edge's poses and whether it is a loop edge."""
         return np.array(self._i, dtype=np.int64), np.array(self._j, dtype=np.int64), np.array(self._loop)
 
+    def measurement(self, e: int) -> tuple[Transform2D, NDArray[np.float64]]:
+        """Edge ``e``'s measured relative pose ``Z_i_j`` and its covariance ``S`` (3, 3)."""
+        return Transform2D(*self._Z[e]), self._S[e].copy()
+
     def add_pose(self, T_map_body: Transform2D) -> int:
         """Add a pose with its initial estimate; returns its index. The first pose fixes the gauge."""
         q = T_map_body.as_array()

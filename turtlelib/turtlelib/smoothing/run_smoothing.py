@@ -11,6 +11,7 @@ there is no association to revise.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -25,7 +26,7 @@ from ..motion.motion_signals import MotionSignal
 from .association_revision import Revision, RevisionConfig, revise_associations
 from .history_problem import problem_from_history
 from .smoother import SmoothedRun, Smoother, SmootherConfig
-from .smoothing_problem import SmoothingProblem
+from .smoothing_problem import LoopEdge, SmoothingProblem
 
 
 @dataclass(frozen=True)
@@ -87,17 +88,20 @@ def smooth_history(
     revise: bool,
     config: SmootherConfig | None = None,
     revision: RevisionConfig | None = None,
+    loops: Sequence[LoopEdge] = (),
 ) -> SmoothingOutcome:
     """The run of ``history`` smoothed with the filter's ``motion`` model (its samples read through
     ``signal``), its ``slam_config`` and its final map (``landmark_ids`` (n,), ``landmarks`` (n, 2)), as the
-    module docstring says; ``revise`` for unknown association. The landmarks of the map that the history
-    never saw (before a relocalization) have no factor and are left out of the smoothed map. ValueError for
-    a history that has not started, or a problem without a unique optimum."""
+    module docstring says; ``revise`` for unknown association; ``loops`` closed during the run (their
+    factors join the problem's: :func:`~turtlelib.smoothing.history_problem.problem_from_history`). The
+    landmarks of the map that the history never saw (before a relocalization) have no factor and are left
+    out of the smoothed map. ValueError for a history that has not started, or a problem without a unique
+    optimum."""
     # only the landmarks the history saw (a relocalization starts it again): the others have no factor
     seen = np.isin(landmark_ids, history.observed_landmarks())
     landmark_ids, landmarks = landmark_ids[seen], landmarks[seen]
     problem, poses, rescale, unassigned = problem_from_history(
-        history, motion, signal, slam_config, landmark_ids
+        history, motion, signal, slam_config, landmark_ids, loops
     )
     smoother = Smoother(slam_config.measurement_model(), config)
     if not revise:

@@ -222,11 +222,13 @@ class _System:
         # whitening L^-1 of every factor's covariance S = L L^T
         self.U_prior = whitening(problem.prior_covariance[None])[0]
         self.U_motion = whitening(problem.motion_covariance)
+        self.U_loop = whitening(problem.loop_covariance)
         self.U_obs = whitening(problem.observation_covariance)
         self.slot = slot
         n_motion = problem.n_poses - 1
         self.motion_row0 = 3
-        self.obs_row0 = 3 + 3 * n_motion
+        self.loop_row0 = 3 + 3 * n_motion
+        self.obs_row0 = self.loop_row0 + 3 * len(problem.loop_pose)
         self.n_rows = self.obs_row0 + 2 * len(problem.z)
 
     def linearise(self, x: NDArray[np.float64], width: float) -> _Linearisation:
@@ -247,6 +249,14 @@ class _System:
         motion_rows = self.motion_row0 + 3 * np.arange(len(q0))
         blocks.append((self.U_motion @ A, motion_rows, 3 * np.arange(len(q0))))
         blocks.append((self.U_motion @ B, motion_rows, 3 * np.arange(1, len(q0) + 1)))
+
+        # loops: r = (q_a^-1 q_b) (-) Z, the motion factor's form between any two poses
+        a, b = problem.loop_pose.T
+        r_loop, A_loop, B_loop = relative_pose_residuals(q[a], q[b], problem.loop_delta)
+        e_loop = np.einsum("kij,kj->ki", self.U_loop, r_loop)
+        loop_rows = self.loop_row0 + 3 * np.arange(len(a))
+        blocks.append((self.U_loop @ A_loop, loop_rows, 3 * a))
+        blocks.append((self.U_loop @ B_loop, loop_rows, 3 * b))
 
         # observations: r = z (-) h(q, m), dr/dq = -dh/dq, dr/dm = -dh/dm, all at once through the relative
         # model: h(q, m) = h(0, p) with p = R(theta)^T (m - p_body) the landmark in the body frame, so
@@ -272,10 +282,10 @@ class _System:
         blocks.append((-(self.U_obs @ H_q) * root_w[:, :, None], obs_rows, 3 * problem.observation_pose))
         blocks.append((-(self.U_obs @ H_m) * root_w[:, :, None], obs_rows, self.n_pose_vars + 2 * self.slot))
 
-        e = np.concatenate([e_prior, e_motion.ravel(), (e_obs * root_w).ravel()])
+        e = np.concatenate([e_prior, e_motion.ravel(), e_loop.ravel(), (e_obs * root_w).ravel()])
         J = sparse_blocks(blocks, (self.n_rows, self.n_vars))
         robust = np.sum(s_obs) if np.isinf(width) else width**2 * np.sum(np.log1p(s_obs / width**2))
-        cost = 0.5 * (e_prior @ e_prior + np.sum(e_motion * e_motion) + robust)
+        cost = 0.5 * (e_prior @ e_prior + np.sum(e_motion * e_motion) + np.sum(e_loop * e_loop) + robust)
         return _Linearisation(e, J, weights, s_obs, float(cost))
 
     def retract(self, x: NDArray[np.float64], step: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -7,10 +7,13 @@ Gaussian covariance ``S``::
 
     start prior      r = q_0 (-) q0_bar                           S = P_0
     motion k         r = (q_k^-1 q_(k+1)) (-) delta_k             S = Q_k
+    loop l           r = (q_a(l)^-1 q_b(l)) (-) Z_l               S = S_l
     observation j    r = z_j (-) h(q_k(j), m_i(j))                S = R_j
 
 ``(-)`` subtracts componentwise with the heading wrapped (for ``z``, the measurement model's residual).
-``q_k^-1 q_(k+1)`` is the relative pose ``[R(theta_k)^T (p_(k+1) - p_k), theta_(k+1) - theta_k]``.
+``q_k^-1 q_(k+1)`` is the relative pose ``[R(theta_k)^T (p_(k+1) - p_k), theta_(k+1) - theta_k]``. A loop is
+a measured relative pose ``Z_l`` between two poses far apart in the run (:class:`LoopEdge`: a revisit that
+loop closure matched, :mod:`turtlelib.smoothing.loop_closure`), ``S_l`` in frame ``a``'s ``[x, y, theta]``.
 
 ``delta_k`` and ``Q_k`` are the motion model's composite step from the identity along the signal's pieces
 between ``t_k`` and ``t_(k+1)`` (:func:`relative_motions`): exactly the prediction the filter made over that
@@ -26,7 +29,7 @@ rho(d))``, ``d`` the distance the sensor moved since the landmark's previous vie
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -44,7 +47,8 @@ class SmoothingProblem:
     noise ``R`` (K, 2, 2), made from pose ``observation_pose`` (K,) (indices) of landmark
     ``observation_landmark`` (K,) (ids); each observation's factor has the covariance ``noise_scale R``
     (``noise_scale`` (K,), default ones: the viewpoint scale of correlated errors, which depends on the
-    labelling). ValueError for inconsistent shapes."""
+    labelling); loops between poses ``loop_pose`` (L, 2) (indices ``a, b``), measured ``loop_delta`` (L, 3)
+    with ``loop_covariance`` (L, 3, 3) (default: none). ValueError for inconsistent shapes."""
 
     pose_t_ns: NDArray[np.int64]
     prior_mean: NDArray[np.float64]
@@ -56,9 +60,12 @@ class SmoothingProblem:
     z: NDArray[np.float64]
     R: NDArray[np.float64]
     noise_scale: NDArray[np.float64] | None = None
+    loop_pose: NDArray[np.int64] = field(default_factory=lambda: np.zeros((0, 2), dtype=np.int64))
+    loop_delta: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 3)))
+    loop_covariance: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 3, 3)))
 
     def __post_init__(self) -> None:
-        n_poses, n_obs = len(self.pose_t_ns), len(self.z)
+        n_poses, n_obs, n_loops = len(self.pose_t_ns), len(self.z), len(self.loop_pose)
         if self.noise_scale is None:
             object.__setattr__(self, "noise_scale", np.ones(n_obs))
         if n_poses < 1 or np.any(np.diff(self.pose_t_ns) <= 0):
@@ -73,12 +80,19 @@ class SmoothingProblem:
             "z": (self.z, (n_obs, 2)),
             "R": (self.R, (n_obs, 2, 2)),
             "noise_scale": (self.noise_scale, (n_obs,)),
+            "loop_pose": (self.loop_pose, (n_loops, 2)),
+            "loop_delta": (self.loop_delta, (n_loops, 3)),
+            "loop_covariance": (self.loop_covariance, (n_loops, 3, 3)),
         }
         for name, (value, shape) in shapes.items():
             if np.shape(value) != shape:
                 raise ValueError(f"{name} must have shape {shape}, got {np.shape(value)}")
         if n_obs and not (0 <= self.observation_pose.min() and self.observation_pose.max() < n_poses):
             raise ValueError("observation_pose must index the poses")
+        if n_loops and not (0 <= self.loop_pose.min() and self.loop_pose.max() < n_poses):
+            raise ValueError("loop_pose must index the poses")
+        if np.any(self.loop_pose[:, 0] == self.loop_pose[:, 1]):
+            raise ValueError("a loop joins two distinct poses")
 
     @property
     def n_poses(self) -> int:
@@ -88,6 +102,17 @@ class SmoothingProblem:
     def observation_covariance(self) -> NDArray[np.float64]:
         """(K, 2, 2) ``noise_scale R``: each observation factor's covariance."""
         return self.R * self.noise_scale[:, None, None]
+
+
+@dataclass(frozen=True)
+class LoopEdge:
+    """A loop: the measured relative pose ``Z = T(t_a)^-1 T(t_b)`` (``T_map_body`` at two stamps, ns) with its
+    covariance ``S`` (3, 3, frame ``a``'s ``[x, y, theta]``)."""
+
+    t_a_ns: int
+    t_b_ns: int
+    Z: Transform2D
+    S: NDArray[np.float64]
 
 
 def relative_motions(
