@@ -96,6 +96,16 @@ def test_a_drifting_loop_is_closed_and_the_graph_lands_on_the_truth():
     odometry, accepted = drive(loops, truth, RING, RING_PILLARS, rng, bias_rad=0.0015)
     assert len(accepted) >= 2
     assert all(c.verdict is Verdict.ACCEPTED for c in accepted)
+    # the loops as a smoother takes them: between their keyframes' stamps, as measured
+    edges = loops.loop_edges()
+    assert len(edges) == len(accepted)
+    for edge, candidate in zip(edges, accepted, strict=True):
+        assert (edge.t_a_ns, edge.t_b_ns) == (
+            loops.keyframes[candidate.i].t_ns,
+            loops.keyframes[candidate.j].t_ns,
+        )
+        np.testing.assert_array_equal(edge.Z.as_array(), candidate.Z_loop.as_array())
+        np.testing.assert_array_equal(edge.S, candidate.S_loop)
     stamps = [keyframe.t_ns for keyframe in loops.keyframes]
     truth_kf = [truth[t // 10**8] for t in stamps]
     odometry_kf = np.array([odometry[t // 10**8].as_array() for t in stamps])
@@ -200,6 +210,15 @@ def test_pose_graph_jacobians_match_finite_differences():
         dx[k] = h
         numeric[:, k] = (graph.linearise(x + dx).e - graph.linearise(x - dx).e) / (2 * h)
     np.testing.assert_allclose(J, numeric, atol=1e-6)
+
+
+def test_a_graph_without_edges_lists_none_and_no_loop():
+    graph = PoseGraph()
+    graph.add_pose(Transform2D())
+    i, j, loop = graph.edges()
+    assert (i.dtype, j.dtype, loop.dtype) == (np.int64, np.int64, np.bool_)
+    assert graph.poses[i[loop]].shape == (0, 3)  # a mask of no edge selects nothing (was float: IndexError)
+    assert LoopClosure().loop_edges() == []
 
 
 def test_pose_graph_hand_computed():

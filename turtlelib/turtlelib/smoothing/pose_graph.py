@@ -121,7 +121,11 @@ class PoseGraph:
 
     def edges(self) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.bool_]]:
         """``(i (E,), j (E,), loop (E,))``: each edge's poses and whether it is a loop edge."""
-        return np.array(self._i, dtype=np.int64), np.array(self._j, dtype=np.int64), np.array(self._loop)
+        return (
+            np.array(self._i, dtype=np.int64),
+            np.array(self._j, dtype=np.int64),
+            np.array(self._loop, dtype=bool),
+        )
 
     def measurement(self, e: int) -> tuple[Transform2D, NDArray[np.float64]]:
         """Edge ``e``'s measured relative pose ``Z_i_j`` and its covariance ``S`` (3, 3)."""
