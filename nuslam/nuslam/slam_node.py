@@ -238,10 +238,11 @@ class SlamNodeConfig:
       and predict with the registered motion (:mod:`nuslam.scan_odometry`);
     * ``loop_closure`` (with ``scan_registration``): close the loops of the registered scans on a revisit,
       moving the filter and drawing the grid at the corrected poses (:mod:`nuslam.loop_closing`, ``loops.*``);
-    * ``smooth_saved_map``: keep the run's history (since start-up, the last reset or relocalization;
-      memory grows with the run) and have ``~/save_map`` save the landmark map of the whole run smoothed
-      and the occupancy grid of its keyframes at the smoothed poses (:mod:`turtlelib.smoothing.run_smoothing`;
-      the call blocks the node while it smooths, seconds for a long run); mapping only.
+    * ``smooth_saved_map``: keep the run's history (since start-up, the last reset or relocalization, a
+      loop closure's excepted: the smoother takes its loops; memory grows with the run) and have
+      ``~/save_map`` save the landmark map of the whole run smoothed and the occupancy grid of its
+      keyframes at the smoothed poses (:mod:`turtlelib.smoothing.run_smoothing`; the call blocks the node
+      while it smooths, seconds for a long run); mapping only.
     """
 
     association: str = "unknown"

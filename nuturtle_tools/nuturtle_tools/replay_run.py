@@ -796,9 +796,9 @@ class Replay:
         """``folder``: slam's whole run smoothed (:meth:`nuslam.slam_node.SlamNode.smooth_run`) in place of
         the filter's in its run ``record``, as a replay's outputs: map.json (the smoothed map), trajectory.png
         and covariance.png (of the last pose and the landmarks), the grid of slam's keyframes at the smoothed
-        poses (map.yaml, map.pgm, grid.png) and, with ground truth, errors.png; returns its metrics (with the
-        scans, the grid's agreement too; the
-        smoothed poses have no covariance: no NEES), what the smoother decided and its CPU time."""
+        poses (map.yaml, map.pgm, grid.png) and, with ground truth, errors.png; returns its metrics (the
+        grid's agreement too, with the scans; the smoothed poses have no covariance: no NEES), what the
+        smoother decided and its CPU time."""
         folder.mkdir()
         cpu_start, wall_start = time.process_time(), time.monotonic()
         outcome = self.slam.smooth_run()
