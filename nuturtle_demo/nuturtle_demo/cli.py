@@ -1,12 +1,12 @@
 """Command line of the simulation + SLAM demo: ``python -m nuturtle_demo [options]`` (``./dev.sh run``).
 
 Runs nusim, turtle_control, odometry, landmarks, slam and a figure-eight driver headless for two minutes of
-robot time, faster than real time, then writes metrics.json, trajectory.png, errors.png, covariance.png,
-the rosbag2 bag run/ (every topic: metadata.yaml + run.mcap) and config.yaml into the output folder and
-prints a results table (docs/demo.md). The output folder is replaced only by a complete run; a run stopped
-by SIGINT, SIGTERM or SIGHUP goes to OUT.incomplete. Exit status: 2 for a bad input (one ``error:`` line,
-nothing written), 1 for a failed run, a failed save_map or, with ``--check``, a failed target or a stopped
-run, else 0.
+robot time, faster than real time, then writes metrics.json, the figures, the occupancy grid, the
+trajectories, the rosbag2 bag run/ (every topic: metadata.yaml + run.mcap) and config.yaml into the output
+folder and prints a results table and every entry of that folder (docs/demo.md). The output folder is
+replaced only by a complete run; a run stopped by SIGINT, SIGTERM or SIGHUP goes to OUT.incomplete. Exit
+status: 2 for a bad input (one ``error:`` line, nothing written), 1 for a failed run, a failed save_map
+or, with ``--check``, a failed target or a stopped run, else 0.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from pathlib import Path
 
 from nuturtle_description.robot_params import add_model_argument
 from nuturtle_eval.run_evaluation import Row, failed_targets, results_table
-from nuturtle_eval.run_folder import error_line, unfinished_runs
+from nuturtle_eval.run_folder import error_line, outputs_line, unfinished_runs
 from nuturtle_ros_common.dds_domain import add_domain_argument
 from nuturtle_tools.relay_config import add_foxglove_argument, parse_endpoint
 
@@ -103,8 +103,7 @@ def report(result: DemoResult, options: DemoOptions) -> str:
         "",
         f"{result.message_count} messages on {len(result.recorded_topics)} topics recorded in the "
         f"rosbag2 bag {result.out_dir / BAG_NAME}/ (ros2 bag info / ros2 bag play)",
-        f"outputs in {result.out_dir}/: metrics.json trajectory.png errors.png covariance.png "
-        f"estimate.tum odometry.tum reference.tum {BAG_NAME}/ config.yaml",
+        outputs_line(result.out_dir),
     ]
     if result.saved_map is not None:
         success, message = result.saved_map

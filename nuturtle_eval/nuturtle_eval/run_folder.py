@@ -19,7 +19,8 @@ in ``keep`` directly inside ``OUT`` (the demo's ``--map-file``, which slam may w
 moved into the new result when it replaces the old one.
 
 :func:`unfinished_runs` finds the staging folders of killed runs (the commands name them before a run);
-:func:`error_line` is how the commands (demo, replay, dataset runs) print an error: one line.
+:func:`error_line` is how the commands (demo, replay, dataset runs) print an error: one line;
+:func:`outputs_line` how they name what a run left in its folder.
 """
 
 from __future__ import annotations
@@ -141,3 +142,12 @@ def error_line(error: BaseException) -> str:
     """What a run's command prints after ``error: ``: the error and its notes (where a failed run left its
     outputs, added by the run) on one line, whatever line breaks they hold (a YAML error spans several)."""
     return "; ".join(" ".join(str(part).split()) for part in [error, *getattr(error, "__notes__", ())])
+
+
+def outputs_line(folder: Path) -> str:
+    """``outputs in FOLDER/: a.json b.png run/ ...``: every entry ``folder`` holds, read from the folder
+    itself (so the line cannot drift from what a run writes), sorted by name, a folder with a trailing
+    ``/``."""
+    folder = Path(folder)
+    entries = sorted(entry.name + ("/" if entry.is_dir() else "") for entry in folder.iterdir())
+    return f"outputs in {folder}/: {' '.join(entries)}"

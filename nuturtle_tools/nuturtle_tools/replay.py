@@ -207,14 +207,9 @@ def summary(result: Any) -> str:
     for hint in (no_landmarks_hint(metrics), motion_gate_warning(metrics)):
         if hint is not None:
             lines.append(hint)
-    if "observation_arrays_applied" in metrics:
-        grid = "map.yaml map.pgm grid.png " if (Path(result.out_dir) / "map.yaml").exists() else ""
-        errors = "errors.png estimate.tum odometry.tum reference.tum " if result.accuracy else ""
-        smoothed = " smoothed/" if "smoothed" in metrics else ""
-        lines.append(f"outputs in {result.out_dir}/: metrics.json trajectory.png map.json {grid}"
-                     f"covariance.png {errors}slam/ config.yaml{smoothed}")  # fmt: skip
-    else:
-        lines.append(f"outputs in {result.out_dir}/: metrics.json")
+    from nuturtle_eval.run_folder import outputs_line
+
+    lines.append(outputs_line(result.out_dir))
     return "\n".join(lines)
 
 

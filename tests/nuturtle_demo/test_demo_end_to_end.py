@@ -84,6 +84,10 @@ def test_demo_meets_targets_and_records_every_topic(tmp_path):
     assert {topic: entry["message_count"] for topic, entry in bag.topic_metadata().items()} == counts
     assert bag.metadata["message_count"] == sum(counts.values()) == len(bag.records)
     assert f"{len(bag.records)} messages on {len(bag.channels)} topics recorded" in stdout
+    # the printout names every file and folder the run left, no more
+    written = sorted(p.name + ("/" if p.is_dir() else "") for p in out.iterdir())
+    assert f"outputs in {out}/: {' '.join(written)}\n" in stdout
+    assert {"map.yaml", "map.pgm", "grid.png", "run/"} <= set(written)
     for topic, type_name in TOPICS.items():
         assert bag.channel_types.get(topic) == type_name, topic
         assert counts.get(topic, 0) >= 1, topic

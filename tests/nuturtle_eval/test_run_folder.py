@@ -12,6 +12,7 @@ from nuturtle_eval.run_folder import (
     RunFolder,
     check_replaceable,
     incomplete_folder,
+    outputs_line,
     unfinished_runs,
 )
 
@@ -95,3 +96,10 @@ def test_the_staging_folder_of_a_killed_run_is_found_and_a_running_one_is_not(tm
     (tmp_path / f"latest.partial-{os.getpid()}").mkdir()
     (tmp_path / "other.partial-1").mkdir()
     assert unfinished_runs(tmp_path / "latest") == [killed]
+
+
+def test_the_outputs_line_names_every_entry_of_the_folder_and_marks_folders(tmp_path):
+    for name in ("metrics.json", "map.yaml", "grid.png"):
+        (tmp_path / name).write_text("x")
+    (tmp_path / "run").mkdir()
+    assert outputs_line(tmp_path) == f"outputs in {tmp_path}/: grid.png map.yaml metrics.json run/"

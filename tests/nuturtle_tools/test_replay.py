@@ -244,6 +244,8 @@ def test_remapped_scan_without_ground_truth_gives_counts_but_no_accuracy(live, t
     assert (out / "trajectory.png").read_bytes().startswith(PNG_MAGIC)
     assert not (out / "errors.png").exists()
     assert f"| messages played, /lidar/scan | {scans} |" in stdout
+    written = sorted(p.name + ("/" if p.is_dir() else "") for p in out.iterdir())
+    assert f"outputs in {out}/: {' '.join(written)}" in stdout.splitlines()
 
     # without --scan-topic the bag has no /scan: a clear error, exit code 2
     code = main([str(bag), "--out", str(tmp_path / "again"), "--no-progress"])
