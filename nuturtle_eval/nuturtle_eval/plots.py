@@ -2,12 +2,15 @@
 covariance matrix.
 
 matplotlib is imported lazily, inside each function, and only its object-oriented API is used
-(``matplotlib.figure.Figure`` renders with the Agg canvas): no pyplot state, no display needed.
+(``matplotlib.figure.Figure`` renders with the Agg canvas): no pyplot state, no display needed. Each
+``plot_*`` returns the figure it saved. Legends go below the axes (:func:`legend_below`), never over the
+data.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -39,6 +42,17 @@ def new_figure(width_in: float, height_in: float) -> Any:
     return Figure(figsize=(width_in, height_in), dpi=DPI, layout="constrained")
 
 
+def legend_below(figure: Any, axes: Any, max_columns: int = 3, keys: Sequence[Any] = ()) -> None:
+    """The legend of the ``keys`` (labelled artists drawn nowhere: :func:`grid_key`) and of ``axes``'
+    labelled artists, below all of ``figure``'s axes (the constrained layout makes room for it), so it
+    covers no data; nothing when there is no label."""
+    handles, labels = axes.get_legend_handles_labels()
+    handles, labels = [*keys, *handles], [*(key.get_label() for key in keys), *labels]
+    if handles:
+        figure.legend(handles, labels, loc="outside lower center", ncols=min(max_columns, len(handles)),
+                      fontsize="small")  # fmt: skip
+
+
 def ellipse_points(
     center: NDArray[np.float64], covariance: NDArray[np.float64], n_sigma: float, samples: int = 64
 ) -> NDArray[np.float64]:
@@ -65,7 +79,7 @@ def plot_trajectory(
     mapped_covariances: NDArray[np.float64],
     walls: NDArray[np.float64] | None,
     loops: NDArray[np.float64] | None = None,
-) -> None:
+) -> Any:
     """trajectory.png: the arena walls, the true cylinders (rows ``[x, y, r]``), the ground truth (red),
     odometry (blue) and SLAM (green) paths in the world frame, the mapped landmarks (n, 2) with their
     2-sigma ellipses from ``mapped_covariances`` (n, 2, 2) and SLAM's loop closures (:func:`draw_loops`).
@@ -116,8 +130,9 @@ def plot_trajectory(
     axes.set_ylabel("y (m)")
     axes.set_title("Trajectories and map")
     axes.grid(True, alpha=0.3)
-    axes.legend(loc="upper right", fontsize="small")
+    legend_below(figure, axes)
     figure.savefig(path)
+    return figure
 
 
 def plot_grid(
@@ -126,10 +141,11 @@ def plot_grid(
     path_xy: NDArray[np.float64],
     landmarks_xy: NDArray[np.float64],
     loops: NDArray[np.float64] | None = None,
-) -> None:
-    """grid.png: the occupancy grid as map_saver's trinary image shows it (occupied >= 65 black, free <= 19
-    white, the rest grey: :mod:`turtlelib.mapping.grid_map_file`) with the SLAM path ``path_xy`` (K, 2),
-    the mapped landmarks (n, 2) and the loop closures (:func:`draw_loops`) over it, in the map frame (m)."""
+) -> Any:
+    """grid.png: the occupancy grid as map_saver's trinary image shows it (occupied >= 65 black, free <= 20
+    white, the rest grey: :mod:`turtlelib.mapping.grid_map_file`; its key in the legend:
+    :func:`grid_key`) with the SLAM path ``path_xy`` (K, 2), the mapped landmarks (n, 2) and the loop
+    closures (:func:`draw_loops`) over it, in the map frame (m)."""
     figure = new_figure(7.0, 7.0)
     axes = figure.add_subplot()
     draw_grid(axes, grid)
@@ -149,8 +165,9 @@ def plot_grid(
     axes.set_xlabel("x (m), map")
     axes.set_ylabel("y (m)")
     axes.set_title(f"Occupancy grid ({res:g} m cells)")
-    axes.legend(loc="upper right", fontsize="small")
+    legend_below(figure, axes, keys=grid_key())
     figure.savefig(path)
+    return figure
 
 
 def draw_loops(axes: Any, loops: NDArray[np.float64] | None) -> None:
@@ -166,9 +183,24 @@ def draw_loops(axes: Any, loops: NDArray[np.float64] | None) -> None:
               label=f"loop closures ({len(loops)})")  # fmt: skip
 
 
+def grid_key() -> list[Any]:
+    """The shades of :func:`draw_grid` as labelled patches for a legend (:func:`legend_below`): occupied,
+    free and unknown cells with their thresholds (occupancy in per cent)."""
+    from matplotlib.patches import Patch
+
+    return [
+        Patch(facecolor=str(pixel / 255.0), edgecolor="black", linewidth=0.5, label=label)
+        for label, pixel in (
+            (f"occupied (>= {round(100.0 * OCCUPIED_THRESH)} %)", OCCUPIED_PIXEL),
+            (f"free (<= {round(100.0 * FREE_THRESH)} %)", FREE_PIXEL),
+            ("unknown", UNKNOWN_PIXEL),
+        )
+    ]
+
+
 def draw_grid(axes: Any, grid: GridMap) -> None:
     """``grid`` on matplotlib ``axes`` in the map frame (m), as map_saver's trinary image shows it
-    (occupied >= 65 black, free <= 19 white, the rest grey: :mod:`turtlelib.mapping.grid_map_file`)."""
+    (occupied >= 65 black, free <= 20 white, the rest grey: :mod:`turtlelib.mapping.grid_map_file`)."""
     occupancy = grid.occupancy
     shade = np.full(occupancy.shape, UNKNOWN_PIXEL, dtype=np.uint8)
     shade[(occupancy >= 0) & (occupancy <= round(100.0 * FREE_THRESH))] = FREE_PIXEL
@@ -183,19 +215,23 @@ def draw_grid(axes: Any, grid: GridMap) -> None:
 
 def plot_slam_errors(
     path: str | Path, slam: PoseSeries, slam_covariances: NDArray[np.float64], truth: PoseSeries
-) -> None:
+) -> Any:
     """errors.png of the SLAM poses (K,) with their covariances (K, 3, 3) against the ground truth, over the
-    time the truth covers (:func:`plot_errors`)."""
+    time the truth covers (:func:`plot_errors`), against the time since the run's start: the first stamp
+    of either series, ``t - min(t_slam[0], t_truth[0])`` (a simulation's clock starts near 0, a
+    recording's at its wall clock, ~1.7e9 s)."""
     covered = slam.within(truth.t_s[0], truth.t_s[-1])
     sigmas = np.sqrt(np.clip(np.diagonal(slam_covariances[covered], axis1=1, axis2=2), 0.0, None))
-    plot_errors(path, slam.t_s[covered], pose_errors(slam, truth), sigmas)
+    start_s = min(slam.t_s[0], truth.t_s[0])
+    return plot_errors(path, slam.t_s[covered] - start_s, pose_errors(slam, truth), sigmas)
 
 
 def plot_errors(
     path: str | Path, t_s: NDArray[np.float64], errors: NDArray[np.float64], sigmas: NDArray[np.float64]
-) -> None:
-    """errors.png: SLAM pose error ``e = [x, y, theta]`` (K, 3) over time (K,) with its +-2 sigma bounds
-    (``sigmas`` (K, 3), square roots of the covariance diagonal)."""
+) -> Any:
+    """errors.png: SLAM pose error ``e = [x, y, theta]`` (K, 3) over the time since the run's start ``t_s``
+    (K,) (s) with its +-2 sigma bounds (``sigmas`` (K, 3), square roots of the covariance diagonal); the
+    time axis starts at 0."""
     figure = new_figure(8.0, 7.0)
     labels = ("x error (m)", "y error (m)", "heading error (rad)")
     axes_list = figure.subplots(3, 1, sharex=True)
@@ -205,13 +241,15 @@ def plot_errors(
         axes.axhline(0.0, color="black", linewidth=0.5)
         axes.set_ylabel(label)
         axes.grid(True, alpha=0.3)
-    axes_list[0].legend(loc="upper right", fontsize="small")
     axes_list[0].set_title("SLAM pose error against its ±2σ bounds")
-    axes_list[-1].set_xlabel("simulation time (s)")
+    axes_list[-1].set_xlabel("time since the run's start (s)")
+    axes_list[-1].set_xlim(left=0.0)
+    legend_below(figure, axes_list[0])
     figure.savefig(path)
+    return figure
 
 
-def plot_covariance(path: str | Path, P: NDArray[np.float64]) -> None:
+def plot_covariance(path: str | Path, P: NDArray[np.float64]) -> Any:
     """covariance.png: the final (N, N) covariance of ``[x, y, theta, m_0x, m_0y, ...]``: log10 |P_ij|
     (left) and the correlation coefficients ``P_ij / sqrt(P_ii P_jj)`` (right), robot and landmark blocks
     outlined."""
@@ -239,3 +277,4 @@ def plot_covariance(path: str | Path, P: NDArray[np.float64]) -> None:
         axes.set_yticks(ticks, names, fontsize="small")
         axes.set_title(title)
     figure.savefig(path)
+    return figure

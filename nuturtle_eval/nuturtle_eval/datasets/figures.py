@@ -1,6 +1,7 @@
 """The dataset run's figures (PNG): trajectory and map, error against +-2 sigma, NEES over time.
 
-matplotlib is imported lazily through :mod:`nuturtle_eval.plots` (object-oriented API, Agg canvas).
+matplotlib is imported lazily through :mod:`nuturtle_eval.plots` (object-oriented API, Agg canvas); the
+legends go below the axes (:func:`nuturtle_eval.plots.legend_below`), never over the data.
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ import numpy as np
 
 from turtlelib import Transform2D
 
-from ..plots import LANDMARK_SIGMAS, SLAM_COLOR, TRUTH_COLOR, ellipse_points, new_figure
+from ..plots import LANDMARK_SIGMAS, SLAM_COLOR, TRUTH_COLOR, ellipse_points, legend_below, new_figure
 from .evaluation import Evaluation
 
 
@@ -20,14 +21,13 @@ def plot_trajectory(path: str | Path, evaluation: Evaluation, title: str) -> Non
     landmarks (if known); left in the map frame, right after the rigid motion that best fits the estimate to
     the reference (the global frame is unobservable)."""
     figure = new_figure(14.0, 7.0)
+    panels = figure.subplots(1, 2)
     for axes, T, label in zip(
-        figure.subplots(1, 2),
-        (Transform2D(), evaluation.T_align),
-        ("map frame", "after rigid alignment"),
-        strict=True,
+        panels, (Transform2D(), evaluation.T_align), ("map frame", "after rigid alignment"), strict=True
     ):
         _draw_run(axes, evaluation, T)
         axes.set_title(f"{title}: {label}")
+    legend_below(figure, panels[0], max_columns=4)
     figure.savefig(path)
 
 
@@ -35,12 +35,12 @@ def plot_side_by_side(path: str | Path, filtered: Evaluation, smoothed: Evaluati
     """smoothed.png: the filter's run (left) and the smoothed run (right), each after its own rigid
     alignment to the reference, with their maps and 2-sigma ellipses."""
     figure = new_figure(14.0, 7.0)
-    for axes, evaluation, label in zip(
-        figure.subplots(1, 2), (filtered, smoothed), ("filter", "smoother"), strict=True
-    ):
+    panels = figure.subplots(1, 2)
+    for axes, evaluation, label in zip(panels, (filtered, smoothed), ("filter", "smoother"), strict=True):
         _draw_run(axes, evaluation, evaluation.T_align)
         ate = evaluation.metrics["ate_rmse_aligned_m"]
         axes.set_title(f"{title}: {label}, aligned (ATE {ate:.3f} m)")
+    legend_below(figure, panels[0], max_columns=4)
     figure.savefig(path)
 
 
@@ -59,12 +59,12 @@ def plot_error_comparison(path: str | Path, filtered: Evaluation, smoothed: Eval
     top.set_title(f"Position error against {filtered.reference_label}")
     for axes in (top, bottom):
         axes.grid(True, alpha=0.3)
-        axes.legend(loc="upper right", fontsize="small")
+    legend_below(figure, top)
     figure.savefig(path)
 
 
 def _draw_run(axes, evaluation: Evaluation, T: Transform2D) -> None:
-    """The reference, the estimate and the map moved by ``T`` on ``axes``."""
+    """The reference, the estimate and the map moved by ``T`` on ``axes``, labelled for the legend."""
     style = "-" if evaluation.true_landmarks is not None else "."
     axes.plot(
         *evaluation.reference_track.T, style, color=TRUTH_COLOR, linewidth=1.0, markersize=1.5,
@@ -84,7 +84,6 @@ def _draw_run(axes, evaluation: Evaluation, T: Transform2D) -> None:
     axes.set_xlabel("x (m)")
     axes.set_ylabel("y (m)")
     axes.grid(True, alpha=0.3)
-    axes.legend(loc="best", fontsize="small")
 
 
 def plot_errors(path: str | Path, evaluation: Evaluation) -> None:
@@ -99,9 +98,9 @@ def plot_errors(path: str | Path, evaluation: Evaluation) -> None:
         axes.plot(t, evaluation.errors[:, k], color="black", linewidth=0.6, label="error")
         axes.set_ylabel(label)
         axes.grid(True, alpha=0.3)
-    axes_list[0].legend(loc="upper right", fontsize="small")
     axes_list[0].set_title(f"Error against {evaluation.reference_label} and the filter's ±2σ")
     axes_list[-1].set_xlabel("time since start (s)")
+    legend_below(figure, axes_list[0])
     figure.savefig(path)
 
 
@@ -127,5 +126,5 @@ def plot_nees(path: str | Path, evaluation: Evaluation) -> None:
     mean, inside = evaluation.metrics["nees_pose_mean"], evaluation.metrics["nees_pose_within_95_fraction"]
     axes.set_title(f"NEES: mean {mean:.2f}, {100 * inside:.0f} % inside the 95 % interval")
     axes.grid(True, alpha=0.3, which="both")
-    axes.legend(loc="upper right", fontsize="small")
+    legend_below(figure, axes, max_columns=2)
     figure.savefig(path)
