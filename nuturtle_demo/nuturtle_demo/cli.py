@@ -99,7 +99,7 @@ def report(result: DemoResult, options: DemoOptions) -> str:
         else f"INCOMPLETE: interrupted by {result.interrupted} after {result.metrics.sim_seconds:.1f} of "
         f"{options.duration_s:.1f} s; the figures cover the time simulated so far; the last complete run is "
         f"still in {options.out_dir}/",
-        results_table(result.metrics, more_rows=_grid_rows(result)),
+        results_table(result.metrics, more_rows=_grid_rows(result), scope=result.scope),
         "",
         f"{result.message_count} messages on {len(result.recorded_topics)} topics recorded in the "
         f"rosbag2 bag {result.out_dir / BAG_NAME}/ (ros2 bag info / ros2 bag play)",
@@ -112,7 +112,7 @@ def report(result: DemoResult, options: DemoOptions) -> str:
 
 
 def _grid_rows(result: DemoResult) -> list[Row]:
-    return [] if result.grid_score is None else result.grid_score.rows()
+    return [] if result.grid_score is None else result.grid_score.rows(result.scope)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -152,7 +152,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         # a bad input (refused before the run started) is 2, a run that failed 1
         return 1 if getattr(error, "__notes__", None) else 2
     print(report(result, options))
-    failed = failed_targets(result.metrics, _grid_rows(result))
+    failed = failed_targets(result.metrics, _grid_rows(result), result.scope)
     if result.interrupted is not None:
         failed.insert(0, f"the run is incomplete ({result.interrupted})")
     if args.check and failed:

@@ -57,9 +57,11 @@ from nuturtle_eval.grid_score import GridScore, WorldOutline, score_grid, seen_p
 from nuturtle_eval.metrics import RunMetrics, odom_in_world
 from nuturtle_eval.run_evaluation import (
     GRID_OUTPUTS,
+    MAPPING_SCOPE,
     TUM_OUTPUTS,
     ProgressBar,
     RunRecord,
+    RunScope,
     evaluate_and_plot,
     grid_counts,
     loop_counts,
@@ -208,7 +210,7 @@ class DemoResult:
     ``interrupted`` the name of the signal that stopped the run early (``SIGTERM``), None when it ran its
     whole duration; ``saved_map``: slam's ``~/save_map`` answer (success, message) with ``save_map``, else
     None; ``grid_score``: slam's occupancy grid against the world's true walls (:func:`grid_score`), None
-    without a grid."""
+    without a grid; ``scope``: what kind of run it was, which decides the targets that apply to it."""
 
     metrics: RunMetrics
     out_dir: Path
@@ -217,6 +219,7 @@ class DemoResult:
     interrupted: str | None
     saved_map: tuple[bool, str] | None = None
     grid_score: GridScore | None = None
+    scope: RunScope = MAPPING_SCOPE
 
 
 class DemoSystem:
@@ -512,6 +515,11 @@ class _DemoRun:
                 stop.received,
                 saved_map,
                 score,
+                RunScope(
+                    mode=options.mode,
+                    grid_loaded=system.slam.grid.loaded is not None,
+                    slip_fraction=system.nusim.simulation.config.noise.slip_fraction,
+                ),
             )
         finally:
             try:

@@ -32,7 +32,7 @@ from turtlelib.mapping.grid_map_file import OCCUPIED_THRESH
 from turtlelib.mapping.occupancy_grid import GridMap
 from turtlelib.sensing.scan_model import cast_beams
 
-from .run_evaluation import Row
+from .run_evaluation import MAPPING_SCOPE, Row, RunScope
 
 # Distance between cell centres within which a true cell and an occupied cell match (m)
 GRID_TOLERANCE_M = 0.10
@@ -127,14 +127,21 @@ class GridScore:
             "grid_occupied_cells": self.occupied_cells,
         }
 
-    def rows(self) -> list[Row]:
+    def rows(self, scope: RunScope = MAPPING_SCOPE) -> list[Row]:
         """Rows of the results table (:func:`nuturtle_eval.run_evaluation.results_table`): (label, value,
-        target, met; None when not measured)."""
+        target, met; None when not measured; ``NotApplicable`` when ``scope``'s grid was loaded, not
+        mapped by the run)."""
+        not_applicable = scope.grid_mapping()
 
         def row(label: str, value: float, count: str, target: str, met: bool) -> Row:
             if np.isnan(value):
                 return (label, "n/a", target, None)
-            return (label, f"{100.0 * value:.1f} % of {count}", target, met)
+            return (
+                label,
+                f"{100.0 * value:.1f} % of {count}",
+                target,
+                met if not_applicable is None else not_applicable,
+            )
 
         return [
             row(

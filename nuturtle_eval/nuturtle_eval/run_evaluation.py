@@ -16,6 +16,7 @@ import sys
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from types import TracebackType
 from typing import Any
@@ -23,8 +24,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from turtlelib import MODES
 from turtlelib.mapping.grid_map_file import save_grid_map
 from turtlelib.mapping.occupancy_grid import GridMap
+from turtlelib.util.validation import in_range, one_of, store
 
 from . import plots
 from .metrics import PoseSeries, RunData, RunMetrics, evaluate_run
@@ -39,32 +42,97 @@ GRID_OUTPUTS = (GRID_YAML, "map.pgm", GRID_FIGURE)
 # the trajectories in the TUM format (nuturtle_eval.tum): SLAM's, the odometry's and the reference's
 ESTIMATE_TUM, ODOMETRY_TUM, REFERENCE_TUM = "estimate.tum", "odometry.tum", "reference.tum"
 TUM_OUTPUTS = (ESTIMATE_TUM, ODOMETRY_TUM, REFERENCE_TUM)
-# (label, value text, target text, met) of one row of the results table
-Row = tuple[str, str, str, bool | None]
+# The odometry drift target (>= 0.2 m) is about the demo's world: its wheels slip by up to this fraction
+# of each step's travel, over a run of at least this long (s)
+DRIFT_SLIP_FRACTION = 0.3
+DRIFT_RUN_S = 120.0
 
-# (metrics.json key, label, format, target text, check) of the printed table
+
+@dataclass(frozen=True)
+class NotApplicable:
+    """A target of the results table that does not apply to the run, and why (shown ``n/a: reason``;
+    never a failure)."""
+
+    reason: str
+
+
+# (label, value text, target text, verdict): verdict True met, False failed (✗), None no target or not
+# measured, NotApplicable a target this run is not about
+Row = tuple[str, str, str, bool | NotApplicable | None]
+
+
+@dataclass(frozen=True)
+class RunScope:
+    """What kind of run the results table is about, which decides the targets that apply to it: slam's
+    ``mode`` (mapping | localization: the landmark map was loaded, this run made none), ``grid_loaded``
+    (slam's occupancy grid came from the map file, this run mapped no scan), ``slip_fraction`` the
+    simulated wheel slip (nusim's ``slip_fraction``; None: not known, e.g. a recording)."""
+
+    mode: str = "mapping"
+    grid_loaded: bool = False
+    slip_fraction: float | None = None
+
+    def __post_init__(self) -> None:
+        store(self, ("mode",), partial(one_of, choices=MODES))
+        if self.slip_fraction is not None:
+            store(self, ("slip_fraction",), partial(in_range, low=0.0, high=1.0))
+
+    def odometry_drift(self, sim_seconds: float) -> NotApplicable | None:
+        """Why the odometry drift target (the demo world's slip over its whole run) does not apply: the
+        world slips less than ``DRIFT_SLIP_FRACTION``, or the run (``sim_seconds``, s) is shorter than
+        ``DRIFT_RUN_S``."""
+        if self.slip_fraction is not None and self.slip_fraction < DRIFT_SLIP_FRACTION:
+            return NotApplicable(
+                f"set for {100 * DRIFT_SLIP_FRACTION:g} % wheel slip, this world's is "
+                f"{100 * self.slip_fraction:g} %"
+            )
+        # to the second: a recording's span is a fraction of its last period shorter than its run
+        if round(sim_seconds) < DRIFT_RUN_S:
+            return NotApplicable(f"set for a run of {DRIFT_RUN_S:g} s")
+        return None
+
+    def landmark_mapping(self, landmarks_in_range: int) -> NotApplicable | None:
+        """Why the landmark mapping target does not apply: localization (the map was loaded) or no true
+        cylinder in range (nothing to map)."""
+        if self.mode == "localization":
+            return NotApplicable("localization: the landmark map was loaded, not made")
+        if landmarks_in_range == 0:
+            return NotApplicable("no cylinder came in range")
+        return None
+
+    def grid_mapping(self) -> NotApplicable | None:
+        """Why the grid's targets do not apply: the grid was loaded (localization), not mapped."""
+        return NotApplicable("localization: the grid was loaded, not mapped") if self.grid_loaded else None
+
+
+# the scope of a mapping run of unknown wheel slip (a replay's)
+MAPPING_SCOPE = RunScope()
+
+# (metrics.json key, label, format, target text, check, why it may not apply (None: it always does)) of
+# the printed table
 TARGETS = (
     ("final_position_error_slam_m", "final position error, SLAM (m)", "{:.4f}", "<= 0.02",
-     lambda v: v <= 0.02),
+     lambda v: v <= 0.02, None),
     ("final_heading_error_slam_rad", "final heading error, SLAM (rad)", "{:.4f}", "<= 0.02",
-     lambda v: v <= 0.02),
+     lambda v: v <= 0.02, None),
     ("final_position_error_odom_m", "final position error, odometry (m)", "{:.4f}", ">= 0.2",
-     lambda v: v >= 0.2),
-    ("final_heading_error_odom_rad", "final heading error, odometry (rad)", "{:.4f}", "", None),
-    ("ate_rmse_slam_m", "ATE RMSE, SLAM (m)", "{:.4f}", "", None),
-    ("ate_rmse_odom_m", "ATE RMSE, odometry (m)", "{:.4f}", "", None),
-    ("ate_rmse_aligned_slam_m", "ATE RMSE aligned, SLAM (m)", "{:.4f}", "", None),
-    ("ate_rmse_aligned_odom_m", "ATE RMSE aligned, odometry (m)", "{:.4f}", "", None),
-    ("rpe_translation_slam_m", "RPE 1-10 m, SLAM (m)", "{:.4f}", "", None),
-    ("rpe_translation_odom_m", "RPE 1-10 m, odometry (m)", "{:.4f}", "", None),
-    ("rpe_rotation_slam_deg", "RPE 1-10 m, SLAM (deg)", "{:.3f}", "", None),
-    ("rpe_rotation_odom_deg", "RPE 1-10 m, odometry (deg)", "{:.3f}", "", None),
-    ("landmark_rmse_m", "landmark RMSE (m)", "{:.4f}", "", None),
-    ("nees_pose_mean", "pose NEES, mean (3 dof)", "{:.2f}", "", None),
-    ("nees_pose_median", "pose NEES, median (3 dof)", "{:.2f}", "", None),
-    ("nees_pose_within_95_fraction", "pose NEES inside the 95% band", "{:.3f}", ">= 0.9", lambda v: v >= 0.9),
-    ("sim_seconds", "simulated time (s)", "{:.1f}", "", None),
-    ("wall_seconds", "wall time (s)", "{:.1f}", "<= sim / 2", None),
+     lambda v: v >= 0.2, lambda scope, values: scope.odometry_drift(values["sim_seconds"])),
+    ("final_heading_error_odom_rad", "final heading error, odometry (rad)", "{:.4f}", "", None, None),
+    ("ate_rmse_slam_m", "ATE RMSE, SLAM (m)", "{:.4f}", "", None, None),
+    ("ate_rmse_odom_m", "ATE RMSE, odometry (m)", "{:.4f}", "", None, None),
+    ("ate_rmse_aligned_slam_m", "ATE RMSE aligned, SLAM (m)", "{:.4f}", "", None, None),
+    ("ate_rmse_aligned_odom_m", "ATE RMSE aligned, odometry (m)", "{:.4f}", "", None, None),
+    ("rpe_translation_slam_m", "RPE 1-10 m, SLAM (m)", "{:.4f}", "", None, None),
+    ("rpe_translation_odom_m", "RPE 1-10 m, odometry (m)", "{:.4f}", "", None, None),
+    ("rpe_rotation_slam_deg", "RPE 1-10 m, SLAM (deg)", "{:.3f}", "", None, None),
+    ("rpe_rotation_odom_deg", "RPE 1-10 m, odometry (deg)", "{:.3f}", "", None, None),
+    ("landmark_rmse_m", "landmark RMSE (m)", "{:.4f}", "", None, None),
+    ("nees_pose_mean", "pose NEES, mean (3 dof)", "{:.2f}", "", None, None),
+    ("nees_pose_median", "pose NEES, median (3 dof)", "{:.2f}", "", None, None),
+    ("nees_pose_within_95_fraction", "pose NEES inside the 95% band", "{:.3f}", ">= 0.9",
+     lambda v: v >= 0.9, None),
+    ("sim_seconds", "simulated time (s)", "{:.1f}", "", None, None),
+    ("wall_seconds", "wall time (s)", "{:.1f}", "<= sim / 2", None, None),
 )  # fmt: skip
 
 
@@ -271,12 +339,13 @@ def write_metrics(out_dir: Path, values: Mapping[str, Any]) -> Path:
     return path
 
 
-def target_rows(metrics: RunMetrics) -> list[tuple[str, str, str, bool | None]]:
-    """The rows of the results table: (label, value text, target text, met) with ``met`` None where no
-    target applies or the figure could not be measured (NaN, shown ``n/a``)."""
+def target_rows(metrics: RunMetrics, scope: RunScope = MAPPING_SCOPE) -> list[Row]:
+    """The rows of the results table: (label, value text, target text, verdict) with verdict None where no
+    target applies or the figure could not be measured (NaN, shown ``n/a``), a :class:`NotApplicable`
+    where the target is not about a run of this ``scope``."""
     values = metrics.as_dict()
-    rows: list[tuple[str, str, str, bool | None]] = []
-    for key, label, fmt, target, check in TARGETS:
+    rows: list[Row] = []
+    for key, label, fmt, target, check, scoped in TARGETS:
         value = values[key]
         if isinstance(value, float) and math.isnan(value):
             rows.append((label, "n/a", target, None))
@@ -285,14 +354,16 @@ def target_rows(metrics: RunMetrics) -> list[tuple[str, str, str, bool | None]]:
             ok = value <= 0.5 * values["sim_seconds"]
         else:
             ok = check(value) if check is not None else None
-        rows.append((label, fmt.format(value), target, ok))
+        not_applicable = None if scoped is None else scoped(scope, values)
+        rows.append((label, fmt.format(value), target, ok if not_applicable is None else not_applicable))
     mapped_ok = values["landmarks_in_range_unmapped"] == 0 and values["landmarks_duplicate"] == 0
+    not_applicable = scope.landmark_mapping(values["landmarks_in_range"])
     rows.append(
         (
             "landmarks: true / came in range / mapped",
             f"{values['landmarks_true']} / {values['landmarks_in_range']} / {values['landmarks_mapped']}",
             "every one in range mapped once",
-            mapped_ok,
+            mapped_ok if not_applicable is None else not_applicable,
         )
     )
     rows.append(
@@ -307,24 +378,35 @@ def target_rows(metrics: RunMetrics) -> list[tuple[str, str, str, bool | None]]:
     return rows
 
 
-def failed_targets(metrics: RunMetrics, more_rows: Sequence[Row] = ()) -> list[str]:
-    """The labels of the targets the results table (with ``more_rows``) marks failed (✗)."""
-    return [label for label, _, _, ok in [*target_rows(metrics), *more_rows] if ok is False]
+def failed_targets(
+    metrics: RunMetrics, more_rows: Sequence[Row] = (), scope: RunScope = MAPPING_SCOPE
+) -> list[str]:
+    """The labels of the targets the results table (with ``more_rows``, for a run of ``scope``) marks
+    failed (✗); a target that does not apply never fails."""
+    return [label for label, _, _, ok in [*target_rows(metrics, scope), *more_rows] if ok is False]
 
 
-def results_table(metrics: RunMetrics, targets: bool = True, more_rows: Sequence[Row] = ()) -> str:
+def results_table(
+    metrics: RunMetrics, targets: bool = True, more_rows: Sequence[Row] = (), scope: RunScope = MAPPING_SCOPE
+) -> str:
     """A markdown table of the run's figures and, with ``targets``, the demo's targets (✓/✗ where one
-    applies); without, the figures alone (a recording of another world, which those targets are not
-    about). ``more_rows`` follow the metrics' own (the grid's score: :mod:`nuturtle_eval.grid_score`)."""
+    applies, ``n/a: why`` where it is not about a run of this ``scope``: :class:`RunScope`); without, the
+    figures alone (a recording of another world, which those targets are not about). ``more_rows`` follow
+    the metrics' own (the grid's score: :mod:`nuturtle_eval.grid_score`)."""
     rows = (
         ["| metric | value | target | |", "|---|---:|---|---|"]
         if targets
         else ["| metric | value |", "|---|---:|"]
     )
-    for label, text, target, ok in [*target_rows(metrics), *more_rows]:
-        mark = "" if ok is None else ("✓" if ok else "✗")
-        rows.append(f"| {label} | {text} | {target} | {mark} |" if targets else f"| {label} | {text} |")
+    for label, text, target, ok in [*target_rows(metrics, scope), *more_rows]:
+        rows.append(f"| {label} | {text} | {target} | {_mark(ok)} |" if targets else f"| {label} | {text} |")
     return "\n".join(rows)
+
+
+def _mark(verdict: bool | NotApplicable | None) -> str:
+    if isinstance(verdict, NotApplicable):
+        return f"n/a: {verdict.reason}"
+    return "" if verdict is None else ("✓" if verdict else "✗")
 
 
 class ProgressBar:

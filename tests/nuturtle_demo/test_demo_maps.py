@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from nuturtle_demo.run import DemoOptions, run_demo
+from nuturtle_eval.run_evaluation import RunScope
 from turtlelib.mapping.grid_map_file import load_grid_map
 from turtlelib.mapping.landmark_map import load_map
 
@@ -43,6 +44,8 @@ def test_mapping_saves_a_map_that_localization_keeps_bit_for_bit(tmp_path):
     assert saved.frame_id == "map"
     assert len(saved.ids) == mapping.metrics.landmarks_mapped >= 3
     assert mapping.metrics.landmarks_spurious == 0
+    # the demo world's slip: every target applies
+    assert mapping.scope == RunScope(mode="mapping", grid_loaded=False, slip_fraction=0.3)
     # the grid beside the landmarks, as the run's own map.yaml (both re-rendered from the same keyframes)
     grid = load_grid_map(tmp_path / "map.yaml")
     assert np.array_equal(grid.occupancy, load_grid_map(tmp_path / "map" / "map.yaml").occupancy)
@@ -68,6 +71,8 @@ def test_mapping_saves_a_map_that_localization_keeps_bit_for_bit(tmp_path):
     assert same_map(first["map"], saved)
     assert localized.saved_map is not None and localized.saved_map[0], localized.saved_map
     assert same_map(load_map(relocalized_file), saved)
+    # no grid file beside the copy: slam mapped the scans, so the grid's targets apply
+    assert localized.scope == RunScope(mode="localization", grid_loaded=False, slip_fraction=0.3)
     metrics = json.loads((tmp_path / "localize" / "metrics.json").read_text())
     assert metrics["landmarks_mapped"] == len(saved.ids)
     assert metrics["final_position_error_slam_m"] <= 0.03

@@ -15,11 +15,13 @@ import pytest
 from nuturtle_eval.grid_score import (
     GRID_TOLERANCE_M,
     OCCUPIED,
+    GridScore,
     WorldOutline,
     score_grid,
     seen_points,
     true_cells,
 )
+from nuturtle_eval.run_evaluation import NotApplicable, RunScope
 from turtlelib import Transform2D
 from turtlelib.mapping.occupancy_grid import GridMap
 
@@ -85,3 +87,12 @@ def test_a_grid_on_every_seen_wall_cell_meets_the_targets():
     # nothing seen: not measured
     nothing = score_grid(grid([(10, 0)]), WALL, np.zeros((0, 2)))
     assert math.isnan(nothing.walls_found) and nothing.rows()[0][1:] == ("n/a", ">= 95 %", None)
+
+
+def test_a_grid_loaded_for_localization_is_not_scored_as_mapped_by_the_run():
+    poor = GridScore(walls_found=0.5, false_occupied=0.2, seen_cells=100, true_cells=120, occupied_cells=80)
+    assert [row[3] for row in poor.rows()] == [False, False]
+    # a localization run without a grid file maps its scans: the targets apply
+    assert [row[3] for row in poor.rows(RunScope(mode="localization"))] == [False, False]
+    loaded = poor.rows(RunScope(mode="localization", grid_loaded=True))
+    assert [row[3] for row in loaded] == [NotApplicable("localization: the grid was loaded, not mapped")] * 2

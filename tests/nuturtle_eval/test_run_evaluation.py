@@ -10,13 +10,16 @@ import pytest
 
 from nuturtle_eval.metrics import PoseSeries, RunMetrics
 from nuturtle_eval.run_evaluation import (
+    NotApplicable,
     ProgressBar,
     RunRecord,
+    RunScope,
     SlamSnapshot,
     evaluate_and_plot,
     failed_targets,
     results_table,
     sensor_range_m,
+    target_rows,
     write_metrics,
 )
 from turtlelib import arena_walls
@@ -96,6 +99,99 @@ def test_failed_targets_are_the_rows_the_table_marks_failed():
     assert failed_targets(metrics) == ["final position error, SLAM (m)"]
     assert table.count("✗") == 1 and "| final position error, SLAM (m) | 2.7000 | <= 0.02 | ✗ |" in table
     assert failed_targets(replace(metrics, final_position_error_slam_m=0.01)) == []
+
+
+def _verdicts(metrics, scope):
+    return {label: verdict for label, _, _, verdict in target_rows(metrics, scope)}
+
+
+DRIFT = "final position error, odometry (m)"
+LANDMARKS = "landmarks: true / came in range / mapped"
+
+
+def test_a_turtlebot3_world_run_is_not_failed_on_the_demo_world_s_odometry_drift():
+    # ROBOTIS' world as nusim models it: 1 % slip, nine cylinders, every one mapped; odometry barely drifts
+    metrics = RunMetrics(**{
+        **FIGURES, "final_position_error_odom_m": 0.0016, "landmarks_true": 9, "landmarks_in_range": 9,
+        "landmarks_mapped": 9, "landmarks_paired": 9, "nees_pose_within_95_fraction": 0.928,
+    })  # fmt: skip
+    scope = RunScope(slip_fraction=0.01)
+    verdicts = _verdicts(metrics, scope)
+    assert verdicts[DRIFT] == NotApplicable("set for 30 % wheel slip, this world's is 1 %")
+    assert verdicts[LANDMARKS] is True
+    assert failed_targets(metrics, scope=scope) == []
+    table = results_table(metrics, scope=scope)
+    assert "✗" not in table
+    assert f"| {DRIFT} | 0.0016 | >= 0.2 | n/a: set for 30 % wheel slip, this world's is 1 % |" in table
+    # the targets that apply still fail honestly
+    worse = replace(metrics, final_position_error_slam_m=0.05, nees_pose_within_95_fraction=0.5)
+    assert failed_targets(worse, scope=scope) == [
+        "final position error, SLAM (m)",
+        "pose NEES inside the 95% band",
+    ]
+
+
+def test_a_localization_run_is_not_failed_on_mapping_targets():
+    # the demo's world, localizing in the map of 8 a mapping run saved: 6 came in range, the map holds 8
+    metrics = RunMetrics(**{
+        **FIGURES, "final_position_error_odom_m": 0.26, "landmarks_in_range": 6,
+        "landmarks_in_range_unmapped": 1, "landmarks_duplicate": 1,
+    })  # fmt: skip
+    scope = RunScope(mode="localization", grid_loaded=True, slip_fraction=0.3)
+    verdicts = _verdicts(metrics, scope)
+    assert verdicts[LANDMARKS] == NotApplicable("localization: the landmark map was loaded, not made")
+    assert verdicts[DRIFT] is True
+    assert failed_targets(metrics, scope=scope) == []
+    # the same counts in a mapping run are a failure
+    assert failed_targets(metrics, scope=RunScope(slip_fraction=0.3)) == [LANDMARKS]
+    # localization's own targets apply
+    lost = replace(metrics, final_position_error_slam_m=0.3, final_heading_error_slam_rad=0.1)
+    assert failed_targets(lost, scope=scope) == [
+        "final position error, SLAM (m)",
+        "final heading error, SLAM (rad)",
+    ]
+
+
+@pytest.mark.parametrize(
+    ("slip_fraction", "sim_seconds", "odometry_m", "verdict"),
+    [
+        # the demo's world over its two minutes: the target applies, met or failed
+        (0.3, 120.0, 0.42, True),
+        (0.3, 120.0, 0.1, False),
+        (0.5, 120.0, 0.1, False),
+        # a recording of it spans its run less a fraction of the last period; slip not known
+        (None, 119.96, 0.1, False),
+        # a shorter run
+        (0.3, 40.0, 0.1, NotApplicable("set for a run of 120 s")),
+        (None, 60.0, 0.1, NotApplicable("set for a run of 120 s")),
+        (0.1, 120.0, 0.1, NotApplicable("set for 30 % wheel slip, this world's is 10 %")),
+    ],
+)
+def test_the_odometry_drift_target_applies_to_the_demo_world_s_slip_over_its_run(
+    slip_fraction, sim_seconds, odometry_m, verdict
+):
+    metrics = RunMetrics(**{**FIGURES, "sim_seconds": sim_seconds, "final_position_error_odom_m": odometry_m})
+    assert _verdicts(metrics, RunScope(slip_fraction=slip_fraction))[DRIFT] == verdict
+
+
+def test_a_world_without_cylinders_in_range_has_no_landmark_target_and_still_counts_spurious_ones():
+    metrics = RunMetrics(**{
+        **FIGURES, "landmarks_true": 0, "landmarks_in_range": 0, "landmarks_mapped": 1, "landmarks_paired": 0,
+        "landmarks_spurious": 1,
+    })  # fmt: skip
+    assert _verdicts(metrics, RunScope())[LANDMARKS] == NotApplicable("no cylinder came in range")
+    assert "| landmarks: in range but unmapped / duplicates / spurious | 0 / 0 / 1 |" in results_table(
+        metrics
+    )
+
+
+@pytest.mark.parametrize(
+    ("fields", "message"),
+    [({"mode": "mapless"}, "mode must be one of"), ({"slip_fraction": 1.5}, "slip_fraction must be in")],
+)
+def test_a_bad_scope_is_refused(fields, message):
+    with pytest.raises(ValueError, match=message):
+        RunScope(**fields)
 
 
 @pytest.mark.parametrize(
