@@ -28,6 +28,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from ..command_help import DefaultsHelpFormatter
 from ..run_evaluation import write_metrics
 from ..run_folder import RunFolder, check_replaceable, error_line
 from .experiment import ASSOCIATIONS, Experiment, ExperimentResult, run_experiment
@@ -46,16 +47,28 @@ if TYPE_CHECKING:
 
 
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
+    return build_parser().parse_args(argv)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The dataset command's command line."""
     parser = argparse.ArgumentParser(
         prog="python -m nuturtle_eval.datasets",
         description="EKF SLAM on the MRCLAM and Victoria Park datasets.",
+        formatter_class=DefaultsHelpFormatter,
     )
     commands = parser.add_subparsers(dest="command", required=True)
-    mrclam = commands.add_parser("mrclam", help="one robot of a UTIAS MRCLAM dataset")
+    mrclam = commands.add_parser(
+        "mrclam", help="one robot of a UTIAS MRCLAM dataset", formatter_class=DefaultsHelpFormatter
+    )
     mrclam.add_argument("--data", required=True, type=Path, help="an MRCLAM_DatasetN directory")
     mrclam.add_argument("--robot", required=True, type=int, choices=range(1, 6), help="robot 1..5")
-    mrclam.add_argument("--association", choices=ASSOCIATIONS, default="known")
-    victoria = commands.add_parser("victoria", help="the Victoria Park run (tree detections, GPS)")
+    mrclam.add_argument("--association", choices=ASSOCIATIONS, default="known",
+                        help="the barcode's subject number as the landmark id (known), or the filter's own "
+                        "association by joint compatibility (unknown)")  # fmt: skip
+    victoria = commands.add_parser(
+        "victoria", help="the Victoria Park run (tree detections, GPS)", formatter_class=DefaultsHelpFormatter
+    )
     victoria.add_argument("--data", required=True, type=Path, help="the victoria_park directory")
     victoria.add_argument(
         "--protocol",
@@ -77,7 +90,9 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
             help="also smooth the whole run (poses, map, associations) and report it beside the filter",
         )
     calibrate = commands.add_parser(
-        "calibrate", help="fit MRCLAM motion and measurement noise to its Vicon truth"
+        "calibrate",
+        help="fit MRCLAM motion and measurement noise to its Vicon truth",
+        formatter_class=DefaultsHelpFormatter,
     )
     calibrate.add_argument("--data", required=True, type=Path, help="an MRCLAM_DatasetN directory")
     calibrate.add_argument("--robot", required=True, type=int, choices=range(1, 6), help="robot 1..5")
@@ -89,7 +104,7 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     )
     calibrate.add_argument("--out", type=Path, default=None, help="params YAML (default: stdout)")
     calibrate.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
-    return parser.parse_args(argv)
+    return parser
 
 
 def _progress(total: int, enabled: bool, label: str):
