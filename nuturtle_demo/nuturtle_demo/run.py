@@ -68,7 +68,7 @@ from nuturtle_eval.run_evaluation import (
     slip_counts,
     write_metrics,
 )
-from nuturtle_eval.run_folder import RunFolder
+from nuturtle_eval.run_folder import RunFolder, say_previous_result
 from nuturtle_ros_common.conversions import planar_covariance_6x6, pose_from_transform
 from nuturtle_ros_common.dds_domain import PRIVATE, DomainChoice, domain_choice, run_context
 from nuturtle_ros_common.qos_events import drop_qos_event_handlers
@@ -466,6 +466,7 @@ class _DemoRun:
                 raise RuntimeError(f"stopped by {stop.received} before the simulation started")
             executor.add_node(system.nusim)
             self.started = True
+            say_previous_result(options.out_dir)
             wall_start = time.monotonic()
             pace = Pace(1.0 / (system.nusim.timing.rate * options.realtime_factor))
             with ProgressBar(options.duration_s, "sim", options.progress) as progress:

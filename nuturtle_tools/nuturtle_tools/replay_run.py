@@ -77,7 +77,7 @@ from nuturtle_eval.run_evaluation import (
     slip_counts,
     write_metrics,
 )
-from nuturtle_eval.run_folder import RunFolder
+from nuturtle_eval.run_folder import RunFolder, say_previous_result
 from nuturtle_ros_common.conversions import stamp_nanoseconds, transform_from_pose
 from nuturtle_ros_common.dds_domain import ENVIRONMENT, PRIVATE, DomainChoice, domain_choice, run_context
 from nuturtle_ros_common.qos_events import drop_qos_event_handlers
@@ -536,6 +536,7 @@ class Replay:
             else:
                 self._wait_for_matching(executor)
             self.started = True
+            say_previous_result(self.options.out_dir)
             wall_start = time.monotonic()
             self._play(executor, stop, writer)
             wall_seconds = time.monotonic() - wall_start

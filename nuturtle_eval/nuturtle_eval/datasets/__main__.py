@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING
 
 from ..command_help import DefaultsHelpFormatter
 from ..run_evaluation import write_metrics
-from ..run_folder import RunFolder, check_replaceable, error_line
+from ..run_folder import RunFolder, check_no_other_run, check_replaceable, error_line, say_previous_result
 from .experiment import ASSOCIATIONS, Experiment, ExperimentResult, run_experiment
 from .setups import PROTOCOLS
 
@@ -124,6 +124,7 @@ def _write_run(
 
     from .figures import plot_error_comparison, plot_errors, plot_nees, plot_side_by_side, plot_trajectory
 
+    say_previous_result(args.out)
     with _progress(len(experiment.motion_t_ns), args.progress, experiment.name) as bar:
         result = run_experiment(experiment, bar.update)
     evaluation = evaluate(experiment, result)
@@ -203,7 +204,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             from .mrclam import load_mrclam
 
             args.out = args.out or Path("results") / f"mrclam_robot{args.robot}_{args.association}"
-            check_replaceable(args.out, OUTPUTS + SMOOTHED_OUTPUTS)
+            _check_out(args.out)
             params = load_params(mrclam_params(args.association), args.params)
             recording = load_mrclam(args.data, args.robot)
             experiment = mrclam_experiment(recording, params, args.association)
@@ -213,7 +214,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             from .victoria import load_victoria
 
             args.out = args.out or Path("results") / "victoria_park"
-            check_replaceable(args.out, OUTPUTS + SMOOTHED_OUTPUTS)
+            _check_out(args.out)
             params = load_params(VICTORIA_PARAMS, args.params)
             recording = load_victoria(args.data)
             experiment = victoria_experiment(recording, params, args.protocol)
@@ -226,6 +227,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(summary(metrics))
     print(f"results in {args.out}")
     return 0
+
+
+def _check_out(out: Path) -> None:
+    """ValueError for an ``out`` the run may not replace or another run is writing (run_folder), before
+    anything is read."""
+    check_replaceable(out, OUTPUTS + SMOOTHED_OUTPUTS)
+    check_no_other_run(out)
 
 
 def _calibrate(args: argparse.Namespace) -> int:
