@@ -406,7 +406,8 @@ def run_demo(options: DemoOptions, on_progress: ProgressCallback | None = None) 
     end the run early (:mod:`nuturtle_ros_common.stop_signals`): the outputs then cover the time simulated,
     metrics.json says ``"complete": false`` and they are left in ``OUT.incomplete`` beside the untouched
     ``OUT``. An error once the simulation ran (a full disk: OSError) leaves what was written there too;
-    an error before (a port in use: OSError, a world nusim refuses: ValueError) leaves nothing.
+    an error before (a port in use: OSError, a world nusim refuses or an ``out_dir`` another run is writing:
+    ValueError) leaves nothing.
 
     ``on_progress(system, sim_time_s)``, if given, is called in the executor's thread after each physics
     step and the callbacks it led to, with the running :class:`DemoSystem` and the simulation time

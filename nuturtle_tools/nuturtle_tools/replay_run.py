@@ -489,7 +489,8 @@ class Replay:
         only when the whole bag was played (:class:`nuturtle_eval.run_folder.RunFolder`); a replay
         stopped early by SIGINT, SIGTERM or SIGHUP, or failing once it plays (a full disk: OSError),
         leaves its outputs in ``OUT.incomplete``. ValueError/OSError before anything is written for a
-        ``out_dir`` that holds the bag or other files, or a Foxglove port in use."""
+        ``out_dir`` that holds the bag or other files or that another run is writing, or a Foxglove port in
+        use."""
         out_dir = Path(self.options.out_dir)
         if out_dir.resolve() in Path(self.options.bag).resolve().parents:
             raise ValueError(
