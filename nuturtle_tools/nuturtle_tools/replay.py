@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from nuturtle_description.robot_params import add_model_argument
+from nuturtle_eval.command_help import DefaultsHelpFormatter
 from nuturtle_ros_common.dds_domain import add_domain_argument
 
 from .relay_config import add_foxglove_argument, parse_endpoint
@@ -44,11 +45,16 @@ DEFAULT_TOPICS = {
 
 
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
+    return build_parser().parse_args(argv)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The replay's command line."""
     parser = argparse.ArgumentParser(
         prog="python -m nuturtle_tools.replay",
         description="Replay a recording (MCAP or sqlite3 bag directory, a single .mcap, or a ROS 1 .bag) "
         "with /clock into the landmarks and slam nodes: SLAM outputs, trajectory, map and metrics.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        formatter_class=DefaultsHelpFormatter,
     )
     parser.add_argument(
         "bag", type=Path, help="bag directory (metadata.yaml), a single .mcap / .db3 file or a ROS 1 .bag"
@@ -95,7 +101,7 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
                         "or the replay is stopped early (for CI)")  # fmt: skip
     add_foxglove_argument(parser, "--rate 1")
     add_domain_argument(parser, "private; env with --play-only, for your own nodes")
-    return parser.parse_args(argv)
+    return parser
 
 
 def no_landmarks_hint(metrics: dict[str, Any]) -> str | None:

@@ -77,7 +77,7 @@ from nuturtle_eval.run_evaluation import (
     slip_counts,
     write_metrics,
 )
-from nuturtle_eval.run_folder import RunFolder
+from nuturtle_eval.run_folder import RunFolder, say_previous_result
 from nuturtle_ros_common.conversions import stamp_nanoseconds, transform_from_pose
 from nuturtle_ros_common.dds_domain import ENVIRONMENT, PRIVATE, DomainChoice, domain_choice, run_context
 from nuturtle_ros_common.qos_events import drop_qos_event_handlers
@@ -489,7 +489,8 @@ class Replay:
         only when the whole bag was played (:class:`nuturtle_eval.run_folder.RunFolder`); a replay
         stopped early by SIGINT, SIGTERM or SIGHUP, or failing once it plays (a full disk: OSError),
         leaves its outputs in ``OUT.incomplete``. ValueError/OSError before anything is written for a
-        ``out_dir`` that holds the bag or other files, or a Foxglove port in use."""
+        ``out_dir`` that holds the bag or other files or that another run is writing, or a Foxglove port in
+        use."""
         out_dir = Path(self.options.out_dir)
         if out_dir.resolve() in Path(self.options.bag).resolve().parents:
             raise ValueError(
@@ -536,6 +537,7 @@ class Replay:
             else:
                 self._wait_for_matching(executor)
             self.started = True
+            say_previous_result(self.options.out_dir)
             wall_start = time.monotonic()
             self._play(executor, stop, writer)
             wall_seconds = time.monotonic() - wall_start
