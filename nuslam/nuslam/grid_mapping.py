@@ -171,7 +171,7 @@ class GridMapping:
         if localization and self.yaml_path is not None and self.yaml_path.exists():
             loaded = load_grid_map(self.yaml_path)
             node.get_logger().info(f"loaded the {loaded.width} x {loaded.height} cell grid {self.yaml_path}")
-        # localization without a saved grid beside map_file: the yaml looked for (warned about by connect)
+        # localization found no saved grid beside map_file: connect warns once and the scans are mapped
         self._grid_missing = localization and loaded is None and self.yaml_path is not None
         self._map_id, body_id, sensor_id = frames
         self._T_body_from = {sensor_id: T_body_scan, body_id: Transform2D()}
