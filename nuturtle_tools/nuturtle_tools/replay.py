@@ -24,6 +24,7 @@ if __name__ == "__main__":
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse
+import math
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -149,14 +150,31 @@ def motion_gate_warning(metrics: dict[str, Any]) -> str | None:
     )
 
 
+def slam_line(metrics: dict[str, Any]) -> str:
+    """What slam made of the bag, in one line, from ``metrics`` (metrics.json's ``slam_mode``,
+    ``map_landmarks`` and ``slam_*`` counts): its mode, the landmarks in its map, the loops it closed, the
+    relocalizations of its slip recovery and the scans it held."""
+    mode, landmarks = metrics["slam_mode"], metrics["map_landmarks"]
+    mapped = f"{landmarks} landmarks mapped" if mode == "mapping" else f"{landmarks} landmarks in its map"
+    loops = metrics.get("slam_loops_closed")
+    closed = "loop closure off" if loops is None else f"{loops} loops closed"
+    return (
+        f"slam: {mode}, {mapped}, {closed}, {metrics['slam_relocalizations']} relocalizations after slip, "
+        f"{metrics['slam_scans_held']} scans held"
+    )
+
+
 def summary(result: Any) -> str:
-    """The printed report: the results table when there is ground truth (with the demo's targets for a
-    nusim recording only), then the counts, the notes and why there are no landmarks if so."""
+    """The printed report: what slam made of the bag (:func:`slam_line`), the results table when there
+    is ground truth (with the demo's targets for a nusim recording only), then the counts, the notes and
+    why there are no landmarks if so."""
     metrics = result.metrics
     lines = [
         f"replayed {metrics['bag']} ({metrics['storage']}), association {metrics['association']}, "
         f"motion from {metrics['motion_source']}"
     ]
+    if "slam_mode" in metrics:
+        lines.append(slam_line(metrics))
     if result.interrupted is not None:
         lines.append(
             f"INCOMPLETE: interrupted by {result.interrupted}; the outputs cover what was played so far"
@@ -187,7 +205,7 @@ def summary(result: Any) -> str:
                     f"{metrics['slam_grid_cells']} / {megabytes[0]:.1f} ({megabytes[1]:.1f}) / "
                     f"{metrics['slam_grid_scans_past_bound']} |")  # fmt: skip
     for key in ("slam_motion_samples_refused", "slam_motion_silences_bridged", "slam_motion_restarts",
-                "slam_scans_held", "slam_relocalizations", "slam_stalls"):  # fmt: skip
+                "slam_stalls"):  # fmt: skip
         if key in metrics:
             rows.append(f"| {key.replace('_', ' ')} | {metrics[key]} |")
     if "slam_loops_closed" in metrics:
@@ -250,11 +268,12 @@ SMOOTHED_ROWS = (
 
 
 def smoothed_rows(metrics: dict[str, Any]) -> list[str]:
-    """The filter and the smoothed run side by side (the figures both have), then the smoother's CPU."""
+    """The filter and the smoothed run side by side (the figures both have: not None, not NaN), then the
+    smoother's CPU."""
     smoothed = metrics["smoothed"]
     rows = ["| | filter | smoother |", "|---|---:|---:|"]
     for key, label in SMOOTHED_ROWS:
-        if key in metrics and key in smoothed:
+        if _measured(metrics.get(key)) and _measured(smoothed.get(key)):
             values = [metrics[key], smoothed[key]]
             rows.append(
                 f"| {label} | "
@@ -263,6 +282,11 @@ def smoothed_rows(metrics: dict[str, Any]) -> list[str]:
             )
     rows.append(f"| smoother CPU (s) | | {smoothed['smoother_cpu_seconds']:.2f} |")
     return rows
+
+
+def _measured(value: Any) -> bool:
+    """A figure that was measured: neither None (not judged) nor NaN (could not be measured)."""
+    return value is not None and not (isinstance(value, float) and math.isnan(value))
 
 
 def recording_params(bag: Path) -> Path | None:

@@ -259,6 +259,18 @@ def test_remapped_scan_without_ground_truth_gives_counts_but_no_accuracy(live, t
     assert (out / "trajectory.png").read_bytes().startswith(PNG_MAGIC)
     assert not (out / "errors.png").exists()
     assert f"| messages played, /lidar/scan | {scans} |" in stdout
+    # what slam made of it, though nothing judges it: its mode, its map (the saved file's landmarks), the
+    # loops it closed, its slip recovery; no landmark called spurious
+    mapped = len(load_map(out / "map.json").ids)
+    assert metrics["slam_mode"] == "mapping" and metrics["map_landmarks"] == mapped > 0
+    held, relocalized, loops = (
+        metrics[f"slam_{k}"] for k in ("scans_held", "relocalizations", "loops_closed")
+    )
+    assert (
+        f"slam: mapping, {mapped} landmarks mapped, {loops} loops closed, {relocalized} relocalizations "
+        f"after slip, {held} scans held"
+    ) in stdout
+    assert "spurious" not in stdout
 
     # without --scan-topic the bag has no /scan: a clear error, exit code 2
     code = main([str(bag), "--out", str(tmp_path / "again"), "--no-progress"])
