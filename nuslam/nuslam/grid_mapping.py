@@ -26,6 +26,8 @@ file written atomically).
 
 Localization (``mode: localization``): the grid saved beside ``map_file`` is loaded at start-up, if there,
 and published once; no scan is mapped. A malformed grid file stops the node at start-up with the reason.
+Without a grid file beside ``map_file`` (only the ``.json`` copied) the scans are mapped into a fresh grid,
+as in mapping, after one WARN at start-up naming the ``<stem>.yaml`` looked for.
 
 Publishes (reliable + transient local, depth 1, REP 2003: a late RViz, nav2 or Foxglove gets the last)
     `map` (nav_msgs/OccupancyGrid, frame ``map_id``): -1 unknown, 0..100 per cent occupied, at most once
@@ -169,6 +171,8 @@ class GridMapping:
         if localization and self.yaml_path is not None and self.yaml_path.exists():
             loaded = load_grid_map(self.yaml_path)
             node.get_logger().info(f"loaded the {loaded.width} x {loaded.height} cell grid {self.yaml_path}")
+        # localization found no saved grid beside map_file: connect warns once and the scans are mapped
+        self._grid_missing = localization and loaded is None and self.yaml_path is not None
         self._map_id, body_id, sensor_id = frames
         self._T_body_from = {sensor_id: T_body_scan, body_id: Transform2D()}
         self._T_body_scan = T_body_scan
@@ -196,8 +200,8 @@ class GridMapping:
 
     def connect(self, node: Node, map_qos: QoSProfile, timeline: SlamTimeline) -> None:
         """Create `map`, `map_metadata` (``map_qos``) and, when mapping, the `scan` subscription placed at
-        ``timeline``'s poses (whose corrections and resets it listens to); publish the loaded grid. Nothing
-        when the grid is off."""
+        ``timeline``'s poses (whose corrections and resets it listens to); publish the loaded grid; WARN
+        once for a localization without a saved grid (a fresh one is mapped). Nothing when the grid is off."""
         if not self.topic_config.enabled:
             return
         self._timeline = timeline
@@ -207,6 +211,12 @@ class GridMapping:
         if self.loaded is not None:
             self._publish(self.loaded, node.get_clock().now().nanoseconds)
         else:
+            if self._grid_missing:
+                node.get_logger().warning(
+                    f"localization without a saved occupancy grid: no {self.yaml_path} beside map_file, so "
+                    f"the scans are mapped into a fresh grid (copy the saved map's .yaml and .pgm with its "
+                    f".json to localize in the saved grid)"
+                )
             node.create_subscription(LaserScan, "scan", self.on_scan, qos_profile_sensor_data)
 
     @property

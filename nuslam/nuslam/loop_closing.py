@@ -13,8 +13,8 @@ start pose and what landmarks did to it stay as they are)::
 
     D = (C_old T_l)^-1 (C_new T_l),   T_map_body' = T_map_body D,   P' = G P G^T
 
-with ``G = [[1, 0, -(y' - y)], [0, 1, x' - x], [0, 0, 1]]`` (the pose covariance carried along, as the
-motion input carries it: ``ScanOdometry.moved_on``); `turtlelib.SlamTimeline.relocalize` sets it, as
+(`turtlelib.smoothing.loop_closure.relocalized`: the pose covariance carried along, as the motion input
+carries it: ``ScanOdometry.moved_on``); `turtlelib.SlamTimeline.relocalize` sets it, as
 /initialpose does, and the landmarks stay where they are, independent of the new pose (as after slip
 recovery: in a room without posts there are none; with posts the landmarks seen again pull the pose to
 their frame).
@@ -50,7 +50,7 @@ from turtlelib import RegistrationConfig, SlamTimeline, Transform2D
 from turtlelib.estimation.lidar_odometry import OdometryStep
 from turtlelib.geometry.pose_buffer import PoseBuffer
 from turtlelib.sensing.correlative_matcher import CorrelativeConfig
-from turtlelib.smoothing.loop_closure import LoopClosure, LoopClosureConfig, Verdict
+from turtlelib.smoothing.loop_closure import LoopClosure, LoopClosureConfig, Verdict, relocalized
 from turtlelib.smoothing.pose_graph import PoseGraphConfig
 from turtlelib.util.timebase import NS_PER_S
 
@@ -161,13 +161,8 @@ class LoopClosing:
             )  # fmt: skip
             return
         slam = self._timeline.slam
-        # D = (C_old T_l)^-1 (C_new T_l),  T' = T D,  P' = G P G^T
-        D = (C_old @ T_l).inverse() @ (C_new @ T_l)
-        T_map_body = slam.pose
-        T_new = T_map_body @ D
-        G = np.eye(3)
-        G[0, 2], G[1, 2] = -(T_new.y - T_map_body.y), T_new.x - T_map_body.x
-        self._timeline.relocalize(T_new, G @ slam.pose_covariance @ G.T, explained=True)
+        T_new, P_new, D = relocalized(slam.pose, slam.pose_covariance, T_l, C_old, C_new)
+        self._timeline.relocalize(T_new, P_new, explained=True)
         self.last_correction = D
         path_m = self.loops.keyframes[-1].path_m - self.loops.keyframes[accepted[0].i].path_m
         self._logger.info(

@@ -46,6 +46,7 @@ from turtlelib.estimation.lidar_odometry import (
     scan_points,
 )
 from turtlelib.geometry.pose_buffer import PoseBuffer
+from turtlelib.geometry.se2 import right_composition_jacobian
 from turtlelib.sensing.range_scan import RangeScan
 from turtlelib.util.timebase import NS_PER_S
 
@@ -206,8 +207,7 @@ class ScanOdometry:
             return T_map_body, P_pose
         U = T_from.inverse() @ T_to
         T = T_map_body @ U
-        G = np.eye(3)
-        G[0, 2], G[1, 2] = -(T.y - T_map_body.y), T.x - T_map_body.x
+        G = right_composition_jacobian(T_map_body, T)
         Q = self.noise.covariance(T_map_body, U.log(), (t_ns - t_from_ns) / NS_PER_S)
         return T, G @ P_pose @ G.T + Q
 

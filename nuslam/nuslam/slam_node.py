@@ -24,7 +24,8 @@ Maps (`map_file`, `mode`)
 Occupancy grid (`grid.*`, `nuslam.grid_mapping`)
     Each `scan` placed at slam's pose at its stamp and the robot's LiDAR mount builds an occupancy grid
     (published on `map`); `~/save_map` writes it beside `map_file` as `<stem>.yaml` + `<stem>.pgm`
-    (map_server's format); in localization the grid saved there is loaded and published instead.
+    (map_server's format); in localization the grid saved there is loaded and published instead
+    (without one there, a WARN at start-up names the file looked for, and a fresh grid is mapped).
 
 Subscribes
     `joint_states` (sensor_msgs/JointState, with `motion_source: joint_states`): wheel angles (rad) of

@@ -17,6 +17,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from nuturtle_description.robot_params import add_model_argument
+from nuturtle_eval.command_help import DefaultsHelpFormatter
 from nuturtle_eval.run_evaluation import Row, failed_targets, results_table
 from nuturtle_eval.run_folder import error_line, outputs_line, unfinished_runs
 from nuturtle_ros_common.dds_domain import add_domain_argument
@@ -35,11 +36,16 @@ from .run import (
 
 
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
+    return build_parser().parse_args(argv)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The demo's command line."""
     parser = argparse.ArgumentParser(
         prog="python -m nuturtle_demo",
         description="Headless simulation + EKF SLAM demo of a TurtleBot3: metrics, plots and a "
         "rosbag2 (MCAP) recording of every topic.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        formatter_class=DefaultsHelpFormatter,
     )
     parser.add_argument("--association", choices=ASSOCIATIONS, default="unknown",
                         help="SLAM data association: landmark ids from nusim's fake sensor (known) or "
@@ -84,7 +90,7 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
                       "given in localization")  # fmt: skip
     maps.add_argument("--route-radius", type=float, default=None,
                       help="the figure eight's loop radius (m) instead of the driver's 0.75")  # fmt: skip
-    return parser.parse_args(argv)
+    return parser
 
 
 def report(result: DemoResult, options: DemoOptions) -> str:

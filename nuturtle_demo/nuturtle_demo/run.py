@@ -70,7 +70,7 @@ from nuturtle_eval.run_evaluation import (
     slip_counts,
     write_metrics,
 )
-from nuturtle_eval.run_folder import RunFolder
+from nuturtle_eval.run_folder import RunFolder, say_previous_result
 from nuturtle_ros_common.conversions import planar_covariance_6x6, pose_from_transform
 from nuturtle_ros_common.dds_domain import PRIVATE, DomainChoice, domain_choice, run_context
 from nuturtle_ros_common.qos_events import drop_qos_event_handlers
@@ -409,7 +409,8 @@ def run_demo(options: DemoOptions, on_progress: ProgressCallback | None = None) 
     end the run early (:mod:`nuturtle_ros_common.stop_signals`): the outputs then cover the time simulated,
     metrics.json says ``"complete": false`` and they are left in ``OUT.incomplete`` beside the untouched
     ``OUT``. An error once the simulation ran (a full disk: OSError) leaves what was written there too;
-    an error before (a port in use: OSError, a world nusim refuses: ValueError) leaves nothing.
+    an error before (a port in use: OSError, a world nusim refuses or an ``out_dir`` another run is writing:
+    ValueError) leaves nothing.
 
     ``on_progress(system, sim_time_s)``, if given, is called in the executor's thread after each physics
     step and the callbacks it led to, with the running :class:`DemoSystem` and the simulation time
@@ -469,6 +470,7 @@ class _DemoRun:
                 raise RuntimeError(f"stopped by {stop.received} before the simulation started")
             executor.add_node(system.nusim)
             self.started = True
+            say_previous_result(options.out_dir)
             wall_start = time.monotonic()
             pace = Pace(1.0 / (system.nusim.timing.rate * options.realtime_factor))
             with ProgressBar(options.duration_s, "sim", options.progress) as progress:

@@ -26,7 +26,9 @@ Metrics
 * landmarks: mapped landmarks ``m_hat`` (K, 2) are associated one-to-one with the true centres ``m``
   (M, 2) by the Hungarian algorithm on Euclidean distance, keeping pairs closer than a gate; a mapped
   landmark without a partner within the gate is *spurious*, a mapped landmark whose nearest true
-  centre is another one's partner a *duplicate*; RMSE ``sqrt(mean |m_hat_i - m_j|^2)`` over the pairs;
+  centre is another one's partner a *duplicate*; RMSE ``sqrt(mean |m_hat_i - m_j|^2)`` over the pairs.
+  Without the true centres (a recording of another world) the mapped landmarks are counted, never judged:
+  the true, in range, paired, unmapped, duplicate and spurious counts are None and the RMSE NaN;
 * pose NEES ``eps_k = e_k^T P_k^-1 e_k`` (3 dof) per estimate with covariance ``P_k``, judged against the
   two-sided 95% chi2 interval for one run (``turtlelib.estimation.consistency``); estimates whose covariance
   is singular (the exactly known start, before the robot moves) are left out; with none left (a run that
@@ -276,7 +278,8 @@ def nees_band(prob: float = NEES_BAND_PROB) -> tuple[float, float]:
 
 @dataclass(frozen=True)
 class RunMetrics:
-    """The figures of one run (metrics.json); units in the names, counts are landmarks."""
+    """The figures of one run (metrics.json); units in the names, counts are landmarks. The landmark counts
+    but ``landmarks_mapped`` are None when the true landmarks are unknown (nothing to judge the map by)."""
 
     final_position_error_odom_m: float
     final_position_error_slam_m: float
@@ -291,13 +294,13 @@ class RunMetrics:
     rpe_translation_slam_m: float
     rpe_rotation_slam_deg: float
     rpe_pairs: int
-    landmarks_true: int
-    landmarks_in_range: int
+    landmarks_true: int | None
+    landmarks_in_range: int | None
     landmarks_mapped: int
-    landmarks_paired: int
-    landmarks_in_range_unmapped: int
-    landmarks_duplicate: int
-    landmarks_spurious: int
+    landmarks_paired: int | None
+    landmarks_in_range_unmapped: int | None
+    landmarks_duplicate: int | None
+    landmarks_spurious: int | None
     landmark_rmse_m: float
     nees_pose_mean: float
     nees_pose_median: float
@@ -317,7 +320,8 @@ class RunData:
     """What a run produced, in the world frame (see the module docstring).
 
     ``truth``, ``odom``, ``slam`` pose series; ``slam_covariances`` (K, 3, 3) the (x, y, theta) covariance
-    of each SLAM pose; ``mapped_xy`` (n, 2) the final map; ``true_xy`` (M, 2) the true cylinder centres;
+    of each SLAM pose; ``mapped_xy`` (n, 2) the final map; ``true_xy`` (M, 2) the true cylinder centres
+    (None: unknown, the map is then not judged);
     ``sensor_range_m`` the range within which a cylinder counts as seen (one for all, or (M,) per cylinder),
     in sight of the path when ``true_radii_m`` (M,) are given (:func:`landmarks_within_range`);
     ``gate_m`` the association gate.
@@ -328,7 +332,7 @@ class RunData:
     slam: PoseSeries
     slam_covariances: NDArray[np.float64]
     mapped_xy: NDArray[np.float64]
-    true_xy: NDArray[np.float64]
+    true_xy: NDArray[np.float64] | None
     sensor_range_m: float | NDArray[np.float64]
     gate_m: float
     true_radii_m: NDArray[np.float64] | None = None
@@ -338,6 +342,27 @@ class RunData:
         if covariances.shape[0] != len(self.slam):
             raise ValueError(f"{len(self.slam)} SLAM poses but {covariances.shape[0]} covariances")
         object.__setattr__(self, "slam_covariances", covariances)
+
+
+def landmark_figures(data: RunData) -> dict[str, int | float | None]:
+    """The map judged against the true landmarks (module docstring): the :class:`RunMetrics` landmark
+    counts but ``landmarks_mapped``, and ``landmark_rmse_m``; None counts and a NaN RMSE without them."""
+    if data.true_xy is None:
+        counts = ("true", "in_range", "paired", "in_range_unmapped", "duplicate", "spurious")
+        return {**{f"landmarks_{count}": None for count in counts}, "landmark_rmse_m": math.nan}
+    association = associate_landmarks(data.mapped_xy, data.true_xy, data.gate_m)
+    in_range = landmarks_within_range(data.true_xy, data.truth.xy, data.sensor_range_m, data.true_radii_m)
+    paired = np.zeros(in_range.size, dtype=bool)
+    paired[association.true_index] = True
+    return {
+        "landmarks_true": int(in_range.size),
+        "landmarks_in_range": int(np.count_nonzero(in_range)),
+        "landmarks_paired": int(association.true_index.size),
+        "landmarks_in_range_unmapped": int(np.count_nonzero(in_range & ~paired)),
+        "landmarks_duplicate": int(association.duplicates.size),
+        "landmarks_spurious": int(association.spurious.size),
+        "landmark_rmse_m": association.rmse_m,
+    }
 
 
 def evaluate_run(data: RunData, sim_seconds: float, wall_seconds: float) -> RunMetrics:
@@ -354,10 +379,6 @@ def evaluate_run(data: RunData, sim_seconds: float, wall_seconds: float) -> RunM
         relative_pose_error(data.odom, data.truth),
         relative_pose_error(data.slam, data.truth),
     )
-    association = associate_landmarks(data.mapped_xy, data.true_xy, data.gate_m)
-    in_range = landmarks_within_range(data.true_xy, data.truth.xy, data.sensor_range_m, data.true_radii_m)
-    paired = np.zeros(in_range.size, dtype=bool)
-    paired[association.true_index] = True
     return RunMetrics(
         final_position_error_odom_m=float(np.hypot(*e_odom[-1, :2])),
         final_position_error_slam_m=float(np.hypot(*e_slam[-1, :2])),
@@ -372,14 +393,8 @@ def evaluate_run(data: RunData, sim_seconds: float, wall_seconds: float) -> RunM
         rpe_translation_slam_m=rpe_slam.translation_m,
         rpe_rotation_slam_deg=rpe_slam.rotation_deg,
         rpe_pairs=rpe_slam.pairs,
-        landmarks_true=int(data.true_xy.shape[0]),
-        landmarks_in_range=int(np.count_nonzero(in_range)),
         landmarks_mapped=int(np.asarray(data.mapped_xy).reshape(-1, 2).shape[0]),
-        landmarks_paired=int(association.true_index.size),
-        landmarks_in_range_unmapped=int(np.count_nonzero(in_range & ~paired)),
-        landmarks_duplicate=int(association.duplicates.size),
-        landmarks_spurious=int(association.spurious.size),
-        landmark_rmse_m=association.rmse_m,
+        **landmark_figures(data),
         # NaN when no pose had a positive definite covariance (the robot never moved from its known start)
         nees_pose_mean=float(np.mean(eps)) if eps.size else math.nan,
         nees_pose_median=float(np.median(eps)) if eps.size else math.nan,

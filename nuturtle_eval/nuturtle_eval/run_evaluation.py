@@ -243,7 +243,8 @@ class RunRecord:
     """What a run or a replay produced, in the truth's frame: the ``truth`` (None without ground truth),
     ``odom`` (None or empty without odometry) and ``slam`` pose series, ``slam_covariances`` (K, 3, 3) of
     the SLAM poses, the filter's final ``snapshot``, the true cylinders ``circles`` (M, 3) of rows
-    ``[x, y, r]``, ``sensor_range_m`` (:func:`sensor_range_m`) and ``walls`` (K, 4) the arena's wall
+    ``[x, y, r]`` (None: unknown, a recording of another world: the map is counted, not judged),
+    ``sensor_range_m`` (:func:`sensor_range_m`) and ``walls`` (K, 4) the arena's wall
     segments ``[x0, y0, x1, y1]``, which the trajectory figure draws (None: no walls, the axes fit the
     data)."""
 
@@ -252,7 +253,7 @@ class RunRecord:
     slam: PoseSeries
     slam_covariances: NDArray[np.float64]
     snapshot: SlamSnapshot
-    circles: NDArray[np.float64]
+    circles: NDArray[np.float64] | None
     sensor_range_m: float | NDArray[np.float64]
     walls: NDArray[np.float64] | None = None
 
@@ -268,10 +269,11 @@ def evaluate_and_plot(
     None. ValueError from evaluate_run (``errors.png`` is then not written)."""
     odom = record.odom if record.odom is not None and len(record.odom) else None
     snapshot = record.snapshot
+    circles = np.zeros((0, 3)) if record.circles is None else np.asarray(record.circles).reshape(-1, 3)
     write_tums(out_dir, record.slam, odom, record.truth)
     if len(record.slam):
         plots.plot_trajectory(
-            out_dir / "trajectory.png", record.truth, odom, record.slam, record.circles,
+            out_dir / "trajectory.png", record.truth, odom, record.slam, circles,
             snapshot.landmarks_xy, snapshot.landmark_covariances, record.walls, snapshot.loops,
         )  # fmt: skip
     plots.plot_covariance(out_dir / "covariance.png", snapshot.covariance)
@@ -279,14 +281,13 @@ def evaluate_and_plot(
         write_grid(out_dir, snapshot.grid, record.slam.xy, snapshot.landmarks_xy, snapshot.loops)
     if record.truth is None or odom is None or not len(record.slam):
         return None
-    circles = np.asarray(record.circles, dtype=np.float64).reshape(-1, 3)
     data = RunData(
         truth=record.truth,
         odom=odom,
         slam=record.slam,
         slam_covariances=record.slam_covariances,
         mapped_xy=snapshot.landmarks_xy,
-        true_xy=circles[:, :2],
+        true_xy=None if record.circles is None else circles[:, :2],
         sensor_range_m=record.sensor_range_m,
         gate_m=LANDMARK_GATE_M,
         true_radii_m=circles[:, 2],
@@ -342,7 +343,8 @@ def write_metrics(out_dir: Path, values: Mapping[str, Any]) -> Path:
 def target_rows(metrics: RunMetrics, scope: RunScope = MAPPING_SCOPE) -> list[Row]:
     """The rows of the results table: (label, value text, target text, verdict) with verdict None where no
     target applies or the figure could not be measured (NaN, shown ``n/a``), a :class:`NotApplicable`
-    where the target is not about a run of this ``scope``."""
+    where the target is not about a run of this ``scope``. Without the true landmarks the map is only
+    counted: no landmark is called unmapped, a duplicate or spurious."""
     values = metrics.as_dict()
     rows: list[Row] = []
     for key, label, fmt, target, check, scoped in TARGETS:
@@ -356,6 +358,10 @@ def target_rows(metrics: RunMetrics, scope: RunScope = MAPPING_SCOPE) -> list[Ro
             ok = check(value) if check is not None else None
         not_applicable = None if scoped is None else scoped(scope, values)
         rows.append((label, fmt.format(value), target, ok if not_applicable is None else not_applicable))
+    if values["landmarks_true"] is None:
+        mapped = str(values["landmarks_mapped"])
+        rows.append(("landmarks mapped (no true landmarks to judge them by)", mapped, "", None))
+        return rows
     mapped_ok = values["landmarks_in_range_unmapped"] == 0 and values["landmarks_duplicate"] == 0
     not_applicable = scope.landmark_mapping(values["landmarks_in_range"])
     rows.append(

@@ -18,15 +18,21 @@ INCOMPLETE, and the files named in ``keep``): anything else in ``OUT`` or ``OUT.
 in ``keep`` directly inside ``OUT`` (the demo's ``--map-file``, which slam may write during the run) are
 moved into the new result when it replaces the old one.
 
-:func:`unfinished_runs` finds the staging folders of killed runs (the commands name them before a run);
-:func:`error_line` is how the commands (demo, replay, dataset runs) print an error: one line;
-:func:`outputs_line` how they name what a run left in its folder.
+One output folder, one run at a time: a run holds an exclusive lock (``flock``) on its staging folder while
+it writes, which the system releases when the process ends however it ends. A run whose ``OUT`` another
+live run is writing (a staging folder beside it whose lock is held) is refused before it starts
+(:func:`check_no_other_run`, ValueError). :func:`unfinished_runs` finds the staging folders no run holds,
+those of killed runs (the commands name them before a run); :func:`say_previous_result` names the result
+a run will replace, as it starts. :func:`error_line` is how the commands (demo, replay, dataset runs) print
+an error: one line; :func:`outputs_line` how they name what a run left in its folder.
 """
 
 from __future__ import annotations
 
+import fcntl
 import os
 import shutil
+import sys
 import time
 from collections.abc import Iterable
 from pathlib import Path
@@ -58,13 +64,42 @@ def check_replaceable(folder: Path, outputs: Iterable[str], keep: Iterable[Path]
         )
 
 
+def say_previous_result(final: Path) -> None:
+    """A note on stderr, for a run that starts (its inputs good): the previous result in ``final`` it
+    replaces when it completes and when that was written (the folder's last change). Nothing when ``final``
+    is missing or empty."""
+    final = Path(final)
+    if not final.is_dir() or not any(final.iterdir()):
+        return
+    written = time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(final.stat().st_mtime))
+    print(
+        f"note: {final}/ holds a previous result (written {written}): this run replaces it when it "
+        "completes (choose another --out to keep it)",
+        file=sys.stderr,
+    )
+
+
+def check_no_other_run(final: Path, own: Path | None = None) -> None:
+    """ValueError when another live run is writing ``final``: a staging folder beside it (``own``, the
+    caller's, excepted) whose lock its run holds."""
+    for staging in _staging_folders(final):
+        if staging != own and _held(staging):
+            pid = staging.name.rpartition("-")[2]
+            raise ValueError(
+                f"another run (process {pid}) is writing {final}: its staging folder {staging}/ replaces "
+                f"{final} when it completes; wait for it to finish or choose another --out"
+            )
+
+
 class RunFolder:
     """The staging folder of one run for the output folder ``final`` (module docstring).
 
     ``outputs``: the names of the entries a run writes (files and folders). Creating it checks ``final``
-    and ``final.incomplete`` (:func:`check_replaceable`, ValueError) and then creates the staging folder
-    ``path`` with its INCOMPLETE marker. Then exactly one of :meth:`complete`, :meth:`keep_incomplete` or
-    :meth:`discard`; each returns where the outputs are (None for discard)."""
+    and ``final.incomplete`` (:func:`check_replaceable`, ValueError), creates the staging folder ``path``
+    with its INCOMPLETE marker and holds its lock, and then refuses (ValueError, the staging folder deleted)
+    when another live run is writing ``final`` (:func:`check_no_other_run`). Then exactly one of
+    :meth:`complete`, :meth:`keep_incomplete` or :meth:`discard`; each returns where the outputs are (None
+    for discard) and lets go of the lock."""
 
     def __init__(self, final: Path, outputs: Iterable[str], keep: Iterable[Path] = ()) -> None:
         self.final = Path(final)
@@ -77,8 +112,16 @@ class RunFolder:
         if self.path.exists():
             shutil.rmtree(self.path)
         self.path.mkdir()
+        # waiting: another run's check_no_other_run holds it for an instant at most
+        self._lock: int | None = os.open(self.path, os.O_RDONLY | os.O_DIRECTORY)
+        fcntl.flock(self._lock, fcntl.LOCK_EX)
         started = time.strftime("%Y-%m-%d %H:%M:%S %Z")
         self._mark(f"this run has not finished: started {started}, process {os.getpid()}")
+        try:
+            check_no_other_run(self.final, own=self.path)
+        except ValueError:
+            self.discard()
+            raise
 
     def _mark(self, reason: str) -> None:
         (self.path / INCOMPLETE).write_text(
@@ -100,6 +143,7 @@ class RunFolder:
             shutil.rmtree(previous)
         else:
             self.path.rename(self.final)
+        self._release()
         return self.final
 
     def keep_incomplete(self, reason: str) -> Path:
@@ -110,32 +154,46 @@ class RunFolder:
         if target.exists():
             shutil.rmtree(target)
         self.path.rename(target)
+        self._release()
         return target
 
     def discard(self) -> None:
         """Delete the staging folder: the run wrote nothing worth keeping."""
         shutil.rmtree(self.path, ignore_errors=True)
+        self._release()
+
+    def _release(self) -> None:
+        if self._lock is not None:
+            os.close(self._lock)
+            self._lock = None
 
 
 def unfinished_runs(final: Path) -> list[Path]:
-    """The staging folders beside ``final`` whose process is gone: runs that were killed (SIGKILL, a power
-    cut) and left their outputs there, marked INCOMPLETE. They are never deleted automatically."""
-    found = []
-    for path in Path(final).parent.glob(f"{Path(final).name}.partial-*"):
-        pid = path.name.rpartition("-")[2]
-        if path.is_dir() and pid.isdigit() and not _running(int(pid)):
-            found.append(path)
-    return sorted(found)
+    """The staging folders beside ``final`` that no run holds: runs that were killed (SIGKILL, a power cut)
+    and left their outputs there, marked INCOMPLETE. They are never deleted automatically."""
+    return [staging for staging in _staging_folders(final) if not _held(staging)]
 
 
-def _running(pid: int) -> bool:
+def _staging_folders(final: Path) -> list[Path]:
+    """The staging folders ``final.partial-<pid>`` beside ``final``."""
+    final = Path(final)
+    found = final.parent.glob(f"{final.name}.partial-*")
+    return sorted(path for path in found if path.is_dir() and path.name.rpartition("-")[2].isdigit())
+
+
+def _held(staging: Path) -> bool:
+    """Whether a run holds the lock of the folder ``staging`` (tried without waiting, let go at once)."""
     try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
+        fd = os.open(staging, os.O_RDONLY | os.O_DIRECTORY)
+    except FileNotFoundError:  # renamed or deleted by its run meanwhile
         return False
-    except PermissionError:
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except BlockingIOError:
         return True
-    return True
+    finally:
+        os.close(fd)
+    return False
 
 
 def error_line(error: BaseException) -> str:

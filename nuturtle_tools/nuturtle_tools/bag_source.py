@@ -5,7 +5,9 @@ What opens
 One code path, ``rosbags.highlevel.AnyReader``, for
 
 * a rosbag2 bag directory with ``metadata.yaml``, MCAP or sqlite3 storage (``rosbags`` reads both, and
-  zstd-compressed files or messages), e.g. the demo's ``out/latest/run/``;
+  zstd-compressed files or messages), e.g. the demo's ``out/latest/run/``, whatever its name: one named
+  ``*.bag/``, which rosbags' AnyReader would take for a ROS 1 file by its suffix, is given to it under
+  another name (a symbolic link in a temporary folder, deleted on close);
 * a single ``.mcap`` file without ``metadata.yaml`` (the demo's ``run/run.mcap``, a Foxglove export):
   rosbags reads the topics, types and the channels' ``offered_qos_profiles`` from the MCAP summary;
 * a single ``.db3`` file (sqlite3 storage without its metadata.yaml);
@@ -117,7 +119,8 @@ class BagSource:
         self.topics: dict[str, BagTopic] = {}
         # an unfinished recording: what was recovered, and the temporary folder of the recovered file
         self.recovery: Recovery | None = None
-        self._recovered: tempfile.TemporaryDirectory | None = None
+        # the temporary folder of a recovered file or of a renamed bag directory
+        self._temporary: tempfile.TemporaryDirectory | None = None
 
     def open(self) -> BagSource:
         from rosbags.highlevel import AnyReader, AnyReaderError
@@ -126,7 +129,7 @@ class BagSource:
         from rosbags.typesys import Stores, get_typestore
 
         self._typestore = get_typestore(Stores.ROS2_JAZZY)
-        readable = self._recover() or self.path
+        readable = self._recover() or self._renamed() or self.path
         reader = AnyReader([readable], default_typestore=self._typestore)
         try:
             reader.open()
@@ -153,8 +156,8 @@ class BagSource:
         unfinished = unfinished_mcap(self.path)
         if unfinished is None:
             return None
-        self._recovered = tempfile.TemporaryDirectory(prefix="nuturtle_recovered_")
-        target = Path(self._recovered.name) / unfinished.name
+        self._temporary = tempfile.TemporaryDirectory(prefix="nuturtle_recovered_")
+        target = Path(self._temporary.name) / unfinished.name
         try:
             self.recovery = recover_mcap(unfinished, target)
         except (ValueError, OSError) as error:
@@ -162,6 +165,15 @@ class BagSource:
                 f"{self.path}: an unfinished recording that cannot be recovered: {error}"
             ) from error
         return target
+
+    def _renamed(self) -> Path | None:
+        """A bag directory named ``*.bag`` under another name (module docstring), else None."""
+        if not (self.path.is_dir() and self.path.suffix == ROS1_SUFFIX):
+            return None
+        self._temporary = tempfile.TemporaryDirectory(prefix="nuturtle_bag_")
+        link = Path(self._temporary.name) / "rosbag2"
+        link.symlink_to(self.path.resolve(), target_is_directory=True)
+        return link
 
     @property
     def start_ns(self) -> int:
@@ -208,9 +220,9 @@ class BagSource:
         if self._reader is not None:
             reader, self._reader = self._reader, None
             reader.close()
-        if self._recovered is not None:
-            recovered, self._recovered = self._recovered, None
-            recovered.cleanup()
+        if self._temporary is not None:
+            temporary, self._temporary = self._temporary, None
+            temporary.cleanup()
 
     def __enter__(self) -> BagSource:
         return self.open()

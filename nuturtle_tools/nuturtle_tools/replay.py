@@ -24,12 +24,14 @@ if __name__ == "__main__":
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse
+import math
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from nuturtle_description.robot_params import add_model_argument
+from nuturtle_eval.command_help import DefaultsHelpFormatter
 from nuturtle_ros_common.dds_domain import add_domain_argument
 
 from .relay_config import add_foxglove_argument, parse_endpoint
@@ -44,11 +46,16 @@ DEFAULT_TOPICS = {
 
 
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
+    return build_parser().parse_args(argv)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The replay's command line."""
     parser = argparse.ArgumentParser(
         prog="python -m nuturtle_tools.replay",
         description="Replay a recording (MCAP or sqlite3 bag directory, a single .mcap, or a ROS 1 .bag) "
         "with /clock into the landmarks and slam nodes: SLAM outputs, trajectory, map and metrics.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        formatter_class=DefaultsHelpFormatter,
     )
     parser.add_argument(
         "bag", type=Path, help="bag directory (metadata.yaml), a single .mcap / .db3 file or a ROS 1 .bag"
@@ -95,7 +102,7 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
                         "or the replay is stopped early (for CI)")  # fmt: skip
     add_foxglove_argument(parser, "--rate 1")
     add_domain_argument(parser, "private; env with --play-only, for your own nodes")
-    return parser.parse_args(argv)
+    return parser
 
 
 def no_landmarks_hint(metrics: dict[str, Any]) -> str | None:
@@ -143,14 +150,31 @@ def motion_gate_warning(metrics: dict[str, Any]) -> str | None:
     )
 
 
+def slam_line(metrics: dict[str, Any]) -> str:
+    """What slam made of the bag, in one line, from ``metrics`` (metrics.json's ``slam_mode``,
+    ``map_landmarks`` and ``slam_*`` counts): its mode, the landmarks in its map, the loops it closed, the
+    relocalizations of its slip recovery and the scans it held."""
+    mode, landmarks = metrics["slam_mode"], metrics["map_landmarks"]
+    mapped = f"{landmarks} landmarks mapped" if mode == "mapping" else f"{landmarks} landmarks in its map"
+    loops = metrics.get("slam_loops_closed")
+    closed = "loop closure off" if loops is None else f"{loops} loops closed"
+    return (
+        f"slam: {mode}, {mapped}, {closed}, {metrics['slam_relocalizations']} relocalizations after slip, "
+        f"{metrics['slam_scans_held']} scans held"
+    )
+
+
 def summary(result: Any) -> str:
-    """The printed report: the results table when there is ground truth (with the demo's targets for a
-    nusim recording only), then the counts, the notes and why there are no landmarks if so."""
+    """The printed report: what slam made of the bag (:func:`slam_line`), the results table when there
+    is ground truth (with the demo's targets for a nusim recording only), then the counts, the notes and
+    why there are no landmarks if so."""
     metrics = result.metrics
     lines = [
         f"replayed {metrics['bag']} ({metrics['storage']}), association {metrics['association']}, "
         f"motion from {metrics['motion_source']}"
     ]
+    if "slam_mode" in metrics:
+        lines.append(slam_line(metrics))
     if result.interrupted is not None:
         lines.append(
             f"INCOMPLETE: interrupted by {result.interrupted}; the outputs cover what was played so far"
@@ -181,7 +205,7 @@ def summary(result: Any) -> str:
                     f"{metrics['slam_grid_cells']} / {megabytes[0]:.1f} ({megabytes[1]:.1f}) / "
                     f"{metrics['slam_grid_scans_past_bound']} |")  # fmt: skip
     for key in ("slam_motion_samples_refused", "slam_motion_silences_bridged", "slam_motion_restarts",
-                "slam_scans_held", "slam_relocalizations", "slam_stalls"):  # fmt: skip
+                "slam_stalls"):  # fmt: skip
         if key in metrics:
             rows.append(f"| {key.replace('_', ' ')} | {metrics[key]} |")
     if "slam_loops_closed" in metrics:
@@ -239,11 +263,12 @@ SMOOTHED_ROWS = (
 
 
 def smoothed_rows(metrics: dict[str, Any]) -> list[str]:
-    """The filter and the smoothed run side by side (the figures both have), then the smoother's CPU."""
+    """The filter and the smoothed run side by side (the figures both have: not None, not NaN), then the
+    smoother's CPU."""
     smoothed = metrics["smoothed"]
     rows = ["| | filter | smoother |", "|---|---:|---:|"]
     for key, label in SMOOTHED_ROWS:
-        if key in metrics and key in smoothed:
+        if _measured(metrics.get(key)) and _measured(smoothed.get(key)):
             values = [metrics[key], smoothed[key]]
             rows.append(
                 f"| {label} | "
@@ -252,6 +277,11 @@ def smoothed_rows(metrics: dict[str, Any]) -> list[str]:
             )
     rows.append(f"| smoother CPU (s) | | {smoothed['smoother_cpu_seconds']:.2f} |")
     return rows
+
+
+def _measured(value: Any) -> bool:
+    """A figure that was measured: neither None (not judged) nor NaN (could not be measured)."""
+    return value is not None and not (isinstance(value, float) and math.isnan(value))
 
 
 def recording_params(bag: Path) -> Path | None:

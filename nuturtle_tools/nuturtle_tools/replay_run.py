@@ -32,7 +32,8 @@ truth's frame; a truth that starts later, as a reference made at the scans, is m
 odometry: :func:`truth_pose_at`), odometry is placed in that frame by its first sample
 (``T_world_odom = T_world_body(t0) T_odom_body(t0)^-1``), and the demo's accuracy metrics are computed;
 the true cylinders come from the params file's ``nusim`` section (``obstacles.x/y/r``, e.g. a nusim world
-file) or else the bag's ``/nusim/obstacles`` markers. With the truth and scans, slam's grid is also scored
+file) or else the bag's ``/nusim/obstacles`` markers (neither: the map is counted, never judged, so no
+landmark is called spurious). With the truth and scans, slam's grid is also scored
 against the scans placed at the truth's poses (:mod:`nuturtle_eval.grid_agreement`). Without it SLAM starts
 at the params' ``x0, y0, theta0``. The demo's pass/fail targets apply to nusim recordings only (the bag has
 ``/nusim/ground_truth``).
@@ -77,7 +78,7 @@ from nuturtle_eval.run_evaluation import (
     slip_counts,
     write_metrics,
 )
-from nuturtle_eval.run_folder import RunFolder
+from nuturtle_eval.run_folder import RunFolder, say_previous_result
 from nuturtle_ros_common.conversions import stamp_nanoseconds, transform_from_pose
 from nuturtle_ros_common.dds_domain import ENVIRONMENT, PRIVATE, DomainChoice, domain_choice, run_context
 from nuturtle_ros_common.qos_events import drop_qos_event_handlers
@@ -489,7 +490,8 @@ class Replay:
         only when the whole bag was played (:class:`nuturtle_eval.run_folder.RunFolder`); a replay
         stopped early by SIGINT, SIGTERM or SIGHUP, or failing once it plays (a full disk: OSError),
         leaves its outputs in ``OUT.incomplete``. ValueError/OSError before anything is written for a
-        ``out_dir`` that holds the bag or other files, or a Foxglove port in use."""
+        ``out_dir`` that holds the bag or other files or that another run is writing, or a Foxglove port in
+        use."""
         out_dir = Path(self.options.out_dir)
         if out_dir.resolve() in Path(self.options.bag).resolve().parents:
             raise ValueError(
@@ -536,6 +538,7 @@ class Replay:
             else:
                 self._wait_for_matching(executor)
             self.started = True
+            say_previous_result(self.options.out_dir)
             wall_start = time.monotonic()
             self._play(executor, stop, writer)
             wall_seconds = time.monotonic() - wall_start
@@ -694,6 +697,7 @@ class Replay:
                     "observation_arrays_applied": observations["applied"],
                     "observation_arrays_skipped": observations["skipped"],
                     "observation_arrays_pending": observations["pending"],
+                    "slam_mode": self.slam.config.mode,
                     "map_landmarks": len(self.slam.slam.landmark_ids),
                     "slam_outputs_recorded": self.writer.message_counts,
                     **slip_counts(self.slam),
@@ -751,13 +755,15 @@ class Replay:
             "grid_unexplained_fraction": agreement.unexplained_fraction,
         }
 
-    def _true_circles(self) -> np.ndarray:
+    def _true_circles(self) -> np.ndarray | None:
+        """The true cylinders ``[x, y, r]`` (M, 3) of the params' ``nusim`` section, else of the bag's
+        ``/nusim/obstacles``; None when neither holds them (a recording of another world)."""
         obstacles = {k: self.nusim_values.get(f"obstacles.{k}") for k in ("x", "y", "r")}
         if all(isinstance(v, list) for v in obstacles.values()):
             return np.column_stack([obstacles["x"], obstacles["y"], obstacles["r"]]).astype(np.float64)
         if self.facts.obstacles is not None:
             return self.facts.obstacles
-        return np.zeros((0, 3))
+        return None
 
     def _run_record(self) -> RunRecord:
         """What the replay produced, in the truth's frame (module docstring), for
@@ -772,7 +778,7 @@ class Replay:
         T_world_body0 = T_start
         if truth is not None and len(odom_raw):
             T_world_body0 = truth_pose_at(truth, round(odom_raw.t_s[0] * 1e9), odom_raw)
-        circles = self._true_circles() if truth is not None else np.zeros((0, 3))
+        circles = self._true_circles() if truth is not None else None
         slam_range_m = float(self.slam.config.max_range)
         return RunRecord(
             truth=truth,
@@ -785,7 +791,7 @@ class Replay:
                 self.association,
                 fake_sensor_range_m=float(self.nusim_values.get("max_range", slam_range_m)),
                 slam_range_m=slam_range_m,
-                radii_m=circles[:, 2],
+                radii_m=np.zeros(0) if circles is None else circles[:, 2],
                 min_points=self.landmarks.config.min_points,
                 angle_increment=self.facts.angle_increment,
                 lidar_range_m=self.facts.range_max,

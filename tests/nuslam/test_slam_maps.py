@@ -230,6 +230,18 @@ def test_a_bad_map_file_stops_the_node_at_start_up_with_a_clear_message(ros, tmp
     assert str(path) in text
 
 
+def test_localization_without_a_saved_grid_warns_once_that_it_maps_a_fresh_grid(ros, tmp_path):
+    # only the landmark map copied (the old recipe of docs/maps.md): the grid was mapped anew, silently
+    path = tmp_path / "lab.json"
+    path.write_text(json.dumps(good_document()))
+    rig = Rig(ros, map_file=str(path), mode="localization")
+    warnings = rig.warnings(at_least=1)
+    assert len(warnings) == 1, warnings
+    assert f"no {tmp_path / 'lab.yaml'} beside map_file" in warnings[0] and "fresh grid" in warnings[0]
+    assert any(s.topic_name == "/scan" for s in rig.node.subscriptions), "the scans are mapped"
+    assert not (tmp_path / "lab.yaml").exists()
+
+
 @pytest.mark.parametrize(("map_file", "message"), [("missing.json", "missing.json"), ("", "needs map_file")])
 def test_localization_without_a_map_file_stops_the_node(ros, tmp_path, map_file, message):
     # an empty map_file ran localization in an empty map: dead reckoning, silently

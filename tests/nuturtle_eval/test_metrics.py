@@ -212,6 +212,13 @@ def test_evaluate_run_on_a_synthetic_run():
     unmeasured = evaluate_run(singular, sim_seconds=60.0, wall_seconds=20.0)
     assert math.isnan(unmeasured.nees_pose_mean) and math.isnan(unmeasured.nees_pose_within_95_fraction)
     assert unmeasured.ate_rmse_slam_m == metrics.ate_rmse_slam_m
+    # without the true landmarks (a recording of another world) the map is counted, never judged
+    unknown = RunData(truth, odom, slam, data.slam_covariances, mapped_xy, None, 1.5, 0.15)
+    unjudged = evaluate_run(unknown, sim_seconds=60.0, wall_seconds=20.0)
+    assert unjudged.landmarks_mapped == 4 and math.isnan(unjudged.landmark_rmse_m)
+    for count in ("true", "in_range", "paired", "in_range_unmapped", "duplicate", "spurious"):
+        assert getattr(unjudged, f"landmarks_{count}") is None, count
+    assert unjudged.ate_rmse_slam_m == metrics.ate_rmse_slam_m
 
 
 def test_a_landmark_hidden_behind_another_is_not_in_range():

@@ -91,6 +91,19 @@ def test_a_figure_that_could_not_be_measured_is_null_in_the_json_and_n_a_in_the_
     assert "pose NEES inside the 95% band" not in failed_targets(unmeasured)
 
 
+def test_without_the_true_landmarks_the_map_is_counted_and_none_is_called_spurious(tmp_path):
+    # a recording of another world: a truth of the poses, none of the landmarks
+    metrics = evaluate_and_plot(tmp_path, replace(_record(), circles=None), sim_seconds=6.0, wall_seconds=0.5)
+    assert metrics is not None and metrics.landmarks_mapped == 2 and metrics.landmarks_spurious is None
+    assert (tmp_path / "trajectory.png").read_bytes().startswith(b"\x89PNG")
+    for targets in (True, False):
+        table = results_table(metrics, targets=targets)
+        assert "| landmarks mapped (no true landmarks to judge them by) | 2 |" in table
+        assert "| landmark RMSE (m) | n/a |" in table
+        assert "spurious" not in table and "duplicates" not in table and "None" not in table
+    assert "landmarks" not in " ".join(failed_targets(metrics))
+
+
 def test_failed_targets_are_the_rows_the_table_marks_failed():
     metrics = RunMetrics(
         **{**FIGURES, "final_position_error_slam_m": 2.7, "final_position_error_odom_m": 0.3}

@@ -1,22 +1,37 @@
 """nuturtle_eval.run_folder: a run writes into a staging folder; the previous result is replaced only when
 the run completes, an early stop leaves a marked OUT.incomplete, a foreign folder is never replaced."""
 
-import os
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
+from nuturtle_eval.datasets.__main__ import main
 from nuturtle_eval.run_folder import (
     INCOMPLETE,
     RunFolder,
+    check_no_other_run,
     check_replaceable,
     incomplete_folder,
     outputs_line,
+    say_previous_result,
     unfinished_runs,
 )
 
 OUTPUTS = ("metrics.json", "run")
+# A run in another process: its RunFolder for argv[1], the staging folder's path printed, then on a line
+# "complete" on stdin it writes metrics.json and completes (else it waits to be killed)
+OTHER_RUN = """
+import sys
+from pathlib import Path
+from nuturtle_eval.run_folder import RunFolder
+folder = RunFolder(Path(sys.argv[1]), ["metrics.json", "run"])
+print(folder.path, flush=True)
+if sys.stdin.readline().strip() == "complete":
+    (folder.path / "metrics.json").write_text("other")
+    folder.complete()
+"""
 
 
 def _previous_result(out):
@@ -87,15 +102,71 @@ def test_a_folder_with_other_files_is_refused_before_anything_is_written(tmp_pat
         check_replaceable(tmp_path / "file", OUTPUTS)
 
 
-def test_the_staging_folder_of_a_killed_run_is_found_and_a_running_one_is_not(tmp_path):
-    gone = subprocess.run(
-        [sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True
+def _other_run(out):
+    """A run into ``out`` in another process, and the staging folder it writes (once it holds it)."""
+    run = subprocess.Popen(
+        [sys.executable, "-P", "-c", OTHER_RUN, str(out)],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
     )
-    killed = tmp_path / f"latest.partial-{int(gone.stdout)}"
-    killed.mkdir()
-    (tmp_path / f"latest.partial-{os.getpid()}").mkdir()
+    return run, run.stdout.readline().strip()
+
+
+def test_the_staging_folder_of_a_killed_run_is_found_and_a_running_one_is_not(tmp_path):
+    out = tmp_path / "latest"
+    killed, killed_path = _other_run(out)
+    assert unfinished_runs(out) == []
+    killed.kill()  # SIGKILL: the system lets go of its lock
+    killed.wait(10)
     (tmp_path / "other.partial-1").mkdir()
-    assert unfinished_runs(tmp_path / "latest") == [killed]
+    running = RunFolder(out, OUTPUTS)
+    assert unfinished_runs(out) == [Path(killed_path)] and running.path.is_dir()
+    running.discard()
+
+
+def test_a_run_into_an_output_folder_another_run_is_writing_is_refused_until_it_completes(tmp_path):
+    out = tmp_path / "latest"
+    _previous_result(out)
+    other, staging = _other_run(out)
+    try:
+        with pytest.raises(ValueError, match=rf"another run \(process {other.pid}\) is writing {out}"):
+            RunFolder(out, OUTPUTS)
+        with pytest.raises(ValueError, match="wait for it to finish or choose another --out"):
+            check_no_other_run(out)
+        # nothing of the refused run is left, the other's staging folder and the previous result untouched
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["latest", f"latest.partial-{other.pid}"]
+        assert str(tmp_path / f"latest.partial-{other.pid}") == staging
+        assert (out / "metrics.json").read_text() == "old" and unfinished_runs(out) == []
+    finally:
+        other.communicate("complete\n", timeout=10)
+    assert other.returncode == 0 and (out / "metrics.json").read_text() == "other"
+    folder = RunFolder(out, OUTPUTS)
+    assert folder.complete() == out
+
+
+def test_the_dataset_command_refuses_an_output_folder_another_run_is_writing_before_reading(tmp_path, capsys):
+    out = tmp_path / "results"
+    other, _ = _other_run(out)
+    try:
+        code = main(["mrclam", "--data", str(tmp_path / "nowhere"), "--robot", "1", "--out", str(out)])
+    finally:
+        other.communicate("complete\n", timeout=10)
+    (line,) = capsys.readouterr().err.splitlines()
+    assert code == 2 and line.startswith(f"error: another run (process {other.pid}) is writing {out}: ")
+
+
+def test_the_previous_result_a_run_replaces_is_named_as_it_starts(tmp_path, capsys):
+    out = tmp_path / "latest"
+    say_previous_result(out)
+    out.mkdir()
+    say_previous_result(out)
+    assert capsys.readouterr().err == ""
+    _previous_result(out)
+    say_previous_result(out)
+    (note,) = capsys.readouterr().err.splitlines()
+    assert note.startswith(f"note: {out}/ holds a previous result (written ")
+    assert note.endswith("this run replaces it when it completes (choose another --out to keep it)")
 
 
 def test_the_outputs_line_names_every_entry_of_the_folder_and_marks_folders(tmp_path):

@@ -222,6 +222,21 @@ def test_a_bag_directory_and_its_single_mcap_file_read_the_same(live):
         assert list(whole.messages()) == list(single.messages())
 
 
+@pytest.mark.parametrize("storage", [StoragePlugin.MCAP, StoragePlugin.SQLITE3])
+def test_a_bag_directory_named_like_a_ros1_file_reads_as_the_rosbag2_directory_it_is(live, tmp_path, storage):
+    """rosbags' AnyReader takes a path ending in .bag for a ROS 1 file; a rosbag2 directory so named reads
+    as any other (a ROS 1 .bag file is still read as ROS 1: test_an_unreadable_path_is_a_clear_error)."""
+    until_ns = int(2e9)
+    named = copy_bag(live.out / BAG_NAME, tmp_path / "x.bag", storage, until_ns=until_ns)
+    with BagSource(live.out / BAG_NAME) as original, BagSource(named) as source:
+        assert source.storage == storage.name.lower()
+        expected = [message for message in original.messages() if message.log_time_ns < until_ns]
+        assert list(source.messages()) == expected
+        assert {name: topic.message_count for name, topic in source.topics.items()} == {
+            name: sum(message.topic == name for message in expected) for name in original.topics
+        }
+
+
 def test_remapped_scan_without_ground_truth_gives_counts_but_no_accuracy(live, tmp_path, capsys):
     """The CLI as a user runs it: the scan recorded as /lidar/scan (played as scan), no ground truth."""
     live_out = live.out
@@ -244,6 +259,18 @@ def test_remapped_scan_without_ground_truth_gives_counts_but_no_accuracy(live, t
     assert (out / "trajectory.png").read_bytes().startswith(PNG_MAGIC)
     assert not (out / "errors.png").exists()
     assert f"| messages played, /lidar/scan | {scans} |" in stdout
+    # what slam made of it, though nothing judges it: its mode, its map (the saved file's landmarks), the
+    # loops it closed, its slip recovery; no landmark called spurious
+    mapped = len(load_map(out / "map.json").ids)
+    assert metrics["slam_mode"] == "mapping" and metrics["map_landmarks"] == mapped > 0
+    held, relocalized, loops = (
+        metrics[f"slam_{k}"] for k in ("scans_held", "relocalizations", "loops_closed")
+    )
+    assert (
+        f"slam: mapping, {mapped} landmarks mapped, {loops} loops closed, {relocalized} relocalizations "
+        f"after slip, {held} scans held"
+    ) in stdout
+    assert "spurious" not in stdout
     written = sorted(p.name + ("/" if p.is_dir() else "") for p in out.iterdir())
     assert f"outputs in {out}/: {' '.join(written)}" in stdout.splitlines()
 

@@ -1,7 +1,8 @@
 """The commands the docs show run as written from the repository root: a Python command is
 ``.venv/bin/python -P`` (``-P``: the source folders at the root, which hold each package one level down,
 must not shadow the installed packages; the interpreter with the project, not whichever ``python`` is
-first on PATH), and ``./dev.sh`` is given one of its subcommands. The commands are read, not run."""
+first on PATH), ``./dev.sh`` is given one of its subcommands, and the recordings the replay commands are
+given exist from the root. The commands are read, not run."""
 
 from __future__ import annotations
 
@@ -40,3 +41,29 @@ def test_dev_sh_commands_in_the_docs_exist():
         (path.name, command) for path in DOCS for command in DEV_SH.findall(path.read_text(encoding="utf-8"))
     }
     assert used and {command for _, command in used} <= known, sorted(used)
+
+
+# the recording a replay command of the docs is given: after the module, or after `./dev.sh replay`
+REPLAYED = re.compile(r"(?:-m nuturtle_tools\.replay|\./dev\.sh replay|nuturtle-replay)\s+(?P<bag>[^\s`]+)")
+# the workplace's shared datasets beside the repository (docs/real_data.md), absent from a clean clone
+SHARED = ROOT.parent / "shared"
+
+
+def test_the_recordings_the_docs_replay_exist_from_the_root():
+    """Each replayed path is a placeholder (capitals: BAG, DIR, ROBOT.mcap), a run's output (out/...),
+    or a path that exists from the repository root (the shared datasets when they are there)."""
+    checked = []
+    for path in DOCS:
+        for match in REPLAYED.finditer(path.read_text(encoding="utf-8")):
+            bag = match["bag"]
+            if (
+                bag[0].isupper()
+                or bag.startswith("out/")
+                or (bag.startswith("../shared/") and not SHARED.is_dir())
+            ):
+                continue
+            checked.append(bag)
+            assert (ROOT / bag).exists(), (
+                f"{path.name}: {match.group()!r}: {bag} does not exist from the root"
+            )
+    assert checked

@@ -10,11 +10,12 @@ import math
 import numpy as np
 import pytest
 import scipy.linalg
+from finite_differences import central_jacobian, wrapping
 from hypothesis import given
 from hypothesis import strategies as st
 
 from turtlelib import Transform2D, Twist2D, integrate_twist, normalize_angle, normalize_angles
-from turtlelib.geometry.se2 import SMALL_ANGLE_RAD
+from turtlelib.geometry.se2 import SMALL_ANGLE_RAD, right_composition_jacobian
 
 PI = math.pi
 coords_m = st.floats(-10.0, 10.0, allow_nan=False)
@@ -390,3 +391,11 @@ def test_exp_of_scaled_twist_composes(V, n):
     for _ in range(n):
         T = T @ step
     assert_transform_close(T, Transform2D.exp(V), atol=1e-11)
+
+
+@given(transforms, transforms)
+def test_right_composition_jacobian_matches_finite_differences(T_from, U):
+    """``G`` of ``T_to = T_from U`` against central differences of ``[x, y, theta] -> T(x, y, theta) U``."""
+    G = right_composition_jacobian(T_from, T_from @ U)
+    numeric = central_jacobian(lambda q: (Transform2D(*q) @ U).as_array(), T_from.as_array(), wrapping(2))
+    np.testing.assert_allclose(G, numeric, atol=1e-5 * (1.0 + abs(U.x) + abs(U.y)))

@@ -17,7 +17,7 @@ from turtlelib.sensing.correlative_matcher import (
     thin_scan,
 )
 from turtlelib.sensing.scan_model import LidarConfig, polygon_walls, simulate_scan
-from turtlelib.smoothing.loop_closure import LoopClosure, LoopClosureConfig, Verdict
+from turtlelib.smoothing.loop_closure import LoopClosure, LoopClosureConfig, Verdict, relocalized
 from turtlelib.smoothing.pose_graph import PoseGraph
 
 LIDAR = LidarConfig(range_max=6.0, noise=0.01)
@@ -219,6 +219,25 @@ def test_a_graph_without_edges_lists_none_and_no_loop():
     assert (i.dtype, j.dtype, loop.dtype) == (np.int64, np.int64, np.bool_)
     assert graph.poses[i[loop]].shape == (0, 3)  # a mask of no edge selects nothing (was float: IndexError)
     assert LoopClosure().loop_edges() == []
+
+
+def test_a_loop_moves_the_filter_by_the_change_of_the_graph_s_pose_of_the_body():
+    # the filter on LiDAR odometry's own pose (no landmark moved it): it lands where the new graph puts it
+    T_l = Transform2D(4.0, 1.0, 0.3)
+    C_old, C_new = Transform2D(), Transform2D(0.2, -0.1, 0.05)
+    P = np.diag([0.01, 0.02, 0.003])
+    T_new, P_new, D = relocalized(T_l, P, T_l, C_old, C_new)
+    np.testing.assert_allclose(T_new.as_array(), (C_new @ T_l).as_array(), atol=1e-12)
+    # a filter in another frame B (its start pose): moved by the same D in the body frame, so B stays
+    B = Transform2D(-1.0, 2.0, 1.2)
+    T_other, _, D_other = relocalized(B @ T_l, P, T_l, C_old, C_new)
+    np.testing.assert_allclose(D_other.as_array(), D.as_array(), atol=1e-12)
+    np.testing.assert_allclose(T_other.as_array(), (B @ C_new @ T_l).as_array(), atol=1e-12)
+    # the covariance carried along the move: heading variance 0.003 swings the position by the move's lever
+    dx, dy = T_new.x - T_l.x, T_new.y - T_l.y
+    np.testing.assert_allclose(P_new[0, 0], 0.01 + dy**2 * 0.003, atol=1e-12)
+    np.testing.assert_allclose(P_new[1, 1], 0.02 + dx**2 * 0.003, atol=1e-12)
+    np.testing.assert_allclose(P_new[2, 2], 0.003, atol=1e-12)
 
 
 def test_pose_graph_hand_computed():

@@ -28,8 +28,9 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from ..command_help import DefaultsHelpFormatter
 from ..run_evaluation import write_metrics
-from ..run_folder import RunFolder, check_replaceable, error_line
+from ..run_folder import RunFolder, check_no_other_run, check_replaceable, error_line, say_previous_result
 from .experiment import ASSOCIATIONS, Experiment, ExperimentResult, run_experiment
 from .setups import PROTOCOLS
 
@@ -46,16 +47,28 @@ if TYPE_CHECKING:
 
 
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
+    return build_parser().parse_args(argv)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The dataset command's command line."""
     parser = argparse.ArgumentParser(
         prog="python -m nuturtle_eval.datasets",
         description="EKF SLAM on the MRCLAM and Victoria Park datasets.",
+        formatter_class=DefaultsHelpFormatter,
     )
     commands = parser.add_subparsers(dest="command", required=True)
-    mrclam = commands.add_parser("mrclam", help="one robot of a UTIAS MRCLAM dataset")
+    mrclam = commands.add_parser(
+        "mrclam", help="one robot of a UTIAS MRCLAM dataset", formatter_class=DefaultsHelpFormatter
+    )
     mrclam.add_argument("--data", required=True, type=Path, help="an MRCLAM_DatasetN directory")
     mrclam.add_argument("--robot", required=True, type=int, choices=range(1, 6), help="robot 1..5")
-    mrclam.add_argument("--association", choices=ASSOCIATIONS, default="known")
-    victoria = commands.add_parser("victoria", help="the Victoria Park run (tree detections, GPS)")
+    mrclam.add_argument("--association", choices=ASSOCIATIONS, default="known",
+                        help="the barcode's subject number as the landmark id (known), or the filter's own "
+                        "association by joint compatibility (unknown)")  # fmt: skip
+    victoria = commands.add_parser(
+        "victoria", help="the Victoria Park run (tree detections, GPS)", formatter_class=DefaultsHelpFormatter
+    )
     victoria.add_argument("--data", required=True, type=Path, help="the victoria_park directory")
     victoria.add_argument(
         "--protocol",
@@ -77,7 +90,9 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
             help="also smooth the whole run (poses, map, associations) and report it beside the filter",
         )
     calibrate = commands.add_parser(
-        "calibrate", help="fit MRCLAM motion and measurement noise to its Vicon truth"
+        "calibrate",
+        help="fit MRCLAM motion and measurement noise to its Vicon truth",
+        formatter_class=DefaultsHelpFormatter,
     )
     calibrate.add_argument("--data", required=True, type=Path, help="an MRCLAM_DatasetN directory")
     calibrate.add_argument("--robot", required=True, type=int, choices=range(1, 6), help="robot 1..5")
@@ -89,7 +104,7 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     )
     calibrate.add_argument("--out", type=Path, default=None, help="params YAML (default: stdout)")
     calibrate.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
-    return parser.parse_args(argv)
+    return parser
 
 
 def _progress(total: int, enabled: bool, label: str):
@@ -109,6 +124,7 @@ def _write_run(
 
     from .figures import plot_error_comparison, plot_errors, plot_nees, plot_side_by_side, plot_trajectory
 
+    say_previous_result(args.out)
     with _progress(len(experiment.motion_t_ns), args.progress, experiment.name) as bar:
         result = run_experiment(experiment, bar.update)
     evaluation = evaluate(experiment, result)
@@ -188,7 +204,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             from .mrclam import load_mrclam
 
             args.out = args.out or Path("results") / f"mrclam_robot{args.robot}_{args.association}"
-            check_replaceable(args.out, OUTPUTS + SMOOTHED_OUTPUTS)
+            _check_out(args.out)
             params = load_params(mrclam_params(args.association), args.params)
             recording = load_mrclam(args.data, args.robot)
             experiment = mrclam_experiment(recording, params, args.association)
@@ -198,7 +214,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             from .victoria import load_victoria
 
             args.out = args.out or Path("results") / "victoria_park"
-            check_replaceable(args.out, OUTPUTS + SMOOTHED_OUTPUTS)
+            _check_out(args.out)
             params = load_params(VICTORIA_PARAMS, args.params)
             recording = load_victoria(args.data)
             experiment = victoria_experiment(recording, params, args.protocol)
@@ -211,6 +227,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(summary(metrics))
     print(f"results in {args.out}")
     return 0
+
+
+def _check_out(out: Path) -> None:
+    """ValueError for an ``out`` the run may not replace or another run is writing (run_folder), before
+    anything is read."""
+    check_replaceable(out, OUTPUTS + SMOOTHED_OUTPUTS)
+    check_no_other_run(out)
 
 
 def _calibrate(args: argparse.Namespace) -> int:

@@ -66,7 +66,7 @@ from functools import partial
 import numpy as np
 from numpy.typing import NDArray
 
-from ..geometry.se2 import Transform2D, normalize_angle
+from ..geometry.se2 import Transform2D, normalize_angle, right_composition_jacobian
 from ..motion.motion_models import TwistNoise, upper_triangle
 from ..motion.motion_signals import Sample
 from ..sensing.range_scan import RangeScan
@@ -261,8 +261,7 @@ class LidarOdometry:
         P_motion = P_motion + self.noise.covariance(T_prev, U.log(), max(dt_s, 0.0))
         # the uncertainty since the last registered scan (steps on the input alone in between):
         # P_acc' = G P_acc G^T + P_motion,  G = [[1, 0, -dy], [0, 1, dx], [0, 0, 1]]
-        G = np.eye(3)
-        G[0, 2], G[1, 2] = -(T_prior.y - T_prev.y), T_prior.x - T_prev.x
+        G = right_composition_jacobian(T_prev, T_prior)
         P_since = G @ self._P_since @ G.T + P_motion
         registration = None
         P_prior = P_since + _PRIOR_FLOOR

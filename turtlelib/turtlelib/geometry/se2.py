@@ -243,6 +243,18 @@ class Transform2D:
         return Twist2D(theta, alpha * self.x + half * self.y, -half * self.x + alpha * self.y)
 
 
+def right_composition_jacobian(T_from: Transform2D, T_to: Transform2D) -> NDArray[np.float64]:
+    """``G`` (3, 3): the Jacobian of ``T_to = T_from U`` (``U`` fixed) with respect to ``T_from``, both as
+    ``[x, y, theta]`` of the outer frame; a heading error at ``T_from`` swings ``T_to`` about it::
+
+        G = [[1, 0, -(y_to - y_from)], [0, 1, x_to - x_from], [0, 0, 1]]
+
+    so a covariance ``P`` of ``T_from`` is ``G P G^T`` at ``T_to``."""
+    G = np.eye(3)
+    G[0, 2], G[1, 2] = -(T_to.y - T_from.y), T_to.x - T_from.x
+    return G
+
+
 def integrate_twist(twist: Twist2D) -> Transform2D:
     """``exp([V])``: the pose, relative to the start frame, after holding body twist ``V`` for unit time.
 

@@ -66,7 +66,7 @@ from numpy.typing import NDArray
 from scipy.stats import chi2
 
 from ..estimation.lidar_odometry import OdometryStep
-from ..geometry.se2 import Transform2D, normalize_angle
+from ..geometry.se2 import Transform2D, normalize_angle, right_composition_jacobian
 from ..sensing.correlative_matcher import (
     CorrelativeConfig,
     CorrelativeMatch,
@@ -404,3 +404,27 @@ class LoopClosure:
             return Transform2D()
         k = range(len(self.keyframes))[k]
         return self.graph.pose(k) @ self.keyframes[k].T_odom_body.inverse()
+
+
+def relocalized(
+    T_map_body: Transform2D,
+    P_pose: NDArray[np.float64],
+    T_l: Transform2D,
+    C_old: Transform2D,
+    C_new: Transform2D,
+) -> tuple[Transform2D, NDArray[np.float64], Transform2D]:
+    """A filter's pose ``T_map_body`` (covariance ``P_pose`` (3, 3)) moved by a change of the graph's
+    correction of the odometry from ``C_old`` to ``C_new`` (``T_map_odom``:
+    :meth:`LoopClosure.map_from_odom`), with ``T_l`` LiDAR odometry's pose at the filter's time: the change
+    of the graph's pose of the body,
+    applied in the body frame (so that the filter's own frame, its start pose and what landmarks did to it
+    stay as they are)::
+
+        D = (C_old T_l)^-1 (C_new T_l),   T' = T_map_body D,   P' = G P G^T
+
+    (``G``: :func:`~turtlelib.geometry.se2.right_composition_jacobian` of ``T_map_body`` to ``T'``, the
+    covariance carried along as a motion carries it). Returns ``(T', P', D)``."""
+    D = (C_old @ T_l).inverse() @ (C_new @ T_l)
+    T_new = T_map_body @ D
+    G = right_composition_jacobian(T_map_body, T_new)
+    return T_new, G @ P_pose @ G.T, D
