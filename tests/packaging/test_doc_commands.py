@@ -52,18 +52,20 @@ SHARED = ROOT.parent / "shared"
 def test_the_recordings_the_docs_replay_exist_from_the_root():
     """Each replayed path is a placeholder (capitals: BAG, DIR, ROBOT.mcap), a run's output (out/...),
     or a path that exists from the repository root (the shared datasets when they are there)."""
-    checked = []
+    replayed = []
     for path in DOCS:
         for match in REPLAYED.finditer(path.read_text(encoding="utf-8")):
             bag = match["bag"]
+            replayed.append(bag)
             if (
                 bag[0].isupper()
                 or bag.startswith("out/")
                 or (bag.startswith("../shared/") and not SHARED.is_dir())
             ):
                 continue
-            checked.append(bag)
             assert (ROOT / bag).exists(), (
                 f"{path.name}: {match.group()!r}: {bag} does not exist from the root"
             )
-    assert checked
+    # the docs' replay examples were found (on a clone without the shared datasets beside it, those under
+    # ../shared/ are not checked: the in-repo ones still are)
+    assert any(not bag[0].isupper() for bag in replayed), replayed
