@@ -100,6 +100,7 @@ def report(result: DemoResult, options: DemoOptions) -> str:
         f"slam: {options.mode}, motion from {options.motion_source}"
         + ("" if options.map_file is None else f", map file {options.map_file}")
         + ("" if options.start is None else f", start {tuple(options.start)}"),
+        "" if result.route is None else result.route.describe(),
         ""
         if result.interrupted is None
         else f"INCOMPLETE: interrupted by {result.interrupted} after {result.metrics.sim_seconds:.1f} of "

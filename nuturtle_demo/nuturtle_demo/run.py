@@ -91,7 +91,7 @@ from turtlelib.util.validation import finite_real, integer, one_of, positive, st
 from .driver import FigureEightDriver, RouteConfig
 from .lockstep import Pace, run_cycle
 from .matched_noise import matched_point_std, matched_wheel_noise
-from .route_fit import fitted_route_radius
+from .route_fit import FittedRoute, fit_route
 
 ASSOCIATIONS = ("known", "unknown")
 # Wall time for slam to take the initialpose, and for its ~/save_map service to appear and answer (s)
@@ -210,7 +210,8 @@ class DemoResult:
     ``interrupted`` the name of the signal that stopped the run early (``SIGTERM``), None when it ran its
     whole duration; ``saved_map``: slam's ``~/save_map`` answer (success, message) with ``save_map``, else
     None; ``grid_score``: slam's occupancy grid against the world's true walls (:func:`grid_score`), None
-    without a grid; ``scope``: what kind of run it was, which decides the targets that apply to it."""
+    without a grid; ``scope``: what kind of run it was, which decides the targets that apply to it;
+    ``route``: the driver's figure eight as fitted to the world and the model (None with a given radius)."""
 
     metrics: RunMetrics
     out_dir: Path
@@ -220,6 +221,7 @@ class DemoResult:
     saved_map: tuple[bool, str] | None = None
     grid_score: GridScore | None = None
     scope: RunScope = MAPPING_SCOPE
+    route: FittedRoute | None = None
 
 
 class DemoSystem:
@@ -239,10 +241,26 @@ class DemoSystem:
         self.nusim = NusimNode(
             stepped_by_owner=True, context=context, parameter_overrides=to_parameters(world)
         )
-        # the route's loops fitted to the world unless a radius is given (route_fit.py)
+        # the route's loops fitted to the world and the model unless a radius is given (route_fit.py);
+        # placed elsewhere in the world (nusim started there) when none fits at the world's start
+        self.route: FittedRoute | None = None
         radius_m = options.route_radius
         if radius_m is None:
-            radius_m = fitted_route_radius(self.nusim.simulation.config, RouteConfig().radius)
+            try:
+                self.route = fit_route(
+                    self.nusim.simulation.config, RouteConfig(), place=options.start is None
+                )
+            except ValueError as error:
+                self.nusim.destroy_node()
+                raise ValueError(f"model {options.model} in world {options.world}: {error}") from None
+            radius_m = self.route.radius_m
+            if self.route.moved:
+                self.nusim.destroy_node()
+                T_start = self.route.T_world_start
+                world.update(x0=T_start.x, y0=T_start.y, theta0=T_start.theta)
+                self.nusim = NusimNode(
+                    stepped_by_owner=True, context=context, parameter_overrides=to_parameters(world)
+                )
         route = {"radius": radius_m}
         self.monitor = RunMonitor(context=context, parameter_overrides=sim_time)
         self.driver = FigureEightDriver(context=context, parameter_overrides=robot + to_parameters(route))
@@ -522,6 +540,7 @@ class _DemoRun:
                     grid_loaded=system.slam.grid.loaded is not None,
                     slip_fraction=system.nusim.simulation.config.noise.slip_fraction,
                 ),
+                system.route,
             )
         finally:
             try:
