@@ -569,7 +569,8 @@ class SlamNode(Node):
 
     def smooth_run(self) -> SmoothingOutcome:
         """The run so far smoothed as a whole (``smooth_saved_map``: the history is kept), with the loops
-        closed (``loop_closure``); ValueError without a history or before the first motion sample."""
+        closed (``loop_closure``) and a pose at every scan the grid keeps (so the smoothed grid places each);
+        ValueError without a history or before the first motion sample."""
         if self.timeline.history is None:
             raise ValueError("no run history: smooth_saved_map is false")
         return smooth_history(
@@ -581,6 +582,7 @@ class SlamNode(Node):
             self.slam.landmarks,
             revise=self.node_config.association == "unknown",
             loops=() if self.loop_closing is None else self.loop_closing.loops.loop_edges(),
+            extra_t_ns=self.grid.keyframes.stamps_ns,
         )
 
     def map_to_save(self, outcome: SmoothingOutcome | None = None) -> LandmarkMap:

@@ -67,7 +67,7 @@ def test_the_timeline_records_the_run():
     assert len(unassigned.z) == 0
 
 
-def test_a_loop_gets_a_pose_at_each_of_its_stamps_and_its_factor():
+def test_a_loop_and_a_stamp_asked_for_get_a_pose_each_and_the_loop_its_factor():
     line = timeline()
     scan_poses = drive(line, range(0, 200, 10))
     Z, S = Transform2D(0.03, 0.001, 0.015), np.diag([1e-4, 1e-4, 1e-5])
@@ -75,17 +75,20 @@ def test_a_loop_gets_a_pose_at_each_of_its_stamps_and_its_factor():
         LoopEdge(0, 150 * MS, Z, S),  # 150 ms: a motion sample's stamp, between two scans
         LoopEdge(40 * MS, 250 * MS, Z, S),  # past the history's motion: left out
     ]
+    # 170 ms: a scan the grid kept whose observations never reached the filter; 900 ms: past the run
     problem, poses, _, _ = problem_from_history(
-        line.history, MOTION, HeldInputs(), CONFIG, np.array([0, 1]), loops
+        line.history, MOTION, HeldInputs(), CONFIG, np.array([0, 1]), loops, extra_t_ns=[170 * MS, 900 * MS]
     )
-    np.testing.assert_array_equal(problem.pose_t_ns, np.r_[np.arange(0, 160, 20), 150, 160, 180] * MS)
+    np.testing.assert_array_equal(problem.pose_t_ns, np.r_[np.arange(0, 160, 20), 150, 160, 170, 180] * MS)
     np.testing.assert_array_equal(problem.loop_pose, [[0, 8]])
     np.testing.assert_array_equal(problem.loop_delta, [Z.as_array()])
     np.testing.assert_array_equal(problem.loop_covariance, [S])
     # the warm start at 150 ms: the pose at the scan of 140 ms moved on by the 10 ms of motion between them
     expected = Transform2D(*scan_poses[7]) @ Transform2D(*problem.motion_delta[7])
     np.testing.assert_allclose(poses[8], expected.as_array())
-    np.testing.assert_array_equal(poses[9:], scan_poses[8:])
+    expected = Transform2D(*scan_poses[8]) @ Transform2D(*problem.motion_delta[9])
+    np.testing.assert_allclose(poses[10], expected.as_array())
+    np.testing.assert_array_equal(poses[[9, 11]], scan_poses[8:])
 
 
 def test_only_landmarks_of_the_final_map_are_kept():

@@ -7,8 +7,9 @@ into the factors of :mod:`turtlelib.smoothing.smoothing_problem` with the filter
 * the motion between them from the motion model and signal
   (:func:`~turtlelib.smoothing.smoothing_problem.relative_motions`);
 * the loops (:class:`~turtlelib.smoothing.smoothing_problem.LoopEdge`) whose stamps the history's motion
-  covers, with a pose at each of their stamps (at a stamp that is not a scan's, the warm start is the pose
-  before it moved on by the motion between them);
+  covers, with a pose at each of their stamps, and a pose at each further stamp asked for (``extra_t_ns``:
+  e.g. every scan an occupancy grid keeps, so that the smoothed run places each; at a stamp that is not a
+  scan's, the warm start is the pose before it moved on by the motion between them);
 * the observations of the landmarks that are in the final map (those of tentative landmarks that were
   dropped are left out), each ``R`` scaled for errors correlated over the viewpoint as the filter does
   (:func:`~turtlelib.smoothing.smoothing_problem.viewpoint_scales` with ``SlamConfig.fusion_scale``).
@@ -44,6 +45,7 @@ def problem_from_history(
     config: SlamConfig,
     landmark_ids: NDArray[np.int64],
     loops: Sequence[LoopEdge] = (),
+    extra_t_ns: Sequence[int] = (),
 ) -> tuple[SmoothingProblem, NDArray[np.float64], Rescale, Unassigned]:
     """``(problem, poses (P, 3), rescale, unassigned)``: the factors of ``history`` (module docstring) for
     the final map's ``landmark_ids``, the filter's poses at the problem's stamps (the warm start: at a stamp
@@ -61,7 +63,9 @@ def problem_from_history(
         if t_first <= min(loop.t_a_ns, loop.t_b_ns) and max(loop.t_a_ns, loop.t_b_ns) <= t_last
     ]
     loop_t_ns = np.array([(loop.t_a_ns, loop.t_b_ns) for loop in loops], dtype=np.int64).reshape(-1, 2)
-    pose_t_ns = np.unique(np.r_[t_first, scan_t_ns, loop_t_ns.ravel()])
+    extra = np.array(extra_t_ns, dtype=np.int64).reshape(-1)
+    extra = extra[(extra >= t_first) & (extra <= t_last)]
+    pose_t_ns = np.unique(np.r_[t_first, scan_t_ns, loop_t_ns.ravel(), extra])
     poses = np.full((len(pose_t_ns), 3), np.nan)
     poses[0] = history.start_pose
     scan_pose = np.searchsorted(pose_t_ns, scan_t_ns)
@@ -70,7 +74,7 @@ def problem_from_history(
     delta, Q = relative_motions(
         motion, signal, history.motion_t_ns, history.motion_samples, pose_t_ns, MIN_FACTOR_STD
     )
-    for k in np.flatnonzero(np.isnan(poses[:, 0])):  # a loop's stamp between scans: q_k = q_k-1 delta_k-1
+    for k in np.flatnonzero(np.isnan(poses[:, 0])):  # a stamp between scans: q_k = q_k-1 delta_k-1
         poses[k] = (Transform2D(*poses[k - 1]) @ Transform2D(*delta[k - 1])).as_array()
     per_scan = [len(z) for z in history.scan_z]
     observation_pose = np.repeat(scan_pose, per_scan)
