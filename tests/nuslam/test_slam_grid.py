@@ -209,21 +209,27 @@ def test_mapping_from_a_saved_map_continues_its_grid_and_saves_both_sessions(ros
 
 
 @pytest.mark.parametrize(
-    ("edit", "message"),
+    ("edit", "mode", "message"),
     [
-        (lambda text: text.replace("resolution: 0.05\n", ""), "resolution"),
-        (lambda text: text.replace("image: lab.pgm", "image: missing.pgm"), "missing.pgm"),
-        (lambda text: text.replace("origin: [", "origin: [nan, "), "origin"),
+        (lambda text: text.replace("resolution: 0.05\n", ""), "localization", "resolution"),
+        (lambda text: text.replace("image: lab.pgm", "image: missing.pgm"), "localization", "missing.pgm"),
+        (lambda text: text.replace("origin: [", "origin: [nan, "), "localization", "origin"),
+        (lambda text: text.replace("image: lab.pgm", "image: missing.pgm"), "mapping", "missing.pgm"),
+        (
+            lambda text: text.replace("resolution: 0.05", "resolution: 0.1"),
+            "mapping",
+            "cannot continue mapping it: the saved grid's resolution 0.1 m is not resolution_m = 0.05 m",
+        ),
     ],
-    ids=["no resolution", "no image", "bad origin"],
+    ids=["no resolution", "no image", "bad origin", "mapping: no image", "mapping: another resolution"],
 )
-def test_a_malformed_grid_file_stops_localization_at_start_up_with_the_reason(ros, tmp_path, edit, message):
+def test_a_malformed_grid_file_stops_the_node_at_start_up_with_the_reason(ros, tmp_path, edit, mode, message):
     path = tmp_path / "lab.json"
     path.write_text(json.dumps(good_document()))
     text = "image: lab.pgm\nmode: trinary\nresolution: 0.05\norigin: [0.0, 0.0, 0.0]\nnegate: 0\n"
     (tmp_path / "lab.yaml").write_text(edit(text + "occupied_thresh: 0.65\nfree_thresh: 0.196\n"))
     (tmp_path / "lab.pgm").write_bytes(b"P5\n2 1\n255\n\x00\xfe")
-    overrides = [Parameter("map_file", value=str(path)), Parameter("mode", value="localization")]
+    overrides = [Parameter("map_file", value=str(path)), Parameter("mode", value=mode)]
     text = refused_at_construction(
         lambda: SlamNode(context=ros.context, parameter_overrides=overrides), message
     )
