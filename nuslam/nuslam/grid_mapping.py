@@ -24,6 +24,16 @@ re-renders the keyframes at these poses (`ScanKeyframes.render`) and writes ``<s
 beside ``map_file`` (`turtlelib.mapping.grid_map_file.save_grid_map`: map_server's trinary format, each
 file written atomically).
 
+Continued mapping: when a grid is saved beside ``map_file`` at start-up, the session continues it (as slam
+continues the landmarks of ``map_file``): the grid starts as the saved one
+(`turtlelib.OccupancyGrid.from_grid_map`: its extent and origin, saved free and occupied cells at the
+clamping bounds, unknown ones unobserved), logged at INFO with its file and size and published at once;
+the scans add to it, the keyframes (this session's only) are rendered over it after a loop closure and by
+``~/save_map``, which writes the continued grid over the saved one; ``~/reset`` goes back to it. A
+malformed grid file, or one this grid cannot continue (another ``grid.resolution_m``, larger than
+``grid.max_size_m``), stops the node at start-up with the reason. Loop closure's pose graph is not saved:
+a continued session's loop closure starts a new graph, whose poses move this session's keyframes only.
+
 Localization (``mode: localization``): the grid saved beside ``map_file`` is loaded at start-up, if there,
 and published once; no scan is mapped. A malformed grid file stops the node at start-up with the reason.
 Without a grid file beside ``map_file`` (only the ``.json`` copied) the scans are mapped into a fresh grid,
@@ -147,8 +157,9 @@ class GridMapping:
 
     ``T_body_scan`` is the LiDAR mount; ``frames`` the node's ``(map_id, body_id, sensor_id)``;
     ``map_file`` slam's landmark map (empty: none), ``localization``: load the grid beside it instead of
-    mapping. ValueError for invalid parameters, a ``map_file`` ending in ``.yaml`` or ``.pgm``, or a
-    malformed grid file beside it in localization. The topics come with :meth:`connect`, once the node
+    mapping (else a grid saved beside it is continued). ValueError for invalid parameters, a ``map_file``
+    ending in ``.yaml`` or ``.pgm``, or a malformed grid file beside it (or, in mapping, one that cannot
+    be continued). The topics come with :meth:`connect`, once the node
     has checked everything else (a node that fails at start-up must not hold subscriptions: their
     callbacks keep it alive).
     """
@@ -167,10 +178,13 @@ class GridMapping:
         self.keyframe_config = declare_dataclass(node, KeyframeConfig, prefix=PREFIX)
         enabled = self.topic_config.enabled
         self.yaml_path = grid_yaml_path(map_file) if enabled and map_file else None
-        loaded = None
-        if localization and self.yaml_path is not None and self.yaml_path.exists():
-            loaded = load_grid_map(self.yaml_path)
-            node.get_logger().info(f"loaded the {loaded.width} x {loaded.height} cell grid {self.yaml_path}")
+        loaded = saved = None
+        if self.yaml_path is not None and self.yaml_path.exists():
+            saved = load_grid_map(self.yaml_path)
+            verb = "loaded" if localization else "continuing"
+            node.get_logger().info(f"{verb} the {saved.width} x {saved.height} cell grid {self.yaml_path}")
+            if localization:
+                loaded, saved = saved, None
         # localization found no saved grid beside map_file: connect warns once and the scans are mapped
         self._grid_missing = localization and loaded is None and self.yaml_path is not None
         self._map_id, body_id, sensor_id = frames
@@ -182,7 +196,9 @@ class GridMapping:
         self._bound_logger = node.get_logger()
         self._bound_warned_s: float | None = None
         self._period_ns = round(self.topic_config.publish_period_s * NS_PER_S)
-        self.grid = OccupancyGrid(self.config)
+        # the saved grid this mapping session continues (None: a fresh one)
+        self.base = saved
+        self.grid = self._start_grid()
         self.keyframes = ScanKeyframes(self.keyframe_config)
         # the pose each keyframe's scan is rendered at by a save: T_map_body by stamp (ns)
         self._keyframe_poses: dict[int, Transform2D] = {}
@@ -200,8 +216,9 @@ class GridMapping:
 
     def connect(self, node: Node, map_qos: QoSProfile, timeline: SlamTimeline) -> None:
         """Create `map`, `map_metadata` (``map_qos``) and, when mapping, the `scan` subscription placed at
-        ``timeline``'s poses (whose corrections and resets it listens to); publish the loaded grid; WARN
-        once for a localization without a saved grid (a fresh one is mapped). Nothing when the grid is off."""
+        ``timeline``'s poses (whose corrections and resets it listens to); publish the loaded or continued
+        grid; WARN once for a localization without a saved grid (a fresh one is mapped). Nothing when the
+        grid is off."""
         if not self.topic_config.enabled:
             return
         self._timeline = timeline
@@ -217,6 +234,8 @@ class GridMapping:
                     f"the scans are mapped into a fresh grid (copy the saved map's .yaml and .pgm with its "
                     f".json to localize in the saved grid)"
                 )
+            if self.base is not None:
+                self._publish(self.grid.grid_map(), node.get_clock().now().nanoseconds)
             node.create_subscription(LaserScan, "scan", self.on_scan, qos_profile_sensor_data)
 
     @property
@@ -259,6 +278,8 @@ class GridMapping:
         )
         if self.scans_past_bound:
             message += f"; {self.scans_past_bound} reached past grid.max_size_m (the grid moved or clipped)"
+        if self.base is not None:
+            message += f", continuing {self.yaml_path}"
         if skipped:
             message += f"; {skipped} skipped since the last report"
         values = {
@@ -296,8 +317,10 @@ class GridMapping:
 
     @property
     def has_grid(self) -> bool:
-        """True when there is a grid to save: enabled, and loaded or made of at least one keyframe."""
-        return self.topic_config.enabled and (self.loaded is not None or len(self.keyframes) > 0)
+        """True when there is a grid to save: enabled, and loaded, continued or made of at least one
+        keyframe."""
+        saved = self.loaded is not None or self.base is not None
+        return self.topic_config.enabled and (saved or len(self.keyframes) > 0)
 
     def render(self, pose_at: Callable[[int], Transform2D | None] | None = None) -> GridMap:
         """The grid of the keyframes at their poses (module docstring), or at ``pose_at(stamp_ns)`` where
@@ -326,7 +349,7 @@ class GridMapping:
                     return T_map_body
             return self._keyframe_poses.get(t_ns)
 
-        return self.keyframes.render(keyframe_pose, self._T_body_scan, self.config)
+        return self.keyframes.render(keyframe_pose, self._T_body_scan, self.config, self.base)
 
     def save(self, pose_at: Callable[[int], Transform2D | None] | None = None) -> str:
         """Write :meth:`render` (with ``pose_at``) beside ``map_file`` (``<stem>.yaml`` + ``<stem>.pgm``,
@@ -337,17 +360,30 @@ class GridMapping:
         grid_map = self.render(pose_at)
         save_grid_map(self.yaml_path, grid_map)
         source = "loaded" if self.loaded is not None else f"of {len(self.keyframes)} keyframes"
+        if self.base is not None:
+            source += " over the continued one"
         return f"the {grid_map.width} x {grid_map.height} cell grid {source} to {self.yaml_path}"
 
     def reset(self) -> None:
-        """Forget every scan (slam's ~/reset): an empty grid, no keyframes."""
-        self.grid = OccupancyGrid(self.config)
+        """Forget every scan (slam's ~/reset): the grid at start-up (empty or the continued one), no
+        keyframes."""
+        self.grid = self._start_grid()
         self.keyframes.clear()
         self._keyframe_poses.clear()
         self._waiting.clear()
         self._newest_ns = self._published_ns = None
 
     # --- helpers -----------------------------------------------------------------------------------------
+
+    def _start_grid(self) -> OccupancyGrid:
+        """A fresh grid, or the saved one this session continues (ValueError naming its file when it
+        cannot be continued)."""
+        if self.base is None:
+            return OccupancyGrid(self.config)
+        try:
+            return OccupancyGrid.from_grid_map(self.base, self.config)
+        except ValueError as error:
+            raise ValueError(f"{self.yaml_path}: cannot continue mapping it: {error}") from None
 
     def insert_reached(self) -> None:
         """Insert, oldest first, the waiting scans the motion samples reach, at slam's pose at their stamps;

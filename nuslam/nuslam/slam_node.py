@@ -19,13 +19,19 @@ Motion (`motion_source`, `scan_registration`)
 Maps (`map_file`, `mode`)
     `map_file` (a `turtlelib.mapping.landmark_map` JSON file) is loaded at start-up when it exists; in `mode:
     localization` it must, and its landmarks stay fixed (a Schmidt update: only the pose is estimated,
-    detections of unmapped landmarks are counted, not added); in `mapping` SLAM goes on from it. A
-    corrupt, wrong-version, non-finite or other-frame file stops the node at start-up with the reason.
+    detections of unmapped landmarks are counted, not added); in `mapping` SLAM goes on from it: its
+    landmarks with their covariance, and the occupancy grid saved beside it (`<stem>.yaml` + `.pgm`),
+    which the new scans extend and `~/save_map` writes back extended (continued mapping, docs/maps.md;
+    loop closure's pose graph is not saved, so a continued session's loop closure starts a new graph).
+    A corrupt, wrong-version, non-finite or other-frame file, or a grid file that is malformed (or, in
+    mapping, saved at another resolution or larger than `grid.max_size_m`), stops the node at start-up
+    with the reason.
 Occupancy grid (`grid.*`, `nuslam.grid_mapping`)
     Each `scan` placed at slam's pose at its stamp and the robot's LiDAR mount builds an occupancy grid
     (published on `map`); `~/save_map` writes it beside `map_file` as `<stem>.yaml` + `<stem>.pgm`
-    (map_server's format); in localization the grid saved there is loaded and published instead
-    (without one there, a WARN at start-up names the file looked for, and a fresh grid is mapped).
+    (map_server's format); in mapping a grid saved there is continued, in localization it is loaded and
+    published instead (without one there, a WARN at start-up names the file looked for, and a fresh grid
+    is mapped).
 
 Subscribes
     `joint_states` (sensor_msgs/JointState, with `motion_source: joint_states`): wheel angles (rad) of
@@ -86,7 +92,8 @@ Services (std_srvs/Trigger)
     `~/save_map`: writes the confirmed landmarks, their joint covariance, the frame, the filter's time and
         this node's parameters to `map_file` (atomically: a temporary file renamed over it), and the
         occupancy grid beside it (`<stem>.yaml` + `<stem>.pgm`, re-rendered from its keyframes).
-    `~/reset`: back to the start pose (x0, y0, theta0) and the map loaded at start-up (or none).
+    `~/reset`: back to the start pose (x0, y0, theta0) and the map loaded at start-up (or none), its grid
+        too.
 Parameters
     `SlamNodeConfig` (association, motion_source, x0, y0, theta0, frame ids, fake_sensor_std,
     landmark_radius, wheel_noise, map_file, observation_timeout), `turtlelib.TwistNoise` as `odom_*`,

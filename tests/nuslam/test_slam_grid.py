@@ -1,6 +1,7 @@
 """slam's occupancy grid (real rclpy): scans placed at slam's pose at their own stamps and the robot's
 LiDAR mount, `map` and `map_metadata` latched for late subscribers, ~/save_map writing map_server's pair
-beside the landmark map, localization publishing the saved grid, malformed grid files stopping the node,
+beside the landmark map, localization publishing the saved grid, mapping continuing it over two sessions,
+malformed grid files stopping the node,
 scans past the grid's bound warned about and its memory in /diagnostics.
 
 Expected grids come from turtlelib (`OccupancyGrid`, `ScanKeyframes`) fed the same scans at the TRUE
@@ -36,7 +37,7 @@ from turtlelib import (
     arena_walls,
     simulate_scan,
 )
-from turtlelib.mapping.grid_map_file import load_grid_map
+from turtlelib.mapping.grid_map_file import load_grid_map, save_grid_map
 from turtlelib.mapping.occupancy_grid import BYTES_PER_CELL
 
 pytestmark = pytest.mark.ros
@@ -50,19 +51,22 @@ CIRCLES = np.array([[0.8, 0.5, 0.1], [-0.7, -0.4, 0.1]])
 SCANS = 7
 
 
-def scan_message(T_map_body: Transform2D, t_ns: int, rng: np.random.Generator) -> LaserScan:
+def scan_message(T_map_body: Transform2D, t_ns: int, rng: np.random.Generator, walls=WALLS) -> LaserScan:
     msg = LaserScan(angle_min=LIDAR.angle_min, angle_increment=LIDAR.angle_increment)
     msg.angle_max = LIDAR.angle_min + (LIDAR.samples - 1) * LIDAR.angle_increment
     msg.range_min, msg.range_max = LIDAR.range_min, LIDAR.range_max
     msg.header.stamp, msg.header.frame_id = stamp(t_ns), "base_scan"
-    msg.ranges = simulate_scan(T_map_body @ T_BODY_SCAN, CIRCLES, WALLS, LIDAR, rng).tolist()
+    msg.ranges = simulate_scan(T_map_body @ T_BODY_SCAN, CIRCLES, walls, LIDAR, rng).tolist()
     return msg
 
 
-def drive_and_scan(rig: Rig) -> list[tuple[int, Transform2D, LaserScan]]:
-    """Drive an arc with joint_states every 0.2 s and a scan stamped half-way between two of them (slam
-    must read its pose between samples); returns (stamp, true body pose, scan) of each."""
-    arc = Arc(Transform2D(), S, vx=0.15, omega=0.8)
+def drive_and_scan(
+    rig: Rig, T_start: Transform2D | None = None, walls=WALLS
+) -> list[tuple[int, Transform2D, LaserScan]]:
+    """Drive an arc from ``T_start`` (slam's start pose) with joint_states every 0.2 s and a scan stamped
+    half-way between two of them (slam must read its pose between samples) in the world of ``walls``;
+    returns (stamp, true body pose, scan) of each."""
+    arc = Arc(T_start or Transform2D(), S, vx=0.15, omega=0.8)
     rng = np.random.default_rng(5)
     scans = []
     rig.wheels(S, arc.angles(S))
@@ -70,7 +74,7 @@ def drive_and_scan(rig: Rig) -> list[tuple[int, Transform2D, LaserScan]]:
         t_ns = S + k * S // 5
         rig.wheels(t_ns, arc.angles(t_ns))
         t_scan = t_ns - S // 10
-        msg = scan_message(arc.pose(t_scan), t_scan, rng)
+        msg = scan_message(arc.pose(t_scan), t_scan, rng, walls)
         rig.scans.publish(msg)
         scans.append((t_scan, arc.pose(t_scan), msg))
     return scans
@@ -133,17 +137,22 @@ def test_scans_past_the_grids_bound_are_mapped_warned_about_and_its_memory_repor
     assert (values["max_cells"], values["max_bytes"]) == ("1600", str(1600 * BYTES_PER_CELL))
 
 
+def keyframes_grid(scans, base=None):
+    """The grid a save renders of ``scans``' keyframes at their true poses, over the saved ``base``."""
+    keyframes = ScanKeyframes(KeyframeConfig())
+    for t_ns, T_map_body, msg in scans:
+        keyframes.offer(t_ns, T_map_body, range_scan_from_message(msg))
+    true_poses = {t_ns: T for t_ns, T, _ in scans}
+    return keyframes.render(true_poses.get, T_BODY_SCAN, GridConfig(), base).grid_map()
+
+
 def test_save_writes_the_grid_beside_the_map_and_localization_publishes_it(ros, tmp_path):
     path = tmp_path / "lab.json"
     rig = Rig(ros, observation_timeout=100.0, map_file=str(path), **MOUNT)
     scans = drive_and_scan(rig)
     response = call(rig, "save_map")
     assert response.success and f"to {tmp_path / 'lab.yaml'}" in response.message, response.message
-    keyframes = ScanKeyframes(KeyframeConfig())
-    for t_ns, T_map_body, msg in scans:
-        keyframes.offer(t_ns, T_map_body, range_scan_from_message(msg))
-    true_poses = {t_ns: T for t_ns, T, _ in scans}
-    expected = keyframes.render(true_poses.get, T_BODY_SCAN, GridConfig()).grid_map()
+    expected = keyframes_grid(scans)
     saved = load_grid_map(tmp_path / "lab.yaml")
     assert (tmp_path / "lab.pgm").is_file() and not list(tmp_path.glob("*.tmp"))
     assert saved.resolution_m == expected.resolution_m and saved.origin == expected.origin
@@ -158,22 +167,69 @@ def test_save_writes_the_grid_beside_the_map_and_localization_publishes_it(ros, 
     assert_grid(latched(rig, OccupancyGridMsg, "map"), saved)
 
 
+def test_mapping_from_a_saved_map_continues_its_grid_and_saves_both_sessions(ros, tmp_path):
+    # a 12 m corridor seen up to 3.5 m: session 1 maps its west end, session 2 (a new node started at the
+    # east end, same map_file) the east end
+    path, corridor = tmp_path / "lab.json", arena_walls(12.0, 2.5)
+    west, east = Transform2D(-4.0, 0.0, 0.0), Transform2D(4.0, 0.0, 0.0)
+    rig = Rig(ros, observation_timeout=100.0, map_file=str(path), x0=west.x, **MOUNT)
+    drive_and_scan(rig, west, corridor)
+    assert call(rig, "save_map").success
+    session_1 = load_grid_map(tmp_path / "lab.yaml")
+    stop(ros, rig)
+    rig = Rig(ros, observation_timeout=100.0, map_file=str(path), x0=east.x, **MOUNT)
+    size = f"{session_1.width} x {session_1.height} cell grid"
+    assert ros.spin_until(
+        lambda: any(log.msg == f"continuing the {size} {tmp_path / 'lab.yaml'}" for log in rig.logs), 5.0
+    )
+    # published at once: the saved grid, free and occupied cells at the clamps
+    start = latched(rig, OccupancyGridMsg, "map")
+    assert_grid(start, OccupancyGrid.from_grid_map(session_1, GridConfig()).grid_map())
+    second = drive_and_scan(rig, east, corridor)
+    response = call(rig, "save_map")
+    assert response.success and "over the continued one" in response.message, response.message
+    saved = load_grid_map(tmp_path / "lab.yaml")
+    save_grid_map(tmp_path / "expected.yaml", keyframes_grid(second, base=session_1))
+    expected = load_grid_map(tmp_path / "expected.yaml")
+    assert saved.origin == expected.origin and np.array_equal(saved.occupancy, expected.occupancy)
+    # both ends: the cells only session 1 saw are as it saved them, session 2's as it mapped them
+    res = saved.resolution_m
+    west_end = slice(None), slice(0, round((-1.0 - saved.origin.x) / res))
+    assert np.array_equal(saved.occupancy[west_end], session_1.occupancy[west_end])
+    assert np.count_nonzero(saved.occupancy[west_end] == 100) > 100, "session 1's walls"
+    session_2 = keyframes_grid(second)  # session 2's scans alone
+    east_cells = session_2.occupancy >= 65
+    assert np.count_nonzero(east_cells) > 100, "session 2's walls"
+    offset = (
+        round((session_2.origin.x - saved.origin.x) / res),
+        round((session_2.origin.y - saved.origin.y) / res),
+    )
+    rows, cols = np.nonzero(east_cells)
+    assert np.all(saved.occupancy[rows + offset[1], cols + offset[0]] == 100)
+
+
 @pytest.mark.parametrize(
-    ("edit", "message"),
+    ("edit", "mode", "message"),
     [
-        (lambda text: text.replace("resolution: 0.05\n", ""), "resolution"),
-        (lambda text: text.replace("image: lab.pgm", "image: missing.pgm"), "missing.pgm"),
-        (lambda text: text.replace("origin: [", "origin: [nan, "), "origin"),
+        (lambda text: text.replace("resolution: 0.05\n", ""), "localization", "resolution"),
+        (lambda text: text.replace("image: lab.pgm", "image: missing.pgm"), "localization", "missing.pgm"),
+        (lambda text: text.replace("origin: [", "origin: [nan, "), "localization", "origin"),
+        (lambda text: text.replace("image: lab.pgm", "image: missing.pgm"), "mapping", "missing.pgm"),
+        (
+            lambda text: text.replace("resolution: 0.05", "resolution: 0.1"),
+            "mapping",
+            "cannot continue mapping it: the saved grid's resolution 0.1 m is not resolution_m = 0.05 m",
+        ),
     ],
-    ids=["no resolution", "no image", "bad origin"],
+    ids=["no resolution", "no image", "bad origin", "mapping: no image", "mapping: another resolution"],
 )
-def test_a_malformed_grid_file_stops_localization_at_start_up_with_the_reason(ros, tmp_path, edit, message):
+def test_a_malformed_grid_file_stops_the_node_at_start_up_with_the_reason(ros, tmp_path, edit, mode, message):
     path = tmp_path / "lab.json"
     path.write_text(json.dumps(good_document()))
     text = "image: lab.pgm\nmode: trinary\nresolution: 0.05\norigin: [0.0, 0.0, 0.0]\nnegate: 0\n"
     (tmp_path / "lab.yaml").write_text(edit(text + "occupied_thresh: 0.65\nfree_thresh: 0.196\n"))
     (tmp_path / "lab.pgm").write_bytes(b"P5\n2 1\n255\n\x00\xfe")
-    overrides = [Parameter("map_file", value=str(path)), Parameter("mode", value="localization")]
+    overrides = [Parameter("map_file", value=str(path)), Parameter("mode", value=mode)]
     text = refused_at_construction(
         lambda: SlamNode(context=ros.context, parameter_overrides=overrides), message
     )

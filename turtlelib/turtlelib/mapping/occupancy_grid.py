@@ -53,6 +53,25 @@ n_y)`` (and the same for the horizontal crossings, a tie going to the vertical o
 known without ordering the crossings, and the last is the end cell. (Rounding can only matter where a
 segment passes within rounding of a cell corner: both or neither of the corner's side cells is then listed.)
 
+Continuing a saved grid
+-----------------------
+:meth:`OccupancyGrid.from_grid_map` starts a grid from a saved :class:`GridMap` (a map_server file read
+back by `turtlelib.mapping.grid_map_file.load_grid_map`), so that a mapping session continues an earlier
+one. The grid takes the saved extent and origin: ``col0 = origin_x / res``, ``row0 = origin_y / res``
+must be whole numbers (a grid saved here always has them), so every saved cell keeps its world position.
+A cell saved unknown (-1) starts unobserved; an observed one starts from the log odds of its saved
+occupancy ``v`` (per cent), clamped: ``l = clip(log(v / (100 - v)), l_min, l_max)``. map_server's trinary
+file holds only 0 (free) and 100 (occupied), so a saved free cell starts at ``l_min`` and an occupied one
+at ``l_max``: the trinary file kept the decision, not the evidence behind it, and the clamping bound is
+where a cell seen the same way scan after scan settles (after about 5 scans at the defaults, far fewer
+than a saved map's cells were seen). A continued cell therefore needs the same bounded number of
+contrary scans to flip as one mapped in a single run (at the defaults a free cell is saved occupied,
+>= 65, after 4 hits, an occupied one saved free, <= 20, after 12 misses), and a stray beam of the new
+session does not erase a saved wall. Cells saved in
+between (map_server's ``scale`` or ``raw`` files) start from their own log odds. New scans are added as
+usual (the grid grows and moves as in "The bound": what it leaves behind of the saved grid is
+forgotten), and :meth:`ScanKeyframes.render` draws its keyframes over the same saved base.
+
 The bound (memory)
 ------------------
 The grid grows by whole cells, ``grow_margin_m`` to spare, as scans reach past it, up to ``n =
@@ -228,6 +247,44 @@ class OccupancyGrid:
         self._hit_scratch = np.zeros(self.log_odds.size, dtype=bool)
         self._layout: tuple[int, float, float] | None = None
         self._directions = np.zeros((0, 2))
+
+    @classmethod
+    def from_grid_map(cls, saved: GridMap, config: GridConfig) -> OccupancyGrid:
+        """A grid continuing ``saved`` (module docstring, "Continuing a saved grid"): its extent and
+        origin, unknown cells unobserved, observed ones at ``clip(log(v / (100 - v)), l_min, l_max)`` for
+        their occupancy ``v``. ValueError for a resolution other than ``config``'s, an origin turned or not
+        on a whole number of cells, or a grid larger than ``max_size_m`` a side."""
+        if not isinstance(saved, GridMap):
+            raise ValueError(f"need a GridMap, got {type(saved).__name__}")
+        res = config.resolution_m
+        if not math.isclose(saved.resolution_m, res, rel_tol=1e-9):
+            raise ValueError(
+                f"the saved grid's resolution {saved.resolution_m!r} m is not resolution_m = {res!r} m"
+            )
+        origin = saved.origin
+        offsets = origin.x / res, origin.y / res
+        if origin.theta != 0.0 or any(abs(u - round(u)) > 1e-6 for u in offsets):
+            raise ValueError(
+                f"the saved grid's origin ({origin.x!r}, {origin.y!r}, {origin.theta!r}) is not a whole "
+                f"number of {res!r} m cells with yaw 0, as the grids saved here are"
+            )
+        grid = cls(config)
+        if max(saved.width, saved.height) > grid._max_side:
+            raise ValueError(
+                f"the saved grid ({saved.width} x {saved.height} cells) is larger than max_size_m = "
+                f"{config.max_size_m!r} m ({grid._max_side} cells) a side"
+            )
+        observed = saved.occupancy != UNKNOWN
+        percent = np.where(observed, saved.occupancy, 50).astype(np.float64)
+        # l = log(v / (100 - v)): -inf for 0 and inf for 100 before the clamp
+        with np.errstate(divide="ignore"):
+            log_odds_grid = np.log(percent) - np.log(100.0 - percent)
+        log_odds_grid = np.clip(log_odds_grid, grid._l_min, grid._l_max)
+        grid.log_odds = np.where(observed, log_odds_grid, 0.0).astype(np.float32)
+        grid.observed = observed
+        grid.col0, grid.row0 = round(offsets[0]), round(offsets[1])
+        grid._hit_scratch = np.zeros(grid.log_odds.size, dtype=bool)
+        return grid
 
     @property
     def cells(self) -> int:
@@ -498,10 +555,13 @@ class ScanKeyframes:
         pose_at: Callable[[int], Transform2D | None],
         T_body_scan: Transform2D,
         config: GridConfig,
+        base: GridMap | None = None,
     ) -> OccupancyGrid:
         """A new grid of every kept scan placed at ``pose_at(stamp_ns) @ T_body_scan`` (the corrected body
-        pose at its stamp and the LiDAR mount); scans whose pose is None (unknown) are skipped."""
-        grid = OccupancyGrid(config)
+        pose at its stamp and the LiDAR mount); scans whose pose is None (unknown) are skipped. The grid
+        starts empty, or from the saved ``base`` (:meth:`OccupancyGrid.from_grid_map`, ValueError as there)
+        when this session continues one."""
+        grid = OccupancyGrid(config) if base is None else OccupancyGrid.from_grid_map(base, config)
         for stamp_ns, scan in self._trail.items:
             T_map_body = pose_at(stamp_ns)
             if T_map_body is not None:
