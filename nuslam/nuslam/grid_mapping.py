@@ -24,8 +24,9 @@ re-renders the keyframes at these poses (`ScanKeyframes.render`) and writes ``<s
 beside ``map_file`` (`turtlelib.mapping.grid_map_file.save_grid_map`: map_server's trinary format, each
 file written atomically).
 
-Continued mapping: when a grid is saved beside ``map_file`` at start-up, the session continues it (as slam
-continues the landmarks of ``map_file``): the grid starts as the saved one
+Continued mapping: when a grid is saved beside ``map_file`` at start-up, and ``map_file`` is there too (a
+saved map is both: without the file the grid is not continued, said at INFO), the session continues it (as
+slam continues the landmarks of ``map_file``): the grid starts as the saved one
 (`turtlelib.OccupancyGrid.from_grid_map`: its extent and origin, saved free and occupied cells at the
 clamping bounds, unknown ones unobserved), logged at INFO with its file and size and published at once;
 the scans add to it, the keyframes (this session's only) are rendered over it after a loop closure and by
@@ -157,9 +158,9 @@ class GridMapping:
 
     ``T_body_scan`` is the LiDAR mount; ``frames`` the node's ``(map_id, body_id, sensor_id)``;
     ``map_file`` slam's landmark map (empty: none), ``localization``: load the grid beside it instead of
-    mapping (else a grid saved beside it is continued). ValueError for invalid parameters, a ``map_file``
-    ending in ``.yaml`` or ``.pgm``, or a malformed grid file beside it (or, in mapping, one that cannot
-    be continued). The topics come with :meth:`connect`, once the node
+    mapping (else a grid saved beside it is continued, when the map file itself is there). ValueError
+    for invalid parameters, a ``map_file`` ending in ``.yaml`` or ``.pgm``, or a malformed grid file beside
+    it (or, in mapping, one that cannot be continued). The topics come with :meth:`connect`, once the node
     has checked everything else (a node that fails at start-up must not hold subscriptions: their
     callbacks keep it alive).
     """
@@ -179,7 +180,11 @@ class GridMapping:
         enabled = self.topic_config.enabled
         self.yaml_path = grid_yaml_path(map_file) if enabled and map_file else None
         loaded = saved = None
-        if self.yaml_path is not None and self.yaml_path.exists():
+        grid_saved = self.yaml_path is not None and self.yaml_path.exists()
+        if grid_saved and not localization and not Path(map_file).exists():
+            # a saved map is its landmark file and its grid: without the file, mapping starts afresh
+            node.get_logger().info(f"no map file {map_file}: the grid {self.yaml_path} is not continued")
+        elif grid_saved:
             saved = load_grid_map(self.yaml_path)
             verb = "loaded" if localization else "continuing"
             node.get_logger().info(f"{verb} the {saved.width} x {saved.height} cell grid {self.yaml_path}")

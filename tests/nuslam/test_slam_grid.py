@@ -208,6 +208,20 @@ def test_mapping_from_a_saved_map_continues_its_grid_and_saves_both_sessions(ros
     assert np.all(saved.occupancy[rows + offset[1], cols + offset[0]] == 100)
 
 
+def test_a_grid_without_its_map_file_is_not_continued(ros, tmp_path):
+    # a user who deletes the landmark file to map afresh: the grid left beside it is not continued either
+    path, corridor = tmp_path / "lab.json", arena_walls(12.0, 2.5)
+    rig = Rig(ros, observation_timeout=100.0, map_file=str(path), x0=-4.0, **MOUNT)
+    drive_and_scan(rig, Transform2D(-4.0, 0.0, 0.0), corridor)
+    assert call(rig, "save_map").success
+    stop(ros, rig)
+    path.unlink()
+    rig = Rig(ros, observation_timeout=100.0, map_file=str(path), x0=4.0, **MOUNT)
+    message = f"no map file {path}: the grid {tmp_path / 'lab.yaml'} is not continued"
+    assert ros.spin_until(lambda: any(log.msg == message for log in rig.logs), 5.0)
+    assert rig.node.grid.base is None
+
+
 @pytest.mark.parametrize(
     ("edit", "mode", "message"),
     [
