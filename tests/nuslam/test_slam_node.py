@@ -705,12 +705,17 @@ def test_a_restarted_simulator_restarts_the_timeline_after_restart_samples_keepi
     warnings = rig.warnings(at_least=2)
     assert len(warnings) == 2 and "not after" in warnings[0] and "restarted" in warnings[1]
     # and counted in /diagnostics: two samples refused (the third restarted the stream), one restart
-    gate = {status.name: status for status in rig.node.report.statuses(0)}["slam: motion gate"]
-    values = {pair.key: pair.value for pair in gate.values}
+    gate, values = motion_gate_status(rig)
     assert gate.level == DiagnosticStatus.WARN and "restarted" in gate.message
     assert (values["motion_samples_refused"], values["motion_restarts"]) == ("2", "1")
-    gate = {status.name: status for status in rig.node.report.statuses(0)}["slam: motion gate"]
+    gate, _ = motion_gate_status(rig)
     assert gate.level == DiagnosticStatus.OK and "2 joint_states samples refused" in gate.message
+
+
+def motion_gate_status(rig: Rig) -> tuple[DiagnosticStatus, dict[str, str]]:
+    """slam's `slam: motion gate` status as its report makes it now, and its values by key."""
+    gate = {status.name: status for status in rig.node.report.statuses(0)}["slam: motion gate"]
+    return gate, {pair.key: pair.value for pair in gate.values}
 
 
 def test_a_restart_while_driving_keeps_the_motion_up_to_the_newest_sample(ros):

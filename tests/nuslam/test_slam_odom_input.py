@@ -14,7 +14,17 @@ import pytest
 from diagnostic_msgs.msg import DiagnosticStatus
 from nav_msgs.msg import Odometry
 from ros_test_messages import cylinder_array, stamp
-from test_slam_node import LANDMARKS, Rig, S, assert_covariance, close_pose, mapped, pose_of, relative
+from test_slam_node import (
+    LANDMARKS,
+    Rig,
+    S,
+    assert_covariance,
+    close_pose,
+    mapped,
+    motion_gate_status,
+    pose_of,
+    relative,
+)
 
 from nuslam.slam_node import WHEEL_NOISE
 from nuturtle_description.robot_params import burger_params
@@ -136,8 +146,7 @@ def test_an_odometry_silent_for_3_4_s_while_the_robot_drove_on_is_bridged_warned
     )
     warnings = rig.warnings(at_least=2)
     assert len(warnings) == 2 and "odom refused" in warnings[0] and "bridged" in warnings[1]
-    gate = {status.name: status for status in rig.node.report.statuses(0)}["slam: motion gate"]
-    values = {pair.key: pair.value for pair in gate.values}
+    gate, values = motion_gate_status(rig)
     assert gate.level == DiagnosticStatus.WARN and "1 silences bridged" in gate.message
     assert (values["motion_silences_bridged"], values["motion_longest_bridge_s"]) == ("1", "3.4")
     assert values["motion_restarts"] == "0"
