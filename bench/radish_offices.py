@@ -10,7 +10,7 @@ estimate.tum, odometry.tum, reference.tum for evo, map.yaml, grid.png, ...) and 
 --out/<name>.log. Prints one markdown table and writes it to --out/results.md.
 
 Usage: python -P bench/radish_offices.py [FOLDER ...] [--max-range-m 3.5] [--out DIR] [--rate R]
-       [--no-scan-registration] [--no-loop-closure] [--smooth]
+       [--no-scan-registration] [--loop-closure] [--smooth]
 """
 
 from __future__ import annotations
@@ -94,12 +94,7 @@ def main() -> None:
         action="store_false",
         help="slam with scan_registration: false (the motion input alone between landmarks)",
     )
-    parser.add_argument(
-        "--no-loop-closure",
-        dest="loop_closure",
-        action="store_false",
-        help="slam with loop_closure: false (LiDAR odometry alone between landmarks)",
-    )
+    parser.add_argument("--loop-closure", action="store_true", help="slam with loop_closure: true")
     parser.add_argument(
         "--smooth",
         action="store_true",

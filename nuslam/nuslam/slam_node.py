@@ -13,9 +13,10 @@ Motion (`motion_source`, `scan_registration`)
     as its prior (`nuslam.scan_odometry`, `turtlelib.LidarOdometry`, parameters `registration.*`), and
     the filter predicts with the registered motion and its covariance (`turtlelib.MeasuredMotion`): the
     pose rests on the walls and furniture wherever the scans see any, on the wheels where they do not.
-    With `loop_closure` (on by default, docs/loop_closure.md) the registered scans' keyframes also close
-    loops on a revisit (`nuslam.loop_closing`, parameters `loops.*`): the filter moves by the correction,
-    the grid is drawn again at the corrected poses.
+    With `loop_closure` (off by default: each correction is a jump in the published pose,
+    docs/loop_closure.md) the registered scans' keyframes also close loops on a revisit
+    (`nuslam.loop_closing`, parameters `loops.*`): the filter moves by the correction, the grid is drawn
+    again at the corrected poses.
 Maps (`map_file`, `mode`)
     `map_file` (a `turtlelib.mapping.landmark_map` JSON file) is loaded at start-up when it exists; in `mode:
     localization` it must, and its landmarks stay fixed (a Schmidt update: only the pose is estimated,
@@ -268,7 +269,7 @@ class SlamNodeConfig:
     map_file: str = ""
     observation_timeout: float = 3.0
     scan_registration: bool = True
-    loop_closure: bool = True
+    loop_closure: bool = False
     smooth_saved_map: bool = False
 
     def __post_init__(self) -> None:

@@ -263,11 +263,10 @@ def test_remapped_scan_without_ground_truth_gives_counts_but_no_accuracy(live, t
     # loops it closed, its slip recovery; no landmark called spurious
     mapped = len(load_map(out / "map.json").ids)
     assert metrics["slam_mode"] == "mapping" and metrics["map_landmarks"] == mapped > 0
-    held, relocalized, loops = (
-        metrics[f"slam_{k}"] for k in ("scans_held", "relocalizations", "loops_closed")
-    )
+    held, relocalized = (metrics[f"slam_{k}"] for k in ("scans_held", "relocalizations"))
+    assert "slam_loops_closed" not in metrics  # loop closure is off by default
     assert (
-        f"slam: mapping, {mapped} landmarks mapped, {loops} loops closed, {relocalized} relocalizations "
+        f"slam: mapping, {mapped} landmarks mapped, loop closure off, {relocalized} relocalizations "
         f"after slip, {held} scans held"
     ) in stdout
     assert "spurious" not in stdout
