@@ -99,6 +99,11 @@ class LandmarksNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__("landmarks", **kwargs)
+        self.build()
+
+    def build(self) -> None:
+        """Read the parameters (ValueError for an invalid one), build the detector, then the topics and
+        timer: at construction, or at configure for `landmarks_managed` (`nuslam.managed_nodes`)."""
         self.config = declare_dataclass(self, DetectorConfig)
         self.detector = LandmarkDetector(self.config)
         self._landmarks_publisher = self.create_publisher(MarkerArray, "landmarks", 10)

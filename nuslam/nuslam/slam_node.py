@@ -291,6 +291,12 @@ class SlamNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__("slam", **kwargs)
+        self.build()
+
+    def build(self) -> None:
+        """Read the parameters (ValueError for an invalid one), build the filter and its parts, then the
+        topics, services and timer: at construction, or at configure for `slam_managed`
+        (`nuslam.managed_nodes`)."""
         self.node_config = frames = declare_dataclass(self, SlamNodeConfig)
         robot = declare_robot(self)
         self._warnings = SourceWarnings(self.get_logger())

@@ -89,6 +89,20 @@ class SafeStop(Protocol):
         :func:`run_node`, while the context is still up."""
 
 
+@runtime_checkable
+class Finalizable(Protocol):
+    """A node that can end its own life (a managed node's lifecycle shutdown)."""
+
+    @property
+    def finalized(self) -> bool:
+        """True once the node has nothing left to do: its process's spin loop ends."""
+
+
+def all_finalized(nodes: Sequence[Node]) -> bool:
+    """True when every node of ``nodes`` is :class:`Finalizable` and finalized."""
+    return all(isinstance(node, Finalizable) and node.finalized for node in nodes)
+
+
 def effective_parameters(node: Node) -> str:
     """``name=value`` of every parameter of ``node``, sorted by name, one line."""
     parameters = node.get_parameters_by_prefix("")
@@ -121,15 +135,15 @@ def spin_once_guarded(executor: Executor, logger: RcutilsLogger, timeout_sec: fl
 
 
 def spin_guarded(nodes: Sequence[Node], stop: StopSignals) -> None:
-    """Spin ``nodes`` (one context) in one EventsExecutor until the context shuts down or ``stop`` has
-    received a signal, every step guarded by :func:`spin_once_guarded` (logging on the first node's
-    logger) and waiting at most ``SPIN_PERIOD_S``."""
+    """Spin ``nodes`` (one context) in one EventsExecutor until the context shuts down, ``stop`` has
+    received a signal or every node is finalized (:func:`all_finalized`), every step guarded by
+    :func:`spin_once_guarded` (logging on the first node's logger) and waiting at most ``SPIN_PERIOD_S``."""
     context = nodes[0].context
     executor = EventsExecutor(context=context)
     for node in nodes:
         executor.add_node(node)
     try:
-        while context.ok() and stop.received is None:
+        while context.ok() and stop.received is None and not all_finalized(nodes):
             spin_once_guarded(executor, nodes[0].get_logger(), timeout_sec=SPIN_PERIOD_S)
     finally:
         executor.shutdown()
