@@ -34,6 +34,8 @@ setup(
             "slam = nuslam.slam_node:main",
             "robot_side = nuslam.robot_side:main",
             "slam_side = nuslam.slam_side:main",
+            "slam_managed = nuslam.managed_nodes:slam_main",
+            "landmarks_managed = nuslam.managed_nodes:landmarks_main",
         ],
     },
 )

@@ -73,14 +73,16 @@ class ManagedNode(LifecycleNode):
 
     @property
     def finalized(self) -> bool:
-        """True once the node has shut down (lifecycle state finalized): its process has nothing left to do."""
+        """True once the node has shut down (lifecycle state finalized): its process has nothing to do."""
         return self._finalized
 
     # --- transitions -------------------------------------------------------------------------------------
 
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         self._unbuilt = set(vars(self))
-        self._entities_before = {kind: {id(e) for e in entities} for kind, entities in self._entities().items()}
+        self._entities_before = {
+            kind: {id(e) for e in entities} for kind, entities in self._entities().items()
+        }
         self._building = True
         try:
             self.build()  # type: ignore[attr-defined]  # the plain node's, next in the bases
@@ -89,7 +91,9 @@ class ManagedNode(LifecycleNode):
             self._drop()
             return TransitionCallbackReturn.FAILURE
         except Exception as error:
-            self.get_logger().error(f"configure raised {type(error).__name__}: {error}\n{traceback.format_exc()}")
+            self.get_logger().error(
+                f"configure raised {type(error).__name__}: {error}\n{traceback.format_exc()}"
+            )
             self._drop()
             return TransitionCallbackReturn.ERROR
         finally:
@@ -157,7 +161,9 @@ class ManagedNode(LifecycleNode):
             return self.create_lifecycle_publisher(*args, **kwargs)
         return super().create_publisher(*args, **kwargs)
 
-    def create_subscription(self, msg_type: Any, topic: str, callback: Callable[[Any], None], *args, **kwargs):
+    def create_subscription(
+        self, msg_type: Any, topic: str, callback: Callable[[Any], None], *args, **kwargs
+    ):
         """A subscription whose ``callback`` runs only while the node is active."""
         return super().create_subscription(msg_type, topic, self._gated(callback), *args, **kwargs)
 
@@ -201,4 +207,3 @@ class ManagedNode(LifecycleNode):
             )
             return SetParametersResult(successful=False, reason=reason)
         return SetParametersResult(successful=True)
-
