@@ -1,4 +1,5 @@
 """`landmarks`: cylinders found in each LiDAR scan (a thin wrapper over `turtlelib.LandmarkDetector`).
+`landmarks_managed` runs it as a managed (lifecycle) node (`nuslam.managed_nodes`).
 
 Subscribes
     `scan` (sensor_msgs/LaserScan, sensor-data QoS as the LDS-01 publishes it).

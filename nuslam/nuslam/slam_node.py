@@ -3,7 +3,8 @@ landmark observations (a thin wrapper over turtlelib).
 
 The filter is `turtlelib.EkfSlam`; `turtlelib.SlamTimeline` brings it to each observation's stamp before
 the observation is applied (the motion interpolated between motion samples), so observations that arrive
-late (up to `max_observation_delay`) are still applied at the pose they were taken from.
+late (up to `max_observation_delay`) are still applied at the pose they were taken from. `slam_managed` runs
+this node as a managed (lifecycle) node for a lifecycle manager (`nuslam.managed_nodes`).
 
 Motion (`motion_source`, `scan_registration`)
     `joint_states` (default): the wheel angles through `turtlelib.DiffDriveMotion` (`wheel_noise`);

@@ -12,8 +12,9 @@ running (a callback then fails on a dead context), and re-raise SIGINT as a ``Ke
 the main thread is (a traceback and exit code -2 when a second SIGINT lands in the shutdown). A second
 signal while the node stops is ignored, and every stop signal once it has stopped; a signal whose
 disposition is SIG_IGN at start-up (``nohup``, a background job of a script) stays ignored. Exit codes: 0
-stopped (a signal, or the context shut down), 1 could not start (an invalid parameter, a port in use) or
-could not stop (below), 2 a bad command line (argparse's usage error).
+stopped (a signal, the context shut down, or a managed node's lifecycle shutdown: :class:`Finalizable`),
+1 could not start (an invalid parameter, a port in use) or could not stop (below), 2 a bad command line
+(argparse's usage error).
 
 Bounded: from the moment a node starts stopping, the process is gone within ``STOP_DEADLINE_S`` (or the
 seconds the environment variable ``NUTURTLE_STOP_DEADLINE_S`` gives, for a launch or container whose own
