@@ -12,11 +12,12 @@ so both are one code (ROS 2's node lifecycle, design.ros2.org/articles/node_life
     stays unconfigured, the process runs on. Any other exception is logged with its traceback and the
     transition ends in ERROR, which drops the same and returns to unconfigured.
 ``activate`` (inactive -> active)
-    Publishers publish and subscription and timer callbacks run.
+    Publishers publish, subscription and timer callbacks run.
 ``deactivate`` (active -> inactive)
     Publishers created in ``build`` are lifecycle publishers and drop what is published while inactive;
-    subscription and timer callbacks return at once (the messages are not taken). The node's state is
-    kept, and its services answer as in the active state.
+    the callbacks of the subscriptions and timers it created return at once (the messages are not taken;
+    rclpy's own, such as the /clock of sim time, go on). The node's state is kept, and its services
+    answer as in the active state.
 ``cleanup`` (inactive -> unconfigured)
     Every publisher, subscription, timer, service and client ``build`` created is destroyed and every
     attribute it set is deleted: the state is gone, as before the first configure.
@@ -52,7 +53,8 @@ from .node_main import effective_parameters
 class ManagedNode(LifecycleNode):
     """The lifecycle plumbing (module docstring); the class after it in the bases provides ``build()``."""
 
-    # while build() runs: what it creates is managed, what it declares is kept across cleanups
+    # while build() runs: what it creates is managed, what it declares is kept across cleanups (a class
+    # attribute too: Node.__init__ declares use_sim_time, and may subscribe to /clock, before ours runs)
     _building = False
 
     def __init__(self, node_name: str, **kwargs: Any) -> None:
@@ -164,14 +166,19 @@ class ManagedNode(LifecycleNode):
     def create_subscription(
         self, msg_type: Any, topic: str, callback: Callable[[Any], None], *args, **kwargs
     ):
-        """A subscription whose ``callback`` runs only while the node is active."""
+        """When ``build()`` creates it, a subscription whose ``callback`` runs only while the node is active
+        (rclpy's own, such as the /clock of sim time, always run)."""
         return super().create_subscription(msg_type, topic, self._gated(callback), *args, **kwargs)
 
     def create_timer(self, timer_period_sec: float, callback: Callable[[], None], *args, **kwargs):
-        """A timer whose ``callback`` runs only while the node is active."""
+        """When ``build()`` creates it, a timer whose ``callback`` runs only while the node is active."""
         return super().create_timer(timer_period_sec, self._gated(callback), *args, **kwargs)
 
     def _gated(self, callback: Callable[..., None]) -> Callable[..., None]:
+        """``callback`` run only while active, for what ``build()`` creates; else ``callback`` itself."""
+        if not self._building:
+            return callback
+
         def gated(*args: Any) -> None:
             if self._active:
                 callback(*args)
