@@ -27,8 +27,8 @@ import numpy as np
 from nuturtle_demo.driver import RouteConfig
 from nuturtle_demo.run import DemoOptions, default_world, run_demo, seen_walls, world_outline
 from nuturtle_eval.grid_score import score_grid
-from nuturtle_eval.metrics import PoseSeries
 from nuturtle_eval.run_evaluation import REFERENCE_TUM
+from nuturtle_eval.tum import read_tum
 from turtlelib.mapping.grid_map_file import load_grid_map
 from turtlelib.mapping.landmark_map import load_map
 
@@ -57,17 +57,13 @@ def run(options: DemoOptions):
     return run_demo(options, keep), held["system"]
 
 
-def true_path(out_dir: Path) -> PoseSeries:
-    """The run's true poses from its reference.tum (TUM: ``t x y z qx qy qz qw``, a planar rotation's
-    quaternion ``(0, 0, sin(theta / 2), cos(theta / 2))``)."""
-    t_s, x, y, _, _, _, qz, qw = np.loadtxt(out_dir / REFERENCE_TUM, ndmin=2).T
-    return PoseSeries(t_s, np.column_stack([x, y, 2.0 * np.arctan2(qz, qw)]))
-
-
 def grid_row(out_dirs: list[Path], systems) -> tuple[float, float]:
     """(walls found, false occupied) of the last run's final grid against the walls all the runs saw."""
     seen = np.vstack(
-        [seen_walls(system, true_path(out)) for out, system in zip(out_dirs, systems, strict=True)]
+        [
+            seen_walls(system, read_tum(out / REFERENCE_TUM))
+            for out, system in zip(out_dirs, systems, strict=True)
+        ]
     )
     score = score_grid(load_grid_map(out_dirs[-1] / "map.yaml"), world_outline(systems[-1]), seen)
     return score.walls_found, score.false_occupied
@@ -131,7 +127,7 @@ def main() -> None:
         )
         print(f"session 1's {len(map1.ids)} landmarks kept: {int(kept.sum())} (ids {map1.ids.tolist()} -> "
               f"{map2.ids.tolist()}), moved at most {max(moved, default=0.0) * 1000:.1f} mm; closest pair "
-              f"in the final map {gaps.min():.3f} m", flush=True)  # fmt: skip
+              f"in the final map {gaps.min(initial=np.inf):.3f} m", flush=True)  # fmt: skip
 
 
 if __name__ == "__main__":
