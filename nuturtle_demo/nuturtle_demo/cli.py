@@ -90,6 +90,10 @@ def build_parser() -> argparse.ArgumentParser:
                       "given in localization")  # fmt: skip
     maps.add_argument("--route-radius", type=float, default=None,
                       help="the figure eight's loop radius (m) instead of the driver's 0.75")  # fmt: skip
+    maps.add_argument("--route-start", type=float, default=0.0, metavar="S",
+                      help="begin the figure eight S s into its route, the robot placed at the route's "
+                      "pose there: continues a run that printed 'route: stopped S s in' (not with "
+                      "--start)")  # fmt: skip
     return parser
 
 
@@ -101,6 +105,7 @@ def report(result: DemoResult, options: DemoOptions) -> str:
         + ("" if options.map_file is None else f", map file {options.map_file}")
         + ("" if options.start is None else f", start {tuple(options.start)}"),
         "" if result.route is None else result.route.describe(),
+        _route_line(result.route_time_s),
         ""
         if result.interrupted is None
         else f"INCOMPLETE: interrupted by {result.interrupted} after {result.metrics.sim_seconds:.1f} of "
@@ -116,6 +121,10 @@ def report(result: DemoResult, options: DemoOptions) -> str:
         success, message = result.saved_map
         lines.append(f"save_map: {'ok' if success else 'FAILED'}: {message}")
     return "\n".join(line for line in lines if line is not None)
+
+
+def _route_line(route_time_s: float) -> str:
+    return f"route: stopped {route_time_s:.1f} s in (--route-start {route_time_s:.1f} goes on from there)"
 
 
 def _grid_rows(result: DemoResult) -> list[Row]:
@@ -143,6 +152,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             start=args.start,
             initial_pose_std=tuple(args.initial_pose_std),
             route_radius=args.route_radius,
+            route_start_s=args.route_start,
             foxglove=foxglove,
             domain_id=args.domain_id,
         )

@@ -13,6 +13,9 @@ so the reference is back at the start pose after each loop and turns the other w
 wheel speeds on a grid of ``1 / motor_cmd_per_rad_sec`` rad/s, so the reference uses the nearest wheel
 speeds on that grid (:class:`FigureEight`): driven open loop, its loops close up to wheel slip.
 The robot first stands still for ``start_delay`` s (the estimators see the start from a known pose).
+With ``route_start_s`` > 0 the route begins that far in, ``tau = route_start_s + (t - t_0 - start_delay)``:
+a run that drove the route for ``route_start_s`` s and stopped is continued by a new run started at the
+pose it stopped at (docs/maps.md, "Continuing over sessions").
 
 Tracking (Kanayama et al. 1990)
 -------------------------------
@@ -22,8 +25,11 @@ T_start_ref``, the error in the body frame ``[e_x, e_y, e_theta] = T_map_body^-1
     v = v_ref cos(e_theta) + k_x e_x
     w = w_ref + v_ref (k_y e_y + k_theta sin(e_theta))
 
-(asymptotically stable for k_x, k_y, k_theta > 0 and v_ref > 0). ``T_map_start`` is the first pose
-received; until then, or with ``feedback`` false, the reference twist is sent as it is (open loop).
+(asymptotically stable for k_x, k_y, k_theta > 0 and v_ref > 0). ``T_map_start`` is the route's start:
+the first pose received ``T_map_first`` composed back along the route already driven,
+``T_map_start = T_map_first @ T_start_ref(route_start_s)^-1`` (the first pose itself when the route begins
+at its start); until a pose arrives, or with ``feedback`` false, the reference twist is sent as it is
+(open loop).
 Feeding back the SLAM pose keeps the true robot on the figure eight while wheel odometry drifts: in the
 default world (cylinders 0.75 m to 1.85 m from the centre, start at the origin facing +x) a radius of
 0.75 m keeps the robot's disc about 0.45 m clear of every cylinder and brings every cylinder within
@@ -65,7 +71,8 @@ from turtlelib.util.validation import non_negative, positive, store
 class RouteConfig:
     """The figure eight: loop ``radius`` (m), linear ``velocity`` (m/s), command ``rate`` (Hz), all
     finite and > 0; ``start_delay`` (s, >= 0) standing still first; tracking gains ``k_x`` (1/s),
-    ``k_y`` (1/m^2), ``k_theta`` (1/m), finite and >= 0; ``feedback``: track the `slam/odom` pose."""
+    ``k_y`` (1/m^2), ``k_theta`` (1/m), finite and >= 0; ``feedback``: track the `slam/odom` pose;
+    ``route_start_s`` (s, finite, >= 0) how far into the route the driver begins (module docstring)."""
 
     radius: float = 0.75
     velocity: float = 0.14
@@ -75,10 +82,11 @@ class RouteConfig:
     k_y: float = 25.0
     k_theta: float = 10.0
     feedback: bool = True
+    route_start_s: float = 0.0
 
     def __post_init__(self) -> None:
         store(self, ("radius", "velocity", "rate"), positive)
-        store(self, ("start_delay", "k_x", "k_y", "k_theta"), non_negative)
+        store(self, ("start_delay", "k_x", "k_y", "k_theta", "route_start_s"), non_negative)
 
 
 @dataclass(frozen=True)
@@ -150,6 +158,8 @@ class FigureEightDriver(Node):
         self._t_start_s: float | None = None
         self.T_map_start: Transform2D | None = None
         self.T_map_body: Transform2D | None = None
+        # s into the route of the last command (route_start_s while standing still)
+        self.route_time_s = self.config.route_start_s
         self.stopped = False
         if self.config.feedback:
             self.create_subscription(Odometry, "slam/odom", self._on_pose, 10)
@@ -162,7 +172,8 @@ class FigureEightDriver(Node):
             self.get_logger().warning(f"slam/odom skipped: {error}", throttle_duration_sec=2.0)
             return
         if self.T_map_start is None:
-            self.T_map_start = self.T_map_body
+            # T_map_start = T_map_first @ T_start_ref(route_start_s)^-1
+            self.T_map_start = self.T_map_body @ self.route.reference(self.config.route_start_s).inverse()
 
     def _on_timer(self) -> None:
         if self.stopped:
@@ -170,10 +181,12 @@ class FigureEightDriver(Node):
         t_s = self.get_clock().now().nanoseconds * 1e-9
         if self._t_start_s is None:
             self._t_start_s = t_s
-        tau_s = t_s - self._t_start_s - self.config.start_delay
-        if tau_s < 0.0:
+        driven_s = t_s - self._t_start_s - self.config.start_delay
+        if driven_s < 0.0:
             self._publisher.publish(Twist())
             return
+        tau_s = self.config.route_start_s + driven_s
+        self.route_time_s = tau_s
         V_ref = self.route.body_twist(tau_s)
         if self.T_map_start is not None and self.T_map_body is not None:
             T_map_ref = self.T_map_start @ self.route.reference(tau_s)

@@ -41,6 +41,7 @@ import numpy as np
 import rclpy
 import yaml
 from geometry_msgs.msg import PoseWithCovarianceStamped
+from numpy.typing import NDArray
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
@@ -54,7 +55,7 @@ from nuturtle_control.odometry import OdometryNode
 from nuturtle_control.turtle_control import TurtleControlNode
 from nuturtle_description.robot_params import resolve_model
 from nuturtle_eval.grid_score import GridScore, WorldOutline, score_grid, seen_points
-from nuturtle_eval.metrics import RunMetrics, odom_in_world
+from nuturtle_eval.metrics import PoseSeries, RunMetrics, odom_in_world
 from nuturtle_eval.run_evaluation import (
     GRID_OUTPUTS,
     MAPPING_SCOPE,
@@ -86,9 +87,9 @@ from nuturtle_tools.relay_config import RelayConfig, check_port_free
 from nuturtle_tools.staged_run import run_staged
 from turtlelib import MODES, Transform2D, TwistNoise, normalize_angle
 from turtlelib.mapping.landmark_map import load_map
-from turtlelib.util.validation import finite_real, integer, one_of, positive, store
+from turtlelib.util.validation import finite_real, integer, non_negative, one_of, positive, store
 
-from .driver import FigureEightDriver, RouteConfig
+from .driver import FigureEight, FigureEightDriver, RouteConfig
 from .lockstep import Pace, run_cycle
 from .matched_noise import matched_point_std, matched_wheel_noise
 from .route_fit import FittedRoute, fit_route
@@ -133,7 +134,9 @@ class DemoOptions:
     is given the true start pose through `initialpose` with standard deviations ``initial_pose_std``
     (m, m, rad, > 0)); ``save_map`` calls slam's ``~/save_map`` at the end (needs ``map_file``);
     ``start`` (x0, y0, theta0) (m, m, rad, finite) replaces the world's true start pose;
-    ``route_radius`` (m, > 0) replaces the driver's figure-eight loop radius.
+    ``route_radius`` (m, > 0) replaces the driver's figure-eight loop radius; ``route_start_s`` (s, >= 0)
+    begins the figure eight that far into its route, the robot (nusim's true start, slam's start) at the
+    route's pose there: the next session of a run that stopped there (not with ``start``).
 
     ``foxglove`` (host, port) serves every topic live on a Foxglove WebSocket there (docs/live.md; with
     ``realtime`` it plays at robot speed). ``domain_id`` the run's DDS world: ``"private"`` (no other ROS
@@ -156,6 +159,7 @@ class DemoOptions:
     start: tuple[float, float, float] | None = None
     initial_pose_std: tuple[float, float, float] = (0.05, 0.05, 0.05)
     route_radius: float | None = None
+    route_start_s: float = 0.0
     foxglove: tuple[str, int] | None = None
     domain_id: DomainChoice = PRIVATE
 
@@ -184,6 +188,9 @@ class DemoOptions:
         )
         if self.route_radius is not None:
             store(self, ("route_radius",), positive)
+        store(self, ("route_start_s",), non_negative)
+        if self.route_start_s > 0.0 and self.start is not None:
+            raise ValueError("route_start_s places the robot on the route: give it or start, not both")
         if self.map_file is not None:
             object.__setattr__(self, "map_file", Path(self.map_file))
         if self.save_map and self.map_file is None:
@@ -211,7 +218,9 @@ class DemoResult:
     whole duration; ``saved_map``: slam's ``~/save_map`` answer (success, message) with ``save_map``, else
     None; ``grid_score``: slam's occupancy grid against the world's true walls (:func:`grid_score`), None
     without a grid; ``scope``: what kind of run it was, which decides the targets that apply to it;
-    ``route``: the driver's figure eight as fitted to the world and the model (None with a given radius)."""
+    ``route``: the driver's figure eight as fitted to the world and the model (None with a given radius);
+    ``route_time_s``: how far into the figure eight's route the driver got (s; ``route_start_s`` of a
+    run that continues this one)."""
 
     metrics: RunMetrics
     out_dir: Path
@@ -222,6 +231,7 @@ class DemoResult:
     grid_score: GridScore | None = None
     scope: RunScope = MAPPING_SCOPE
     route: FittedRoute | None = None
+    route_time_s: float = 0.0
 
 
 class DemoSystem:
@@ -245,23 +255,27 @@ class DemoSystem:
         # placed elsewhere in the world (nusim started there) when none fits at the world's start
         self.route: FittedRoute | None = None
         radius_m = options.route_radius
+        simulation = self.nusim.simulation.config
+        T_route_start = simulation.arena.T_world_start
         if radius_m is None:
             try:
-                self.route = fit_route(
-                    self.nusim.simulation.config, RouteConfig(), place=options.start is None
-                )
+                self.route = fit_route(simulation, RouteConfig(), place=options.start is None)
             except ValueError as error:
                 self.nusim.destroy_node()
                 raise ValueError(f"model {options.model} in world {options.world}: {error}") from None
             radius_m = self.route.radius_m
-            if self.route.moved:
-                self.nusim.destroy_node()
-                T_start = self.route.T_world_start
-                world.update(x0=T_start.x, y0=T_start.y, theta0=T_start.theta)
-                self.nusim = NusimNode(
-                    stepped_by_owner=True, context=context, parameter_overrides=to_parameters(world)
-                )
-        route = {"radius": radius_m}
+            T_route_start = self.route.T_world_start
+        route = {"radius": radius_m, "route_start_s": options.route_start_s}
+        # a continued route starts the robot where the route is route_start_s in:
+        # T_world_robot = T_world_route_start @ T_start_ref(route_start_s)
+        loop = FigureEight.for_robot(RouteConfig(**route), simulation.robot)
+        T_start = T_route_start @ loop.reference(options.route_start_s)
+        if T_start != simulation.arena.T_world_start:
+            self.nusim.destroy_node()
+            world.update(x0=T_start.x, y0=T_start.y, theta0=T_start.theta)
+            self.nusim = NusimNode(
+                stepped_by_owner=True, context=context, parameter_overrides=to_parameters(world)
+            )
         self.monitor = RunMonitor(context=context, parameter_overrides=sim_time)
         self.driver = FigureEightDriver(context=context, parameter_overrides=robot + to_parameters(route))
         self.turtle_control = TurtleControlNode(context=context, parameter_overrides=robot)
@@ -541,6 +555,7 @@ class _DemoRun:
                     slip_fraction=system.nusim.simulation.config.noise.slip_fraction,
                 ),
                 system.route,
+                system.driver.route_time_s,
             )
         finally:
             try:
@@ -583,16 +598,31 @@ def _run_record(system: DemoSystem, options: DemoOptions) -> RunRecord:
 
 def grid_score(system: DemoSystem, record: RunRecord) -> GridScore | None:
     """slam's final occupancy grid scored against everything solid in nusim's world
-    (:mod:`nuturtle_eval.grid_score`), the walls seen being where the LiDAR's exact beams end from the true
-    poses at the scan rate (its nominal beams, the robot's mount); None without a grid or a true pose."""
+    (:mod:`nuturtle_eval.grid_score`), the walls seen being those of :func:`seen_walls`; None without a
+    grid or a true pose."""
     grid = record.snapshot.grid
-    if grid is None or record.truth is None or len(record.truth) < 2:
+    seen_xy = seen_walls(system, record.truth)
+    if grid is None or seen_xy is None:
+        return None
+    return score_grid(grid, world_outline(system), seen_xy)
+
+
+def world_outline(system: DemoSystem) -> WorldOutline:
+    """Everything solid in nusim's world (:class:`nuturtle_eval.grid_score.WorldOutline`)."""
+    world = system.nusim.simulation.world
+    return WorldOutline(world.segments, world.circles)
+
+
+def seen_walls(system: DemoSystem, truth: PoseSeries | None) -> NDArray[np.float64] | None:
+    """Where the LiDAR's exact beams (its nominal beams, the robot's mount) end on the world's outline from
+    the true poses ``truth`` at the scan rate (:func:`nuturtle_eval.grid_score.seen_points`), (N, 2) (m);
+    None without two true poses."""
+    if truth is None or len(truth) < 2:
         return None
     simulation = system.nusim.simulation
-    world, lidar = simulation.world, simulation.config.lidar
-    outline = WorldOutline(world.segments, world.circles)
-    t_s = np.arange(record.truth.t_s[0], record.truth.t_s[-1], 1.0 / system.nusim.timing.scan_rate)
+    lidar = simulation.config.lidar
+    t_s = np.arange(truth.t_s[0], truth.t_s[-1], 1.0 / system.nusim.timing.scan_rate)
     T_body_scan = simulation.config.robot.T_body_scan
     # T_world_scan = T_world_body @ T_body_scan
-    T_world_scans = [Transform2D(*pose) @ T_body_scan for pose in record.truth.interpolate(t_s)]
-    return score_grid(grid, outline, seen_points(outline, T_world_scans, lidar.angles(), lidar.range_max))
+    T_world_scans = [Transform2D(*pose) @ T_body_scan for pose in truth.interpolate(t_s)]
+    return seen_points(world_outline(system), T_world_scans, lidar.angles(), lidar.range_max)

@@ -35,3 +35,18 @@ def write_tum(path: Path, series: PoseSeries) -> Path:
     path = Path(path)
     path.write_text(tum_lines(series), encoding="utf-8")
     return path
+
+
+def read_tum(path: Path) -> PoseSeries:
+    """The planar poses of a TUM file (module docstring): ``theta = 2 atan2(qz, qw)`` of each line's
+    quaternion (its rotation about z; ``qx``, ``qy`` and ``z`` are not read). ValueError for a file that
+    is not 8 numbers a line, or whose stamps do not increase."""
+    path = Path(path)
+    try:
+        table = np.loadtxt(path, comments="#", ndmin=2)
+    except ValueError as error:
+        raise ValueError(f"{path}: not a TUM trajectory: {error}") from None
+    if table.shape[1:] != (8,):
+        raise ValueError(f"{path}: a TUM line has 8 numbers, these have {table.shape[1]}")
+    t_s, x, y, _, _, _, qz, qw = table.T
+    return PoseSeries(t_s, np.column_stack([x, y, 2.0 * np.arctan2(qz, qw)]))

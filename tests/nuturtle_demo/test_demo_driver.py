@@ -24,7 +24,7 @@ def test_route_config_rejects_bad_values(field, bad):
         RouteConfig(**{field: bad})
 
 
-@pytest.mark.parametrize("field", ["start_delay", "k_x", "k_y", "k_theta"])
+@pytest.mark.parametrize("field", ["start_delay", "k_x", "k_y", "k_theta", "route_start_s"])
 @pytest.mark.parametrize("bad", [-1.0, math.inf, math.nan])
 def test_route_config_rejects_bad_delay_and_gains(field, bad):
     with pytest.raises(ValueError, match=field):
@@ -166,3 +166,37 @@ def test_closed_loop_driver_steers_back_onto_the_route(ros):
     # turning right of the feed-forward: w = w_ref + v k_y e_y with e_y = -0.1 m (k_x e_x is small)
     V_ref = driver.route.left_loop
     assert received[-1].angular.z < V_ref.omega - 0.5 * V_ref.vx * driver.config.k_y * 0.1
+
+
+@pytest.mark.ros
+def test_driver_continues_a_route_from_where_it_stopped(ros):
+    """route_start_s 1.25 loops in: the route's start is the first pose composed back along the route
+    driven, and the first command is the second (clockwise) loop's."""
+    period = FigureEight.for_robot(RouteConfig(), burger_params()).loop_period_s
+    driver = ros.add(FigureEightDriver(context=ros.context, parameter_overrides=[
+        Parameter("use_sim_time", value=True), Parameter("start_delay", value=0.0),
+        Parameter("route_start_s", value=1.25 * period), Parameter("model", value="burger"),
+    ]))  # fmt: skip
+    helper = ros.node("helper")
+    received = []
+    helper.create_subscription(Twist, "cmd_vel", received.append, 10)
+    clock = helper.create_publisher(Clock, "/clock", 10)
+    poses = helper.create_publisher(Odometry, "slam/odom", 10)
+    assert ros.spin_until(
+        lambda: helper.count_subscribers("/clock") >= 1 and helper.count_subscribers("slam/odom") >= 1, 5.0
+    )
+    T_map_route = Transform2D(0.3, -0.2, 0.4)
+    # where the route is 1.25 loops in: a quarter into the clockwise loop
+    T_map_first = T_map_route @ driver.route.reference(1.25 * period)
+    msg = Odometry()
+    msg.pose.pose = pose_from_transform(T_map_first)
+    poses.publish(msg)
+    assert ros.spin_until(lambda: driver.T_map_start is not None, 5.0)
+    start = driver.T_map_start
+    assert (start.x, start.y, start.theta) == pytest.approx((0.3, -0.2, 0.4), abs=1e-9)
+    clock.publish(Clock(clock=stamp_from_seconds(1.0)))
+    assert ros.spin_until(lambda: len(received) > 0, 5.0)
+    # on the route: the clockwise loop's feed-forward, nothing to correct
+    assert received[-1].angular.z == pytest.approx(-driver.route.left_loop.omega, abs=1e-6)
+    assert received[-1].linear.x == pytest.approx(driver.route.left_loop.vx, abs=1e-6)
+    assert driver.route_time_s == pytest.approx(1.25 * period)

@@ -15,7 +15,7 @@ from evo.tools import file_interface
 
 from nuturtle_eval.metrics import PoseSeries, ate_rmse_aligned
 from nuturtle_eval.relative_error import relative_pose_error
-from nuturtle_eval.tum import write_tum
+from nuturtle_eval.tum import read_tum, write_tum
 from turtlelib import Transform2D
 
 STEP_M = 0.1
@@ -98,3 +98,17 @@ def test_the_rpe_of_a_narrow_band_is_evo_s_all_pairs_rpe_at_that_distance(evo_pa
     assert translation > 0.01 and rotation > 0.1
     assert ours.translation_m == pytest.approx(translation, abs=TOLERANCE_M)
     assert ours.rotation_deg == pytest.approx(rotation, abs=TOLERANCE_DEG)
+
+
+def test_read_tum_reads_the_planar_poses_evo_writes(tmp_path):
+    reference, _ = _loop_pair(n=50)
+    ref = file_interface.read_tum_trajectory_file(str(write_tum(tmp_path / "ours.tum", reference)))
+    file_interface.write_tum_trajectory_file(str(tmp_path / "evo.tum"), ref)
+    read = read_tum(tmp_path / "evo.tum")
+    np.testing.assert_allclose(read.t_s, reference.t_s, rtol=0.0, atol=1e-6)
+    np.testing.assert_allclose(read.poses[:, :2], reference.poses[:, :2], rtol=0.0, atol=TOLERANCE_M)
+    heading_error = np.angle(np.exp(1j * (read.poses[:, 2] - reference.poses[:, 2])))
+    np.testing.assert_allclose(heading_error, 0.0, atol=np.deg2rad(TOLERANCE_DEG))
+    (tmp_path / "bad.tum").write_text("1.0 2.0 3.0\n", encoding="utf-8")
+    with pytest.raises(ValueError, match="8 numbers"):
+        read_tum(tmp_path / "bad.tum")
