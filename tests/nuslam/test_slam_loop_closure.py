@@ -72,7 +72,7 @@ def test_a_revisit_closes_the_loop_and_brings_the_drifted_pose_back(ros):
         loop_closure=True,
         x0=0.6,
         lidar_x=0.0,
-        wheel_noise=0.3,
+        wheel_noise=0.35,
         smooth_saved_map=True,
     )
     poses = route()

@@ -27,30 +27,43 @@ Each scan gives a sample of :class:`turtlelib.motion.motion_signals.MeasuredPose
 timeline: the pose ``T_k`` and the covariance of the motion since ``t_k-1`` (map frame, additive ``[x, y,
 theta]``), so the filter predicts from scan to scan with the registered motion
 (:class:`turtlelib.motion.motion_models.MeasuredMotion`) as independent increments. Scans registered to the
-same local map are not independent: their errors are errors against the same anchor (the newest keyframe),
-which moves only when a keyframe is added; summing each scan's ``Sigma_k`` as an increment would grow the
-covariance with the number of scans while the error stays bounded wherever the scans constrain it. The
-registered pose is ``Sigma_k (H_s z + P_prior^-1 (T_k-1 U_k))``: the scan's part errs against the anchor,
-the prior's carries the previous scan's error ``e_k-1`` on. So the error against the anchor has the
+same local map are not independent: their errors are errors against the same anchor (the local map),
+which moves only a little when a keyframe is added; summing each scan's ``Sigma_k`` as an increment would
+grow the covariance with the number of scans while the error stays bounded wherever the scans constrain it.
+The registered pose is ``Sigma_k (H_s z + P_prior^-1 (T_k-1 U_k))``: the scan's part errs against the map,
+the prior's carries the previous scan's error ``e_k-1`` on. So the error against the map has the
 covariance::
 
     C_k = Sigma_k + M C_k-1 M^T,     M = Sigma_k P_prior^-1
 
 (where the scan pins a direction, ``M ~ 0`` there and ``C_k ~ Sigma_k``: bounded; along a degenerate one
-``M ~ I`` and ``C_k ~ C_k-1 + P_prior``: the motion input's random walk), and the steps since the newest
-keyframe add up to the envelope of the ``C``'s: with ``A`` their sum so far, a registered scan's increment
-is::
+``M ~ I`` and ``C_k ~ C_k-1 + P_prior``: the motion input's random walk). The map's own error ``B`` is what
+its keyframes brought in. Where the scans pin the pose, the map is (to first order) the mean of its
+keyframes, each put in at its registered pose: a keyframe added to a map of ``n`` moves the map by ``s``
+of its error against it, ``s = 1 / (n + 1)`` while the map grows and, once each new keyframe drops the
+oldest of ``K``, ``s = 2 / (K + 1)`` in the long run (the lasting shift an error ``e_k`` gives ``x_k =
+mean(x_k-K .. x_k-1) + e_k`` is ``1 / sum_j (j / K)``). Where the prior decided the pose (``M``), the map
+along that direction is the new keyframe alone, and takes all of its error. So with ``N = s (I - M) + M``
+(``M`` the keyframe's own), the keyframe moves the map by ``N e`` and leaves ``(I - N) e`` as the error
+against the new map::
 
-    Q_k = [C_k - A]_+,     A <- A + Q_k      ([.]_+: the positive semi-definite part)
+    B <- B + N C_k N^T,     C_k <- (I - N) C_k (I - N)^T
 
-so ``A >= C_k`` after each scan (the filter's pose covariance covers the newest error against the anchor).
-``A`` and ``C`` restart at 0 after a keyframe (the new anchor's own error is in the covariance then: the next
-scans' errors add to it). A step on the motion input alone carries its whole motion covariance (and adds it
-to ``A``; ``C`` is carried to the new pose, the next registration's prior covering the motion).
+A scan's error against the world then has the covariance ``B + C_k``, and the steps add up to its
+envelope: with ``A`` their sum so far, a registered scan's increment is::
+
+    Q_k = [B + C_k - A]_+,     A <- A + Q_k      ([.]_+: the positive semi-definite part)
+
+so ``A >= B + C_k`` after each scan (the filter's pose covariance covers the newest error): in a room the
+covariance grows by about ``s^2 C`` a keyframe instead of ``C``, along a corridor by the motion input's
+random walk, as it should. ``A``, ``B`` and ``C`` are carried to each new pose (``G X G^T``, ``G`` the
+right-composition Jacobian). A step on the motion input alone carries its whole motion covariance (and
+adds it to ``A``, its ``M = I``; ``C`` is carried to the new pose, the next registration's prior covering
+the motion).
 
 The local map is itself made of registered scans: its error against the world, which no registration
-against it can see, grows with the distance travelled (the anchors chain: each keyframe's error against the
-one before; biases of real scans: a wall seen at a glancing angle, glass, a LiDAR's range bias). Each
+against it can see, grows with the distance travelled by more than ``B`` holds where the scans are biased
+(a wall seen at a glancing angle, glass, a LiDAR's range bias: errors that do not average out). Each
 registered step of ``d_k`` metres adds ``d_k diag(q_xy, q_xy, q_theta)`` (``drift_m2_per_m``,
 ``drift_rad2_per_m``) for it; 0 where the scans are unbiased, as in a simulator.
 """
@@ -180,10 +193,13 @@ class LidarOdometry:
         self._last: tuple[int, Transform2D, Transform2D] | None = None
         # the covariance of the motion since the last registered scan (the next registration's prior)
         self._P_since = np.zeros((3, 3))
-        # A: the steps' covariances summed since the newest keyframe; C: the newest registered scan's error
-        # covariance against that keyframe
+        # A: the steps' covariances summed; B: the local map's error covariance; C: the newest registered
+        # scan's error covariance against the local map (all carried to the newest pose)
         self._A = np.zeros((3, 3))
+        self._B = np.zeros((3, 3))
         self._C = np.zeros((3, 3))
+        # M of the newest step: how much of its pose the prior, not the scan, decided (I: the input alone)
+        self._M = np.eye(3)
 
     def forget_input(self) -> None:
         """The motion input restarted: its motion to the next scan is taken only if plausible (module
@@ -267,8 +283,9 @@ class LidarOdometry:
         P_prior = P_since + _PRIOR_FLOOR
         if self._map is not None and len(points) >= self.config.registration.min_points:
             registration = register(points, self._map, T_prior, P_prior, self.config.registration)
-        self._C = G @ self._C @ G.T
+        self._A, self._B, self._C = (G @ X @ G.T for X in (self._A, self._B, self._C))
         if registration is None:
+            self._M = np.eye(3)
             self._P_since = P_since
             self._A = self._A + P_motion
             return OdometryStep(t_ns, T_prior, P_motion, Basis.MOTION, None, t_ns - t_prev)
@@ -278,8 +295,9 @@ class LidarOdometry:
         Sigma = registration.Sigma
         M = np.linalg.solve(P_prior, Sigma).T
         self._C = Sigma + M @ self._C @ M.T
-        # Q_k = [C_k - A]_+,  A <- A + Q_k
-        Q = _positive_part(self._C - self._A)
+        self._M = M
+        # Q_k = [B + C_k - A]_+,  A <- A + Q_k
+        Q = _positive_part(self._B + self._C - self._A)
         self._A = self._A + Q
         # + d_k diag(q_xy, q_xy, q_theta): the local map's own drift over the step's d_k metres
         d_m = math.hypot(registration.T_map_body.x - T_prev.x, registration.T_map_body.y - T_prev.y)
@@ -300,8 +318,13 @@ class LidarOdometry:
         if len(points) == 0 or not self._is_keyframe(T_odom_body):
             return
         self._keyframe_pose = T_odom_body
-        self._A = np.zeros((3, 3))
-        self._C = np.zeros((3, 3))
+        n = len(self._keyframes)
+        if n:
+            # N = s (I - M) + M: B <- B + N C N^T,  C <- (I - N) C (I - N)^T
+            s = 2.0 / (n + 1) if n == self._keyframes.maxlen else 1.0 / (n + 1)
+            N = s * (np.eye(3) - self._M) + self._M
+            self._B = self._B + N @ self._C @ N.T
+            self._C = (np.eye(3) - N) @ self._C @ (np.eye(3) - N).T
         self._keyframes.append(T_odom_body @ points)
         q_map = voxel_centroids(np.concatenate(list(self._keyframes)), self.config.registration.voxel_m)
         self._map = LocalMap(q_map, self.config.registration) if len(q_map) >= 3 else None
