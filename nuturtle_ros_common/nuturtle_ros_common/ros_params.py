@@ -30,8 +30,9 @@ C = TypeVar("C")
 
 def _coerce(value: Any, like: Any, name: str) -> Any:
     """Convert a ROS parameter value to the type of the field default: ints are accepted where floats
-    are expected and ROS arrays become tuples of floats (an empty YAML list, which rcl leaves without a
-    type, ``None``, an empty tuple); anything else of the wrong type is a ValueError."""
+    are expected and ROS arrays become tuples of floats, or of strings for a string array (an empty YAML
+    list, which rcl leaves without a type, ``None``, an empty tuple); anything else of the wrong type is a
+    ValueError."""
     is_number = isinstance(value, (int, float)) and not isinstance(value, bool)
     if isinstance(like, bool) and isinstance(value, bool):
         return value
@@ -44,6 +45,8 @@ def _coerce(value: Any, like: Any, name: str) -> Any:
     if isinstance(like, tuple) and value is None:
         return ()
     if isinstance(like, tuple) and isinstance(value, (list, tuple, array.array)):
+        if value and all(isinstance(v, str) for v in value):
+            return tuple(value)
         try:
             return tuple(float(v) for v in value)
         except (TypeError, ValueError):
