@@ -578,7 +578,9 @@ class MultiRobotSimulation:
 
     def others(self, index: int) -> NDArray[np.float64]:
         """The discs ``[x, y, r]`` (m) of every robot but ``index``, shape (n - 1, 3)."""
-        return np.array([robot.disc for robot in self.robots if robot.index != index]).reshape(-1, 3)
+        if len(self.robots) == 1:
+            return NO_OTHERS
+        return np.array([robot.disc for robot in self.robots if robot.index != index])
 
     def step(self, dt_s: float) -> None:
         """One physics step of ``dt_s`` s: each robot in turn, against the others where they are now."""

@@ -9,15 +9,19 @@ its centre R to the robot's left, the second, clockwise, R to its right. At line
 
     V_ref = [(-1)^k omega, v, 0],     T_start_ref(tau) = exp([V_ref] (tau - k T))
 
-so the reference is back at the start pose after each loop and turns the other way. The motors hold
+so the reference is back at the start pose after each loop and turns the other way. A robot may join the
+route at its time ``phase`` (s, the demo's robots spaced along one figure eight): it starts at
+``T_start_ref(phase)`` and follows ``T_start_ref(tau + phase)``. The motors hold
 wheel speeds on a grid of ``1 / motor_cmd_per_rad_sec`` rad/s, so the reference uses the nearest wheel
 speeds on that grid (:class:`FigureEight`): driven open loop, its loops close up to wheel slip.
 The robot first stands still for ``start_delay`` s (the estimators see the start from a known pose).
 
 Tracking (Kanayama et al. 1990)
 -------------------------------
-With the pose estimate ``T_map_body`` (from `slam/odom`) and the reference ``T_map_ref = T_map_start @
-T_start_ref``, the error in the body frame ``[e_x, e_y, e_theta] = T_map_body^-1 T_map_ref`` gives::
+With the pose estimate ``T_map_body`` (from `slam/odom`) and the reference ``T_map_ref = T_map_route @
+T_start_ref(tau + phase)``, ``T_map_route = T_map_start @ T_start_ref(phase)^-1`` (the route's crossing;
+``T_map_start`` itself without a phase), the error in the body frame
+``[e_x, e_y, e_theta] = T_map_body^-1 T_map_ref`` gives::
 
     v = v_ref cos(e_theta) + k_x e_x
     w = w_ref + v_ref (k_y e_y + k_theta sin(e_theta))
@@ -65,7 +69,8 @@ from turtlelib.util.validation import non_negative, positive, store
 class RouteConfig:
     """The figure eight: loop ``radius`` (m), linear ``velocity`` (m/s), command ``rate`` (Hz), all
     finite and > 0; ``start_delay`` (s, >= 0) standing still first; tracking gains ``k_x`` (1/s),
-    ``k_y`` (1/m^2), ``k_theta`` (1/m), finite and >= 0; ``feedback``: track the `slam/odom` pose."""
+    ``k_y`` (1/m^2), ``k_theta`` (1/m), finite and >= 0; ``feedback``: track the `slam/odom` pose;
+    ``phase`` (s, >= 0): the route's time where the robot joins it (0: at the crossing)."""
 
     radius: float = 0.75
     velocity: float = 0.14
@@ -75,10 +80,11 @@ class RouteConfig:
     k_y: float = 25.0
     k_theta: float = 10.0
     feedback: bool = True
+    phase: float = 0.0
 
     def __post_init__(self) -> None:
         store(self, ("radius", "velocity", "rate"), positive)
-        store(self, ("start_delay", "k_x", "k_y", "k_theta"), non_negative)
+        store(self, ("start_delay", "k_x", "k_y", "k_theta", "phase"), non_negative)
 
 
 @dataclass(frozen=True)
@@ -148,7 +154,8 @@ class FigureEightDriver(Node):
         self.route = FigureEight.for_robot(self.config, self.robot)
         self._publisher = self.create_publisher(Twist, "cmd_vel", 10)
         self._t_start_s: float | None = None
-        self.T_map_start: Transform2D | None = None
+        # T_map_route = T_map_start @ T_start_ref(phase)^-1: where the route's reference starts
+        self.T_map_route: Transform2D | None = None
         self.T_map_body: Transform2D | None = None
         self.stopped = False
         if self.config.feedback:
@@ -161,8 +168,13 @@ class FigureEightDriver(Node):
         except ValueError as error:
             self.get_logger().warning(f"slam/odom skipped: {error}", throttle_duration_sec=2.0)
             return
-        if self.T_map_start is None:
-            self.T_map_start = self.T_map_body
+        if self.T_map_route is None:
+            phase_s = self.config.phase
+            self.T_map_route = (
+                self.T_map_body
+                if phase_s == 0.0
+                else self.T_map_body @ self.route.reference(phase_s).inverse()
+            )
 
     def _on_timer(self) -> None:
         if self.stopped:
@@ -174,9 +186,10 @@ class FigureEightDriver(Node):
         if tau_s < 0.0:
             self._publisher.publish(Twist())
             return
+        tau_s += self.config.phase
         V_ref = self.route.body_twist(tau_s)
-        if self.T_map_start is not None and self.T_map_body is not None:
-            T_map_ref = self.T_map_start @ self.route.reference(tau_s)
+        if self.T_map_route is not None and self.T_map_body is not None:
+            T_map_ref = self.T_map_route @ self.route.reference(tau_s)
             V_ref = track(self.T_map_body, T_map_ref, V_ref, self.config)
         self._publisher.publish(twist_message(V_ref))
 
