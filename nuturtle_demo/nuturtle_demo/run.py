@@ -464,7 +464,8 @@ def run_demo(options: DemoOptions, on_progress: ProgressCallback | None = None) 
     result, where = run_staged(
         folder, partial(run.run, on_progress=on_progress), lambda: run.started, stopped_reason, "the run"
     )
-    return replace(result, out_dir=where)
+    robots = tuple(replace(robot, out_dir=where / robot.name) for robot in result.robots)
+    return replace(result, out_dir=where, robots=robots)
 
 
 class _DemoRun:
