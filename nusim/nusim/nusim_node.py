@@ -109,6 +109,7 @@ from turtlelib.util.validation import positive, store
 
 from .house import Boxes, InteriorWalls, Legs, WorldGeometry
 from .simulation import (
+    ROBOT_NAME,
     ArenaConfig,
     LidarChoice,
     MultiRobotSimulation,
@@ -125,8 +126,8 @@ WORLD_FRAME = "nusim/world"
 TRUE_FRAME_NAMESPACE = "nusim/"
 BODY_FRAME = "base_footprint"
 SCAN_FRAME = "base_scan"
-# A frame prefix: empty, or namespace tokens each ended by "/"
-FRAME_PREFIX = re.compile(r"([A-Za-z][A-Za-z0-9_]*/)*")
+# A frame prefix: empty, or namespace tokens (as robot names) each ended by "/"
+FRAME_PREFIX = re.compile(f"({ROBOT_NAME.pattern}/)*")
 # Wall thickness (m): display only (an interior wall has none: it is shown this thin).
 WALL_THICKNESS_M = 0.1
 INTERIOR_WALL_THICKNESS_M = 0.02
@@ -173,7 +174,8 @@ class FrameConfig:
     def __post_init__(self) -> None:
         if not isinstance(self.frame_prefix, str) or FRAME_PREFIX.fullmatch(self.frame_prefix) is None:
             raise ValueError(
-                f"frame_prefix must be empty or end with '/' (such as 'tb3_0/'), got {self.frame_prefix!r}"
+                "frame_prefix must be empty or namespace tokens each ended by '/' (such as 'tb3_0/'), got "
+                f"{self.frame_prefix!r}"
             )
 
 

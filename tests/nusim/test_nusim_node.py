@@ -26,7 +26,7 @@ from std_srvs.srv import Empty
 from visualization_msgs.msg import Marker, MarkerArray
 
 from nusim.house import Boxes, InteriorWalls, Legs
-from nusim.nusim_node import NusimNode, NusimTiming
+from nusim.nusim_node import FrameConfig, NusimNode, NusimTiming
 from nusim.simulation import ArenaConfig, NoiseConfig, Obstacles, Walls, default_lidar
 from nuturtle_description.robot_params import burger_params
 from nuturtle_ros_common.conversions import pose_from_transform, stamp_seconds, yaw_from_quaternion
@@ -540,3 +540,14 @@ def test_two_robots_publish_under_their_names_with_prefixed_frames_and_see_each_
         assert scan.ranges[0] == pytest.approx(x1 - (-0.5 - 0.032) - 0.11, abs=1e-6)
     # both nusims drive the one global /clock
     assert node.count_publishers("/clock") == 2
+
+
+def test_a_frame_prefix_is_namespace_tokens_and_not_given_with_several_robots(ros):
+    assert FrameConfig("tb3_0/").frame_prefix == "tb3_0/" and FrameConfig("a/b_1/").frame_prefix == "a/b_1/"
+    for bad in ("tb3_0", "/tb3_0/", "0a/", "a//"):
+        with pytest.raises(ValueError, match="frame_prefix must be empty or namespace tokens"):
+            FrameConfig(bad)
+    values = {"frame_prefix": "x/", "robots.names": ["tb3_0"], "robots.x0": [0.0], "robots.y0": [0.0]}
+    values["robots.theta0"] = [0.0]
+    with pytest.raises(ValueError, match="frame_prefix \\('x/'\\) must be empty with robots.names"):
+        NusimNode(context=ros.context, parameter_overrides=parameters(values))
