@@ -20,6 +20,7 @@ from launch.actions import DeclareLaunchArgument
 from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration, PythonExpression
 from launch_ros.actions import Node
+from launch_ros.parameter_descriptions import ParameterValue
 
 from nuturtle_description.launch_arguments import model_argument, switch_argument
 
@@ -31,8 +32,10 @@ def _share(package, *parts):
 def generate_launch_description() -> LaunchDescription:
     basic_world = _share("nusim", "config", "basic_world.yaml")
     namespace = LaunchConfiguration("namespace")
-    # "<ns>/" under a namespace, "" without one
-    frame_prefix = PythonExpression(["'", namespace, "/' if '", namespace, "' else ''"])
+    # "<ns>/" under a namespace, "" without one (a string as it is: an empty one is not read as YAML's null)
+    frame_prefix = ParameterValue(
+        PythonExpression(["'", namespace, "/' if '", namespace, "' else ''"]), value_type=str
+    )
     return LaunchDescription(
         [
             model_argument(),
