@@ -8,10 +8,18 @@ frames carry the prefix ``tb3_k/`` (odometry's ``odom_id``, ``body_id``; slam's 
 ``sensor_id``: the names nusim gives them). slam's ``map_id`` stays the shared ``map``: every robot's
 SLAM starts at its true start pose in ``nusim/world`` (run.py's "Frames"), so each robot's ``map`` is
 ``nusim/world`` and one ``map`` frame is right for all of them.
+
+To each robot's LiDAR the others are discs of their collision radius ``R``, which the landmark detector
+would take for cylinders: seen standing still at the start they are mapped, and when they drive off the
+map moves with them and the SLAM with it (three robots in the default world: the first robot's SLAM lost
+its pose within 1.5 s). So with several robots the landmarks node's radius window is narrowed to leave
+``R`` out (:func:`landmark_radius_window`), as one who knows the size of the posts would set it: the
+world's cylinders all smaller than ``R`` keep radii up to halfway to ``R``, all larger from halfway up.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -26,7 +34,7 @@ from nuturtle_eval.metrics import RunMetrics
 from nuturtle_eval.run_evaluation import RunScope, failed_targets
 from nuturtle_tools.monitor import RunMonitor
 from nuturtle_tools.params import to_parameters
-from turtlelib import Transform2D, TwistNoise
+from turtlelib import DetectorConfig, Transform2D, TwistNoise
 
 from .driver import FigureEightDriver
 from .matched_noise import matched_point_std, matched_wheel_noise
@@ -95,6 +103,20 @@ class RobotStack:
         return self.plan.T_world_start
 
 
+def landmark_radius_window(radii_m: Iterable[float], robot_radius_m: float) -> dict[str, float]:
+    """The landmarks node's ``min_radius`` / ``max_radius`` that leave out the robots (module docstring):
+    with every cylinder radius in ``radii_m`` below ``robot_radius_m`` ``R``, ``max_radius`` halfway from
+    the largest to ``R``; with every one above, ``min_radius`` halfway from ``R`` to the smallest (each
+    only narrowing DetectorConfig's window); none otherwise (nothing to tell them apart by)."""
+    default = DetectorConfig()
+    radii_m = [float(r) for r in radii_m]
+    if radii_m and max(radii_m) < robot_radius_m:
+        return {"max_radius": min(default.max_radius, 0.5 * (max(radii_m) + robot_radius_m))}
+    if radii_m and min(radii_m) > robot_radius_m:
+        return {"min_radius": max(default.min_radius, 0.5 * (min(radii_m) + robot_radius_m))}
+    return {}
+
+
 def slam_nodes(stack: RobotStack, options: Any, nusim: Any, context: Context, sim_time: list[Parameter]):
     """The landmarks and slam nodes of ``stack``'s robot, SLAM started at its start pose (localization:
     at the map origin) with matched process noise and LiDAR noise (the scan registration's)."""
@@ -139,7 +161,12 @@ def slam_nodes(stack: RobotStack, options: Any, nusim: Any, context: Context, si
         noise = TwistNoise.from_wheel_slip(stack.driver.robot.diff_drive(), wheel_noise)
         slam_values.update({f"odom_{name}": value for name, value in vars(noise).items()})
     where = stack.plan.namespace
-    landmarks = LandmarksNode(context=context, parameter_overrides=sim_time, **where)
+    window = (
+        landmark_radius_window(simulation.circles[:, 2], simulation.config.robot.collision_radius)
+        if prefix
+        else {}
+    )
+    landmarks = LandmarksNode(context=context, parameter_overrides=sim_time + to_parameters(window), **where)
     slam = SlamNode(context=context, parameter_overrides=sim_time + to_parameters(slam_values), **where)
     return landmarks, slam
 
