@@ -107,12 +107,17 @@ def landmark_radius_window(radii_m: Iterable[float], robot_radius_m: float) -> d
     """The landmarks node's ``min_radius`` / ``max_radius`` that leave out the robots (module docstring):
     with every cylinder radius in ``radii_m`` below ``robot_radius_m`` ``R``, ``max_radius`` halfway from
     the largest to ``R``; with every one above, ``min_radius`` halfway from ``R`` to the smallest (each
-    only narrowing DetectorConfig's window); none otherwise (nothing to tell them apart by)."""
+    only narrowing DetectorConfig's window, never past its other end); none otherwise (nothing to tell
+    them apart by)."""
     default = DetectorConfig()
     radii_m = [float(r) for r in radii_m]
     if radii_m and max(radii_m) < robot_radius_m:
         return {"max_radius": min(default.max_radius, 0.5 * (max(radii_m) + robot_radius_m))}
-    if radii_m and min(radii_m) > robot_radius_m:
+    if (
+        radii_m
+        and min(radii_m) > robot_radius_m
+        and 0.5 * (min(radii_m) + robot_radius_m) < default.max_radius
+    ):
         return {"min_radius": max(default.min_radius, 0.5 * (min(radii_m) + robot_radius_m))}
     return {}
 

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from bag_reading import read_bag
+from nuturtle_demo.robot_stack import landmark_radius_window
 from nuturtle_demo.run import DemoOptions, run_demo
 from nuturtle_description.robot_params import burger_params
 from nuturtle_ros_common.conversions import stamp_seconds, yaw_from_quaternion
@@ -16,6 +17,18 @@ from turtlelib import Transform2D
 DURATION_S = 20.0
 # a beam ends on the other robot's disc: within the LiDAR's noise and resolution (1 cm each) of its edge
 ON_DISC_M = 0.05
+
+
+def test_the_landmark_radius_window_leaves_out_the_robots_radius():
+    # the default world's 0.038 m cylinders and the Burger's 0.11 m: up to halfway
+    assert landmark_radius_window([0.038, 0.038], 0.11) == {"max_radius": pytest.approx(0.074)}
+    # turtlebot3_world's 0.15 m cylinders: from halfway; never past the detector's own window (0.02 to
+    # 0.25 m): posts beyond it are not detected anyway
+    assert landmark_radius_window([0.15], 0.11) == {"min_radius": pytest.approx(0.13)}
+    assert landmark_radius_window([0.3], 0.22) == {}
+    assert landmark_radius_window([0.05], 0.6) == {"max_radius": 0.25}
+    # cylinders on both sides of the robot's radius, or none: nothing to tell them apart by
+    assert landmark_radius_window([0.05, 0.15], 0.11) == {} and landmark_radius_window([], 0.11) == {}
 
 
 def scan_points(scan, T_world_scan: Transform2D) -> np.ndarray:
