@@ -27,7 +27,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from nusim.house import Boxes, InteriorWalls, Legs
 from nusim.nusim_node import FrameConfig, NusimNode, NusimTiming
-from nusim.simulation import ArenaConfig, NoiseConfig, Obstacles, Walls, default_lidar
+from nusim.simulation import ArenaConfig, NoiseConfig, Obstacles, Robots, Walls, default_lidar
 from nuturtle_description.robot_params import burger_params
 from nuturtle_ros_common.conversions import pose_from_transform, stamp_seconds, yaw_from_quaternion
 from nuturtle_ros_common.ros_files import load_ros_yaml
@@ -333,7 +333,7 @@ def test_bad_wheel_commands_are_skipped_with_a_warning(ros, names, velocities, r
 def test_the_default_parameters_are_the_basic_world_yaml():
     world = load_ros_yaml(BASIC_WORLD)
     flat = {k: v for k, v in world.items() if not isinstance(v, dict)}
-    for group in ("obstacles", "lidar", "walls", "interior_walls", "boxes", "legs"):
+    for group in ("obstacles", "lidar", "walls", "interior_walls", "boxes", "legs", "robots"):
         flat.update({f"{group}.{k}": v for k, v in world[group].items()})
     defaults = {
         **vars(NusimTiming()),
@@ -348,6 +348,8 @@ def test_the_default_parameters_are_the_basic_world_yaml():
         "wheel_right": "wheel_right_joint",
         "cmd_timeout": 0.5,
         **vars(PathTrailConfig()),
+        **{f"robots.{k}": list(v) for k, v in vars(Robots()).items()},
+        **vars(FrameConfig()),
     }
     assert flat == defaults
 
