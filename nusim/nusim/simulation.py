@@ -65,9 +65,9 @@ above, robot ``k >= 1`` the four children of the seed's child ``4 + k``; the pla
 world's). To the others a robot is a cylinder of its ``collision_radius`` at its true position: each
 robot's LiDAR sees the others as discs, and robots collide with each other as with a cylinder (the move
 cut at the first contact ``|p_a - p_b| = R_a + R_b``, the heading still turning). One physics step moves
-every robot in turn, in the order of their names, each against the others where they are at that moment
-(the robots before it already moved), so no two ever overlap. The starts must be free and pairwise at
-least ``2 R`` apart, and the furniture on legs is placed clear of every start.
+every robot in turn, in the order ``robots.names`` lists them, each against the others where they are at
+that moment (the robots before it already moved), so no two ever overlap. The starts must be free and
+pairwise at least ``2 R`` apart, and the furniture on legs is placed clear of every start.
 """
 
 from __future__ import annotations
