@@ -251,19 +251,20 @@ class WorldGeometry:
         return None
 
     def with_legs(
-        self, legs: Legs, rng: np.random.Generator, start_xy: NDArray[np.float64], robot_radius_m: float
+        self, legs: Legs, rng: np.random.Generator, starts_xy: NDArray[np.float64], robot_radius_m: float
     ) -> WorldGeometry:
         """This world with ``legs``' pieces placed in order, each drawn from ``rng`` until its four legs are
-        free here (among the legs placed before) and clear of the robot's start disc (``start_xy``,
-        ``robot_radius_m``); ValueError naming the piece when PLACEMENT_DRAWS draws leave none free."""
+        free here (among the legs placed before) and clear of every robot's start disc (``starts_xy``
+        (n, 2), ``robot_radius_m``); ValueError naming the piece when PLACEMENT_DRAWS draws leave none
+        free."""
         world = self
+        starts_xy = np.asarray(starts_xy, dtype=np.float64).reshape(-1, 2)
         for k in range(legs.pieces):
             for _ in range(PLACEMENT_DRAWS):
                 candidate = legs.draw(k, rng)
-                # |leg - start| >= R + r, and each leg a free disc
-                clear_of_robot = (
-                    np.hypot(*(candidate[:, :2] - start_xy).T) >= robot_radius_m + candidate[:, 2]
-                )
+                # |leg - start| >= R + r for every start, and each leg a free disc
+                gaps_m = np.linalg.norm(candidate[:, None, :2] - starts_xy[None], axis=-1)
+                clear_of_robot = gaps_m >= robot_radius_m + candidate[:, 2:3]
                 if np.all(clear_of_robot) and all(
                     world.first_collision(leg[:2], leg[2]) is None for leg in candidate
                 ):
@@ -271,7 +272,7 @@ class WorldGeometry:
             else:
                 raise ValueError(
                     f"{legs.describe(k)}: no placement of its legs in {PLACEMENT_DRAWS} draws is clear of "
-                    "the walls, boxes, cylinders, other legs and the robot's start"
+                    "the walls, boxes, cylinders, other legs and the robots' starts"
                 )
             world = replace(world, legs=np.vstack([world.legs, candidate]))
         return world

@@ -1,7 +1,8 @@
 """`nusim`: a simulated TurtleBot3 (any model) in an arena of cylinders or in rooms, publishing what the real
 robot does.
 
-A thin ROS wrapper over `nusim.simulation.Simulation` (models in that module's docstring).
+A thin ROS wrapper over `nusim.simulation.MultiRobotSimulation` (models in that module's docstring): one
+robot, or several in one world (`robots.names`, below).
 
 Subscribes
     `wheel_cmd` (sensor_msgs/JointState): `velocity` (rad/s) of joints `wheel_left`, `wheel_right`
@@ -41,6 +42,21 @@ Parameters
     (cmd_timeout), `PathTrailConfig` (path_*). The defaults are the default world of
     config/basic_world.yaml. Invalid values stop the node at start-up with a message (exit code 1).
 
+Frames: the robot's frames carry `frame_prefix` (e.g. `tb3_0/`: `tb3_0/base_footprint`, `tb3_0/base_scan`,
+and the true pose's child frame `nusim/tb3_0/base_footprint`; robot_state_publisher's convention); the
+world frame `nusim/world` is the one world's. Started under a namespace (nusim.launch.py's `namespace`)
+with the matching prefix, one robot's streams are that namespace's (`/tb3_0/scan`,
+`/tb3_0/nusim/ground_truth`); `/clock` and `/tf` stay global.
+
+Several robots: with `robots.names` (e.g. `[tb3_0, tb3_1]`) and their start poses `robots.x0`,
+`robots.y0`, `robots.theta0` (`nusim.simulation.Robots`; then `x0`, `y0`, `theta0` are unused and
+`frame_prefix` must be empty) one node simulates them all in one world, each seen by the others' LiDAR
+and met by them as a cylinder of its collision radius. Robot `tb3_0` has the topics above under its name:
+it subscribes `tb3_0/wheel_cmd` and `tb3_0/nusim/teleport` and publishes `tb3_0/joint_states`,
+`tb3_0/scan`, `tb3_0/fake_sensor`, `tb3_0/nusim/ground_truth` and `tb3_0/nusim/path` (what a nusim
+under the namespace `tb3_0` would), with the frame prefix `tb3_0/`; `/clock`, `~/obstacles`, `~/walls`
+and `~/reset` (every robot to its start) are the world's, once.
+
 Time: a wall-clock (steady) timer ticks at `rate * realtime_factor` Hz and each tick advances simulation
 time by `1 / rate` s, so the node needs no `use_sim_time` itself; every other node runs on its /clock.
 Built with ``stepped_by_owner``, it has no timer and its owner calls ``step()`` (the demo, in lockstep with
@@ -51,8 +67,10 @@ A stream of `f` Hz is published after step k when ``floor(k f / rate)`` increase
 from __future__ import annotations
 
 import math
+import re
 import sys
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 from builtin_interfaces.msg import Time
@@ -84,25 +102,32 @@ from nuturtle_ros_common.tf_compat import OptionalTfBroadcaster
 from nuturtle_ros_common.throttle import WARN_THROTTLE_S
 from nuturtle_ros_common.wheel_joints import WheelJoints, wheel_values
 from turtlelib import Twist2D
+from turtlelib.geometry.path_trail import PathTrailConfig
 from turtlelib.sensing.scan_model import LidarConfig
 from turtlelib.util.timebase import NS_PER_S
 from turtlelib.util.validation import positive, store
 
 from .house import Boxes, InteriorWalls, Legs, WorldGeometry
 from .simulation import (
+    ROBOT_NAME,
     ArenaConfig,
     LidarChoice,
+    MultiRobotSimulation,
     NoiseConfig,
     Obstacles,
+    Robots,
     Simulation,
     SimulationConfig,
     Walls,
 )
 
 WORLD_FRAME = "nusim/world"
-TRUE_BODY_FRAME = "nusim/base_footprint"
+# the true body frame is TRUE_FRAME_NAMESPACE + frame_prefix + BODY_FRAME (nusim/base_footprint)
+TRUE_FRAME_NAMESPACE = "nusim/"
 BODY_FRAME = "base_footprint"
 SCAN_FRAME = "base_scan"
+# A frame prefix: empty, or namespace tokens (as robot names) each ended by "/"
+FRAME_PREFIX = re.compile(f"({ROBOT_NAME.pattern}/)*")
 # Wall thickness (m): display only (an interior wall has none: it is shown this thin).
 WALL_THICKNESS_M = 0.1
 INTERIOR_WALL_THICKNESS_M = 0.02
@@ -136,6 +161,70 @@ class NusimTiming:
         """Whether a stream of `stream_hz` publishes after physics step `step` (>= 1)."""
         # floor(k f / rate) > floor((k - 1) f / rate)
         return math.floor(step * stream_hz / self.rate) > math.floor((step - 1) * stream_hz / self.rate)
+
+
+@dataclass(frozen=True)
+class FrameConfig:
+    """`frame_prefix`: what the robot's frame ids start with (`base_footprint`, `base_scan`, and the true
+    pose's `nusim/<frame_prefix>base_footprint`): empty (the default) or namespace tokens each ended by
+    `/`, such as `tb3_0/` (robot_state_publisher's `frame_prefix`)."""
+
+    frame_prefix: str = ""
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.frame_prefix, str) or FRAME_PREFIX.fullmatch(self.frame_prefix) is None:
+            raise ValueError(
+                "frame_prefix must be empty or namespace tokens each ended by '/' (such as 'tb3_0/'), got "
+                f"{self.frame_prefix!r}"
+            )
+
+
+@dataclass(frozen=True)
+class RobotFrames:
+    """One robot's frame ids: ``body`` (base_footprint), ``scan`` (base_scan) and ``true_body`` (the true
+    pose's child frame), each with the robot's ``prefix``."""
+
+    body: str
+    scan: str
+    true_body: str
+
+    @classmethod
+    def with_prefix(cls, prefix: str) -> RobotFrames:
+        return cls(prefix + BODY_FRAME, prefix + SCAN_FRAME, TRUE_FRAME_NAMESPACE + prefix + BODY_FRAME)
+
+
+class RobotPorts:
+    """Robot ``index``'s topics on ``node`` and what goes with them: named ``name`` (its topics under
+    ``name/``, its private ones under ``name/<node name>/``) or, for the one robot, ``""`` (the node's
+    own); its ``frames``, its ``~/path`` and its wheel_cmd watchdog."""
+
+    def __init__(
+        self,
+        node: NusimNode,
+        index: int,
+        name: str,
+        frames: RobotFrames,
+        path_config: PathTrailConfig,
+        timeout: CommandTimeoutConfig,
+    ) -> None:
+        self.name = name
+        self.frames = frames
+        topic = f"{name}/" if name else ""
+        private = f"{name}/{node.get_name()}/" if name else "~/"
+        self.path = PathTopic(node, private + "path", path_config)
+        self.watchdog = CommandWatchdog(timeout)
+        self.joint_states = node.create_publisher(JointState, topic + "joint_states", 10)
+        self.scan = node.create_publisher(LaserScan, topic + "scan", qos_profile_sensor_data)
+        self.fake_sensor = node.create_publisher(MarkerArray, topic + "fake_sensor", 10)
+        self.ground_truth = node.create_publisher(Odometry, private + "ground_truth", 10)
+        self.subscriptions = (
+            (JointState, topic + "wheel_cmd", partial(node.on_wheel_cmd, index)),
+            (PoseWithCovarianceStamped, private + "teleport", partial(node.on_teleport, index)),
+        )
+
+    def says(self, text: str) -> str:
+        """``text`` naming the robot when there are several."""
+        return f"{self.name}: {text}" if self.name else text
 
 
 def box_marker(
@@ -196,7 +285,9 @@ def house_markers(world: WorldGeometry, stamp: Time) -> list[Marker]:
 
 
 class NusimNode(Node):
-    """The `nusim` node (module docstring); ``stepped_by_owner``: no timer, the owner calls ``step()``."""
+    """The `nusim` node (module docstring); ``stepped_by_owner``: no timer, the owner calls ``step()``.
+
+    ``fleet``: every robot's simulation; ``ports[k]``: robot ``k``'s topics, frames, path and watchdog."""
 
     def __init__(self, stepped_by_owner: bool = False, **kwargs) -> None:
         super().__init__("nusim", **kwargs)
@@ -205,6 +296,7 @@ class NusimNode(Node):
         self.lidar_model = lidar_choice.model
         config = SimulationConfig(
             arena=declare_dataclass(self, ArenaConfig),
+            robots=declare_dataclass(self, Robots, prefix="robots."),
             obstacles=declare_dataclass(self, Obstacles, prefix="obstacles."),
             walls=declare_dataclass(self, Walls, prefix="walls."),
             interior_walls=declare_dataclass(self, InteriorWalls, prefix="interior_walls."),
@@ -216,10 +308,16 @@ class NusimNode(Node):
                 self, LidarConfig, prefix="lidar.", overrides=vars(self.lidar_model.sensor)
             ),
         )
+        frame_prefix = declare_dataclass(self, FrameConfig).frame_prefix
+        if frame_prefix and config.robots.names:
+            raise ValueError(
+                f"frame_prefix ({frame_prefix!r}) must be empty with robots.names: each robot's frames "
+                "are prefixed with its name"
+            )
         self.joints = declare_dataclass(self, WheelJoints)
-        self.watchdog = CommandWatchdog(declare_dataclass(self, CommandTimeoutConfig))
-        self.path = PathTopic(self)
-        self.simulation = Simulation(config)
+        timeout = declare_dataclass(self, CommandTimeoutConfig)
+        path_config = declare_dataclass(self, PathTrailConfig)
+        self.fleet = MultiRobotSimulation(config)
         self.step_count = 0
         lidar = config.lidar
         spin = f", spin spread {lidar.spin_spread:g}" if lidar.spin_spread else ""
@@ -230,16 +328,24 @@ class NusimNode(Node):
         )
 
         self._clock_publisher = self.create_publisher(ClockMsg, "/clock", 10)
-        self._joint_states_publisher = self.create_publisher(JointState, "joint_states", 10)
-        self._scan_publisher = self.create_publisher(LaserScan, "scan", qos_profile_sensor_data)
-        self._fake_sensor_publisher = self.create_publisher(MarkerArray, "fake_sensor", 10)
-        self._ground_truth_publisher = self.create_publisher(Odometry, "~/ground_truth", 10)
+        self.ports = [
+            RobotPorts(
+                self,
+                k,
+                name,
+                RobotFrames.with_prefix(f"{name}/" if name else frame_prefix),
+                path_config,
+                timeout,
+            )
+            for k, name in enumerate(self.fleet.names)
+        ]
         latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         obstacles_publisher = self.create_publisher(MarkerArray, "~/obstacles", latched)
         walls_publisher = self.create_publisher(MarkerArray, "~/walls", latched)
         self._tf = OptionalTfBroadcaster(self)
-        self.create_subscription(JointState, "wheel_cmd", self._on_wheel_cmd, 10)
-        self.create_subscription(PoseWithCovarianceStamped, "~/teleport", self._on_teleport, 10)
+        for ports in self.ports:
+            for message_type, topic, callback in ports.subscriptions:
+                self.create_subscription(message_type, topic, callback, 10)
         self.create_service(Empty, "~/reset", self._on_reset)
 
         start = self.sim_stamp()
@@ -258,6 +364,11 @@ class NusimNode(Node):
                 clock=Clock(clock_type=ClockType.STEADY_TIME),
             )
 
+    @property
+    def simulation(self) -> Simulation:
+        """Robot 0's simulation (the one robot's): its world and its config are every robot's."""
+        return self.fleet.robots[0]
+
     def _sim_time_ns(self) -> int:
         """Simulation time ``step_count / rate`` in integer ns."""
         return round(self.step_count * NS_PER_S / self.timing.rate)
@@ -268,31 +379,42 @@ class NusimNode(Node):
 
     # --- inputs ------------------------------------------------------------------------------------------
 
-    def _on_wheel_cmd(self, msg: JointState) -> None:
+    def on_wheel_cmd(self, index: int, msg: JointState) -> None:
+        """Robot ``index``'s `wheel_cmd`."""
+        ports = self.ports[index]
         try:
             left_rad_s, right_rad_s = wheel_values(self.joints, msg.name, msg.velocity)
         except ValueError as error:
-            self.get_logger().warning(f"wheel_cmd skipped: {error}", throttle_duration_sec=WARN_THROTTLE_S)
+            self.get_logger().warning(
+                ports.says(f"wheel_cmd skipped: {error}"), throttle_duration_sec=WARN_THROTTLE_S
+            )
             return
-        self.simulation.command_wheels(left_rad_s, right_rad_s)
-        self.watchdog.command(self._sim_time_ns())
+        self.fleet.robots[index].command_wheels(left_rad_s, right_rad_s)
+        ports.watchdog.command(self._sim_time_ns())
 
-    def _on_teleport(self, msg: PoseWithCovarianceStamped) -> None:
+    def on_teleport(self, index: int, msg: PoseWithCovarianceStamped) -> None:
+        """Robot ``index``'s `~/teleport`."""
+        ports = self.ports[index]
         frame_id = msg.header.frame_id
         try:
             if frame_id not in ("", WORLD_FRAME):
                 raise ValueError(f"the pose is in frame {frame_id!r}, not {WORLD_FRAME!r}")
-            self.simulation.teleport(transform_from_pose(msg.pose.pose))
+            self.fleet.teleport(index, transform_from_pose(msg.pose.pose))
         except ValueError as error:
-            self.get_logger().warning(f"teleport refused: {error}", throttle_duration_sec=WARN_THROTTLE_S)
+            self.get_logger().warning(
+                ports.says(f"teleport refused: {error}"), throttle_duration_sec=WARN_THROTTLE_S
+            )
             return
-        self.path.clear()
-        T = self.simulation.T_world_body
-        self.get_logger().info(f"teleported to x = {T.x:.3f} m, y = {T.y:.3f} m, theta = {T.theta:.3f} rad")
+        ports.path.clear()
+        T = self.fleet.robots[index].T_world_body
+        self.get_logger().info(
+            ports.says(f"teleported to x = {T.x:.3f} m, y = {T.y:.3f} m, theta = {T.theta:.3f} rad")
+        )
 
     def _on_reset(self, request: Empty.Request, response: Empty.Response) -> Empty.Response:
-        self.simulation.reset()
-        self.path.clear()
+        self.fleet.reset()
+        for ports in self.ports:
+            ports.path.clear()
         self.get_logger().info("reset to the start pose")
         return response
 
@@ -300,41 +422,45 @@ class NusimNode(Node):
 
     def step(self) -> None:
         """One physics step of ``1 / rate`` s, then /clock and every stream due after it."""
-        self.simulation.step(1.0 / self.timing.rate)
+        self.fleet.step(1.0 / self.timing.rate)
         self.step_count += 1
-        if self.watchdog.expired(self._sim_time_ns()):
-            self.simulation.command_wheels(0.0, 0.0)
-            self.get_logger().info("no wheel_cmd for cmd_timeout: wheels stopped")
+        for k, ports in enumerate(self.ports):
+            if ports.watchdog.expired(self._sim_time_ns()):
+                self.fleet.robots[k].command_wheels(0.0, 0.0)
+                self.get_logger().info(ports.says("no wheel_cmd for cmd_timeout: wheels stopped"))
         stamp = self.sim_stamp()
         self._clock_msg.clock = stamp
         self._clock_publisher.publish(self._clock_msg)
-        if self.timing.due(self.step_count, self.timing.joint_states_rate):
-            self._publish_joint_states(stamp)
-            self._publish_ground_truth(stamp)
-        if self.timing.due(self.step_count, self.timing.scan_rate):
-            self._publish_scan(stamp)
-        if self.timing.due(self.step_count, self.timing.fake_sensor_rate):
-            self._publish_fake_sensor(stamp)
+        for k in range(len(self.ports)):
+            if self.timing.due(self.step_count, self.timing.joint_states_rate):
+                self._publish_joint_states(k, stamp)
+                self._publish_ground_truth(k, stamp)
+            if self.timing.due(self.step_count, self.timing.scan_rate):
+                self._publish_scan(k, stamp)
+            if self.timing.due(self.step_count, self.timing.fake_sensor_rate):
+                self._publish_fake_sensor(k, stamp)
 
-    def _publish_joint_states(self, stamp: Time) -> None:
+    def _publish_joint_states(self, k: int, stamp: Time) -> None:
+        simulation = self.fleet.robots[k]
         msg = JointState(
             name=self.joints.names,
-            position=self.simulation.wheel_angles_rad.tolist(),
-            velocity=self.simulation.wheel_speed_rad_s.tolist(),
+            position=simulation.wheel_angles_rad.tolist(),
+            velocity=simulation.wheel_speed_rad_s.tolist(),
         )
         msg.header.stamp = stamp
-        self._joint_states_publisher.publish(msg)
+        self.ports[k].joint_states.publish(msg)
 
-    def _publish_ground_truth(self, stamp: Time) -> None:
-        T_world_body = self.simulation.T_world_body
-        V_body = Twist2D(*self.simulation.V_body)
-        odom = odometry_message(T_world_body, V_body, WORLD_FRAME, TRUE_BODY_FRAME, stamp)
-        self._ground_truth_publisher.publish(odom)
-        self._tf.send(transform_stamped(T_world_body, WORLD_FRAME, TRUE_BODY_FRAME, stamp))
-        self.path.add(T_world_body, odom)
+    def _publish_ground_truth(self, k: int, stamp: Time) -> None:
+        simulation, ports = self.fleet.robots[k], self.ports[k]
+        T_world_body = simulation.T_world_body
+        V_body = Twist2D(*simulation.V_body)
+        odom = odometry_message(T_world_body, V_body, WORLD_FRAME, ports.frames.true_body, stamp)
+        ports.ground_truth.publish(odom)
+        self._tf.send(transform_stamped(T_world_body, WORLD_FRAME, ports.frames.true_body, stamp))
+        ports.path.add(T_world_body, odom)
 
-    def _publish_scan(self, stamp: Time) -> None:
-        scan = self.simulation.scan()
+    def _publish_scan(self, k: int, stamp: Time) -> None:
+        scan = self.fleet.scan(k)
         lidar, model = scan.layout, self.lidar_model
         range_min, range_max = model.reported_range_m or (lidar.range_min, lidar.range_max)
         last_beam = lidar.samples - 1 + model.angle_max_past_last_beam
@@ -349,24 +475,24 @@ class NusimNode(Node):
             ranges=scan.range_m.tolist(),
         )
         msg.header.stamp = stamp
-        msg.header.frame_id = SCAN_FRAME
-        self._scan_publisher.publish(msg)
+        msg.header.frame_id = self.ports[k].frames.scan
+        self.ports[k].scan.publish(msg)
 
-    def _publish_fake_sensor(self, stamp: Time) -> None:
-        readings = self.simulation.sense_landmarks()
-        radii_m = self.simulation.circles[:, 2]
+    def _publish_fake_sensor(self, k: int, stamp: Time) -> None:
+        simulation, ports = self.fleet.robots[k], self.ports[k]
+        readings = simulation.sense_landmarks()
+        radii_m = simulation.circles[:, 2]
+        body = ports.frames.body
         markers = [
-            cylinder_marker(
-                BODY_FRAME, stamp, "fake_sensor", int(j), float(x), float(y), float(radii_m[j]), YELLOW
-            )
+            cylinder_marker(body, stamp, "fake_sensor", int(j), float(x), float(y), float(radii_m[j]), YELLOW)
             for j, (x, y) in zip(readings.ids, readings.p_body, strict=True)
         ]
         for j in sorted(set(range(radii_m.size)) - set(readings.ids.tolist())):
             marker = Marker(ns="fake_sensor", id=j, action=Marker.DELETE)
-            marker.header.frame_id = BODY_FRAME
+            marker.header.frame_id = body
             marker.header.stamp = stamp
             markers.append(marker)
-        self._fake_sensor_publisher.publish(MarkerArray(markers=markers))
+        ports.fake_sensor.publish(MarkerArray(markers=markers))
 
     def _obstacle_markers(self, stamp: Time) -> MarkerArray:
         """The cylinders (namespace ``obstacles``, red) and the placed legs (``legs``, brown)."""

@@ -54,11 +54,27 @@ Randomness: one ``numpy.random.SeedSequence(seed)`` spawns five independent stre
 LiDAR, landmark sensor, placement of the furniture on legs), so the same seed and the same commands
 reproduce the same run in the same rooms, and changing how often one sensor is read does not change
 another's noise.
+
+Several robots (:class:`Robots`, :class:`MultiRobotSimulation`)
+----------------------------------------------------------------
+One world can hold ``n`` robots of one model, robot ``k`` named ``robots.names[k]`` (its ROS namespace)
+and starting at ``(robots.x0[k], robots.y0[k], robots.theta0[k])``; without names it is the one robot at
+``(x0, y0, theta0)`` above, exactly as before. Each robot is a :class:`Simulation` of its own (motors,
+encoders, slip, sensors) with its own four noise streams (:func:`robot_streams`: robot 0 has the ones
+above, robot ``k >= 1`` the four children of the seed's child ``4 + k``; the placement stream is the
+world's). To the others a robot is a cylinder of its ``collision_radius`` at its true position: each
+robot's LiDAR sees the others as discs, and robots collide with each other as with a cylinder (the move
+cut at the first contact ``|p_a - p_b| = R_a + R_b``, the heading still turning). One physics step moves
+every robot in turn, in the order ``robots.names`` lists them, each against the others where they are at
+that moment (the robots before it already moved), so no two ever overlap. The starts must be free and
+pairwise at least ``2 R`` apart, and the furniture on legs is placed clear of every start.
 """
 
 from __future__ import annotations
 
 import math
+import re
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import partial
 
@@ -70,8 +86,8 @@ from turtlelib import DiffDrive, Transform2D
 from turtlelib.sensing.scan_model import LidarConfig, arena_walls, polygon_walls, simulate_scan
 from turtlelib.util.validation import finite_real, in_range, integer, non_negative, one_of, positive, store
 
-from .free_space import FreeBall, first_collision
-from .house import Boxes, InteriorWalls, Legs, WorldGeometry, store_lists
+from .free_space import FreeBall, contact_fraction, first_collision
+from .house import Boxes, InteriorWalls, Legs, WorldGeometry, store_lists, store_table
 
 # The default world: eight cylinders of the course's radius, 0.75 to 1.85 m from the centre. On any circle
 # of radius 0.5 to 1.0 m through the origin (centre (0, +-radius)) the robot's disc (0.11 m) clears every
@@ -79,6 +95,11 @@ from .house import Boxes, InteriorWalls, Legs, WorldGeometry, store_lists
 DEFAULT_OBSTACLE_R_M = 0.038
 DEFAULT_OBSTACLES_X = (1.4, -1.4, 1.3, -1.3, 0.0, 0.0, 1.2, -1.2)
 DEFAULT_OBSTACLES_Y = (0.3, -0.3, -1.2, 1.2, 0.75, -0.75, 1.4, -1.4)
+# A robot's name: one token of a ROS namespace (tb3_0, tb3_1, ...)
+ROBOT_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]*")
+# No other robot: rows [x, y, r] (m) of the other robots' discs
+NO_OTHERS = np.zeros((0, 3))
+NO_WALLS = np.zeros((0, 4))
 
 
 @dataclass(frozen=True)
@@ -250,14 +271,65 @@ def seed_streams(seed: int) -> list[np.random.SeedSequence]:
     return np.random.SeedSequence(seed).spawn(5)
 
 
+def robot_streams(seed: int, index: int) -> list[np.random.SeedSequence]:
+    """Robot ``index``'s four streams (wheel noise, slip, LiDAR, landmark sensor): robot 0's are the first
+    four of :func:`seed_streams` (one robot as before), robot ``k >= 1``'s the children of the seed's child
+    ``4 + k`` (``SeedSequence(seed, spawn_key=(4 + k,))``, the child ``spawn`` would give): every robot's
+    independent of the others' and of the placement."""
+    if index == 0:
+        return seed_streams(seed)[:4]
+    return np.random.SeedSequence(seed, spawn_key=(4 + index,)).spawn(4)
+
+
+@dataclass(frozen=True)
+class Robots:
+    """Several robots in one world (module docstring): ``names`` their names (each a ROS namespace token:
+    a letter then letters, digits or ``_``; distinct), and their start poses ``x0[k]``, ``y0[k]`` (m,
+    finite) and ``theta0[k]`` (rad, finite), one per name. No names (the default): the one robot at the
+    arena's ``(x0, y0, theta0)``. ROS parameters ``robots.names``, ``robots.x0``, ``robots.y0``,
+    ``robots.theta0``; any sequences become tuples.
+    """
+
+    names: tuple[str, ...] = ()
+    x0: tuple[float, ...] = ()
+    y0: tuple[float, ...] = ()
+    theta0: tuple[float, ...] = ()
+
+    def __post_init__(self) -> None:
+        if isinstance(self.names, (str, bytes)) or not isinstance(self.names, Sequence):
+            raise ValueError(f"robots.names must be a list of names, got {self.names!r}")
+        object.__setattr__(self, "names", tuple(self.names))
+        for k, name in enumerate(self.names):
+            if not isinstance(name, str) or ROBOT_NAME.fullmatch(name) is None:
+                raise ValueError(
+                    f"robots.names[{k}] must be a namespace token (a letter, then letters, digits or _), "
+                    f"got {name!r}"
+                )
+        if len(set(self.names)) != len(self.names):
+            raise ValueError(f"robots.names must be distinct, got {list(self.names)}")
+        store_table(self, "robots.", (("x0", finite_real), ("y0", finite_real), ("theta0", finite_real)))
+        if len(self.x0) != len(self.names):
+            raise ValueError(
+                f"robots.x0, robots.y0 and robots.theta0 need one value per name ({len(self.names)}), "
+                f"got {len(self.x0)}"
+            )
+
+    def starts(self, arena: ArenaConfig) -> tuple[Transform2D, ...]:
+        """Each robot's start pose ``T_world_start``; without names the arena's one."""
+        if not self.names:
+            return (arena.T_world_start,)
+        return tuple(Transform2D(*pose) for pose in zip(self.x0, self.y0, self.theta0, strict=True))
+
+
 @dataclass(frozen=True)
 class SimulationConfig:
     """The whole simulated world; the defaults are the default world (config/basic_world.yaml).
 
     Besides each part's own checks, every cylinder must lie inside the arena, outside every box and clear
-    of the interior walls, and the robot's collision disc must start free (inside the walls, clear of
-    every cylinder, box and interior wall); the furniture on legs is then placed (``world``, from the
-    seed's placement stream); ValueError otherwise.
+    of the interior walls, and each robot's collision disc must start free (inside the walls, clear of
+    every cylinder, box and interior wall, and of the other robots' start discs); the furniture on legs
+    is then placed (``world``, from the seed's placement stream, clear of every start); ValueError
+    otherwise. ``robots``: several robots (module docstring), none by default (one robot).
     """
 
     arena: ArenaConfig = field(default_factory=ArenaConfig)
@@ -269,6 +341,7 @@ class SimulationConfig:
     interior_walls: InteriorWalls = field(default_factory=InteriorWalls)
     boxes: Boxes = field(default_factory=Boxes)
     legs: Legs = field(default_factory=Legs)
+    robots: Robots = field(default_factory=Robots)
     # everything solid, the legs placed: set by __post_init__
     world: WorldGeometry = field(init=False, repr=False, compare=False)
 
@@ -286,16 +359,31 @@ class SimulationConfig:
             if reason is not None:
                 raise ValueError(f"obstacle {j} at ({x}, {y}) m with radius {r} m {reason}")
         world = WorldGeometry(bare.outer, bare.interior, bare.boxes, self.obstacles.circles())
-        start_xy = self.arena.T_world_start.translation
-        collision = world.first_collision(start_xy, self.robot.collision_radius)
-        if collision is not None:
-            raise ValueError(
-                f"the robot's start (x0, y0) = ({self.arena.x0}, {self.arena.y0}) m with collision_radius "
-                f"{self.robot.collision_radius} m {collision}"
-            )
+        radius_m = self.robot.collision_radius
+        starts_xy = np.array([T.translation for T in self.starts])
+        for k, p_world in enumerate(starts_xy):
+            collision = world.first_collision(p_world, radius_m)
+            if collision is None and k > 0:
+                # |p_k - p_j| >= 2 R for the robots before it
+                gaps_m = np.hypot(*(starts_xy[:k] - p_world).T)
+                j = int(np.argmin(gaps_m))
+                if gaps_m[j] < 2.0 * radius_m:
+                    collision = f"overlaps robot {self.robots.names[j]}'s start ({gaps_m[j]:.3f} m apart)"
+            if collision is not None:
+                whose = (
+                    f"the robot's start (x0, y0) = ({self.arena.x0}, {self.arena.y0}) m"
+                    if not self.robots.names
+                    else f"robot {self.robots.names[k]}'s start ({p_world[0]}, {p_world[1]}) m"
+                )
+                raise ValueError(f"{whose} with collision_radius {radius_m} m {collision}")
         placement = np.random.default_rng(seed_streams(self.noise.seed)[4])
-        world = world.with_legs(self.legs, placement, start_xy, self.robot.collision_radius)
+        world = world.with_legs(self.legs, placement, starts_xy, radius_m)
         object.__setattr__(self, "world", world)
+
+    @property
+    def starts(self) -> tuple[Transform2D, ...]:
+        """Each robot's start pose ``T_world_start`` (one without ``robots``: the arena's)."""
+        return self.robots.starts(self.arena)
 
     @property
     def wall_segments(self) -> NDArray[np.float64]:
@@ -321,26 +409,31 @@ class LandmarkReadings:
 
 
 class Simulation:
-    """The true state of the simulated Burger and its sensors (see the module docstring for the models).
+    """The true state of one simulated robot and its sensors (see the module docstring for the models):
+    robot ``index`` of ``config.robots`` (0: the one robot), starting at ``T_world_start``.
 
     State: ``T_world_body`` (true pose), the motor commands ``motor_cmd`` (left, right; mcu), the encoder
     angles (rad, continuous, before quantisation) and the last step's wheel speeds and body twist.
+    ``others`` (M, 3) of :meth:`step`, :meth:`scan` and :meth:`teleport`: the other robots' discs
+    ``[x, y, r]`` (m) in the world (:class:`MultiRobotSimulation`), none by default.
     """
 
-    def __init__(self, config: SimulationConfig) -> None:
+    def __init__(self, config: SimulationConfig, index: int = 0) -> None:
         self.config = config
+        self.index = index
+        self.T_world_start = config.starts[index]
         self.drive: DiffDrive = config.robot.diff_drive()
         # the landmarks and the arena's polygon of walls; world: everything solid (rooms included)
         self.circles = config.obstacles.circles()
         self.walls = config.wall_segments
         self.world = config.world
         self._free_ball = FreeBall(self.world.circles, self.world.segments, config.robot.collision_radius)
-        wheel_seq, slip_seq, lidar_seq, landmark_seq, _ = seed_streams(config.noise.seed)
+        wheel_seq, slip_seq, lidar_seq, landmark_seq = robot_streams(config.noise.seed, index)
         self._wheel_rng = np.random.default_rng(wheel_seq)
         self._slip_rng = np.random.default_rng(slip_seq)
         self._lidar_rng = np.random.default_rng(lidar_seq)
         self._landmark_rng = np.random.default_rng(landmark_seq)
-        self.T_world_body = config.arena.T_world_start
+        self.T_world_body = self.T_world_start
         self.motor_cmd = np.zeros(2, dtype=np.int64)
         self._encoder_rad = np.zeros(2)
         self.wheel_speed_rad_s = np.zeros(2)
@@ -373,8 +466,9 @@ class Simulation:
 
     # --- physics -----------------------------------------------------------------------------------------
 
-    def step(self, dt_s: float) -> None:
-        """Advance the world by ``dt_s`` s (> 0): wheel noise, encoders, slip, arc motion, collisions."""
+    def step(self, dt_s: float, others: NDArray[np.float64] = NO_OTHERS) -> None:
+        """Advance the robot by ``dt_s`` s (> 0): wheel noise, encoders, slip, arc motion, collisions (with
+        the world and the ``others``' discs)."""
         dt_s = positive("dt_s", dt_s)
         noise = self.config.noise
         w = self.commanded_speed_rad_s
@@ -392,6 +486,11 @@ class Simulation:
         T_end = self.drive.step(T_start, dphi[0], dphi[1])
         d_world = T_end.translation - T_start.translation
         s = self._free_ball.contact_fraction(T_start.translation, d_world)
+        if others.shape[0]:
+            # the other robots as cylinders: contact at |p - c| = R + r
+            s = min(
+                s, contact_fraction(T_start.translation, d_world, others, NO_WALLS, self.collision_radius_m)
+            )
         if s < 1.0:
             p_world = T_start.translation + s * d_world
             T_end = Transform2D(p_world[0], p_world[1], T_end.theta)
@@ -409,9 +508,26 @@ class Simulation:
         """The encoder reading as a wheel angle: ``ticks / encoder_ticks_per_rad`` (rad), shape (2,)."""
         return self.encoder_ticks / self.config.robot.encoder_ticks_per_rad
 
-    def teleport(self, T_world_body: Transform2D) -> None:
-        """Put the robot at ``T_world_body`` (the encoders keep their count); ValueError if not free."""
-        collision = self.world.first_collision(T_world_body.translation, self.config.robot.collision_radius)
+    @property
+    def collision_radius_m(self) -> float:
+        """The robot's collision radius (m): its disc to the world and to the other robots."""
+        return self.config.robot.collision_radius
+
+    @property
+    def disc(self) -> NDArray[np.float64]:
+        """The robot as the others meet and see it: ``[x, y, collision_radius]`` (m), shape (3,)."""
+        return np.array([self.T_world_body.x, self.T_world_body.y, self.collision_radius_m])
+
+    def teleport(self, T_world_body: Transform2D, others: NDArray[np.float64] = NO_OTHERS) -> None:
+        """Put the robot at ``T_world_body`` (the encoders keep their count); ValueError if not free (in the
+        world, or overlapping one of the ``others``' discs)."""
+        p_world = T_world_body.translation
+        collision = self.world.first_collision(p_world, self.collision_radius_m)
+        # |p - c| < R + r
+        overlapping = np.hypot(*(p_world - others[:, :2]).T) < self.collision_radius_m + others[:, 2]
+        if collision is None and np.any(overlapping):
+            j = int(np.argmax(overlapping))
+            collision = f"overlaps another robot at ({others[j, 0]:.3f}, {others[j, 1]:.3f}) m"
         if collision is not None:
             raise ValueError(
                 f"cannot teleport to ({T_world_body.x}, {T_world_body.y}) m: the robot {collision}"
@@ -421,20 +537,21 @@ class Simulation:
 
     def reset(self) -> None:
         """Back to the start pose, at rest (motor commands zero); the encoders keep their count."""
-        self.teleport(self.config.arena.T_world_start)
+        self.teleport(self.T_world_start)
         self.motor_cmd = np.zeros(2, dtype=np.int64)
         self.wheel_speed_rad_s = np.zeros(2)
 
     # --- sensors -----------------------------------------------------------------------------------------
 
-    def scan(self) -> SimulatedScan:
-        """A LiDAR scan from the true pose against every wall and cylinder (rooms included): this turn's
-        layout, then the ranges (m; ``no_return`` where nothing is measured)."""
+    def scan(self, others: NDArray[np.float64] = NO_OTHERS) -> SimulatedScan:
+        """A LiDAR scan from the true pose against every wall and cylinder (rooms included) and the
+        ``others``' discs: this turn's layout, then the ranges (m; ``no_return`` where nothing is
+        measured)."""
         T_world_scan = self.T_world_body @ self.config.robot.T_body_scan
         layout = self.config.lidar.scan_layout(self._lidar_rng)
+        circles = self.world.circles if not others.shape[0] else np.vstack([self.world.circles, others])
         return SimulatedScan(
-            layout,
-            simulate_scan(T_world_scan, self.world.circles, self.world.segments, layout, self._lidar_rng),
+            layout, simulate_scan(T_world_scan, circles, self.world.segments, layout, self._lidar_rng)
         )
 
     def sense_landmarks(self) -> LandmarkReadings:
@@ -446,3 +563,40 @@ class Simulation:
         e = self._landmark_rng.normal(0.0, sigma_m, size=p_body.shape)
         in_range = np.hypot(p_body[:, 0], p_body[:, 1]) <= self.config.noise.max_range
         return LandmarkReadings(np.flatnonzero(in_range), p_body[in_range] + e[in_range])
+
+
+class MultiRobotSimulation:
+    """Every robot of ``config`` in its one world (module docstring, "Several robots"): ``robots[k]`` the
+    :class:`Simulation` of robot ``k`` (one without ``config.robots``), ``names`` their names (``("",)``
+    for the one robot). Each robot's other robots are cylinders of their collision radius at their true
+    positions."""
+
+    def __init__(self, config: SimulationConfig) -> None:
+        self.config = config
+        self.names = config.robots.names or ("",)
+        self.robots = [Simulation(config, k) for k in range(len(self.names))]
+
+    def others(self, index: int) -> NDArray[np.float64]:
+        """The discs ``[x, y, r]`` (m) of every robot but ``index``, shape (n - 1, 3)."""
+        if len(self.robots) == 1:
+            return NO_OTHERS
+        return np.array([robot.disc for robot in self.robots if robot.index != index])
+
+    def step(self, dt_s: float) -> None:
+        """One physics step of ``dt_s`` s: each robot in turn, against the others where they are now."""
+        for robot in self.robots:
+            robot.step(dt_s, self.others(robot.index))
+
+    def scan(self, index: int) -> SimulatedScan:
+        """Robot ``index``'s LiDAR scan, the other robots seen as discs."""
+        return self.robots[index].scan(self.others(index))
+
+    def teleport(self, index: int, T_world_body: Transform2D) -> None:
+        """Put robot ``index`` at ``T_world_body``; ValueError if that is not free of the world and of the
+        other robots."""
+        self.robots[index].teleport(T_world_body, self.others(index))
+
+    def reset(self) -> None:
+        """Every robot back to its start pose, at rest (the starts are free and apart: SimulationConfig)."""
+        for robot in self.robots:
+            robot.reset()

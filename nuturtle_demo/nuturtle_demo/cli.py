@@ -3,7 +3,10 @@
 Runs nusim, turtle_control, odometry, landmarks, slam and a figure-eight driver headless for two minutes of
 robot time, faster than real time, then writes metrics.json, the figures, the occupancy grid, the
 trajectories, the rosbag2 bag run/ (every topic: metadata.yaml + run.mcap) and config.yaml into the output
-folder and prints a results table and every entry of that folder (docs/demo.md). The output folder is
+folder and prints a results table and every entry of that folder (docs/demo.md). With ``--robots N``
+(N > 1) N robots drive the world, each with its own SLAM: a folder per robot (tb3_0/, ...) holds its
+metrics.json and figures, summary.md a row per robot, and the printout each robot's results table and
+that summary. The output folder is
 replaced only by a complete run; a run stopped by SIGINT, SIGTERM or SIGHUP goes to OUT.incomplete. Exit
 status: 2 for a bad input (one ``error:`` line, nothing written), 1 for a failed run, a failed save_map
 or, with ``--check``, a failed target or a stopped run, else 0.
@@ -18,14 +21,16 @@ from pathlib import Path
 
 from nuturtle_description.robot_params import add_model_argument
 from nuturtle_eval.command_help import DefaultsHelpFormatter
-from nuturtle_eval.run_evaluation import Row, failed_targets, results_table
+from nuturtle_eval.run_evaluation import results_table
 from nuturtle_eval.run_folder import error_line, outputs_line, unfinished_runs
 from nuturtle_ros_common.dds_domain import add_domain_argument
 from nuturtle_tools.relay_config import add_foxglove_argument, parse_endpoint
 
+from .robot_stack import RobotResult, summary_table
 from .run import (
     ASSOCIATIONS,
     BAG_NAME,
+    MAX_ROBOTS,
     MODES,
     MOTION_SOURCES,
     DemoOptions,
@@ -64,6 +69,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help="upper bound on simulated seconds per wall second "
                         "when not --realtime")  # fmt: skip
     parser.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    parser.add_argument("--robots", type=int, default=1,
+                        help=f"robots in the world (1 to {MAX_ROBOTS}), each with its own SLAM, named "
+                        "tb3_0, tb3_1, ... (mapping only)")  # fmt: skip
     parser.add_argument("--check", action="store_true",
                         help="exit status 1 when a target of the results table fails or the run is "
                         "stopped early (for CI)")  # fmt: skip
@@ -111,7 +119,7 @@ def report(result: DemoResult, options: DemoOptions) -> str:
         else f"INCOMPLETE: interrupted by {result.interrupted} after {result.metrics.sim_seconds:.1f} of "
         f"{options.duration_s:.1f} s; the figures cover the time simulated so far; the last complete run is "
         f"still in {options.out_dir}/",
-        results_table(result.metrics, more_rows=_grid_rows(result), scope=result.scope),
+        *_robot_tables(result.robots),
         "",
         f"{result.message_count} messages on {len(result.recorded_topics)} topics recorded in the "
         f"rosbag2 bag {result.out_dir / BAG_NAME}/ (ros2 bag info / ros2 bag play)",
@@ -127,8 +135,25 @@ def _route_line(route_time_s: float) -> str:
     return f"route: stopped {route_time_s:.1f} s in (--route-start {route_time_s:.1f} goes on from there)"
 
 
-def _grid_rows(result: DemoResult) -> list[Row]:
-    return [] if result.grid_score is None else result.grid_score.rows(result.scope)
+def _robot_tables(robots: tuple[RobotResult, ...]) -> list[str]:
+    """The one robot's results table, or each robot's under its name and then the summary of them all."""
+    if len(robots) == 1:
+        robot = robots[0]
+        return [results_table(robot.metrics, more_rows=robot.grid_rows(), scope=robot.scope)]
+    lines = []
+    for robot in robots:
+        T = robot.T_world_start
+        lines += [
+            f"robot {robot.name}, from ({T.x:.2f}, {T.y:.2f}, {T.theta:.3f}), outputs in {robot.out_dir}/:",
+            results_table(robot.metrics, more_rows=robot.grid_rows(), scope=robot.scope),
+            "",
+        ]
+    return [*lines, "every robot (summary.md):", summary_table(list(robots))]
+
+
+def _failed(robots: tuple[RobotResult, ...]) -> list[str]:
+    """Each robot's failed targets, named after the robot when there are several."""
+    return [f"{robot.name}: {label}" if robot.name else label for robot in robots for label in robot.failed()]
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -155,6 +180,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             route_start_s=args.route_start,
             foxglove=foxglove,
             domain_id=args.domain_id,
+            robots=args.robots,
         )
     except ValueError as error:
         print(f"error: {error_line(error)}", file=sys.stderr)
@@ -169,7 +195,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         # a bad input (refused before the run started) is 2, a run that failed 1
         return 1 if getattr(error, "__notes__", None) else 2
     print(report(result, options))
-    failed = failed_targets(result.metrics, _grid_rows(result), result.scope)
+    failed = _failed(result.robots)
     if result.interrupted is not None:
         failed.insert(0, f"the run is incomplete ({result.interrupted})")
     if args.check and failed:

@@ -13,23 +13,25 @@ so the reference is back at the start pose after each loop and turns the other w
 wheel speeds on a grid of ``1 / motor_cmd_per_rad_sec`` rad/s, so the reference uses the nearest wheel
 speeds on that grid (:class:`FigureEight`): driven open loop, its loops close up to wheel slip.
 The robot first stands still for ``start_delay`` s (the estimators see the start from a known pose).
-With ``route_start_s`` > 0 the route begins that far in, ``tau = route_start_s + (t - t_0 - start_delay)``:
-a run that drove the route for ``route_start_s`` s and stopped is continued by a new run started at the
-pose it stopped at (docs/maps.md, "Continuing over sessions").
+A robot may join the route ``route_start_s`` s in: it starts at ``T_start_ref(route_start_s)`` and
+follows ``T_start_ref(tau)``, ``tau = route_start_s + (t - t_0 - start_delay)``. That continues a run
+that drove the route for ``route_start_s`` s and stopped, from the pose it stopped at (docs/maps.md,
+"Continuing over sessions"), and spaces the demo's robots along one figure eight.
 
 Tracking (Kanayama et al. 1990)
 -------------------------------
-With the pose estimate ``T_map_body`` (from `slam/odom`) and the reference ``T_map_ref = T_map_start @
-T_start_ref``, the error in the body frame ``[e_x, e_y, e_theta] = T_map_body^-1 T_map_ref`` gives::
+With the pose estimate ``T_map_body`` (from `slam/odom`) and the reference ``T_map_ref = T_map_route @
+T_start_ref(tau)``, the error in the body frame ``[e_x, e_y, e_theta] = T_map_body^-1 T_map_ref``
+gives::
 
     v = v_ref cos(e_theta) + k_x e_x
     w = w_ref + v_ref (k_y e_y + k_theta sin(e_theta))
 
-(asymptotically stable for k_x, k_y, k_theta > 0 and v_ref > 0). ``T_map_start`` is the route's start:
-the first pose received ``T_map_first`` composed back along the route already driven,
-``T_map_start = T_map_first @ T_start_ref(route_start_s)^-1`` (the first pose itself when the route begins
-at its start); until a pose arrives, or with ``feedback`` false, the reference twist is sent as it is
-(open loop).
+(asymptotically stable for k_x, k_y, k_theta > 0 and v_ref > 0). ``T_map_route`` is the route's start
+(its crossing): the first pose received ``T_map_first`` composed back along the route already driven,
+``T_map_route = T_map_first @ T_start_ref(route_start_s)^-1`` (the first pose itself when the route
+begins at its start); until a pose arrives, or with ``feedback`` false, the reference twist is sent as it
+is (open loop).
 Feeding back the SLAM pose keeps the true robot on the figure eight while wheel odometry drifts: in the
 default world (cylinders 0.75 m to 1.85 m from the centre, start at the origin facing +x) a radius of
 0.75 m keeps the robot's disc about 0.45 m clear of every cylinder and brings every cylinder within
@@ -156,7 +158,8 @@ class FigureEightDriver(Node):
         self.route = FigureEight.for_robot(self.config, self.robot)
         self._publisher = self.create_publisher(Twist, "cmd_vel", 10)
         self._t_start_s: float | None = None
-        self.T_map_start: Transform2D | None = None
+        # where the route's reference starts (module docstring)
+        self.T_map_route: Transform2D | None = None
         self.T_map_body: Transform2D | None = None
         # s into the route of the last command (route_start_s while standing still)
         self.route_time_s = self.config.route_start_s
@@ -171,9 +174,9 @@ class FigureEightDriver(Node):
         except ValueError as error:
             self.get_logger().warning(f"slam/odom skipped: {error}", throttle_duration_sec=2.0)
             return
-        if self.T_map_start is None:
-            # T_map_start = T_map_first @ T_start_ref(route_start_s)^-1
-            self.T_map_start = self.T_map_body @ self.route.reference(self.config.route_start_s).inverse()
+        if self.T_map_route is None:
+            # T_map_route = T_map_first @ T_start_ref(route_start_s)^-1
+            self.T_map_route = self.T_map_body @ self.route.reference(self.config.route_start_s).inverse()
 
     def _on_timer(self) -> None:
         if self.stopped:
@@ -188,8 +191,8 @@ class FigureEightDriver(Node):
         tau_s = self.config.route_start_s + driven_s
         self.route_time_s = tau_s
         V_ref = self.route.body_twist(tau_s)
-        if self.T_map_start is not None and self.T_map_body is not None:
-            T_map_ref = self.T_map_start @ self.route.reference(tau_s)
+        if self.T_map_route is not None and self.T_map_body is not None:
+            T_map_ref = self.T_map_route @ self.route.reference(tau_s)
             V_ref = track(self.T_map_body, T_map_ref, V_ref, self.config)
         self._publisher.publish(twist_message(V_ref))
 

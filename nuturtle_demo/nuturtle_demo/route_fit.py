@@ -24,6 +24,17 @@ is tried, and the first radius with a clear placement is taken at the start near
 default world the route's own 0.75 m fits at the start, in turtlebot3_world a Burger keeps its spawn with
 smaller loops and a Waffle's loops move into the strip between the cylinders and the south wall, and in
 rooms_world the living room holds the route's own.
+
+Several robots (:func:`fleet_route`) share the one fitted figure eight, spaced along it in time: robot
+``k`` joins the route at ``s_k = s_0 + k Delta T`` (``T`` one loop's period, ``s_0`` the run's
+``--route-start``) and starts at ``T_world_start @ T_start_ref(s_k)``, so they drive it one after the other
+and never meet. On loops of
+radius ``R`` the robots at ``f`` and ``f + Delta`` (in loops) are ``R d(f, Delta)`` apart; the spacing
+``Delta`` among FLEET_SPACINGS that keeps the smallest distance of every pair over the route's two loops
+the largest is taken: half a loop for two robots (always ``2 R`` apart: opposite on one loop or mirrored
+across the crossing), two thirds for three (``sqrt(3) R``), about a quarter for four (``1.41 R``). It
+fits when that distance, measured along the route as driven (:class:`FigureEight`), keeps the robots'
+discs grown by ROUTE_CLEARANCE_M apart.
 """
 
 from __future__ import annotations
@@ -52,6 +63,10 @@ ROUTE_WHEEL_SHARE = 0.9
 PLACEMENT_STEP_M = 0.05
 # Start headings tried there (rad): 0 to pi in steps of pi / 6 (the hexagon's and the grid's symmetries)
 PLACEMENT_HEADINGS = tuple(k * math.pi / 6.0 for k in range(6))
+# Spacings tried between consecutive robots on the route (in loops: fractions of one loop's period), and
+# the samples per loop where their distances are measured
+FLEET_SPACINGS = tuple(k / 240.0 for k in range(1, 481))
+FLEET_SAMPLES_PER_LOOP = 360
 
 
 @dataclass(frozen=True)
@@ -211,3 +226,64 @@ def fit_route(config: SimulationConfig, route: RouteConfig, place: bool = True) 
         f"{'anywhere' if place else 'from the start pose'} in this world, clear of its cylinders, walls "
         f"and furniture by {ROUTE_CLEARANCE_M} m ({route_collision(config, radii[-1])})"
     )
+
+
+@dataclass(frozen=True)
+class FleetRoute:
+    """Robots on one figure eight (module docstring): robot ``k`` joins the route at ``route_starts_s[k]``
+    (s) and starts at ``starts[k]`` (nusim/world); ``gap_m``: the smallest distance (m) between two of them
+    along the route as driven."""
+
+    starts: tuple[Transform2D, ...]
+    route_starts_s: tuple[float, ...]
+    gap_m: float
+
+
+def unit_route_xy(f_loops: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The figure eight of unit radius from the origin facing +x at ``f_loops`` loops into it (..., 2):
+    ``(sin a, 1 - cos a)`` on the counter-clockwise loop, ``(sin a, cos a - 1)`` on the clockwise one,
+    ``a = 2 pi frac(f)``."""
+    angle = 2.0 * np.pi * np.mod(f_loops, 1.0)
+    y = 1.0 - np.cos(angle)
+    return np.stack([np.sin(angle), np.where(np.mod(f_loops, 2.0) < 1.0, y, -y)], axis=-1)
+
+
+def fleet_spacing(n: int) -> float:
+    """The spacing (loops) among FLEET_SPACINGS, up to two loops over ``n``, that keeps ``n`` robots on the
+    unit figure eight farthest apart (the smallest pairwise distance over its two loops the largest; the
+    smallest spacing on a tie)."""
+    f = np.arange(2 * FLEET_SAMPLES_PER_LOOP) / FLEET_SAMPLES_PER_LOOP
+    spacings = np.array([d for d in FLEET_SPACINGS if d <= 2.0 / n + 1e-12])
+    # xy (spacings, robots, samples, 2)
+    xy = unit_route_xy(f[None, None, :] + spacings[:, None, None] * np.arange(n)[None, :, None])
+    a, b = np.triu_indices(n, 1)
+    gaps = np.linalg.norm(xy[:, a] - xy[:, b], axis=-1).min(axis=(1, 2))
+    return float(spacings[int(np.argmax(gaps))])
+
+
+def fleet_route(
+    fitted: FittedRoute, figure: FigureEight, n: int, robot: RobotParams, route_start_s: float = 0.0
+) -> FleetRoute:
+    """``n`` (>= 1) robots on the fitted figure eight (module docstring), the first ``route_start_s`` (s)
+    into it. ValueError when two of them would come nearer than their discs grown by ROUTE_CLEARANCE_M."""
+    if n < 1:
+        raise ValueError(f"the number of robots must be >= 1, got {n}")
+    if n == 1:
+        return FleetRoute(
+            (fitted.T_world_start @ figure.reference(route_start_s),), (route_start_s,), math.inf
+        )
+    period_s = figure.loop_period_s
+    route_starts_s = tuple(route_start_s + k * fleet_spacing(n) * period_s for k in range(n))
+    tau_s = np.arange(2 * FLEET_SAMPLES_PER_LOOP) * period_s / FLEET_SAMPLES_PER_LOOP
+    # each robot's positions along the route as driven: T_start_ref(tau + s_k)
+    xy = np.array([[figure.reference(t + s).translation for t in tau_s] for s in route_starts_s])
+    a, b = np.triu_indices(n, 1)
+    gap_m = float(np.linalg.norm(xy[a] - xy[b], axis=-1).min())
+    needed_m = 2.0 * route_clearance_m(robot)
+    if gap_m < needed_m:
+        raise ValueError(
+            f"{n} robots on the figure eight of {fitted.radius_m:.3f} m loops come {gap_m:.3f} m near each "
+            f"other, less than two collision radii and their clearance ({needed_m:.3f} m)"
+        )
+    starts = tuple(fitted.T_world_start @ figure.reference(s) for s in route_starts_s)
+    return FleetRoute(starts, route_starts_s, gap_m)

@@ -21,6 +21,15 @@ In ``localization`` mode (docs/maps.md) slam loads a map made by an earlier run 
 ``nusim/world``, the same world) and starts at the map origin; the demo then relocalizes it at the true
 start pose with a real `initialpose` message before nusim moves the robot.
 
+Several robots (``robots``, ``--robots N``): one nusim simulates them all in the one world
+(nusim/README.md, "Several robots"), and each robot ``tb3_k`` has a stack of its own (robot_stack.py:
+turtle_control, odometry, landmarks, slam, driver, demo_monitor under the namespace ``tb3_k``, its frames
+prefixed ``tb3_k/``, slam's map the shared ``map``), all on the one executor in the one lockstep. They
+drive the one fitted figure eight one after the other (route_fit.py, "Several robots"), each starting
+where it joins it, and each robot's LiDAR sees the others. Each robot is evaluated as a run of its own
+(``OUT/tb3_k/``: its metrics.json, figures, grid and trajectories) and ``OUT/summary.md`` holds one row
+per robot; the bag and config.yaml are the run's. A run of one robot is exactly the run without robots.
+
 Order of start-up: every node is built, the recorder subscribes to every topic, (localization) slam takes
 the initialpose, and only then is nusim added to the executor, so the recording holds the run from its
 first physics step. With ``save_map`` the demo calls slam's `~/save_map` service (std_srvs/Trigger) once
@@ -51,8 +60,6 @@ from std_srvs.srv import Trigger
 
 from nusim.nusim_node import NusimNode
 from nuslam.slam_node import MOTION_SOURCES
-from nuturtle_control.odometry import OdometryNode
-from nuturtle_control.turtle_control import TurtleControlNode
 from nuturtle_description.robot_params import resolve_model
 from nuturtle_eval.grid_score import GridScore, WorldOutline, score_grid, seen_points
 from nuturtle_eval.metrics import PoseSeries, RunMetrics, odom_in_world
@@ -79,39 +86,53 @@ from nuturtle_ros_common.ros_files import load_ros_parameters, share_file
 from nuturtle_ros_common.shared_clock import share_clock
 from nuturtle_ros_common.stop_signals import StopSignals
 from nuturtle_tools.foxglove_relay import FoxgloveRelay, StaticTransform, slam_view_transforms
-from nuturtle_tools.monitor import RunMonitor
 from nuturtle_tools.params import params_file, to_parameters
 from nuturtle_tools.player import spin_until, wait_until
 from nuturtle_tools.recorder import BagWriter, TeeSink, TopicRecorder
 from nuturtle_tools.relay_config import RelayConfig, check_port_free
 from nuturtle_tools.staged_run import run_staged
-from turtlelib import MODES, Transform2D, TwistNoise, normalize_angle
+from turtlelib import MODES, Transform2D, normalize_angle
 from turtlelib.mapping.landmark_map import load_map
 from turtlelib.util.validation import finite_real, integer, non_negative, one_of, positive, store
 
-from .driver import FigureEight, FigureEightDriver, RouteConfig
+from .driver import FigureEight, RouteConfig
 from .lockstep import Pace, run_cycle
-from .matched_noise import matched_point_std, matched_wheel_noise
-from .route_fit import FittedRoute, fit_route
+from .robot_stack import (
+    MAX_ROBOTS,
+    RobotPlan,
+    RobotResult,
+    RobotStack,
+    robot_names,
+    summary_table,
+)
+from .route_fit import FittedRoute, fit_route, fleet_route
 
 ASSOCIATIONS = ("known", "unknown")
 # Wall time for slam to take the initialpose, and for its ~/save_map service to appear and answer (s)
 SLAM_SERVICE_TIMEOUT_S = 10.0
 # The recording: a rosbag2 bag directory in the output folder
 BAG_NAME = "run"
-# Everything a run writes into its output folder (nuturtle_eval.run_folder)
+# With several robots: the table of their results, beside a folder per robot (robot_stack.py)
+SUMMARY_FILE = "summary.md"
+# Everything a run writes into its output folder (nuturtle_eval.run_folder): one robot's outputs, or several
+# robots' folders and their summary
 OUTPUTS = (
     "metrics.json", "trajectory.png", "errors.png", "covariance.png", *GRID_OUTPUTS, *TUM_OUTPUTS,
-    "config.yaml", BAG_NAME,
+    "config.yaml", BAG_NAME, SUMMARY_FILE, *robot_names(MAX_ROBOTS),
 )  # fmt: skip
 # Wall time to wait for the recorder to subscribe to every topic before the simulation starts (s)
 DISCOVERY_TIMEOUT_S = 10.0
 # Wall time to let the last messages arrive after the simulation stops (s)
 DRAIN_S = 0.3
-# Topics the recorder must hold before nusim starts (the rest follow as they appear)
+# Topics the recorder must hold before nusim starts (the rest follow as they appear), each robot's
 REQUIRED_TOPICS = (
     "/cmd_vel", "/wheel_cmd", "/odom", "/landmarks", "/slam/odom", "/slam/path", "/slam/map",
 )  # fmt: skip
+
+
+def required_topics(names: tuple[str, ...]) -> set[str]:
+    """REQUIRED_TOPICS of every robot named in ``names`` (``""``: no namespace)."""
+    return {f"/{name}{topic}" if name else topic for name in names for topic in REQUIRED_TOPICS}
 
 
 def default_world() -> Path:
@@ -138,6 +159,9 @@ class DemoOptions:
     begins the figure eight that far into its route, the robot (nusim's true start, slam's start) at the
     route's pose there: the next session of a run that stopped there (not with ``start``).
 
+    ``robots`` (1 to MAX_ROBOTS): how many robots drive the world, each with its own SLAM (module
+    docstring); more than one only in mapping, without map_file, save_map, start or foxglove.
+
     ``foxglove`` (host, port) serves every topic live on a Foxglove WebSocket there (docs/live.md; with
     ``realtime`` it plays at robot speed). ``domain_id`` the run's DDS world: ``"private"`` (no other ROS
     program hears it), ``"env"`` (the shell's ROS_DOMAIN_ID) or a domain id 0-232
@@ -162,9 +186,13 @@ class DemoOptions:
     route_start_s: float = 0.0
     foxglove: tuple[str, int] | None = None
     domain_id: DomainChoice = PRIVATE
+    robots: int = 1
 
     def __post_init__(self) -> None:
         one_of("association", self.association, ASSOCIATIONS)
+        store(self, ("robots",), partial(integer, minimum=1))
+        if self.robots > MAX_ROBOTS:
+            raise ValueError(f"robots must be at most {MAX_ROBOTS}, got {self.robots}")
         store(self, ("domain_id",), domain_choice)
         object.__setattr__(self, "model", resolve_model(self.model))
         if self.foxglove is not None:
@@ -199,6 +227,17 @@ class DemoOptions:
             raise ValueError(f"localization needs an existing map_file, got {self.map_file}")
         if self.map_file is not None and self.map_file.exists():
             load_map(self.map_file)  # slam loads it at start-up: ValueError naming the file
+        if self.robots > 1:
+            alone = {
+                "localization": self.mode == "localization",
+                "map_file": self.map_file is not None,
+                "save_map": self.save_map,
+                "start": self.start is not None,
+                "foxglove": self.foxglove is not None,
+            }
+            given = [name for name, used in alone.items() if used]
+            if given:
+                raise ValueError(f"{', '.join(given)} take one robot, not robots = {self.robots}")
 
     @property
     def realtime_factor(self) -> float:
@@ -220,7 +259,9 @@ class DemoResult:
     without a grid; ``scope``: what kind of run it was, which decides the targets that apply to it;
     ``route``: the driver's figure eight as fitted to the world and the model (None with a given radius);
     ``route_time_s``: how far into the figure eight's route the driver got (s; ``route_start_s`` of a
-    run that continues this one)."""
+    run that continues this one);
+    ``robots``: each robot's results (one for a run of one robot: ``metrics``, ``grid_score`` and
+    ``scope`` are the first robot's)."""
 
     metrics: RunMetrics
     out_dir: Path
@@ -232,18 +273,19 @@ class DemoResult:
     scope: RunScope = MAPPING_SCOPE
     route: FittedRoute | None = None
     route_time_s: float = 0.0
+    robots: tuple[RobotResult, ...] = ()
 
 
 class DemoSystem:
-    """The nodes of one run, built in one context (see the module docstring): ``nusim``, ``turtle_control``,
-    ``odometry``, ``landmarks``, ``slam``, ``driver``, ``recorder``, ``monitor`` and, with
-    ``options.foxglove``, ``relay``: the Foxglove server the recorder's subscriptions also feed (else None;
-    the caller closes it); ``sim_time_s`` the simulation time (s) nusim has reached. OSError when the relay
-    cannot bind its port."""
+    """The nodes of one run, built in one context (see the module docstring): ``nusim``, each robot's
+    ``stacks`` (robot_stack.py: ``turtle_control``, ``odometry``, ``landmarks``, ``slam``, ``driver``,
+    ``monitor``; those of the first robot are also this system's attributes of these names), ``recorder``
+    and, with ``options.foxglove``, ``relay``: the Foxglove server the recorder's subscriptions also feed
+    (else None; the caller closes it); ``sim_time_s`` the simulation time (s) nusim has reached. OSError
+    when the relay cannot bind its port; ValueError when the robots' route does not fit the world."""
 
     def __init__(self, options: DemoOptions, context: Context, writer: BagWriter) -> None:
         sim_time = [Parameter("use_sim_time", value=True)]
-        robot = sim_time + [Parameter("model", value=options.model)]
         world = load_ros_parameters(Path(options.world))
         world.update(seed=options.seed, realtime_factor=options.realtime_factor, model=options.model)
         if options.start is not None:
@@ -255,32 +297,39 @@ class DemoSystem:
         # placed elsewhere in the world (nusim started there) when none fits at the world's start
         self.route: FittedRoute | None = None
         radius_m = options.route_radius
-        simulation = self.nusim.simulation.config
-        T_route_start = simulation.arena.T_world_start
-        if radius_m is None:
-            try:
-                self.route = fit_route(simulation, RouteConfig(), place=options.start is None)
-            except ValueError as error:
-                self.nusim.destroy_node()
-                raise ValueError(f"model {options.model} in world {options.world}: {error}") from None
-            radius_m = self.route.radius_m
-            T_route_start = self.route.T_world_start
-        route = {"radius": radius_m, "route_start_s": options.route_start_s}
-        # a continued route starts the robot where the route is route_start_s in:
-        # T_world_robot = T_world_route_start @ T_start_ref(route_start_s)
-        loop = FigureEight.for_robot(RouteConfig(**route), simulation.robot)
-        T_start = T_route_start @ loop.reference(options.route_start_s)
-        if T_start != simulation.arena.T_world_start:
+        config = self.nusim.simulation.config
+        fitted = FittedRoute(config.arena.T_world_start, radius_m, moved=False) if radius_m else None
+        try:
+            if radius_m is None:
+                self.route = fitted = fit_route(config, RouteConfig(), place=options.start is None)
+                radius_m = fitted.radius_m
+            figure = FigureEight.for_robot(RouteConfig(radius=radius_m), config.robot)
+            fleet = fleet_route(fitted, figure, options.robots, config.robot, options.route_start_s)
+        except ValueError as error:
             self.nusim.destroy_node()
+            raise ValueError(f"model {options.model} in world {options.world}: {error}") from None
+        names = robot_names(options.robots)
+        if options.robots > 1:
+            columns = zip(*(T.as_array() for T in fleet.starts), strict=True)
+            robots = dict(zip(("robots.x0", "robots.y0", "robots.theta0"), map(list, columns), strict=True))
+            world.update({"robots.names": list(names), **robots})
+        elif fleet.starts[0] != config.arena.T_world_start:
+            # moved by the route's fit, or a continued route (--route-start) placing the robot where it is
+            T_start = fleet.starts[0]
             world.update(x0=T_start.x, y0=T_start.y, theta0=T_start.theta)
+        if options.robots > 1 or fleet.starts[0] != config.arena.T_world_start:
+            self.nusim.destroy_node()
             self.nusim = NusimNode(
                 stepped_by_owner=True, context=context, parameter_overrides=to_parameters(world)
             )
-        self.monitor = RunMonitor(context=context, parameter_overrides=sim_time)
-        self.driver = FigureEightDriver(context=context, parameter_overrides=robot + to_parameters(route))
-        self.turtle_control = TurtleControlNode(context=context, parameter_overrides=robot)
-        self.odometry = OdometryNode(context=context, parameter_overrides=robot)
-        self.landmarks, self.slam = _slam_nodes(self, options, context, sim_time)
+        self.stacks = [
+            RobotStack(RobotPlan(name, T_start, radius_m, route_start_s), options, self.nusim, context)
+            for name, T_start, route_start_s in zip(names, fleet.starts, fleet.route_starts_s, strict=True)
+        ]
+        first = self.stacks[0]
+        self.monitor, self.driver = first.monitor, first.driver
+        self.turtle_control, self.odometry = first.turtle_control, first.odometry
+        self.landmarks, self.slam = first.landmarks, first.slam
         self.relay = None if options.foxglove is None else _relay(self, options.foxglove)
         # one subscription per topic for both: a second tap node would slow every executor step
         sink = writer if self.relay is None else TeeSink(writer, self.relay)
@@ -293,10 +342,12 @@ class DemoSystem:
 
     @property
     def nodes(self) -> list[Node]:
-        return [
-            self.nusim, self.turtle_control, self.odometry, self.landmarks, self.slam, self.driver,
-            self.recorder, self.monitor,
-        ]  # fmt: skip
+        robots = [
+            node
+            for stack in self.stacks
+            for node in (stack.turtle_control, stack.odometry, stack.landmarks, stack.slam, stack.driver)
+        ]
+        return [self.nusim, *robots, self.recorder, *(stack.monitor for stack in self.stacks)]
 
     @property
     def sim_time_s(self) -> float:
@@ -320,48 +371,6 @@ def _relay(system: DemoSystem, endpoint: tuple[str, int]) -> FoxgloveRelay:
     relay = FoxgloveRelay(host, port, name="nuturtle_demo", **transforms)
     print(f"Foxglove WebSocket on {relay.url} (Foxglove: Open connection)", file=sys.stderr)
     return relay
-
-
-def _slam_nodes(system: DemoSystem, options: DemoOptions, context: Context, sim_time: list[Parameter]):
-    """The landmarks and slam nodes, SLAM started at nusim's start pose (localization: at the map origin)
-    with matched process noise and LiDAR noise (the scan registration's)."""
-    from nuslam.landmarks_node import LandmarksNode
-    from nuslam.slam_node import SlamNode
-
-    simulation = system.nusim.simulation
-    T_start = simulation.config.arena.T_world_start
-    left_rad_s, right_rad_s = system.driver.route.wheel_speeds_rad_s
-    wheel_noise = matched_wheel_noise(
-        simulation.config.noise.slip_fraction,
-        0.5 * (abs(left_rad_s) + abs(right_rad_s)),
-        system.nusim.timing.rate,
-    )
-    T_slam_start = Transform2D() if options.mode == "localization" else T_start
-    slam_values = {
-        "model": options.model,
-        "association": options.association,
-        "x0": T_slam_start.x,
-        "y0": T_slam_start.y,
-        "theta0": T_slam_start.theta,
-        "wheel_noise": wheel_noise,
-        "motion_source": options.motion_source,
-        "mode": options.mode,
-        "registration.point_std_m": matched_point_std(
-            simulation.config.lidar.noise, simulation.config.lidar.resolution
-        ),
-        # nusim's ranges are unbiased: its local maps do not drift
-        "registration.drift_m2_per_m": 0.0,
-        "registration.drift_rad2_per_m": 0.0,
-    }
-    if options.map_file is not None:
-        slam_values["map_file"] = str(options.map_file)
-    if options.motion_source == "odom":
-        # the same slip as wheel_noise, as the twist noise of the odometry's pose increments
-        noise = TwistNoise.from_wheel_slip(system.driver.robot.diff_drive(), wheel_noise)
-        slam_values.update({f"odom_{name}": value for name, value in vars(noise).items()})
-    landmarks = LandmarksNode(context=context, parameter_overrides=sim_time)
-    slam = SlamNode(context=context, parameter_overrides=sim_time + to_parameters(slam_values))
-    return landmarks, slam
 
 
 def relocalize(executor: SingleThreadedExecutor, system: DemoSystem, options: DemoOptions) -> None:
@@ -466,7 +475,8 @@ def run_demo(options: DemoOptions, on_progress: ProgressCallback | None = None) 
     result, where = run_staged(
         folder, partial(run.run, on_progress=on_progress), lambda: run.started, stopped_reason, "the run"
     )
-    return replace(result, out_dir=where)
+    robots = tuple(replace(robot, out_dir=where / robot.name) for robot in result.robots)
+    return replace(result, out_dir=where, robots=robots)
 
 
 class _DemoRun:
@@ -489,12 +499,14 @@ class _DemoRun:
                 if node is not system.nusim:
                     executor.add_node(node)
 
+            required = required_topics(tuple(stack.name for stack in system.stacks))
+
             def subscribed() -> bool:
-                return set(REQUIRED_TOPICS) <= set(system.recorder.recorded_topics)
+                return required <= set(system.recorder.recorded_topics)
 
             logger = system.nusim.get_logger()
             if not spin_until(executor, logger, subscribed, DISCOVERY_TIMEOUT_S):
-                missing = sorted(set(REQUIRED_TOPICS) - set(system.recorder.recorded_topics))
+                missing = sorted(required - set(system.recorder.recorded_topics))
                 raise RuntimeError(f"the recorder did not discover {missing} within {DISCOVERY_TIMEOUT_S} s")
             if options.mode == "localization":
                 relocalize(executor, system, options)
@@ -517,45 +529,40 @@ class _DemoRun:
             wall_seconds = time.monotonic() - wall_start
             sim_seconds = system.sim_time_s
             executor.remove_node(system.nusim)
-            system.driver.stop()
+            for stack in system.stacks:
+                stack.driver.stop()
             wait_until(executor, logger, time.monotonic() + DRAIN_S)
             saved_map = call_save_map(executor, system) if options.save_map else None
             writer.close()
             # the pace of this run is not part of the world: reusing the file runs nusim at real time
             config = params_file(system.nodes, replace={"nusim": {"realtime_factor": 1.0}})
             (out_dir / "config.yaml").write_text(config, encoding="utf-8")
-            record = _run_record(system, options)
-            metrics = evaluate_and_plot(out_dir, record, sim_seconds=sim_seconds, wall_seconds=wall_seconds)
-            if metrics is None:
-                raise RuntimeError("the run published no odometry or SLAM pose to evaluate")
-            score = grid_score(system, record)
-            write_metrics(
-                out_dir,
-                {
-                    **metrics.as_dict(),
-                    **slip_counts(system.slam),
-                    **grid_counts(system.slam),
-                    **loop_counts(system.slam),
-                    **(score.as_dict() if score is not None else {}),
-                    "complete": stop.received is None,
-                    "stopped_by": stop.received,
-                },
+            scope = RunScope(
+                mode=options.mode,
+                grid_loaded=system.slam.grid.loaded is not None,
+                slip_fraction=system.nusim.simulation.config.noise.slip_fraction,
             )
+            results = []
+            for stack in system.stacks:
+                robot_dir = out_dir / stack.name if stack.name else out_dir
+                robot_dir.mkdir(exist_ok=True)
+                seconds = (sim_seconds, wall_seconds)
+                results.append(_evaluate_robot(system, stack, options, robot_dir, seconds, scope, stop))
+            if len(results) > 1:
+                (out_dir / SUMMARY_FILE).write_text(summary_table(results) + "\n", encoding="utf-8")
+            first = results[0]
             return DemoResult(
-                metrics,
+                first.metrics,
                 out_dir,
                 sorted(system.recorder.recorded_topics),
                 writer.message_count,
                 stop.received,
                 saved_map,
-                score,
-                RunScope(
-                    mode=options.mode,
-                    grid_loaded=system.slam.grid.loaded is not None,
-                    slip_fraction=system.nusim.simulation.config.noise.slip_fraction,
-                ),
+                first.grid_score,
+                scope,
                 system.route,
                 system.driver.route_time_s,
+                tuple(results),
             )
         finally:
             try:
@@ -570,25 +577,65 @@ class _DemoRun:
                 rclpy.try_shutdown(context=context)
 
 
-def _run_record(system: DemoSystem, options: DemoOptions) -> RunRecord:
-    """What the run produced, in ``nusim/world`` (module docstring), for
+def _evaluate_robot(
+    system: DemoSystem,
+    stack: RobotStack,
+    options: DemoOptions,
+    out_dir: Path,
+    seconds: tuple[float, float],
+    scope: RunScope,
+    stop: StopSignals,
+) -> RobotResult:
+    """One robot's figures and metrics.json in ``out_dir`` (its name and start added with several robots)
+    for a run of ``seconds`` (simulated, wall); RuntimeError when it published no odometry or SLAM pose to
+    evaluate."""
+    record = _run_record(system, stack, options)
+    sim_seconds, wall_seconds = seconds
+    metrics = evaluate_and_plot(out_dir, record, sim_seconds=sim_seconds, wall_seconds=wall_seconds)
+    if metrics is None:
+        where = f" of {stack.name}" if stack.name else ""
+        raise RuntimeError(f"the run published no odometry or SLAM pose{where} to evaluate")
+    score = grid_score(system, record)
+    robot = (
+        {"robot": stack.name, "start": stack.T_world_start.as_array().tolist()}
+        if len(system.stacks) > 1
+        else {}
+    )
+    write_metrics(
+        out_dir,
+        {
+            **robot,
+            **metrics.as_dict(),
+            **slip_counts(stack.slam),
+            **grid_counts(stack.slam),
+            **loop_counts(stack.slam),
+            **(score.as_dict() if score is not None else {}),
+            "complete": stop.received is None,
+            "stopped_by": stop.received,
+        },
+    )
+    return RobotResult(stack.name, stack.T_world_start, metrics, score, scope, out_dir)
+
+
+def _run_record(system: DemoSystem, stack: RobotStack, options: DemoOptions) -> RunRecord:
+    """What ``stack``'s robot produced, in ``nusim/world`` (module docstring), for
     :func:`nuturtle_eval.run_evaluation.evaluate_and_plot`."""
     simulation = system.nusim.simulation
-    arena = simulation.config.arena
     lidar = simulation.config.lidar
+    monitor = stack.monitor
     return RunRecord(
-        truth=system.monitor.truth(),
-        odom=odom_in_world(system.monitor.odom(), arena.T_world_start),
-        slam=system.monitor.slam(),
-        slam_covariances=system.monitor.slam_covariances(),
-        snapshot=slam_snapshot(system.slam),
+        truth=monitor.truth(),
+        odom=odom_in_world(monitor.odom(), stack.T_world_start),
+        slam=monitor.slam(),
+        slam_covariances=monitor.slam_covariances(),
+        snapshot=slam_snapshot(stack.slam),
         circles=simulation.circles,
         sensor_range_m=sensor_range_m(
             options.association,
             fake_sensor_range_m=simulation.config.noise.max_range,
-            slam_range_m=float(system.slam.config.max_range),
+            slam_range_m=float(stack.slam.config.max_range),
             radii_m=simulation.circles[:, 2],
-            min_points=system.landmarks.config.min_points,
+            min_points=stack.landmarks.config.min_points,
             angle_increment=lidar.angle_increment,
             lidar_range_m=lidar.range_max,
         ),

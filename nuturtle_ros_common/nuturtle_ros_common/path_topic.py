@@ -17,11 +17,16 @@ from .ros_params import declare_dataclass
 
 
 class PathTopic:
-    """``~/path`` of ``node``, in the frame and with the stamp of the odometry it is given."""
+    """``~/path`` (or ``topic``) of ``node``, in the frame and with the stamp of the odometry it is given;
+    ``config``: the trail's parameters when the node has declared them already (several paths of one
+    node), else they are declared here."""
 
-    def __init__(self, node: Node) -> None:
-        self.trail: PathTrail[PoseStamped] = PathTrail(declare_dataclass(node, PathTrailConfig))
-        self._publisher = node.create_publisher(Path, "~/path", 10)
+    def __init__(self, node: Node, topic: str = "~/path", config: PathTrailConfig | None = None) -> None:
+        if config is None:
+            config = declare_dataclass(node, PathTrailConfig)
+        self.config = config
+        self.trail: PathTrail[PoseStamped] = PathTrail(config)
+        self._publisher = node.create_publisher(Path, topic, 10)
 
     def add(self, T_frame_body: Transform2D, odom: Odometry) -> None:
         """Offer the pose ``T_frame_body`` of ``odom`` to the trail; publish the trail when it is due."""

@@ -28,11 +28,21 @@ from rclpy.parameter import Parameter
 C = TypeVar("C")
 
 
-def _coerce(value: Any, like: Any, name: str) -> Any:
+# The annotation of a field that is a string array (as written under ``from __future__ import annotations``,
+# or evaluated)
+STRING_TUPLE = ("tuple[str, ...]", tuple[str, ...])
+
+
+def _coerce(value: Any, like: Any, name: str, strings: bool = False) -> Any:
     """Convert a ROS parameter value to the type of the field default: ints are accepted where floats
-    are expected and ROS arrays become tuples of floats (an empty YAML list, which rcl leaves without a
-    type, ``None``, an empty tuple); anything else of the wrong type is a ValueError."""
+    are expected and ROS arrays become tuples of floats, or of strings for a string-array field
+    (``strings``: annotated ``tuple[str, ...]``) (an empty YAML list, which rcl leaves without a type,
+    ``None``, an empty tuple); anything else of the wrong type is a ValueError."""
     is_number = isinstance(value, (int, float)) and not isinstance(value, bool)
+    if strings and isinstance(value, (list, tuple)):
+        if all(isinstance(v, str) for v in value):
+            return tuple(value)
+        raise ValueError(f"parameter {name} must be a list of strings, got {value!r}")
     if isinstance(like, bool) and isinstance(value, bool):
         return value
     if isinstance(like, float) and is_number:
@@ -49,6 +59,11 @@ def _coerce(value: Any, like: Any, name: str) -> Any:
         except (TypeError, ValueError):
             pass
     raise ValueError(f"parameter {name} must be of type {type(like).__name__}, got {value!r}")
+
+
+def string_tuple_fields(cls: type) -> set[str]:
+    """The fields of ``cls`` annotated ``tuple[str, ...]`` (ROS string arrays)."""
+    return {field.name for field in dataclasses.fields(cls) if field.type in STRING_TUPLE}
 
 
 def field_defaults(cls: type) -> dict[str, Any]:
@@ -127,6 +142,7 @@ def declare_dataclass(
     defaults.update({name: value for name, value in (overrides or {}).items() if name not in fixed})
     values = dict(fixed)
     descriptions = field_descriptions(cls)
+    strings = string_tuple_fields(cls)
     for name, default in defaults.items():
         if isinstance(default, tuple):
             default = list(default)
@@ -135,7 +151,7 @@ def declare_dataclass(
         descriptor = ParameterDescriptor(description=description, read_only=read_only, dynamic_typing=True)
         parameter = node.declare_parameter(prefix + name, default, descriptor)
         like = defaults[name]
-        values[name] = _coerce(parameter.value, like, prefix + name)
+        values[name] = _coerce(parameter.value, like, prefix + name, name in strings)
     return cls(**values)
 
 
@@ -147,8 +163,9 @@ def replace_from_parameters(config: C, parameters: Iterable[Parameter], prefix: 
     """
     current = {field.name: getattr(config, field.name) for field in dataclasses.fields(config)}
     changes = {}
+    strings = string_tuple_fields(type(config))
     for parameter in parameters:
         name = parameter.name.removeprefix(prefix)
         if parameter.name.startswith(prefix) and name in current:
-            changes[name] = _coerce(parameter.value, current[name], parameter.name)
+            changes[name] = _coerce(parameter.value, current[name], parameter.name, name in strings)
     return dataclasses.replace(config, **changes)

@@ -26,8 +26,8 @@ from std_srvs.srv import Empty
 from visualization_msgs.msg import Marker, MarkerArray
 
 from nusim.house import Boxes, InteriorWalls, Legs
-from nusim.nusim_node import NusimNode, NusimTiming
-from nusim.simulation import ArenaConfig, NoiseConfig, Obstacles, Walls, default_lidar
+from nusim.nusim_node import FrameConfig, NusimNode, NusimTiming
+from nusim.simulation import ArenaConfig, NoiseConfig, Obstacles, Robots, Walls, default_lidar
 from nuturtle_description.robot_params import burger_params
 from nuturtle_ros_common.conversions import pose_from_transform, stamp_seconds, yaw_from_quaternion
 from nuturtle_ros_common.ros_files import load_ros_yaml
@@ -333,7 +333,7 @@ def test_bad_wheel_commands_are_skipped_with_a_warning(ros, names, velocities, r
 def test_the_default_parameters_are_the_basic_world_yaml():
     world = load_ros_yaml(BASIC_WORLD)
     flat = {k: v for k, v in world.items() if not isinstance(v, dict)}
-    for group in ("obstacles", "lidar", "walls", "interior_walls", "boxes", "legs"):
+    for group in ("obstacles", "lidar", "walls", "interior_walls", "boxes", "legs", "robots"):
         flat.update({f"{group}.{k}": v for k, v in world[group].items()})
     defaults = {
         **vars(NusimTiming()),
@@ -348,6 +348,8 @@ def test_the_default_parameters_are_the_basic_world_yaml():
         "wheel_right": "wheel_right_joint",
         "cmd_timeout": 0.5,
         **vars(PathTrailConfig()),
+        **{f"robots.{k}": list(v) for k, v in vars(Robots()).items()},
+        **vars(FrameConfig()),
     }
     assert flat == defaults
 
@@ -489,3 +491,65 @@ def test_rooms_world_from_its_params_file_is_simulated_and_shown():
     finally:
         executor.shutdown()
         rclpy.try_shutdown(context=context)
+
+
+def test_two_robots_publish_under_their_names_with_prefixed_frames_and_see_each_other(ros):
+    """robots.names [tb3_0, tb3_1]: each robot's streams under its name, its frames prefixed, its own
+    wheel_cmd; tb3_0's scan sees tb3_1 where its ground truth puts it. A one-robot nusim under a namespace
+    with frame_prefix publishes the same names; /clock stays global."""
+    robots = {"robots.names": ["tb3_0", "tb3_1"], "robots.x0": [-0.5, 0.5], "robots.y0": [0.0, 0.0]}
+    robots["robots.theta0"] = [0.0, math.pi]
+    values = {"realtime_factor": 20.0, "cmd_timeout": 0.0, **QUIET, **EXACT_LIDAR, **robots}
+    node = ros.add(NusimNode(context=ros.context, parameter_overrides=parameters(values)))
+    alone = {"realtime_factor": 20.0, "frame_prefix": "tb3_9/", **QUIET}
+    ros.add(NusimNode(context=ros.context, namespace="tb3_9", parameter_overrides=parameters(alone)))
+    helper = ros.node("nusim_robots_listener")
+    received: dict[str, list] = {}
+    endpoints = []
+    streams = [("scan", LaserScan), ("fake_sensor", MarkerArray), ("nusim/ground_truth", Odometry)]
+    for name in ("tb3_0", "tb3_1", "tb3_9"):
+        for topic, message_type in streams:
+            qos = qos_profile_sensor_data if topic == "scan" else 100
+            received[f"/{name}/{topic}"] = messages = []
+            endpoints.append(
+                helper.create_subscription(message_type, f"/{name}/{topic}", messages.append, qos)
+            )
+    wheel_cmd = helper.create_publisher(JointState, "/tb3_1/wheel_cmd", 10)
+    endpoints.append(wheel_cmd)
+    assert ros.spin_until(lambda: matched(*endpoints), 10.0)
+    # tb3_1 (facing -x) drives towards tb3_0 at 0.1 m/s; tb3_0 gets no command
+    wheel_cmd.publish(JointState(name=["wheel_left_joint", "wheel_right_joint"], velocity=[3.0, 3.0]))
+    assert ros.spin_until(lambda: len(received["/tb3_0/scan"]) >= 4 and len(received["/tb3_9/scan"]), 20.0)
+    for name in ("tb3_0", "tb3_1", "tb3_9"):
+        assert received[f"/{name}/scan"][-1].header.frame_id == f"{name}/base_scan"
+        truth = received[f"/{name}/nusim/ground_truth"][-1]
+        assert (truth.header.frame_id, truth.child_frame_id) == (
+            "nusim/world",
+            f"nusim/{name}/base_footprint",
+        )
+        assert {m.header.frame_id for m in received[f"/{name}/fake_sensor"][-1].markers} == {
+            f"{name}/base_footprint"
+        }
+    truth_0, truth_1 = (received[f"/tb3_{k}/nusim/ground_truth"] for k in range(2))
+    assert pose_of(truth_0[-1]).as_array() == pytest.approx([-0.5, 0.0, 0.0], abs=1e-12)
+    assert pose_of(truth_1[-1]).x < 0.5 - 0.01, "tb3_1 drove on its own wheel_cmd"
+    truth_1_at = {stamp_seconds(t.header.stamp): pose_of(t).x for t in truth_1}
+    scans = [scan for scan in received["/tb3_0/scan"] if stamp_seconds(scan.header.stamp) in truth_1_at]
+    assert len(scans) >= 3
+    for scan in scans:
+        # beam 0 from tb3_0's sensor at (-0.532, 0) ends on tb3_1's disc (R = 0.11 m) around (x1, 0)
+        x1 = truth_1_at[stamp_seconds(scan.header.stamp)]
+        assert scan.ranges[0] == pytest.approx(x1 - (-0.5 - 0.032) - 0.11, abs=1e-6)
+    # both nusims drive the one global /clock
+    assert node.count_publishers("/clock") == 2
+
+
+def test_a_frame_prefix_is_namespace_tokens_and_not_given_with_several_robots(ros):
+    assert FrameConfig("tb3_0/").frame_prefix == "tb3_0/" and FrameConfig("a/b_1/").frame_prefix == "a/b_1/"
+    for bad in ("tb3_0", "/tb3_0/", "0a/", "a//"):
+        with pytest.raises(ValueError, match="frame_prefix must be empty or namespace tokens"):
+            FrameConfig(bad)
+    values = {"frame_prefix": "x/", "robots.names": ["tb3_0"], "robots.x0": [0.0], "robots.y0": [0.0]}
+    values["robots.theta0"] = [0.0]
+    with pytest.raises(ValueError, match="frame_prefix \\('x/'\\) must be empty with robots.names"):
+        NusimNode(context=ros.context, parameter_overrides=parameters(values))

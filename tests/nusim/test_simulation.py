@@ -20,12 +20,16 @@ from nusim.simulation import (
     LIDAR_MODELS,
     ArenaConfig,
     LidarChoice,
+    MultiRobotSimulation,
     NoiseConfig,
     Obstacles,
+    Robots,
     Simulation,
     SimulationConfig,
     Walls,
     default_lidar,
+    robot_streams,
+    seed_streams,
 )
 from nuturtle_description.robot_params import RobotParams
 from turtlelib import Transform2D
@@ -552,6 +556,21 @@ def test_teleport_refuses_poses_in_collision_and_reset_returns_to_the_start():
             lambda: SimulationConfig(walls=NOTCHED_WALLS, obstacles=Obstacles((0.0,), (0.98,), (0.038,))),
             "obstacle 0 at .* does not fit inside the arena's 5-corner polygon of walls",
         ),
+        (lambda: Robots(("tb3_0", "1b")), r"robots.names\[1\] must be a namespace token"),
+        (lambda: Robots(("a/b",)), r"robots.names\[0\] must be a namespace token"),
+        (lambda: Robots("tb3_0"), "robots.names must be a list of names"),
+        (lambda: Robots(("a", "a"), (0.0, 1.0), (0.0, 0.0), (0.0, 0.0)), "robots.names must be distinct"),
+        (lambda: Robots(("a", "b"), (0.0,), (0.0,), (0.0,)), "need one value per name \\(2\\), got 1"),
+        (lambda: Robots(("a",), (0.0,), (0.0, 1.0), (0.0,)), "must have the same length, got 1, 2, 1"),
+        (lambda: Robots(("a",), (math.nan,), (0.0,), (0.0,)), r"robots.x0\[0\] must be a finite number"),
+        (
+            lambda: SimulationConfig(robots=Robots(("a", "b"), (0.0, 0.2), (0.0, 0.0), (0.0, 0.0))),
+            r"robot b's start \(0.2, 0.0\) m with collision_radius 0.11 m overlaps robot a's start",
+        ),
+        (
+            lambda: SimulationConfig(robots=Robots(("a", "b"), (0.0, 1.4), (0.0, 0.3), (0.0, 0.0))),
+            "robot b's start .* overlaps obstacle 0",
+        ),
     ],
 )
 def test_invalid_configurations_raise_with_their_reason(build, message):
@@ -562,3 +581,131 @@ def test_invalid_configurations_raise_with_their_reason(build, message):
 def test_step_rejects_a_non_positive_time_step():
     with pytest.raises(ValueError, match="dt_s must be finite and > 0"):
         world().step(0.0)
+
+
+# --- several robots -------------------------------------------------------------------------------------
+
+
+def fleet(x0, y0, theta0, noise=QUIET, obstacles=((), (), ()), arena=(4.0, 3.0)) -> MultiRobotSimulation:
+    names = tuple(f"tb3_{k}" for k in range(len(x0)))
+    return MultiRobotSimulation(
+        SimulationConfig(
+            arena=ArenaConfig(0.0, 0.0, 0.0, *arena),
+            obstacles=Obstacles(*obstacles),
+            robot=RobotParams(),
+            noise=noise,
+            lidar=EXACT_LIDAR,
+            robots=Robots(names, x0, y0, theta0),
+        )
+    )
+
+
+def test_each_robot_s_lidar_sees_the_other_robot_as_a_disc_of_its_collision_radius():
+    # tb3_0 at the origin facing +x, tb3_1 at (1, 0.5) facing -y; arena 4 m x 3 m, no cylinder
+    robots = fleet((0.0, 1.0), (0.0, 0.5), (0.0, -math.pi / 2))
+    ranges = robots.scan(0).range_m
+    # tb3_0's sensor at (-0.032, 0): the beam towards (1, 0.5) (bearing atan2(0.5, 1.032) = 25.85 deg:
+    # beam 26 at 26 deg) meets the disc of radius 0.11 m around it; the beam at 0 deg passes 0.5 m beside
+    # it and hits the wall x = 2
+    assert ranges[0] == pytest.approx(2.0 - LIDAR_X, abs=1e-12)
+    # beam 26: from s = (-0.032, 0) along u = (cos 26, sin 26), |s + t u - c| = R: t = u.(c - s) - sqrt(...)
+    u = np.array([math.cos(math.radians(26)), math.sin(math.radians(26))])
+    m = np.array([1.0 + 0.032, 0.5])
+    t = u @ m - math.sqrt((u @ m) ** 2 - m @ m + R_ROBOT**2)
+    assert ranges[26] == pytest.approx(t, abs=1e-12)
+    # tb3_1's sensor at (1, 0.532) facing -y: beam 0 towards -y hits the wall y = -1.5; beam 270 (+x)
+    # the wall x = 2; the beam towards tb3_0 (bearing atan2(-0.532, -1) - (-pi/2) = -62 deg: beam 298)
+    # meets tb3_0's disc, and the landmarks never include a robot
+    ranges_1 = robots.scan(1).range_m
+    assert ranges_1[0] == pytest.approx(1.5 + 0.532, abs=1e-12)
+    assert ranges_1[90] == pytest.approx(1.0, abs=1e-12)
+    bearing = -math.pi / 2 + math.radians(298 - 360)
+    u = np.array([math.cos(bearing), math.sin(bearing)])
+    m = np.array([0.0, 0.0]) - np.array([1.0, 0.5 + 0.032])
+    t = u @ m - math.sqrt((u @ m) ** 2 - m @ m + R_ROBOT**2)
+    assert ranges_1[298] == pytest.approx(t, abs=1e-12)
+    assert robots.robots[1].sense_landmarks().ids.size == 0
+
+
+def test_two_robots_driving_at_each_other_stop_at_contact_and_their_wheels_keep_turning():
+    robots = fleet((-0.5, 0.5), (0.0, 0.0), (0.0, math.pi))
+    for robot in robots.robots:
+        robot.command_wheels(5.0, 5.0)
+    for _ in range(300):
+        robots.step(DT)
+    p0, p1 = (robot.T_world_body.translation for robot in robots.robots)
+    # touching: |p0 - p1| = 2 R (the first to move reached contact, the second found none left)
+    assert np.hypot(*(p1 - p0)) == pytest.approx(2 * R_ROBOT, abs=1e-9)
+    assert all(robot.encoder_ticks[0] > 4096 for robot in robots.robots), "the wheels kept turning"
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    starts=st.lists(
+        st.tuples(st.floats(-1.2, 1.2), st.floats(-1.0, 1.0), st.floats(-math.pi, math.pi)),
+        min_size=2,
+        max_size=3,
+    ),
+    commands=st.lists(
+        st.lists(st.tuples(st.floats(-7.0, 7.0), st.floats(-7.0, 7.0)), min_size=3, max_size=3),
+        min_size=1,
+        max_size=5,
+    ),
+    seed=st.integers(0, 2**32),
+)
+def test_robots_never_overlap_or_pass_through_each_other(starts, commands, seed):
+    """Each step's straight moves: at every step every pair of robots is at least 2 R apart, and no robot's
+    chord crosses another's disc where that one stood when it moved."""
+    xy = np.array([start[:2] for start in starts])
+    gaps = np.hypot(*(xy[:, None] - xy[None]).transpose(2, 0, 1))
+    if np.any(gaps[np.triu_indices(len(starts), 1)] < 2 * R_ROBOT):
+        return
+    x0, y0, theta0 = zip(*starts, strict=True)
+    robots = fleet(x0, y0, theta0, noise=NoiseConfig(input_noise=0.5, slip_fraction=0.3, seed=seed))
+    for wheels in commands:
+        for robot, (left, right) in zip(robots.robots, wheels, strict=False):
+            robot.command_wheels(left, right)
+        for _ in range(15):
+            before = [robot.T_world_body.translation for robot in robots.robots]
+            robots.step(0.05)
+            after = [robot.T_world_body.translation for robot in robots.robots]
+            for k, (p, q) in enumerate(zip(before, after, strict=True)):
+                # robot k moved after the robots before it: they stood at their new places
+                others = [after[j] for j in range(k)] + [before[j] for j in range(k + 1, len(before))]
+                d = q - p
+                for c in others:
+                    s = np.clip(((c - p) @ d) / max(d @ d, 1e-300), 0.0, 1.0)
+                    assert np.hypot(*(p + s * d - c)) >= 2 * R_ROBOT - 1e-9
+
+
+def test_one_named_robot_is_the_one_robot_and_each_robot_has_its_own_noise():
+    noise = NoiseConfig(input_noise=0.2, slip_fraction=0.1, seed=3)
+    one = Simulation(SimulationConfig(arena=ArenaConfig(0.3, -0.2, 1.0), noise=noise))
+    named = MultiRobotSimulation(
+        SimulationConfig(noise=noise, robots=Robots(("tb3_0",), (0.3,), (-0.2,), (1.0,)))
+    ).robots[0]
+    pair = fleet((-1.0, 1.0), (0.0, 0.0), (0.0, 0.0), noise=noise, arena=(5.0, 5.0)).robots
+    for sim in (one, named, *pair):
+        sim.command_wheels(3.0, 4.0)
+        run(sim, 50)
+    assert named.T_world_body == one.T_world_body
+    np.testing.assert_array_equal(named.scan().range_m, one.scan().range_m)
+    # the same commands, other noise: robot 1's streams are not robot 0's
+    assert not np.array_equal(pair[0].wheel_speed_rad_s, pair[1].wheel_speed_rad_s)
+    assert [s.spawn_key for s in robot_streams(3, 0)] == [s.spawn_key for s in seed_streams(3)[:4]]
+    keys = {s.spawn_key for k in range(4) for s in robot_streams(3, k)} | {seed_streams(3)[4].spawn_key}
+    assert len(keys) == 17, "every robot's four streams and the placement are distinct"
+
+
+def test_teleport_refuses_a_pose_on_another_robot_and_reset_brings_every_robot_back():
+    robots = fleet((-0.5, 0.5), (0.0, 0.0), (0.0, 0.0))
+    with pytest.raises(ValueError, match=r"overlaps another robot at \(0.500, 0.000\) m"):
+        robots.teleport(0, Transform2D(0.3, 0.0, 0.0))
+    robots.teleport(0, Transform2D(-0.5, 1.0, 0.0))
+    robots.robots[1].command_wheels(3.0, 3.0)
+    run(robots.robots[1], 30)
+    robots.reset()
+    assert [r.T_world_body for r in robots.robots] == [
+        Transform2D(-0.5, 0.0, 0.0),
+        Transform2D(0.5, 0.0, 0.0),
+    ]

@@ -156,7 +156,7 @@ def test_closed_loop_driver_steers_back_onto_the_route(ros):
 
     # the first pose fixes the route's start; then the robot is 10 cm left of its reference
     poses.publish(pose(0.0, 0.0, 0.0))
-    assert ros.spin_until(lambda: driver.T_map_start is not None, 5.0)
+    assert ros.spin_until(lambda: driver.T_map_route is not None, 5.0)
     poses.publish(pose(0.0, 0.1, 0.0))
     assert ros.spin_until(lambda: driver.T_map_body is not None and driver.T_map_body.y == 0.1, 5.0)
     clock.publish(Clock(clock=stamp_from_seconds(1.0)))
@@ -191,8 +191,8 @@ def test_driver_continues_a_route_from_where_it_stopped(ros):
     msg = Odometry()
     msg.pose.pose = pose_from_transform(T_map_first)
     poses.publish(msg)
-    assert ros.spin_until(lambda: driver.T_map_start is not None, 5.0)
-    start = driver.T_map_start
+    assert ros.spin_until(lambda: driver.T_map_route is not None, 5.0)
+    start = driver.T_map_route
     assert (start.x, start.y, start.theta) == pytest.approx((0.3, -0.2, 0.4), abs=1e-9)
     clock.publish(Clock(clock=stamp_from_seconds(1.0)))
     assert ros.spin_until(lambda: len(received) > 0, 5.0)

@@ -35,6 +35,14 @@ def test_defaults_and_converted_values():
         (dict(duration_s="60"), "duration_s must be a finite number, got '60'"),
         (dict(max_realtime_factor=-2.0), "max_realtime_factor must be finite and > 0, got -2.0"),
         (dict(world="no/such/world.yaml"), "world file no/such/world.yaml does not exist"),
+        (dict(robots=0), "robots must be >= 1, got 0"),
+        (dict(robots=7), "robots must be at most 6, got 7"),
+        (
+            dict(robots=2, save_map=True, map_file="m.json"),
+            "map_file, save_map take one robot, not robots = 2",
+        ),
+        (dict(robots=3, start=(0.0, 0.0, 0.0)), "start take one robot, not robots = 3"),
+        (dict(robots=2, foxglove=("127.0.0.1", 8765)), "foxglove take one robot"),
     ],
 )
 def test_invalid_options_raise_with_their_reason(fields, message):

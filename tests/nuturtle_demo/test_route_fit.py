@@ -21,7 +21,10 @@ from nuturtle_demo.route_fit import (
     ROUTE_CLEARANCE_M,
     ROUTE_SHRINK,
     ROUTE_WHEEL_SHARE,
+    FittedRoute,
     fit_route,
+    fleet_route,
+    fleet_spacing,
     loop_centres,
     route_collision,
 )
@@ -110,3 +113,30 @@ def test_no_clear_route_is_a_clear_error():
     )
     with pytest.raises(ValueError, match="anywhere in this world"):
         fit_route(small, RouteConfig())
+
+
+def test_robots_on_one_figure_eight_are_spaced_to_stay_apart():
+    """Two robots half a loop apart are always 2 R apart (opposite on one loop, or mirrored across the
+    crossing), three robots a third of a loop apart sqrt(3) R; each starts on the route where it joins it,
+    and robots that would come nearer than their grown discs are refused."""
+    assert fleet_spacing(2) == 0.5
+    assert fleet_spacing(3) == pytest.approx(1.0 / 3.0)
+    burger = model_params("burger")
+    figure = FigureEight.for_robot(RouteConfig(), burger)
+    start = Transform2D(0.2, -0.1, 0.3)
+    two = fleet_route(FittedRoute(start, 0.75, False), figure, 2, burger)
+    # the loops as driven: radius v / omega of the motors' rounded wheel speeds (close to 0.75 m)
+    radius_m = figure.left_loop.vx / figure.left_loop.omega
+    assert two.gap_m == pytest.approx(2.0 * radius_m, rel=1e-4)
+    assert two.route_starts_s == pytest.approx((0.0, 0.5 * figure.loop_period_s))
+    # half a loop in: the far side of the first loop, 2 R to the start's left, heading back
+    assert two.starts[0] == start
+    T_first_second = start.inverse() @ two.starts[1]
+    np.testing.assert_allclose(T_first_second.translation, [0.0, 2.0 * radius_m], atol=1e-9)
+    assert abs(T_first_second.theta) == pytest.approx(math.pi, abs=1e-9)
+    three = fleet_route(FittedRoute(start, 0.75, False), figure, 3, burger)
+    assert three.gap_m == pytest.approx(math.sqrt(3.0) * radius_m, rel=1e-3)
+    assert fleet_route(FittedRoute(start, 0.75, False), figure, 1, burger).starts == (start,)
+    small = FigureEight.for_robot(RouteConfig(radius=0.25), burger)
+    with pytest.raises(ValueError, match="6 robots on the figure eight of 0.250 m loops come"):
+        fleet_route(FittedRoute(start, 0.25, False), small, 6, burger)

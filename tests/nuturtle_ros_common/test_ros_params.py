@@ -20,6 +20,7 @@ class Example:
     label: str = "x"
     enabled: bool = False
     weights: tuple[float, ...] = (1.0, 2.0)
+    names: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if not self.gain > 0:
@@ -58,10 +59,13 @@ def test_declare_dataclass_converts_every_field_type(ros):
             Parameter("label", value="y"),
             Parameter("enabled", value=True),
             Parameter("weights", value=[3, 4, 5]),
+            Parameter("names", value=["tb3_0", "tb3_1"]),
         ],
     )
     config = declare_dataclass(node, Example)
-    assert config == Example(gain=2.0, count=7, label="y", enabled=True, weights=(3.0, 4.0, 5.0))
+    assert config == Example(
+        gain=2.0, count=7, label="y", enabled=True, weights=(3.0, 4.0, 5.0), names=("tb3_0", "tb3_1")
+    )
     assert isinstance(config.gain, float) and all(isinstance(w, float) for w in config.weights)
 
 
@@ -92,6 +96,7 @@ def test_an_empty_yaml_list_is_an_empty_tuple(tmp_path):
         Parameter("label", value=1),
         Parameter("enabled", value=1),
         Parameter("weights", value=["a", "b"]),
+        Parameter("names", value=[1.0, 2.0]),
         Parameter("gain", value=-1.0),  # the right type, refused by the dataclass
     ],
     ids=lambda p: f"{p.name}={p.value!r}",
