@@ -110,11 +110,18 @@ def refused_at_construction(build: Callable[[], Node], message: str) -> str:
     return text
 
 
-def rcl_parameters(context: Context, node_name: str, arguments: list[str]) -> dict[str, Any]:
-    """The parameter values rcl gives node ``node_name`` for command-line ``arguments`` (its own merge of
-    parameter files and ``-p`` values), read from a bare node that declares whatever it is given."""
+def rcl_parameters(
+    context: Context, node_name: str, arguments: list[str], namespace: str = ""
+) -> dict[str, Any]:
+    """The parameter values rcl gives node ``node_name`` (in ``namespace``) for command-line ``arguments``
+    (its own merge of parameter files and ``-p`` values), read from a bare node that declares whatever it
+    is given."""
     node = Node(
-        node_name, context=context, cli_args=arguments, automatically_declare_parameters_from_overrides=True
+        node_name,
+        namespace=namespace,
+        context=context,
+        cli_args=arguments,
+        automatically_declare_parameters_from_overrides=True,
     )
     try:
         return {name: parameter.value for name, parameter in node.get_parameters_by_prefix("").items()}

@@ -16,16 +16,24 @@ Arguments
                                   (`robot_side`: one executor, one /clock subscription; less CPU and
                                   memory, docs/benchmarks.md "Robot-side nodes"); false (default): one
                                   process each.
+    namespace:=<name>             the robot's namespace (default empty: none), e.g. tb3_0: every node here
+                                  and in start_robot.launch.py under /tb3_0 (`/tb3_0/scan`,
+                                  `/tb3_0/slam/odom`), its frames tb3_0/odom, tb3_0/base_footprint,
+                                  tb3_0/base_scan (slam's and odometry's frame ids, robot_state_publisher's
+                                  frame_prefix); /tf, /tf_static, /clock stay global.
+    map_frame:=<frame>            slam's map frame (default empty: the robot's own, tb3_0/map under a
+                                  namespace, else map); map: one map frame shared by several robots.
 
     ros2 launch nuslam slam.launch.py cmd_src:=teleop        # our control stack (wheel_cmd firmware)
     ros2 launch nuslam slam.launch.py rviz:=true             # ... and watch it in RViz2
     ros2 launch nuslam turtlebot3.launch.py                  # a stock TurtleBot3 (its own odom, TF, cmd_vel)
     ros2 launch nuturtle_demo nusim_slam.launch.py           # the same against the simulator
+    ros2 launch nuslam slam.launch.py namespace:=tb3_0       # one of several robots (docs/robot.md)
 
 Every node reads its own defaults from config/landmarks.yaml and config/slam.yaml and the robot's constants
 from its `model`; the launch arguments come last, so they win (`nuslam.launch_nodes`).
 RViz shows the wheel odometry's path (blue) and SLAM's pose with its covariance, path and map in `map`
-(green), with the scan and the LiDAR landmarks.
+(green), with the scan and the LiDAR landmarks; under a namespace, that robot's topics in its map frame.
 """
 
 from launch import LaunchDescription
@@ -44,7 +52,14 @@ from nuslam.launch_nodes import (
     slam_parameters,
 )
 from nuturtle_control.launch_nodes import CMD_SRC
-from nuturtle_description.launch_arguments import declare_argument, model_argument, switch_argument
+from nuturtle_description.launch_arguments import (
+    declare_argument,
+    in_namespace,
+    launched_frames,
+    model_argument,
+    switch_argument,
+)
+from nuturtle_ros_common.launch_parameters import MAP_FRAME, NAMESPACE
 from nuturtle_ros_common.ros_files import share_file
 
 
@@ -53,10 +68,12 @@ def _slam_nodes(context):
     use_sim_time = LaunchConfiguration("use_sim_time").perform(context) == "true"
     arguments = {name: LaunchConfiguration(name).perform(context) for name in SLAM_ARGUMENTS}
     model = LaunchConfiguration("model").perform(context)
+    frames = launched_frames(context)
+    arguments.update(frames.slam())
     rviz = Node(
         package="rviz2",
         executable="rviz2",
-        arguments=rviz_arguments(),
+        arguments=rviz_arguments(frames),
         parameters=[{"use_sim_time": use_sim_time}],
         condition=IfCondition(LaunchConfiguration("rviz")),
         output="screen",
@@ -68,7 +85,7 @@ def _slam_nodes(context):
             parameters=robot_side_parameters(association, use_sim_time, model, **arguments),
             output="screen",
         )
-        return [rviz, robot_side]
+        return in_namespace(frames, [rviz, robot_side])
     nodes = [
         rviz,
         Node(
@@ -87,7 +104,7 @@ def _slam_nodes(context):
                 output="screen",
             )
         )
-    return nodes
+    return in_namespace(frames, nodes)
 
 
 def generate_launch_description() -> LaunchDescription:
@@ -99,6 +116,8 @@ def generate_launch_description() -> LaunchDescription:
             declare_argument("cmd_src", CMD_SRC),
             switch_argument("rviz", False, "true: also RViz2 (slam.rviz)"),
             switch_argument("one_process", False, "true: the robot-side nodes in one process (robot_side)"),
+            declare_argument("namespace", NAMESPACE),
+            declare_argument("map_frame", MAP_FRAME),
             *[declare_argument(name, argument) for name, argument in SLAM_ARGUMENTS.items()],
             IncludeLaunchDescription(
                 PythonLaunchDescriptionSource(
@@ -110,6 +129,7 @@ def generate_launch_description() -> LaunchDescription:
                     "cmd_src": LaunchConfiguration("cmd_src"),
                     # with one_process, robot_side runs turtle_control and odometry
                     "one_process": LaunchConfiguration("one_process"),
+                    "namespace": LaunchConfiguration("namespace"),
                 }.items(),
             ),
             OpaqueFunction(function=_slam_nodes),

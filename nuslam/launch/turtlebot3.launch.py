@@ -17,10 +17,17 @@ Arguments
     one_process:=false|true            true: landmarks and slam in one process (`slam_side`: one executor,
                                        one /clock subscription; less CPU and memory, docs/robot.md "CPU
                                        and memory"); false (default): one process each.
+    namespace:=<name>                  the robot's namespace (default empty: none), e.g. tb3_0 for a robot
+                                       whose bringup runs under /tb3_0 with its frames prefixed tb3_0/:
+                                       landmarks and slam under /tb3_0, slam's frames tb3_0/odom,
+                                       tb3_0/base_footprint, tb3_0/base_scan
+    map_frame:=<frame>                 slam's map frame (default empty: tb3_0/map under a namespace, else
+                                       map); map: one map frame shared by several robots
 
     ros2 launch nuslam turtlebot3.launch.py      # on the laptop, same ROS_DOMAIN_ID as the robot
     ros2 launch nuslam turtlebot3.launch.py rviz:=true
     ros2 launch nuslam turtlebot3.launch.py mode:=localization map_file:=$HOME/maps/lab.json
+    ros2 launch nuslam turtlebot3.launch.py namespace:=tb3_0 rviz:=true
 
 slam uses the LiDAR landmarks (association unknown: a real robot has no fake sensor).
 
@@ -41,17 +48,26 @@ from nuslam.launch_nodes import (
     slam_parameters,
     slam_side_parameters,
 )
-from nuturtle_description.launch_arguments import declare_argument, model_argument, switch_argument
+from nuturtle_description.launch_arguments import (
+    declare_argument,
+    in_namespace,
+    launched_frames,
+    model_argument,
+    switch_argument,
+)
+from nuturtle_ros_common.launch_parameters import MAP_FRAME, NAMESPACE
 
 
 def _nodes(context):
     arguments = {name: LaunchConfiguration(name).perform(context) for name in SLAM_ARGUMENTS}
     model = LaunchConfiguration("model").perform(context)
     use_sim_time = LaunchConfiguration("use_sim_time").perform(context) == "true"
+    frames = launched_frames(context)
+    arguments.update(frames.slam())
     rviz = Node(
         package="rviz2",
         executable="rviz2",
-        arguments=rviz_arguments(),
+        arguments=rviz_arguments(frames),
         parameters=[{"use_sim_time": use_sim_time}],
         condition=IfCondition(LaunchConfiguration("rviz")),
         output="screen",
@@ -63,8 +79,8 @@ def _nodes(context):
             parameters=slam_side_parameters("unknown", use_sim_time, model, **arguments),
             output="screen",
         )
-        return [rviz, slam_side]
-    return [
+        return in_namespace(frames, [rviz, slam_side])
+    nodes = [
         rviz,
         Node(
             package="nuslam",
@@ -79,6 +95,7 @@ def _nodes(context):
             output="screen",
         ),
     ]
+    return in_namespace(frames, nodes)
 
 
 def generate_launch_description() -> LaunchDescription:
@@ -93,6 +110,8 @@ def generate_launch_description() -> LaunchDescription:
             ),
             switch_argument("rviz", False, "true: also RViz2 (slam.rviz)"),
             switch_argument("one_process", False, "true: landmarks and slam in one process (slam_side)"),
+            declare_argument("namespace", NAMESPACE),
+            declare_argument("map_frame", MAP_FRAME),
             OpaqueFunction(function=_nodes),
         ]
     )

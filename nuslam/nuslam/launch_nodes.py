@@ -3,14 +3,19 @@ launch cannot run in CI).
 
 Every list is the node's own defaults (config/<node>.yaml), then the launch arguments, which win
 (`launch_parameters.with_arguments`); slam's robot constants are the defaults of its ``model`` argument.
+Under a namespace RViz gets a copy of slam.rviz that shows that robot (:func:`namespaced_rviz_config`).
 """
 
 from __future__ import annotations
 
+import tempfile
+from pathlib import Path
 from typing import Any
 
+import yaml
+
 from nuslam.slam_node import MOTION_SOURCES
-from nuturtle_ros_common.launch_parameters import LaunchArgument, with_arguments
+from nuturtle_ros_common.launch_parameters import LaunchArgument, RobotFrames, with_arguments
 from nuturtle_ros_common.ros_files import share_file
 from turtlelib import MODES
 
@@ -69,6 +74,40 @@ def landmarks_parameters(use_sim_time: bool) -> list[str | dict[str, Any]]:
     return with_arguments([share_file("nuslam", "config", "landmarks.yaml")], {"use_sim_time": use_sim_time})
 
 
-def rviz_arguments() -> list[str]:
-    """rviz2's arguments for the SLAM view: ``-d`` and the installed ``share/nuslam/rviz/slam.rviz``."""
-    return ["-d", str(share_file("nuslam", "rviz", "slam.rviz"))]
+# the keys of an RViz display's topics (each a mapping whose ``Value`` is the topic's name)
+RVIZ_TOPIC_KEYS = ("Topic", "Update Topic", "Description Topic")
+
+
+def namespaced_rviz_config(config: dict[str, Any], frames: RobotFrames) -> dict[str, Any]:
+    """An RViz config (the parsed YAML of slam.rviz) showing the robot of ``frames``: every absolute
+    topic ``/x`` of a display or tool as ``/<namespace>/x``, the fixed frame ``frames.map_id`` and the
+    robot model's TF prefix ``<namespace>`` (robot_state_publisher's ``frame_prefix``); ``config`` is
+    left as it is."""
+
+    def rewritten(value: Any, key: str | None = None) -> Any:
+        if isinstance(value, dict):
+            if key in RVIZ_TOPIC_KEYS and str(value.get("Value", "")).startswith("/") and frames.namespace:
+                return {**value, "Value": f"/{frames.namespace}{value['Value']}"}
+            if value.get("Class") == "rviz_default_plugins/RobotModel":
+                value = {**value, "TF Prefix": frames.namespace}
+            return {k: rewritten(v, k) for k, v in value.items()}
+        if isinstance(value, list):
+            return [rewritten(item) for item in value]
+        return frames.map_id if key == "Fixed Frame" else value
+
+    return rewritten(config)
+
+
+def rviz_arguments(frames: RobotFrames | None = None) -> list[str]:
+    """rviz2's arguments for the SLAM view: ``-d`` and the installed ``share/nuslam/rviz/slam.rviz``;
+    for a namespaced robot or a chosen map frame (``frames``), a copy of it rewritten by
+    :func:`namespaced_rviz_config`, written to a new file in the temporary folder."""
+    config = share_file("nuslam", "rviz", "slam.rviz")
+    if frames is None or frames == RobotFrames(""):
+        return ["-d", str(config)]
+    text = yaml.safe_dump(namespaced_rviz_config(yaml.safe_load(config.read_text()), frames), sort_keys=False)
+    name = frames.namespace.replace("/", "_") or "map"
+    handle, path = tempfile.mkstemp(prefix=f"slam_{name}_", suffix=".rviz")
+    with open(handle, "w", encoding="utf-8") as file:
+        file.write(text)
+    return ["-d", str(Path(path))]

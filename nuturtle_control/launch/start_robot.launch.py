@@ -11,6 +11,10 @@ Arguments
     one_process:=false|true       true: turtle_control and odometry are not started here: they run in
                                   nuslam's robot_side process with slam and landmarks (what
                                   slam.launch.py one_process:=true starts).
+    namespace:=<name>             the robot's namespace (default empty: none), e.g. tb3_0: every node and
+                                  topic under /tb3_0 (`/tb3_0/cmd_vel`, `/tb3_0/odom`), odometry's frames
+                                  tb3_0/odom -> tb3_0/base_footprint and robot_state_publisher's
+                                  frame_prefix tb3_0/ (TurtleBot3's convention for several robots).
 
 The simulator is not started here (this package installs on the robot without it): the simulated system
 is `ros2 launch nuturtle_demo nusim_slam.launch.py`. Every node gets its own defaults from this package's
@@ -33,19 +37,27 @@ from nuturtle_control.launch_nodes import (
     robot_state_publisher_parameters,
     turtle_control_parameters,
 )
-from nuturtle_description.launch_arguments import declare_argument, model_argument, switch_argument
+from nuturtle_description.launch_arguments import (
+    declare_argument,
+    in_namespace,
+    launched_frames,
+    model_argument,
+    switch_argument,
+)
+from nuturtle_ros_common.launch_parameters import NAMESPACE
 
 
 def _nodes(context):
     cmd_src = LaunchConfiguration("cmd_src").perform(context)
     use_sim_time = LaunchConfiguration("use_sim_time").perform(context) == "true"
     model = LaunchConfiguration("model").perform(context)
+    frames = launched_frames(context)
     nodes = [
         # the one owner of base_footprint -> base_scan (and the wheel joints' TF)
         Node(
             package="robot_state_publisher",
             executable="robot_state_publisher",
-            parameters=robot_state_publisher_parameters(use_sim_time, model),
+            parameters=robot_state_publisher_parameters(use_sim_time, model, frames.prefix),
             output="screen",
         ),
     ]
@@ -60,7 +72,7 @@ def _nodes(context):
             Node(
                 package="nuturtle_control",
                 executable="odometry",
-                parameters=odometry_parameters(use_sim_time, model),
+                parameters=odometry_parameters(use_sim_time, model, **frames.odometry()),
                 output="screen",
             ),
         ]
@@ -83,7 +95,7 @@ def _nodes(context):
                 output="screen",
             )
         )
-    return nodes
+    return in_namespace(frames, nodes)
 
 
 def generate_launch_description() -> LaunchDescription:
@@ -92,6 +104,7 @@ def generate_launch_description() -> LaunchDescription:
             model_argument(),
             switch_argument("use_sim_time", False, "true: run on /clock (simulated robot)"),
             declare_argument("cmd_src", CMD_SRC),
+            declare_argument("namespace", NAMESPACE),
             switch_argument(
                 "one_process", False, "true: turtle_control and odometry run in nuslam's robot_side instead"
             ),

@@ -9,7 +9,9 @@ that mean something.
   :class:`DiagnosticsPublisher` publishes a node's statuses at 1 Hz.
 
 Viewers (`rqt_runtime_monitor`, Foxglove's diagnostics panel, `ros2 topic echo /diagnostics`) show each
-status by its name ``<node>: <part>``.
+status by its name ``<node>: <part>``. `/diagnostics` is one topic for every robot (as diagnostic_updater's
+and the aggregator's), so a node in a namespace names its statuses ``<namespace>/<node>: <part>``
+(``tb3_0/slam: scan registration``) and its ``hardware_id`` ``<namespace>/<node>``.
 """
 
 from __future__ import annotations
@@ -112,7 +114,8 @@ class DurationMonitor:
 
 class DiagnosticsPublisher:
     """Publishes ``DiagnosticArray(status=statuses(now_ns))`` on `/diagnostics` every ``PERIOD_S`` of the
-    node's clock (1 Hz, as diagnostic_updater does)."""
+    node's clock (1 Hz, as diagnostic_updater does), names and hardware ids prefixed with the node's
+    namespace (if any)."""
 
     PERIOD_S = 1.0
 
@@ -124,6 +127,14 @@ class DiagnosticsPublisher:
 
     def _publish(self) -> None:
         now = self._node.get_clock().now()
-        array = DiagnosticArray(status=self._statuses(now.nanoseconds))
+        statuses = self._statuses(now.nanoseconds)
+        namespace = self._node.get_namespace().strip("/")
+        if namespace:
+            for status in statuses:
+                status.name, status.hardware_id = (
+                    f"{namespace}/{status.name}",
+                    f"{namespace}/{status.hardware_id}",
+                )
+        array = DiagnosticArray(status=statuses)
         array.header.stamp = now.to_msg()
         self._publisher.publish(array)

@@ -18,7 +18,13 @@ from nuslam.launch_nodes import (
     slam_side_parameters,
 )
 from nuturtle_control.launch_nodes import circle_parameters, odometry_parameters, turtle_control_parameters
-from nuturtle_ros_common.launch_parameters import LaunchArgument, ros_arguments, with_arguments
+from nuturtle_ros_common.launch_parameters import (
+    LaunchArgument,
+    RobotFrames,
+    robot_frames,
+    ros_arguments,
+    with_arguments,
+)
 from nuturtle_ros_common.ros_files import share_file
 from rclpy_harness import rcl_parameters, served_parameters
 
@@ -234,3 +240,125 @@ def test_robot_state_publisher_gets_the_urdf_with_the_lidar_mount_slam_uses():
 def test_a_launch_argument_record_refuses_a_default_outside_its_choices_or_no_description(fields, message):
     with pytest.raises(ValueError, match=message):
         LaunchArgument(*fields)
+
+
+@pytest.mark.parametrize(
+    ("node", "parameters"),
+    [
+        ("slam", slam_parameters("unknown", False, "burger")),
+        ("landmarks", landmarks_parameters(False)),
+        ("turtle_control", turtle_control_parameters(False, "burger")),
+        ("odometry", odometry_parameters(False, "burger")),
+        ("circle", circle_parameters(False)),
+    ],
+)
+def test_a_node_s_own_yaml_reaches_it_in_any_namespace(ros, tmp_path, node, parameters):
+    # what rcl gives a node under /tb3_0 from the list launch builds is what it gives it without one (a
+    # file keyed by the bare node name would reach /slam only: the /tb3_0/slam of `namespace:=tb3_0`
+    # would run on its code's defaults)
+    arguments = ros_arguments(parameters, tmp_path)
+    bare = rcl_parameters(ros.context, node, arguments)
+    assert len(bare) > 3, "the node's file reached it"
+    assert rcl_parameters(ros.context, node, arguments, namespace="tb3_0") == bare
+    assert rcl_parameters(ros.context, node, arguments, namespace="fleet/tb3_1") == bare
+
+
+def test_a_namespaced_robot_s_frames_reach_slam_and_odometry(ros, tmp_path):
+    frames = robot_frames("tb3_0")
+    names = ["map_id", "odom_id", "body_id", "sensor_id", "association"]
+    slam = ros.add(
+        node_class("slam")(
+            context=ros.context,
+            namespace="tb3_0",
+            cli_args=ros_arguments(slam_parameters("unknown", False, "burger", **frames.slam()), tmp_path),
+        )
+    )
+    assert slam.get_fully_qualified_name() == "/tb3_0/slam"
+    assert served_parameters(ros, slam, names) == {
+        "map_id": "tb3_0/map",
+        "odom_id": "tb3_0/odom",
+        "body_id": "tb3_0/base_footprint",
+        "sensor_id": "tb3_0/base_scan",
+        "association": "unknown",
+    }
+    ros.remove(slam)
+    parameters = odometry_parameters(False, "burger", **frames.odometry())
+    values = rcl_parameters(ros.context, "odometry", ros_arguments(parameters, tmp_path), namespace="tb3_0")
+    assert (values["odom_id"], values["body_id"]) == ("tb3_0/odom", "tb3_0/base_footprint")
+
+
+@pytest.mark.parametrize(
+    ("namespace", "map_frame", "expected"),
+    [
+        ("", "", ("", "map", "odom", "base_footprint", "base_scan")),
+        ("tb3_0", "", ("tb3_0/", "tb3_0/map", "tb3_0/odom", "tb3_0/base_footprint", "tb3_0/base_scan")),
+        ("/tb3_1/", "map", ("tb3_1/", "map", "tb3_1/odom", "tb3_1/base_footprint", "tb3_1/base_scan")),
+        (
+            "fleet/r2",
+            "",
+            ("fleet/r2/", "fleet/r2/map", "fleet/r2/odom", "fleet/r2/base_footprint", "fleet/r2/base_scan"),
+        ),
+    ],
+)
+def test_robot_frames_prefix_every_frame_with_the_namespace(namespace, map_frame, expected):
+    frames = robot_frames(namespace, map_frame)
+    assert (frames.prefix, frames.map_id, frames.odom_id, frames.body_id, frames.sensor_id) == expected
+
+
+def test_without_a_namespace_the_nodes_keep_their_own_frame_parameters():
+    # no frame id in the launch list: a frame set in a node's yaml file stays as today
+    assert robot_frames("").slam() == {} and robot_frames("").odometry() == {}
+    assert robot_frames("", "world").slam() == {"map_id": "world"}
+    assert robot_frames("tb3_0", "map").slam()["map_id"] == "map"
+    assert robot_frames("tb3_0").odometry() == {"odom_id": "tb3_0/odom", "body_id": "tb3_0/base_footprint"}
+
+
+@pytest.mark.parametrize(
+    ("namespace", "map_frame", "message"),
+    [
+        ("tb3-0", "", "namespace"),
+        ("0tb3", "", "namespace"),
+        ("a//b", "", "namespace"),
+        ("tb3_0", "/map", "map frame"),
+    ],
+)
+def test_robot_frames_refuse_a_namespace_that_is_no_ros_name(namespace, map_frame, message):
+    with pytest.raises(ValueError, match=message):
+        robot_frames(namespace, map_frame)
+
+
+def test_the_namespaced_rviz_config_shows_that_robot():
+    import yaml
+
+    from nuslam.launch_nodes import namespaced_rviz_config, rviz_arguments
+
+    installed = share_file("nuslam", "rviz", "slam.rviz")
+    config = yaml.safe_load(installed.read_text())
+    shown = namespaced_rviz_config(config, robot_frames("tb3_0"))
+    displays = {display["Name"]: display for display in shown["Visualization Manager"]["Displays"]}
+    assert displays["Occupancy grid (SLAM)"]["Topic"]["Value"] == "/tb3_0/map"
+    assert displays["Occupancy grid (SLAM)"]["Update Topic"]["Value"] == "/tb3_0/map_updates"
+    assert displays["RobotModel"]["Description Topic"]["Value"] == "/tb3_0/robot_description"
+    assert displays["RobotModel"]["TF Prefix"] == "tb3_0"
+    assert shown["Visualization Manager"]["Global Options"]["Fixed Frame"] == "tb3_0/map"
+    tools = {tool["Class"]: tool for tool in shown["Visualization Manager"]["Tools"]}
+    assert tools["rviz_default_plugins/SetInitialPose"]["Topic"]["Value"] == "/tb3_0/initialpose"
+
+    def topics(value) -> list[str]:
+        if isinstance(value, dict):
+            own = [value["Value"]] if "Value" in value and "Depth" in value else []
+            return own + [t for item in value.values() for t in topics(item)]
+        return [t for item in value for t in topics(item)] if isinstance(value, list) else []
+
+    before, after = topics(config), topics(shown)
+    assert len(before) >= 12 and after == [f"/tb3_0{topic}" for topic in before]
+    # the config read is left as it was, and a shared map frame keeps the topics and sets the frame
+    assert config == yaml.safe_load(installed.read_text())
+    shared = namespaced_rviz_config(config, robot_frames("tb3_1", "map"))
+    assert shared["Visualization Manager"]["Global Options"]["Fixed Frame"] == "map"
+    assert topics(shared)[0].startswith("/tb3_1/")
+    # the launch files' arguments: the installed file without a namespace, else the rewritten copy
+    assert rviz_arguments() == ["-d", str(installed)] == rviz_arguments(RobotFrames(""))
+    flag, path = rviz_arguments(robot_frames("tb3_0"))
+    assert flag == "-d" and yaml.safe_load(Path(path).read_text()) == shown
+    Path(path).unlink()
