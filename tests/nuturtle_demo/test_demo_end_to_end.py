@@ -18,7 +18,9 @@ import yaml
 from bag_reading import read_bag
 from turtlelib.mapping.grid_map_file import load_grid_map
 
-DURATION_S = 40.0
+# the demo's own run: its targets are set for 120 s (over 40 s the pose NEES band's fraction scatters by
+# +-0.05 from seed to seed, 0.90-0.99 over seeds 0-3, and the odometry has not drifted its 0.2 m yet)
+DURATION_S = 120.0
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 TOPICS = {
     "/clock": "rosgraph_msgs/msg/Clock",
@@ -61,7 +63,7 @@ def test_demo_meets_targets_and_records_every_topic(tmp_path):
     assert metrics["sim_seconds"] == pytest.approx(DURATION_S, abs=0.05)
     assert metrics["final_position_error_slam_m"] <= 0.02
     assert metrics["final_heading_error_slam_rad"] <= 0.02
-    # 40 s is too short for the full-run odometry target (>= 0.2 m); odometry is still clearly worse
+    assert metrics["final_position_error_odom_m"] >= 0.2
     assert metrics["final_position_error_odom_m"] >= 3 * metrics["final_position_error_slam_m"]
     assert metrics["ate_rmse_odom_m"] >= 3 * metrics["ate_rmse_slam_m"]
     assert metrics["landmarks_in_range"] >= 5

@@ -192,7 +192,7 @@ def test_the_slam_launch_files_start_rviz2_with_slam_rviz_when_asked():
         ]
         keywords = {kw.arg: ast.unparse(kw.value) for kw in rviz.keywords}
         assert keywords["executable"] == "'rviz2'", launch_file
-        assert keywords["arguments"] == "rviz_arguments()", launch_file
+        assert keywords["arguments"] == "rviz_arguments(frames)", launch_file  # the robot's frames
         assert keywords["condition"] == "IfCondition(LaunchConfiguration('rviz'))", launch_file
 
 
