@@ -122,7 +122,9 @@ def _wall_contact_fraction(
     if not np.any(approaching):
         return 1.0
     h, hd, a, t, length = h[approaching], hd[approaching], a[approaching], t[approaching], length[approaching]
-    s = np.maximum((np.abs(h) - radius_m) / np.abs(hd), 0.0)
+    # a move nearly along the wall's line reaches it only at an overflowing s (inf): no contact this step
+    with np.errstate(over="ignore"):
+        s = np.maximum((np.abs(h) - radius_m) / np.abs(hd), 0.0)
     foot = np.einsum("kd,kd->k", p_world + s[:, None] * d_world - a, t)
     hits = (foot >= 0.0) & (foot <= length) & (s <= 1.0)
     return float(np.min(s[hits])) if np.any(hits) else 1.0
