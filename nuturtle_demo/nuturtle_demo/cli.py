@@ -113,7 +113,7 @@ def report(result: DemoResult, options: DemoOptions) -> str:
         + ("" if options.map_file is None else f", map file {options.map_file}")
         + ("" if options.start is None else f", start {tuple(options.start)}"),
         "" if result.route is None else result.route.describe(),
-        _route_line(result.route_time_s),
+        _route_line(result.route_time_s) if len(result.robots) == 1 else None,
         ""
         if result.interrupted is None
         else f"INCOMPLETE: interrupted by {result.interrupted} after {result.metrics.sim_seconds:.1f} of "
@@ -132,6 +132,7 @@ def report(result: DemoResult, options: DemoOptions) -> str:
 
 
 def _route_line(route_time_s: float) -> str:
+    """Where the route stopped, for the next session of one robot (several robots map once: no map_file)."""
     return f"route: stopped {route_time_s:.1f} s in (--route-start {route_time_s:.1f} goes on from there)"
 
 

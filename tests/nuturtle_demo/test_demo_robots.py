@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from bag_reading import read_bag
+from nuturtle_demo.cli import report
 from nuturtle_demo.robot_stack import landmark_radius_window
 from nuturtle_demo.run import DemoOptions, run_demo
 from nuturtle_description.robot_params import burger_params
@@ -53,8 +54,11 @@ def truth_by_stamp(bag, name: str) -> dict[float, Transform2D]:
 @pytest.mark.ros
 def test_two_robots_each_map_within_their_targets_and_see_each_other(tmp_path):
     out = tmp_path / "out"
-    result = run_demo(DemoOptions(duration_s=DURATION_S, out_dir=out, robots=2, progress=False))
+    options = DemoOptions(duration_s=DURATION_S, out_dir=out, robots=2, progress=False)
+    result = run_demo(options)
     assert [robot.name for robot in result.robots] == ["tb3_0", "tb3_1"]
+    # several robots map once (no map file to continue): no --route-start hint in the report
+    assert "route: stopped" not in report(result, options)
     assert sorted(p.name for p in out.iterdir()) == ["config.yaml", "run", "summary.md", "tb3_0", "tb3_1"]
     summary = (out / "summary.md").read_text()
     for robot in result.robots:
