@@ -202,8 +202,11 @@ class LoopClosing:
         self._timeline.relocalize(T_new, P_new, explained=True)
         self.last_correction = D
         path_m = self.loops.keyframes[-1].path_m - self.loops.keyframes[accepted[0].i].path_m
+        back = (
+            "onto the saved graph" if accepted[0].i < self.loops.n_loaded else f"{path_m:.0f} m of path back"
+        )
         self._logger.info(
-            f"loop closed: keyframe {pairs} ({path_m:.0f} m of path back); the pose moved by "
+            f"loop closed: keyframe {pairs} ({back}); the pose moved by "
             f"{math.hypot(D.x, D.y):.3f} m, {D.theta:+.3f} rad"
         )
 

@@ -147,6 +147,7 @@ def test_a_continued_session_closes_a_loop_onto_the_saved_graph(tmp_path):
     # loops onto loaded keyframes, from this session's
     assert len(accepted) >= 2
     assert all(c.i < K <= c.j for c in accepted)
+    assert session_2.loop_edges() == []  # none between this run's own keyframes, for its smoother
     # the loaded keyframes are anchors: they stay (to 1 mm: the anchor's standard deviation)
     assert np.abs(session_2.graph.poses[:K] - loaded.T_map_keyframe).max() < 1e-3
     # the open chain's heading at the last keyframe, 53 steps in, is off by the bias over them (0.159 rad,

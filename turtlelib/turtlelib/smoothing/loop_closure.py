@@ -489,12 +489,14 @@ class LoopClosure:
         return bool(np.any(loop & (i == candidate.i) & (j == candidate.j)))
 
     def loop_edges(self) -> list[LoopEdge]:
-        """The loops in the graph, each between its keyframes' stamps (for a smoother of the whole run:
-        :func:`turtlelib.smoothing.run_smoothing.smooth_history`)."""
+        """This session's loops, each between its keyframes' stamps (for a smoother of the whole run:
+        :func:`turtlelib.smoothing.run_smoothing.smooth_history`); a loop onto a loaded keyframe is left
+        out (that keyframe has no pose in this run: its stamp is another session's)."""
         i, j, loop = self.graph.edges()
+        ours = loop & (i >= self.n_loaded) & (j >= self.n_loaded)
         return [
             LoopEdge(self.keyframes[i[e]].t_ns, self.keyframes[j[e]].t_ns, *self.graph.measurement(e))
-            for e in np.flatnonzero(loop)
+            for e in np.flatnonzero(ours)
         ]
 
     def map_from_odom(self, k: int | None = -1) -> Transform2D:
