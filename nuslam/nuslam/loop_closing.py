@@ -21,8 +21,9 @@ their frame).
 
 The occupancy grid is drawn at the graph's poses: each grid keyframe's scan (`nuslam.grid_mapping`) at
 ``B C_k T_odom_body(t)``, ``C_k`` the correction now at the newest graph keyframe at or before its stamp
-``t`` and ``B = T_map_body(t_f) (C T_l)^-1`` the filter's frame over the graph's (the identity, or the
-start pose, unless landmarks or /initialpose moved the filter). After a loop closes the grid is rendered
+``t`` (this session's start correction before its first keyframe) and ``B = T_map_body(t_f) (C T_l)^-1``
+the filter's frame over the graph's (the identity unless landmarks or /initialpose moved the filter: the
+graph's first step is at slam's start pose). After a loop closes the grid is rendered
 again from its keyframes, at most once per ``RERENDER_PERIOD_NS`` of scan time (its CPU grows with the
 keyframes: `slam: loop closure` reports it); a save and a run's final grid always use the newest graph.
 
@@ -33,8 +34,7 @@ when ``map_file`` and that file are there at start-up, the graph is loaded and c
 (`turtlelib.smoothing.loop_closure`, "Continuing a saved graph": its keyframes anchored, this session placed
 at slam's start pose with its covariance, so a revisit of a place the earlier session saw closes a loop onto
 it); a malformed file stops the node at start-up with the reason. Localization neither loads nor saves it
-(the map is fixed there: the session's loops are its own). The graph of every session is in the map frame:
-its first step at slam's start pose.
+(the map is fixed there: the session's loops are its own).
 
 `/diagnostics` gets `slam: loop closure` (:meth:`LoopClosing.status`): keyframes, loops closed, candidates
 refused by reason, the last correction, the time per step and per re-rendering. Each loop closed is logged

@@ -193,7 +193,8 @@ def _from_arrays(arrays: dict[str, np.ndarray]) -> SavedGraph:
     version = arrays["version"]
     if version.shape != () or version.dtype.kind not in "iu" or int(version) != GRAPH_FORMAT_VERSION:
         raise ValueError(
-            f"version {version.tolist()!r} is not supported (this reader supports version {GRAPH_FORMAT_VERSION} only)"
+            f"version {version.tolist()!r} is not supported "
+            f"(this reader supports version {GRAPH_FORMAT_VERSION} only)"
         )
     missing, unknown = set(_KEYS) - set(arrays), set(arrays) - set(_KEYS)
     if missing or unknown:

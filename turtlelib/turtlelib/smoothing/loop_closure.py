@@ -504,8 +504,7 @@ class LoopClosure:
         keyframe over the odometry's, ``T_map_body T_odom_body^-1``; a scan after keyframe ``k`` is at
         ``T_map_odom T_odom_body``. Before this session's first keyframe (or ``k`` None), where its start
         placed it (identity before the first step)."""
-        newest = self.session_keyframe
-        if newest is None or k is None:
+        if self.session_keyframe is None or k is None:
             return Transform2D() if self._T_map_odom is None else self._T_map_odom
         k = range(len(self.keyframes))[k]
         return self.graph.pose(k) @ self.keyframes[k].T_odom_body.inverse()

@@ -217,7 +217,7 @@ class PoseGraph:
     def optimise(self) -> GraphSolution:
         """Minimise ``F`` (module docstring) from the current estimates, least squares first and then with
         the loop kernel; the poses are replaced by the optimum. ValueError for a graph whose poses are not
-        all linked to pose 0."""
+        all linked to a prior (through edges or their own)."""
         x = self.poses.ravel()
         iterations = 0
         for width in (np.inf, self.config.loop_kernel):
