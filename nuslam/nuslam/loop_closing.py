@@ -21,10 +21,20 @@ their frame).
 
 The occupancy grid is drawn at the graph's poses: each grid keyframe's scan (`nuslam.grid_mapping`) at
 ``B C_k T_odom_body(t)``, ``C_k`` the correction now at the newest graph keyframe at or before its stamp
-``t`` and ``B = T_map_body(t_f) (C T_l)^-1`` the filter's frame over the graph's (the identity, or the
-start pose, unless landmarks or /initialpose moved the filter). After a loop closes the grid is rendered
+``t`` (this session's start correction before its first keyframe) and ``B = T_map_body(t_f) (C T_l)^-1``
+the filter's frame over the graph's (the identity unless landmarks or /initialpose moved the filter: the
+graph's first step is at slam's start pose). After a loop closes the grid is rendered
 again from its keyframes, at most once per ``RERENDER_PERIOD_NS`` of scan time (its CPU grows with the
 keyframes: `slam: loop closure` reports it); a save and a run's final grid always use the newest graph.
+
+Across sessions (docs/maps.md, "Continuing over sessions"): ``~/save_map`` also writes the graph beside
+``map_file`` as ``<stem>.graph.npz`` (:func:`graph_path`, `turtlelib.smoothing.graph_file`: this session's
+keyframes at their map poses ``B T_graph_keyframe``, the loaded ones as loaded, every edge); in mapping,
+when ``map_file`` and that file are there at start-up, the graph is loaded and continued
+(`turtlelib.smoothing.loop_closure`, "Continuing a saved graph": its keyframes anchored, this session placed
+at slam's start pose with its covariance, so a revisit of a place the earlier session saw closes a loop onto
+it); a malformed file stops the node at start-up with the reason. Localization neither loads nor saves it
+(the map is fixed there: the session's loops are its own).
 
 `/diagnostics` gets `slam: loop closure` (:meth:`LoopClosing.status`): keyframes, loops closed, candidates
 refused by reason, the last correction, the time per step and per re-rendering. Each loop closed is logged
@@ -36,6 +46,7 @@ from __future__ import annotations
 import math
 import time
 from collections import Counter
+from pathlib import Path
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -50,6 +61,7 @@ from turtlelib import RegistrationConfig, SlamTimeline, Transform2D
 from turtlelib.estimation.lidar_odometry import OdometryStep
 from turtlelib.geometry.pose_buffer import PoseBuffer
 from turtlelib.sensing.correlative_matcher import CorrelativeConfig
+from turtlelib.smoothing.graph_file import SavedGraph, load_graph, save_graph
 from turtlelib.smoothing.loop_closure import LoopClosure, LoopClosureConfig, Verdict, relocalized
 from turtlelib.smoothing.pose_graph import PoseGraphConfig
 from turtlelib.util.timebase import NS_PER_S
@@ -65,6 +77,11 @@ SCAN_POSES_SLACK = 1000
 KEPT = (Verdict.ACCEPTED, Verdict.HELD)
 
 
+def graph_path(map_file: str) -> Path:
+    """``<stem>.graph.npz`` beside the landmark map ``map_file``."""
+    return Path(map_file).with_suffix(".graph.npz")
+
+
 def declare_loop_closure(node: Node, registration: RegistrationConfig) -> LoopClosureConfig:
     """`turtlelib.smoothing.loop_closure.LoopClosureConfig`'s own fields as ``loops.*`` parameters; the
     refining registration is slam's (``registration.*``), the matcher and the graph at their defaults."""
@@ -74,7 +91,8 @@ def declare_loop_closure(node: Node, registration: RegistrationConfig) -> LoopCl
 
 class LoopClosing:
     """slam's loop closure (module docstring) over its ``timeline`` and ``grid``. Feed it each LiDAR
-    odometry step with :meth:`add_step`."""
+    odometry step with :meth:`add_step`. ``map_file`` (empty: none) has the graph beside it saved and, in
+    mapping (not ``localization``), continued; ValueError for a malformed graph file there."""
 
     def __init__(
         self,
@@ -83,10 +101,27 @@ class LoopClosing:
         grid: GridMapping,
         node: Node,
         warnings: SourceWarnings,
+        map_file: str = "",
+        localization: bool = False,
     ) -> None:
         self.config = config
         self._timeline, self._grid, self._warnings = timeline, grid, warnings
         self._logger = node.get_logger()
+        self.graph_path = graph_path(map_file) if map_file and not localization else None
+        # the graph loaded at start-up (None: none), which ~/reset goes back to
+        self._loaded: SavedGraph | None = None
+        if self.graph_path is not None and self.graph_path.exists():
+            if Path(map_file).exists():
+                self._loaded = load_graph(self.graph_path)
+                self._logger.info(
+                    f"continuing the pose graph {self.graph_path}: {self._loaded.n_keyframes} keyframes, "
+                    f"{self._loaded.n_edges} edges ({int(self._loaded.edge_loop.sum())} loops)"
+                )
+            else:
+                # a saved map is its landmark file and what lies beside it: without the file, a new graph
+                self._logger.info(
+                    f"no map file {map_file}: the pose graph {self.graph_path} is not continued"
+                )
         self._step_time, self._render_time = DurationMonitor(), DurationMonitor()
         self.cpu_s = {"steps": 0.0, "renders": 0.0}
         self.renders = 0
@@ -96,7 +131,9 @@ class LoopClosing:
             grid.pose_source = self.pose_at
 
     def _start(self) -> None:
-        self.loops = LoopClosure(self.config)
+        """A new graph (the loaded one continued), this session's first step at the filter's pose."""
+        slam = self._timeline.slam
+        self.loops = LoopClosure(self.config, self._loaded, slam.pose, slam.pose_covariance)
         self.closed = 0
         self.last_correction: Transform2D | None = None
         self._lidar_poses = PoseBuffer(LIDAR_POSES)
@@ -135,7 +172,7 @@ class LoopClosing:
             self._lidar_poses.clear()
             self._lidar_poses.add(step.t_ns, step.T_odom_body)
         if len(p_body) and self._grid.mapping:
-            self._scan_poses[step.t_ns] = (len(self.loops.keyframes) - 1, step.T_odom_body)
+            self._scan_poses[step.t_ns] = (self.loops.session_keyframe, step.T_odom_body)
             self._forget_dropped_scans()
         if accepted:
             self._closed(accepted, C_old)
@@ -165,8 +202,11 @@ class LoopClosing:
         self._timeline.relocalize(T_new, P_new, explained=True)
         self.last_correction = D
         path_m = self.loops.keyframes[-1].path_m - self.loops.keyframes[accepted[0].i].path_m
+        back = (
+            "onto the saved graph" if accepted[0].i < self.loops.n_loaded else f"{path_m:.0f} m of path back"
+        )
         self._logger.info(
-            f"loop closed: keyframe {pairs} ({path_m:.0f} m of path back); the pose moved by "
+            f"loop closed: keyframe {pairs} ({back}); the pose moved by "
             f"{math.hypot(D.x, D.y):.3f} m, {D.theta:+.3f} rad"
         )
 
@@ -180,7 +220,7 @@ class LoopClosing:
         if scan is None or B is None:
             return None
         k, T_odom_body = scan
-        return B @ self.loops.map_from_odom(max(k, 0)) @ T_odom_body
+        return B @ self.loops.map_from_odom(k) @ T_odom_body
 
     def _filter_from_graph(self) -> Transform2D | None:
         """``B = T_map_body(t_f) (C T_l)^-1``: the filter's frame over the graph's; None before a pose."""
@@ -206,6 +246,15 @@ class LoopClosing:
             kept = set(self._grid.keyframes.stamps_ns)
             newest = max(kept, default=-1)
             self._scan_poses = {t: v for t, v in self._scan_poses.items() if t in kept or t > newest}
+
+    def save(self) -> str:
+        """Write the graph to :attr:`graph_path` (module docstring; atomically); a one-line account of it
+        ('' in localization or without ``map_file``). OSError or ValueError when it cannot be written."""
+        if self.graph_path is None:
+            return ""
+        graph = self.loops.saved_graph(self._filter_from_graph())
+        save_graph(self.graph_path, graph)
+        return f"the pose graph ({graph.n_keyframes} keyframes, {graph.n_edges} edges) to {self.graph_path}"
 
     def loop_segments(self) -> NDArray[np.float64]:
         """(L, 2, 2): each loop closed as its two keyframes' positions ``[[x_i, y_i], [x_j, y_j]]`` (m) at the

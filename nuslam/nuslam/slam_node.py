@@ -23,11 +23,13 @@ Maps (`map_file`, `mode`)
     localization` it must, and its landmarks stay fixed (a Schmidt update: only the pose is estimated,
     detections of unmapped landmarks are counted, not added); in `mapping` SLAM goes on from it: its
     landmarks with their covariance, and the occupancy grid saved beside it (`<stem>.yaml` + `.pgm`),
-    which the new scans extend and `~/save_map` writes back extended (continued mapping, docs/maps.md;
-    loop closure's pose graph is not saved, so a continued session's loop closure starts a new graph).
-    A corrupt, wrong-version, non-finite or other-frame file, or a grid file that is malformed (or, in
-    mapping, saved at another resolution or larger than `grid.max_size_m`), stops the node at start-up
-    with the reason.
+    which the new scans extend and `~/save_map` writes back extended (continued mapping, docs/maps.md),
+    and with `loop_closure` loop closure's pose graph saved beside it (`<stem>.graph.npz`), which it
+    continues: a revisit of a place an earlier session saw closes a loop onto that session's keyframes
+    (`nuslam.loop_closing`; localization neither loads nor saves the graph).
+    A corrupt, wrong-version, non-finite or other-frame file, or a grid or graph file that is malformed (or,
+    in mapping, a grid saved at another resolution or larger than `grid.max_size_m`), stops the node at
+    start-up with the reason.
 Occupancy grid (`grid.*`, `nuslam.grid_mapping`)
     Each `scan` placed at slam's pose at its stamp and the robot's LiDAR mount builds an occupancy grid
     (published on `map`); `~/save_map` writes it beside `map_file` as `<stem>.yaml` + `<stem>.pgm`
@@ -93,7 +95,8 @@ Publishes
 Services (std_srvs/Trigger)
     `~/save_map`: writes the confirmed landmarks, their joint covariance, the frame, the filter's time and
         this node's parameters to `map_file` (atomically: a temporary file renamed over it), and the
-        occupancy grid beside it (`<stem>.yaml` + `<stem>.pgm`, re-rendered from its keyframes).
+        occupancy grid beside it (`<stem>.yaml` + `<stem>.pgm`, re-rendered from its keyframes), and with
+        `loop_closure` in mapping the pose graph (`<stem>.graph.npz`).
     `~/reset`: back to the start pose (x0, y0, theta0) and the map loaded at start-up (or none), its grid
         too.
 Parameters
@@ -331,7 +334,9 @@ class SlamNode(Node):
         self._fused_reported = 0
         self.loop_closing = None
         if self.scan_odometry is not None and frames.loop_closure:
-            self.loop_closing = LoopClosing(self._loops, self.timeline, self.grid, self, self._warnings)
+            self.loop_closing = LoopClosing(
+                self._loops, self.timeline, self.grid, self, self._warnings, frames.map_file, localization
+            )
             self.scan_odometry.step_listener = self.loop_closing.add_step
         self._connect(topics[1])
 
@@ -633,9 +638,15 @@ class SlamNode(Node):
             response.message += f"; could not save the occupancy grid: {error}"
             self.get_logger().error(response.message)
             return response
+        try:
+            graph_saved = "" if self.loop_closing is None else self.loop_closing.save()
+        except (OSError, ValueError) as error:
+            response.success = False
+            response.message += f"; could not save the pose graph: {error}"
+            self.get_logger().error(response.message)
+            return response
         response.success = True
-        if grid_saved:
-            response.message += f" and {grid_saved}"
+        response.message += "".join(f" and {saved}" for saved in (grid_saved, graph_saved) if saved)
         self.get_logger().info(response.message)
         return response
 

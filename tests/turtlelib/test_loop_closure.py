@@ -17,8 +17,9 @@ from turtlelib.sensing.correlative_matcher import (
     thin_scan,
 )
 from turtlelib.sensing.scan_model import LidarConfig, polygon_walls, simulate_scan
+from turtlelib.smoothing.graph_file import load_graph, save_graph
 from turtlelib.smoothing.loop_closure import LoopClosure, LoopClosureConfig, Verdict, relocalized
-from turtlelib.smoothing.pose_graph import PoseGraph
+from turtlelib.smoothing.pose_graph import ANCHOR_COVARIANCE, PoseGraph
 
 LIDAR = LidarConfig(range_max=6.0, noise=0.01)
 # a ring of corridors 2.5 m wide around a block, with pillars that break its symmetry
@@ -62,11 +63,12 @@ def path_through(waypoints, step_m: float = 0.25, turn_rad: float = 0.4) -> list
     return poses
 
 
-def drive(loops: LoopClosure, truth, walls, circles, rng, noise_std=STEP_STD, bias_rad=0.0):
+def drive(loops: LoopClosure, truth, walls, circles, rng, noise_std=STEP_STD, bias_rad=0.0, odom_start=None):
     """Feed ``loops`` the odometry of the true poses drifting by ``bias_rad`` of heading per step, with
     random-walk noise of a quarter of ``noise_std`` per step (its Sigma ``diag(noise_std^2)``: bias and
-    noise within it), scans simulated at the truth; returns the odometry's poses and the accepted loops."""
-    T_odom = truth[0]
+    noise within it), scans simulated at the truth; the odometry starts at ``odom_start`` (default the
+    true start pose). Returns the odometry's poses and the accepted loops."""
+    T_odom = truth[0] if odom_start is None else odom_start
     odometry, accepted = [], []
     for k, T_true in enumerate(truth):
         if k:
@@ -114,6 +116,57 @@ def test_a_drifting_loop_is_closed_and_the_graph_lands_on_the_truth():
     # the loop pulls the end of the run back onto the truth; the open chain has drifted
     assert closed.max() < 0.12
     assert open_chain.max() > 0.6 and open_chain.max() > 5.0 * closed.max()
+
+
+def test_a_continued_session_closes_a_loop_onto_the_saved_graph(tmp_path):
+    rng = np.random.default_rng(11)
+    # session 1: the bottom and right corridors of the ring, no loop; its odometry in a frame of its own
+    first = path_through([[-3.75, -2.75], [3.75, -2.75], [3.75, 2.75]])
+    session_1 = LoopClosure(start_pose=first[0])
+    _, accepted = drive(session_1, first, RING, RING_PILLARS, rng, odom_start=Transform2D(1.0, 2.0, 0.5))
+    assert accepted == []
+    # the graph in the map: the first keyframe at the start pose
+    np.testing.assert_allclose(session_1.graph.poses[0], first[0].as_array(), atol=1e-12)
+    save_graph(tmp_path / "map.graph.npz", session_1.saved_graph())
+    loaded = load_graph(tmp_path / "map.graph.npz")
+    K = loaded.n_keyframes
+    assert K == len(session_1.keyframes) and loaded.n_edges == K - 1
+    # session 2 starts at the top left (its start pose known), drives down the left corridor and along the
+    # bottom one that session 1 saw, its heading drifting by 3 mrad per step (in its Sigma, 4 mrad)
+    second = path_through([[-3.75, 2.75], [-3.75, -2.75], [3.75, -2.75]])
+    session_2 = LoopClosure(loaded=loaded, start_pose=second[0])
+    bias = 0.003
+    odometry, accepted = drive(
+        session_2, second, RING, RING_PILLARS, rng, bias_rad=bias, odom_start=Transform2D(-2.0, 0.5, -1.0)
+    )
+    assert session_2.n_loaded == K
+    # its path goes on min_travel_m past the loaded graph's end: every loaded keyframe a candidate at once
+    assert session_2.keyframes[K].path_m == pytest.approx(
+        loaded.path_m.max() + LoopClosureConfig().min_travel_m
+    )
+    # loops onto loaded keyframes, from this session's
+    assert len(accepted) >= 2
+    assert all(c.i < K <= c.j for c in accepted)
+    assert session_2.loop_edges() == []  # none between this run's own keyframes, for its smoother
+    # the loaded keyframes are anchors: they stay (to 1 mm: the anchor's standard deviation)
+    assert np.abs(session_2.graph.poses[:K] - loaded.T_map_keyframe).max() < 1e-3
+    # the open chain's heading at the last keyframe, 53 steps in, is off by the bias over them (0.159 rad,
+    # +- the random walk of std 1 mrad per step, 7.3 mrad over them), its position by 0.7 m; the loops pull
+    # it back onto the truth
+    stamps = [k.t_ns for k in session_2.keyframes[K:]]
+    T_map_odom = second[0] @ odometry[0].inverse()
+    n = stamps[-1] // 10**8
+    open_end, T_true = T_map_odom @ odometry[n], second[n]
+    assert n == 53
+    assert open_end.theta - T_true.theta == pytest.approx(n * bias, abs=0.025)
+    assert math.hypot(open_end.x - T_true.x, open_end.y - T_true.y) > 0.6
+    closed_end = session_2.graph.pose(len(session_2.keyframes) - 1)
+    assert math.hypot(closed_end.x - T_true.x, closed_end.y - T_true.y) < 0.03
+    assert abs(closed_end.theta - T_true.theta) < 0.01
+    # saved again: both sessions' keyframes and the loops, for a third session
+    again = session_2.saved_graph()
+    assert again.n_keyframes == len(session_2.keyframes) and again.edge_loop.sum() == len(accepted)
+    assert LoopClosure(loaded=again).n_loaded == again.n_keyframes
 
 
 def test_a_corridor_never_closes_a_loop_along_itself():
@@ -262,6 +315,17 @@ def test_pose_graph_hand_computed():
         chain.add_edge(i, i + 1, Transform2D(1.0, 0.0, 0.0), np.diag([a, b, c]), loop=False)
     expected = np.array([[2 * a, 0, 0], [0, 2 * b + c, c], [0, c, 2 * c]])
     np.testing.assert_allclose(chain.relative_covariance(0, 2), expected, atol=1e-9)
+    # a prior on pose 1 at x = 1.2 against the edge's 1.0 from pose 0 (held by the gauge), equally sure:
+    # between them, pose 0 moved by the gauge's share only (1e-6 of the pull)
+    anchored = PoseGraph()
+    anchored.add_pose(Transform2D())
+    anchored.add_pose(Transform2D(1.0, 0.0, 0.0))
+    anchored.add_edge(0, 1, Transform2D(1.0, 0.0, 0.0), S, loop=False)
+    anchored.add_prior(1, Transform2D(1.2, 0.0, 0.0), S)
+    np.testing.assert_allclose(anchored.optimise().poses, [[0.0, 0, 0], [1.1, 0, 0]], atol=1e-6)
+    # an anchor's prior holds its pose as the gauge holds pose 0
+    anchored.add_prior(1, Transform2D(1.0, 0.0, 0.0), ANCHOR_COVARIANCE)
+    np.testing.assert_allclose(anchored.optimise().poses[1], [1.0, 0, 0], atol=1e-6)
 
 
 def test_invalid_configuration_and_edges_are_refused():

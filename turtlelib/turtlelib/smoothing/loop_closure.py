@@ -33,6 +33,21 @@ submap is keyframe ``i`` and its ``submap_keyframes`` neighbours on each side (t
 registration (:func:`turtlelib.sensing.scan_registration.register`, prior ``refine_std_m``,
 ``refine_std_rad``), whose pose and covariance are the loop's measurement ``Z_loop``, ``S_loop``.
 
+Continuing a saved graph
+------------------------
+A graph saved by an earlier session (:mod:`turtlelib.smoothing.graph_file`: map poses, points, path,
+edges; :meth:`LoopClosure.saved_graph`) is loaded whole: its keyframes become poses held where they are by
+anchors (priors of the gauge's covariance, :data:`turtlelib.smoothing.pose_graph.ANCHOR_COVARIANCE`), so
+that a loop onto them bends only the new session (the map, grid and landmarks saved with them stay
+right). The new session lives in its own odometry frame; its first step is placed at ``start_pose`` in the
+map (``T_map_odom = T_start T_odom_body_first^-1``), and its first keyframe is linked to the loaded graph
+by a prior there, ``N(T_map_odom T_odom_body, S_0)`` with ``S_0`` the start pose's covariance
+``start_covariance`` composed with the odometry to that keyframe as ``Sigma_w`` composes it (plus the
+floor of an edge). Its path goes on from the loaded graph's, ``min_travel_m`` past its end (no loaded
+keyframe is in the new session's local map, so each is a candidate from the start). A loop onto a loaded
+keyframe is detected and verified as any other: ``S_pred`` is the new session's drift since its start
+over the start pose's prior.
+
 Verification: a wrong loop must never close
 -------------------------------------------
 A loop edge bends the whole graph, so a match is taken only when every test passes, each for a reason:
@@ -81,8 +96,9 @@ from ..sensing.scan_registration import (
     register,
     voxel_centroids,
 )
-from ..util.validation import in_range, integer, positive, store
-from .pose_graph import PoseGraph, PoseGraphConfig
+from ..util.validation import covariance, in_range, integer, positive, store
+from .graph_file import SavedGraph
+from .pose_graph import ANCHOR_COVARIANCE, PoseGraph, PoseGraphConfig
 from .smoothing_problem import LoopEdge
 
 
@@ -166,8 +182,9 @@ class LoopClosureConfig:
 
 @dataclass(frozen=True)
 class Keyframe:
-    """A keyframe: its stamp (ns), its pose ``T_odom_body`` as the odometry gave it, its points (n, 2, body
-    frame, thinned) and the path travelled to it (m)."""
+    """A keyframe: its stamp (ns), its pose ``T_odom_body`` as the odometry gave it (a loaded keyframe's:
+    its map pose, its session's odometry being gone), its points (n, 2, body frame, thinned) and the path
+    travelled to it (m)."""
 
     t_ns: int
     T_odom_body: Transform2D
@@ -216,13 +233,36 @@ class LoopCandidate:
 class LoopClosure:
     """The keyframe pose graph of a LiDAR odometry run and its loops (module docstring). Feed every
     odometry step with :meth:`add_step`; the graph's keyframe poses (frame ``map``) are
-    :attr:`graph`'s, and :meth:`map_from_odom` is the correction of the odometry at a keyframe."""
+    :attr:`graph`'s, and :meth:`map_from_odom` is the correction of the odometry at a keyframe.
 
-    def __init__(self, config: LoopClosureConfig | None = None) -> None:
+    ``loaded``: a saved graph to continue (module docstring, "Continuing a saved graph"), its keyframes
+    the first :attr:`n_loaded`; ``start_pose`` (``T_map_body`` of the first step; default: the odometry's
+    own pose, the graph then in the odometry frame) and ``start_covariance`` (3, 3, positive
+    semi-definite; default zero) place this session in it. ValueError for an invalid covariance."""
+
+    def __init__(
+        self,
+        config: LoopClosureConfig | None = None,
+        loaded: SavedGraph | None = None,
+        start_pose: Transform2D | None = None,
+        start_covariance: NDArray[np.float64] | None = None,
+    ) -> None:
         self.config = LoopClosureConfig() if config is None else config
         self.graph = PoseGraph(self.config.graph)
         self.keyframes: list[Keyframe] = []
         self.candidates: list[LoopCandidate] = []
+        self._start_pose = start_pose
+        self._start_covariance = (
+            np.zeros((3, 3))
+            if start_covariance is None
+            else covariance("start_covariance", start_covariance, (3, 3), definite=False)
+        )
+        # T_map_odom of this session, set at its first step
+        self._T_map_odom: Transform2D | None = None
+        self._session_path_m = 0.0
+        if loaded is not None:
+            self._load(loaded)
+        self.n_loaded = len(self.keyframes)
         self._gate = float(chi2.ppf(self.config.gate_probability, 3))
         # the newest verified loop and its place in candidates
         self._held: LoopCandidate | None = None
@@ -232,19 +272,67 @@ class LoopClosure:
         self._path_m = 0.0
         self._last_T: Transform2D | None = None
 
+    def _load(self, loaded: SavedGraph) -> None:
+        """The saved graph's keyframes, anchored, and its edges (module docstring)."""
+        for k in range(loaded.n_keyframes):
+            T_map = Transform2D(*loaded.T_map_keyframe[k])
+            self.keyframes.append(
+                Keyframe(int(loaded.t_ns[k]), T_map, loaded.points[k], float(loaded.path_m[k]))
+            )
+            self.graph.add_pose(T_map)
+            if k:
+                self.graph.add_prior(k, T_map, ANCHOR_COVARIANCE)
+        for e in range(loaded.n_edges):
+            Z, S = Transform2D(*loaded.edge_Z[e]), loaded.edge_S[e]
+            self.graph.add_edge(
+                int(loaded.edge_i[e]), int(loaded.edge_j[e]), Z, S, loop=bool(loaded.edge_loop[e])
+            )
+        if loaded.n_keyframes:
+            self._session_path_m = float(loaded.path_m.max()) + self.config.min_travel_m
+
+    @property
+    def session_keyframe(self) -> int | None:
+        """The index of this session's newest keyframe (None before its first)."""
+        return len(self.keyframes) - 1 if len(self.keyframes) > self.n_loaded else None
+
+    def saved_graph(self, T_map_graph: Transform2D | None = None) -> SavedGraph:
+        """The graph to save (:mod:`turtlelib.smoothing.graph_file`): this session's keyframes at
+        ``T_map_graph`` composed with their graph poses (the graph's frame in the map; default identity),
+        the loaded ones where they were loaded; every edge."""
+        T_map_graph = Transform2D() if T_map_graph is None else T_map_graph
+        poses = [
+            self.graph.pose(k) if k < self.n_loaded else T_map_graph @ self.graph.pose(k)
+            for k in range(len(self.keyframes))
+        ]
+        i, j, loop = self.graph.edges()
+        measurements = [self.graph.measurement(e) for e in range(self.graph.n_edges)]
+        return SavedGraph(
+            t_ns=np.array([k.t_ns for k in self.keyframes], dtype=np.int64),
+            T_map_keyframe=np.array([T.as_array() for T in poses]).reshape(-1, 3),
+            points=tuple(k.p_body for k in self.keyframes),
+            path_m=np.array([k.path_m for k in self.keyframes]),
+            edge_i=i,
+            edge_j=j,
+            edge_Z=np.array([Z.as_array() for Z, _ in measurements]).reshape(-1, 3),
+            edge_S=np.array([S for _, S in measurements]).reshape(-1, 3, 3),
+            edge_loop=loop,
+        )
+
     def add_step(self, step: OdometryStep, p_body: NDArray[np.float64]) -> list[LoopCandidate]:
         """One odometry step and its scan's points ``p_body`` (n, 2, body frame): composed into the edge from
         the newest keyframe, and made a keyframe if it moved far enough (module docstring). Returns the
         loops accepted at this step (empty for most)."""
         T = step.T_odom_body
-        if self._last_T is not None:
+        if self._T_map_odom is None:
+            self._start_session(T)
+        elif self._last_T is not None:
             dx, dy = T.x - self._last_T.x, T.y - self._last_T.y
             # Sigma_w <- A Sigma_w A^T + Sigma_k
             A = np.array([[1.0, 0.0, -dy], [0.0, 1.0, dx], [0.0, 0.0, 1.0]])
             self._Sigma_w = A @ self._Sigma_w @ A.T + step.Sigma
             self._path_m += math.hypot(dx, dy)
         self._last_T = T
-        if self.keyframes:
+        if self.session_keyframe is not None:
             moved = self.keyframes[-1].T_odom_body.inverse() @ T
             far = math.hypot(moved.x, moved.y) >= self.config.keyframe_distance_m
             turned = abs(normalize_angle(moved.theta)) >= self.config.keyframe_angle_rad
@@ -255,25 +343,38 @@ class LoopClosure:
             return []
         return self._add_keyframe(step.t_ns, T, points)
 
+    def _start_session(self, T: Transform2D) -> None:
+        """This session's first step, at ``T_odom_body`` ``T``: ``T_map_odom`` from the start pose, and
+        ``Sigma_w`` the start pose's covariance carried into the odometry frame (module docstring)."""
+        start = T if self._start_pose is None else self._start_pose
+        self._T_map_odom = start @ T.inverse()
+        R = np.eye(3)
+        R[:2, :2] = self._T_map_odom.rotation_matrix()
+        self._reset_edge(T)
+        self._Sigma_w = R.T @ self._start_covariance @ R
+
     def _add_keyframe(self, t_ns: int, T: Transform2D, points: NDArray[np.float64]) -> list[LoopCandidate]:
-        if not self.keyframes:
-            self.keyframes.append(Keyframe(t_ns, T, points, 0.0))
-            self.graph.add_pose(T)
-            self._reset_edge(T)
-            return []
-        previous = self.keyframes[-1]
-        path_m = previous.path_m + self._path_m
-        a = len(self.keyframes) - 1
-        # Z_ab = T_a^-1 T_b,  S_ab = B Sigma_w B^T
-        Z = previous.T_odom_body.inverse() @ T
-        B = np.eye(3)
-        B[:2, :2] = previous.T_odom_body.rotation_matrix().T
-        S = B @ self._Sigma_w @ B.T
-        # a floor so that a robot standing still keeps an invertible edge: (1 mm, 1 mrad)^2
-        S = 0.5 * (S + S.T) + 1e-6 * np.eye(3)
-        self.keyframes.append(Keyframe(t_ns, T, points, path_m))
-        b = self.graph.add_pose(self.graph.pose(a) @ Z)
-        self.graph.add_edge(a, b, Z, S, loop=False)
+        if self.session_keyframe is None:
+            path_m = self._session_path_m + self._path_m
+            self.keyframes.append(Keyframe(t_ns, T, points, path_m))
+            T_map = self._T_map_odom @ T
+            b = self.graph.add_pose(T_map)
+            if b:  # linked to the loaded graph by its start pose's prior: S_0 = R Sigma_w R^T + floor
+                R = np.eye(3)
+                R[:2, :2] = self._T_map_odom.rotation_matrix()
+                self.graph.add_prior(b, T_map, _floored(R @ self._Sigma_w @ R.T))
+        else:
+            previous = self.keyframes[-1]
+            path_m = previous.path_m + self._path_m
+            a = len(self.keyframes) - 1
+            # Z_ab = T_a^-1 T_b,  S_ab = B Sigma_w B^T
+            Z = previous.T_odom_body.inverse() @ T
+            B = np.eye(3)
+            B[:2, :2] = previous.T_odom_body.rotation_matrix().T
+            S = _floored(B @ self._Sigma_w @ B.T)
+            self.keyframes.append(Keyframe(t_ns, T, points, path_m))
+            b = self.graph.add_pose(self.graph.pose(a) @ Z)
+            self.graph.add_edge(a, b, Z, S, loop=False)
         self._reset_edge(T)
         i = self._candidate(b)
         if i is None:
@@ -388,22 +489,31 @@ class LoopClosure:
         return bool(np.any(loop & (i == candidate.i) & (j == candidate.j)))
 
     def loop_edges(self) -> list[LoopEdge]:
-        """The loops in the graph, each between its keyframes' stamps (for a smoother of the whole run:
-        :func:`turtlelib.smoothing.run_smoothing.smooth_history`)."""
+        """This session's loops, each between its keyframes' stamps (for a smoother of the whole run:
+        :func:`turtlelib.smoothing.run_smoothing.smooth_history`); a loop onto a loaded keyframe is left
+        out (that keyframe has no pose in this run: its stamp is another session's)."""
         i, j, loop = self.graph.edges()
+        ours = loop & (i >= self.n_loaded) & (j >= self.n_loaded)
         return [
             LoopEdge(self.keyframes[i[e]].t_ns, self.keyframes[j[e]].t_ns, *self.graph.measurement(e))
-            for e in np.flatnonzero(loop)
+            for e in np.flatnonzero(ours)
         ]
 
-    def map_from_odom(self, k: int = -1) -> Transform2D:
-        """``T_map_odom`` at keyframe ``k`` (the newest by default): the graph's pose of the keyframe over
-        the odometry's, ``T_map_body T_odom_body^-1``; a scan after keyframe ``k`` is at ``T_map_odom
-        T_odom_body``. Identity before the first keyframe."""
-        if not self.keyframes:
-            return Transform2D()
+    def map_from_odom(self, k: int | None = -1) -> Transform2D:
+        """``T_map_odom`` at keyframe ``k`` of this session (the newest by default): the graph's pose of the
+        keyframe over the odometry's, ``T_map_body T_odom_body^-1``; a scan after keyframe ``k`` is at
+        ``T_map_odom T_odom_body``. Before this session's first keyframe (or ``k`` None), where its start
+        placed it (identity before the first step)."""
+        if self.session_keyframe is None or k is None:
+            return Transform2D() if self._T_map_odom is None else self._T_map_odom
         k = range(len(self.keyframes))[k]
         return self.graph.pose(k) @ self.keyframes[k].T_odom_body.inverse()
+
+
+def _floored(S: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``S`` made symmetric, plus a floor so that a robot standing still keeps an invertible edge or prior:
+    (1 mm, 1 mrad)^2."""
+    return 0.5 * (S + S.T) + 1e-6 * np.eye(3)
 
 
 def relocalized(

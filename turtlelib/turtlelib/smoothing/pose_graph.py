@@ -4,16 +4,20 @@ loop closures between distant ones), optimised by sparse Levenberg-Marquardt.
 Unknowns: poses ``q_k = [x, y, theta]`` (``T_map_body``; m, m, rad). Factors, each a residual ``r`` with a
 Gaussian covariance ``S``::
 
-    gauge            r = q_0 (-) q0_bar                        S = (1e-3 m, 1e-3 m, 1e-3 rad)^2 I
+    prior on k       r = q_k (-) q_bar                         S = S_prior
     edge e = (i, j)  r = (q_i^-1 q_j) (-) Z_e                  S = S_e
 
 ``Z_e = [x, y, theta]`` the relative pose ``T_i^-1 T_j`` measured in frame ``i`` and ``S_e`` its covariance
 there (:func:`turtlelib.smoothing.sparse_least_squares.relative_pose_residuals` has the residual and its
-Jacobians). Pose 0's factor fixes the gauge at its value when the graph was made (the odometry frame).
+Jacobians). Pose 0 gets a prior at its value when it was added, ``S = (1e-3 m, 1e-3 m, 1e-3 rad)^2 I``: the
+gauge (its frame: the odometry's, or the map's). :meth:`PoseGraph.add_prior` adds others: a continued
+session's loaded keyframes held at their map poses as anchors (the same tight prior), its own first keyframe
+at its start pose (:mod:`turtlelib.smoothing.loop_closure`).
 
 With ``e = S^-1/2 r`` and ``s_e = |e_e|^2`` an edge's squared Mahalanobis distance, the cost is::
 
-    F(q) = 1/2 |e_gauge|^2 + 1/2 sum_odometry s_e + 1/2 sum_loops rho(s_e),   rho(s) = c^2 ln(1 + s / c^2)
+    F(q) = 1/2 sum_priors |e_p|^2 + 1/2 sum_odometry s_e + 1/2 sum_loops rho(s_e),
+    rho(s) = c^2 ln(1 + s / c^2)
 
 the Cauchy kernel of width ``c`` (``loop_kernel``, whitened units) on the loop edges alone: a loop that
 the rest of the graph contradicts costs only logarithmically (odometry edges are never outliers). It is
@@ -35,7 +39,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import sparse
 
-from ..geometry.se2 import Transform2D, normalize_angle, normalize_angles
+from ..geometry.se2 import Transform2D, normalize_angles
 from ..util.validation import covariance, integer, positive, store
 from .sparse_least_squares import (
     factorise,
@@ -47,6 +51,8 @@ from .sparse_least_squares import (
 
 # the gauge factor's standard deviation (m, m, rad)
 _GAUGE_STD = 1e-3
+# the gauge's covariance, also that of an anchor (PoseGraph.add_prior)
+ANCHOR_COVARIANCE = _GAUGE_STD**2 * np.eye(3)
 
 
 @dataclass(frozen=True)
@@ -66,8 +72,9 @@ class PoseGraphConfig:
 
 @dataclass(frozen=True)
 class GraphLinearisation:
-    """At ``x`` (3P,): whitened, reweighted residuals ``e`` and their Jacobian ``J`` (rows: gauge, then three
-    per edge), each edge's squared Mahalanobis distance ``s`` (E,) and kernel weight ``w`` (E,), the cost."""
+    """At ``x`` (3P,): whitened, reweighted residuals ``e`` and their Jacobian ``J`` (rows: three per
+    prior, then three per edge), each edge's squared Mahalanobis distance ``s`` (E,) and kernel weight ``w``
+    (E,), the cost."""
 
     e: NDArray[np.float64]
     J: sparse.csr_matrix
@@ -101,7 +108,10 @@ class PoseGraph:
         self._Z: list[NDArray[np.float64]] = []
         self._S: list[NDArray[np.float64]] = []
         self._loop: list[bool] = []
-        self._gauge: NDArray[np.float64] | None = None
+        # priors: pose index, mean [x, y, theta], covariance
+        self._prior_k: list[int] = []
+        self._prior_q: list[NDArray[np.float64]] = []
+        self._prior_S: list[NDArray[np.float64]] = []
 
     def __len__(self) -> int:
         return len(self._poses)
@@ -132,12 +142,21 @@ class PoseGraph:
         return Transform2D(*self._Z[e]), self._S[e].copy()
 
     def add_pose(self, T_map_body: Transform2D) -> int:
-        """Add a pose with its initial estimate; returns its index. The first pose fixes the gauge."""
-        q = T_map_body.as_array()
-        if self._gauge is None:
-            self._gauge = q.copy()
-        self._poses.append(q)
+        """Add a pose with its initial estimate; returns its index. The first pose fixes the gauge (a prior
+        at its value, module docstring)."""
+        self._poses.append(T_map_body.as_array())
+        if len(self._poses) == 1:
+            self.add_prior(0, T_map_body, ANCHOR_COVARIANCE)
         return len(self._poses) - 1
+
+    def add_prior(self, k: int, T_map_body: Transform2D, S: NDArray[np.float64]) -> None:
+        """A prior ``q_k ~ N(T_map_body, S)`` on pose ``k`` (``S`` (3, 3) positive definite, ``[x, y,
+        theta]``; :data:`ANCHOR_COVARIANCE` holds the pose where it is). ValueError for an unknown pose or an
+        invalid covariance."""
+        k = integer("k", k, 0, len(self._poses) - 1)
+        self._prior_S.append(covariance("prior covariance", S, (3, 3), definite=True))
+        self._prior_k.append(k)
+        self._prior_q.append(T_map_body.as_array())
 
     def add_edge(self, i: int, j: int, Z_i_j: Transform2D, S: NDArray[np.float64], *, loop: bool) -> int:
         """Add the measured relative pose ``Z_i_j = T_i^-1 T_j`` with covariance ``S`` (3, 3, positive
@@ -159,30 +178,33 @@ class PoseGraph:
         q = x.reshape(-1, 3)
         i, j, loop = self.edges()
         U = whitening(np.array(self._S).reshape(-1, 3, 3))
-        U_gauge = np.eye(3) / _GAUGE_STD
-        r_gauge = q[0] - self._gauge
-        r_gauge[2] = normalize_angle(r_gauge[2])
+        k = np.array(self._prior_k, dtype=np.int64)
+        U_prior = whitening(np.array(self._prior_S).reshape(-1, 3, 3))
+        r_prior = q[k] - np.array(self._prior_q).reshape(-1, 3)
+        r_prior[:, 2] = normalize_angles(r_prior[:, 2])
+        e_prior = np.einsum("kij,kj->ki", U_prior, r_prior).ravel()
         r, A, B = relative_pose_residuals(q[i], q[j], np.array(self._Z).reshape(-1, 3))
         e_edge = np.einsum("kij,kj->ki", U, r)
         s = np.einsum("ki,ki->k", e_edge, e_edge)
         # IRLS on loop edges: rows scaled by sqrt(w), w = 1 / (1 + s / c^2)
         w = np.where(loop, 1.0 / (1.0 + s / width**2), 1.0) if np.isfinite(width) else np.ones(len(s))
         root_w = np.sqrt(w)[:, None]
-        rows = 3 + 3 * np.arange(len(i))
+        n_prior = 3 * len(k)
+        rows = n_prior + 3 * np.arange(len(i))
         J = sparse_blocks(
             [
-                (U_gauge[None], np.array([0]), np.array([0])),
+                (U_prior, 3 * np.arange(len(k)), 3 * k),
                 ((U @ A) * root_w[:, :, None], rows, 3 * i),
                 ((U @ B) * root_w[:, :, None], rows, 3 * j),
             ],
-            (3 + 3 * len(i), len(x)),
+            (n_prior + 3 * len(i), len(x)),
         )
-        e = np.concatenate([U_gauge @ r_gauge, (e_edge * root_w).ravel()])
+        e = np.concatenate([e_prior, (e_edge * root_w).ravel()])
         if np.isfinite(width):
             edge_cost = np.where(loop, width**2 * np.log1p(s / width**2), s)
         else:
             edge_cost = s
-        cost = 0.5 * (float(np.sum((U_gauge @ r_gauge) ** 2)) + float(np.sum(edge_cost)))
+        cost = 0.5 * (float(np.sum(e_prior**2)) + float(np.sum(edge_cost)))
         return GraphLinearisation(e, J, s, w, cost)
 
     @staticmethod
@@ -195,7 +217,7 @@ class PoseGraph:
     def optimise(self) -> GraphSolution:
         """Minimise ``F`` (module docstring) from the current estimates, least squares first and then with
         the loop kernel; the poses are replaced by the optimum. ValueError for a graph whose poses are not
-        all linked to pose 0."""
+        all linked to a prior (through edges or their own)."""
         x = self.poses.ravel()
         iterations = 0
         for width in (np.inf, self.config.loop_kernel):
