@@ -141,7 +141,9 @@ def test_two_namespaced_stacks_in_one_domain_keep_to_their_own_topics_frames_and
     for k in range(SCANS + 1):
         for robot in robots:
             robot.drive(S + k * S // 5, rng)
-        ros.spin_for(0.05)
+        # each scan's landmarks out before the next joint_states: a loaded machine must not make them late
+        # for slam (max_observation_delay), whatever its pace
+        ros.spin_until(lambda k=k: all(len(r.received["landmarks"]) > k for r in robots), 5.0)
     last_ns = S + SCANS * S // 5
     for robot in robots:
         assert ros.spin_until(lambda r=robot: len(r.received["slam/map"]) >= SCANS - 1, 10.0), "scans fused"
