@@ -646,11 +646,20 @@ class Replay:
 
     def _relay(self) -> FoxgloveRelay:
         """The Foxglove relay; without /tf it is given slam's pose and sensor mount (none with
-        ``play_only``: no slam here). OSError when it cannot bind."""
+        ``play_only``: no slam here); under a namespace, how to write that robot's layout is printed.
+        OSError when it cannot bind."""
         host, port = self.options.foxglove
         transforms = {} if self.options.play_only else slam_view_transforms(self.slam)
         relay = FoxgloveRelay(host, port, name="nuturtle_tools.replay", **transforms)
         print(f"Foxglove WebSocket on {relay.url} (Foxglove: Open connection)", file=sys.stderr)
+        frames = self.options.frames
+        if frames.namespace:
+            choice = f" --map-frame {frames.map_frame}" if frames.map_frame else ""
+            print(
+                f"the layout of {frames.namespace}: python -P -m nuturtle_tools.foxglove_layout --namespace "
+                f"{frames.namespace}{choice} --out {frames.namespace}.json (docs/live.md)",
+                file=sys.stderr,
+            )
         return relay
 
     def _wait_for_matching(self, executor: SingleThreadedExecutor) -> None:
