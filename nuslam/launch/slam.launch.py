@@ -16,6 +16,15 @@ Arguments
                                   (`robot_side`: one executor, one /clock subscription; less CPU and
                                   memory, docs/benchmarks.md "Robot-side nodes"); false (default): one
                                   process each.
+    managed:=false|true           true: slam and landmarks as managed (lifecycle) nodes, `slam_managed` and
+                                  `landmarks_managed`: started unconfigured, they wait for a lifecycle
+                                  manager (nav2's lifecycle_manager, `ros2 lifecycle set`) to configure
+                                  and activate them with the rest of the stack (docs/robot.md "Managed
+                                  nodes"); turtle_control and odometry stay plain. Started by launch_ros's
+                                  plain `Node` action: the manager drives them over their lifecycle
+                                  services, and `LifecycleNode` would only add launch-side transition
+                                  events, which nothing here uses. Not with one_process:=true (robot_side
+                                  runs plain nodes): the launch stops with that reason.
     namespace:=<name>             the robot's namespace (default empty: none), e.g. tb3_0: every node here
                                   and in start_robot.launch.py under /tb3_0 (`/tb3_0/scan`,
                                   `/tb3_0/slam/odom`), its frames tb3_0/odom, tb3_0/base_footprint,
@@ -45,8 +54,11 @@ from launch_ros.actions import Node
 
 from nuslam.launch_nodes import (
     ASSOCIATION,
+    MANAGED_DESCRIPTION,
+    MANAGED_ONE_PROCESS,
     SLAM_ARGUMENTS,
     landmarks_parameters,
+    node_executable,
     robot_side_parameters,
     rviz_arguments,
     slam_parameters,
@@ -78,7 +90,10 @@ def _slam_nodes(context):
         condition=IfCondition(LaunchConfiguration("rviz")),
         output="screen",
     )
+    managed = LaunchConfiguration("managed").perform(context) == "true"
     if LaunchConfiguration("one_process").perform(context) == "true":
+        if managed:
+            raise ValueError(MANAGED_ONE_PROCESS)
         robot_side = Node(
             package="nuslam",
             executable="robot_side",
@@ -90,7 +105,7 @@ def _slam_nodes(context):
         rviz,
         Node(
             package="nuslam",
-            executable="slam",
+            executable=node_executable("slam", managed),
             parameters=slam_parameters(association, use_sim_time, model, **arguments),
             output="screen",
         ),
@@ -99,7 +114,7 @@ def _slam_nodes(context):
         nodes.append(
             Node(
                 package="nuslam",
-                executable="landmarks",
+                executable=node_executable("landmarks", managed),
                 parameters=landmarks_parameters(use_sim_time),
                 output="screen",
             )
@@ -116,6 +131,7 @@ def generate_launch_description() -> LaunchDescription:
             declare_argument("cmd_src", CMD_SRC),
             switch_argument("rviz", False, "true: also RViz2 (slam.rviz)"),
             switch_argument("one_process", False, "true: the robot-side nodes in one process (robot_side)"),
+            switch_argument("managed", False, MANAGED_DESCRIPTION),
             declare_argument("namespace", NAMESPACE),
             declare_argument("map_frame", MAP_FRAME),
             *[declare_argument(name, argument) for name, argument in SLAM_ARGUMENTS.items()],

@@ -17,6 +17,14 @@ Arguments
     one_process:=false|true            true: landmarks and slam in one process (`slam_side`: one executor,
                                        one /clock subscription; less CPU and memory, docs/robot.md "CPU
                                        and memory"); false (default): one process each.
+    managed:=false|true                true: `slam_managed` and `landmarks_managed`, the managed (lifecycle)
+                                       variants, started unconfigured for a lifecycle manager (nav2's
+                                       lifecycle_manager) to bring up with the rest of the stack
+                                       (docs/robot.md "Managed nodes"), by launch_ros's plain `Node` action
+                                       (the manager drives them over their lifecycle services; nothing here
+                                       needs `LifecycleNode`'s launch-side events). Not with
+                                       one_process:=true (slam_side runs plain nodes): the launch stops
+                                       with that reason.
     namespace:=<name>                  the robot's namespace (default empty: none), e.g. tb3_0 for a robot
                                        whose bringup runs under /tb3_0 with its frames prefixed tb3_0/:
                                        landmarks and slam under /tb3_0, slam's frames tb3_0/odom,
@@ -42,8 +50,11 @@ from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
 from nuslam.launch_nodes import (
+    MANAGED_DESCRIPTION,
+    MANAGED_ONE_PROCESS,
     SLAM_ARGUMENTS,
     landmarks_parameters,
+    node_executable,
     rviz_arguments,
     slam_parameters,
     slam_side_parameters,
@@ -72,7 +83,10 @@ def _nodes(context):
         condition=IfCondition(LaunchConfiguration("rviz")),
         output="screen",
     )
+    managed = LaunchConfiguration("managed").perform(context) == "true"
     if LaunchConfiguration("one_process").perform(context) == "true":
+        if managed:
+            raise ValueError(MANAGED_ONE_PROCESS)
         slam_side = Node(
             package="nuslam",
             executable="slam_side",
@@ -84,13 +98,13 @@ def _nodes(context):
         rviz,
         Node(
             package="nuslam",
-            executable="landmarks",
+            executable=node_executable("landmarks", managed),
             parameters=landmarks_parameters(use_sim_time),
             output="screen",
         ),
         Node(
             package="nuslam",
-            executable="slam",
+            executable=node_executable("slam", managed),
             parameters=slam_parameters("unknown", use_sim_time, model, **arguments),
             output="screen",
         ),
@@ -110,6 +124,7 @@ def generate_launch_description() -> LaunchDescription:
             ),
             switch_argument("rviz", False, "true: also RViz2 (slam.rviz)"),
             switch_argument("one_process", False, "true: landmarks and slam in one process (slam_side)"),
+            switch_argument("managed", False, MANAGED_DESCRIPTION),
             declare_argument("namespace", NAMESPACE),
             declare_argument("map_frame", MAP_FRAME),
             OpaqueFunction(function=_nodes),

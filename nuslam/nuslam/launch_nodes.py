@@ -34,6 +34,25 @@ SLAM_ARGUMENTS: dict[str, LaunchArgument] = {
     ),
 }
 
+# managed:=true (slam.launch.py, turtlebot3.launch.py): the lifecycle variants of slam and landmarks
+MANAGED_DESCRIPTION = (
+    "true: slam_managed and landmarks_managed, lifecycle nodes that wait unconfigured for a lifecycle "
+    "manager (docs/robot.md 'Managed nodes'); not with one_process"
+)
+# the one-process executables (robot_side, slam_side) run plain nodes only
+MANAGED_ONE_PROCESS = (
+    "managed:=true starts slam_managed and landmarks_managed, one process each; one_process:=true runs "
+    "plain nodes only (they start working at once): choose one of the two"
+)
+
+
+def node_executable(node: str, managed: bool) -> str:
+    """The executable of ``node`` (``slam`` or ``landmarks``): its managed variant (``slam_managed``,
+    :mod:`nuslam.managed_nodes`) when ``managed``. ValueError for another node."""
+    if node not in ("slam", "landmarks"):
+        raise ValueError(f"only slam and landmarks have managed variants, not {node!r}")
+    return f"{node}_managed" if managed else node
+
 
 def slam_parameters(
     association: str, use_sim_time: bool, model: str, **arguments: Any

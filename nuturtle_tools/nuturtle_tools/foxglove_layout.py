@@ -21,8 +21,15 @@ How to open it
     bag, then *Layouts* > *Import from file* and pick ``nuturtle_tools/config/foxglove_layout.json``
     (installed as ``share/nuturtle_tools/config/foxglove_layout.json``).
 
-The committed JSON is this module's output: ``python -P -m nuturtle_tools.foxglove_layout`` rewrites it,
-``--check`` exits 1 when it differs from :func:`build_layout`.
+One robot of several (``namespace``, e.g. ``tb3_1``; docs/robot.md "Several robots")
+    The same layout on that robot's topics (``/tb3_1/scan``, ``/tb3_1/slam/odom``,
+    ``/tb3_1/demo_monitor/slam_error``, ...; ``/diagnostics``, ``/nusim/obstacles`` and ``/nusim/walls``
+    stay global) with its map frame as the fixed frame (``tb3_1/map``, or ``map_frame``:
+    :func:`nuturtle_ros_common.launch_parameters.robot_frames`): ``python -P -m
+    nuturtle_tools.foxglove_layout --namespace tb3_1 --out tb3_1.json``.
+
+The committed JSON is this module's output for no namespace: ``python -P -m nuturtle_tools.foxglove_layout``
+rewrites it, ``--check`` exits 1 when it differs from :func:`build_layout`.
 """
 
 from __future__ import annotations
@@ -36,12 +43,14 @@ from pathlib import Path
 import foxglove.layouts as fl
 
 from nuturtle_eval.metrics import POSE_DOF, nees_band
+from nuturtle_ros_common.launch_parameters import RobotFrames, robot_frames
 from nuturtle_ros_common.ros_files import share_file
 
-SLAM_ERROR_TOPIC = "/demo_monitor/slam_error"
+# the robot's topics (under its namespace), and the topics every robot shares
+SLAM_ERROR_TOPIC = "demo_monitor/slam_error"
+SLAM_ODOM_TOPIC = "slam/odom"
 DIAGNOSTICS_TOPIC = "/diagnostics"
-SLAM_ODOM_TOPIC = "/slam/odom"
-FIXED_FRAME = "map"
+WORLD_TOPICS = ("/nusim/obstacles", "/nusim/walls")
 # the colours of the demo's figures (matplotlib's tab:green, tab:blue, tab:red)
 SLAM_COLOR = "#2ca02c"
 ODOM_COLOR = "#1f77b4"
@@ -63,46 +72,57 @@ def _markers(visible: bool = True) -> fl.BaseRendererRosMarkerTopicSettings:
     return fl.BaseRendererRosMarkerTopicSettings(visible=visible)
 
 
-def _scene_topics() -> dict[str, fl.BaseRendererTopicSettings]:
+def robot_topic(frames: RobotFrames, name: str) -> str:
+    """The robot's topic ``name`` (``scan``) in full: ``/scan``, ``/tb3_1/scan`` under ``tb3_1``."""
+    return f"/{frames.prefix}{name}"
+
+
+def _scene_topics(frames: RobotFrames) -> dict[str, fl.BaseRendererTopicSettings]:
     """The 3D panel's topics and how each is drawn."""
-    return {
-        "/map": fl.BaseRendererRosOccupancyGridTopicSettings(
+    robot = {
+        "map": fl.BaseRendererRosOccupancyGridTopicSettings(
             visible=True, color_mode="map", draw_behind=True, alpha=GRID_ALPHA
         ),
-        "/scan": fl.BaseRendererLaserScanTopicSettings(
+        "scan": fl.BaseRendererLaserScanTopicSettings(
             visible=True, point_size=3, color_mode="flat", flat_color=SCAN_COLOR
         ),
-        "/landmarks": _markers(),
-        "/slam/map": _markers(),
-        "/slam/path": _path(SLAM_COLOR),
-        "/odometry/path": _path(ODOM_COLOR),
-        "/nusim/path": _path(TRUTH_COLOR),
+        "landmarks": _markers(),
+        "slam/map": _markers(),
+        "slam/path": _path(SLAM_COLOR),
+        "odometry/path": _path(ODOM_COLOR),
+        "nusim/path": _path(TRUTH_COLOR),
         SLAM_ODOM_TOPIC: fl.BaseRendererPoseTopicSettings(
             visible=True, type="arrow", color=SLAM_COLOR, show_covariance=True, covariance_color=SLAM_COLOR
         ),
-        "/nusim/obstacles": _markers(),
-        "/nusim/walls": _markers(),
-        "/fake_sensor": _markers(visible=False),
+    }
+    world = {topic: _markers() for topic in WORLD_TOPICS}
+    return {
+        **{robot_topic(frames, name): settings for name, settings in robot.items()},
+        **world,
+        robot_topic(frames, "fake_sensor"): _markers(visible=False),
     }
 
 
-def _scene() -> fl.ThreeDeePanel:
+def _scene(frames: RobotFrames) -> fl.ThreeDeePanel:
+    fixed_frame = frames.map_id
     return fl.ThreeDeePanel(
-        title="SLAM in map",
+        title=f"SLAM in {fixed_frame}",
         config=fl.ThreeDeeConfig(
-            follow_tf=FIXED_FRAME,
-            fixed_frame=FIXED_FRAME,
+            follow_tf=fixed_frame,
+            fixed_frame=fixed_frame,
             follow_mode="follow-none",
             camera_state=fl.ThreeDeeCameraState(perspective=False, distance=CAMERA_DISTANCE),
-            layers={"grid": fl.BaseRendererGridLayerSettings(visible=True, frame_id=FIXED_FRAME, size=10)},
-            topics=_scene_topics(),
+            layers={"grid": fl.BaseRendererGridLayerSettings(visible=True, frame_id=fixed_frame, size=10)},
+            topics=_scene_topics(frames),
         ),
     )
 
 
-def _error_series(index: int, label: str, color: str, y_axis_id: str | None = None) -> fl.PlotSeries:
+def _error_series(
+    error_topic: str, index: int, label: str, color: str, y_axis_id: str | None = None
+) -> fl.PlotSeries:
     return fl.PlotSeries(
-        value=f"{SLAM_ERROR_TOPIC}.data[{index}]",
+        value=f"{error_topic}.data[{index}]",
         label=label,
         color=color,
         timestamp_method="receiveTime",
@@ -131,31 +151,35 @@ def _plot(
     )
 
 
-def _error_plot() -> fl.PlotPanel:
+def _error_plot(error_topic: str) -> fl.PlotPanel:
     return _plot(
         "SLAM error against ground truth",
         "position error (m)",
         [
-            _error_series(0, "position error (m)", SLAM_COLOR),
-            _error_series(1, "heading error (rad)", TRUTH_COLOR, y_axis_id=HEADING_AXIS),
+            _error_series(error_topic, 0, "position error (m)", SLAM_COLOR),
+            _error_series(error_topic, 1, "heading error (rad)", TRUTH_COLOR, y_axis_id=HEADING_AXIS),
         ],
         secondary_axes=[fl.PlotSecondaryAxis(id=HEADING_AXIS, label="heading error (rad)")],
     )
 
 
-def _nees_plot() -> fl.PlotPanel:
+def _nees_plot(error_topic: str) -> fl.PlotPanel:
     low, high = nees_band()
     return _plot(
         f"pose NEES ({POSE_DOF} dof; 95 % of samples in [{low:.3f}, {high:.2f}] if consistent)",
         "NEES",
-        [_error_series(2, "pose NEES", SLAM_COLOR)],
+        [_error_series(error_topic, 2, "pose NEES", SLAM_COLOR)],
         min_y_value=0.0,
     )
 
 
-def build_layout() -> fl.Layout:
+def build_layout(namespace: str = "", map_frame: str = "") -> fl.Layout:
     """The layout: the 3D scene on the left; the error and NEES plots and the diagnostics / raw
-    ``/slam/odom`` tabs stacked on the right."""
+    ``/slam/odom`` tabs stacked on the right; of the robot in ``namespace`` (``""``: none) with slam's map
+    frame ``map_frame`` (``""``: the robot's own; module docstring). ValueError for a namespace that is no
+    ROS name."""
+    frames = robot_frames(namespace, map_frame)
+    slam_odom, error_topic = (robot_topic(frames, name) for name in (SLAM_ODOM_TOPIC, SLAM_ERROR_TOPIC))
     tabs = fl.TabContainer(
         tabs=[
             fl.TabItem(
@@ -165,23 +189,26 @@ def build_layout() -> fl.Layout:
                 ),
             ),
             fl.TabItem(
-                title=SLAM_ODOM_TOPIC,
-                content=fl.RawMessagesPanel(config=fl.RawMessagesConfig(topic_path=SLAM_ODOM_TOPIC)),
+                title=slam_odom,
+                content=fl.RawMessagesPanel(config=fl.RawMessagesConfig(topic_path=slam_odom)),
             ),
         ]
     )
     side = fl.SplitContainer(
         direction="column",
         items=[
-            fl.SplitItem(content=_error_plot()),
-            fl.SplitItem(content=_nees_plot()),
+            fl.SplitItem(content=_error_plot(error_topic)),
+            fl.SplitItem(content=_nees_plot(error_topic)),
             fl.SplitItem(content=tabs),
         ],
     )
     return fl.Layout(
         content=fl.SplitContainer(
             direction="row",
-            items=[fl.SplitItem(proportion=2, content=_scene()), fl.SplitItem(proportion=1, content=side)],
+            items=[
+                fl.SplitItem(proportion=2, content=_scene(frames)),
+                fl.SplitItem(proportion=1, content=side),
+            ],
         )
     )
 
@@ -206,9 +233,23 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument(
         "--check", action="store_true", help="write nothing; exit 1 when the file differs from build_layout()"
     )
+    parser.add_argument("--namespace", default="", metavar="NS",
+                        help="the layout of the robot under NS (e.g. tb3_1): its topics, its map frame; "
+                        "needs --out (default: none, the committed layout)")  # fmt: skip
+    parser.add_argument(
+        "--map-frame",
+        default="",
+        metavar="FRAME",
+        help="the fixed frame: slam's map frame (default: NS/map, map without --namespace)",
+    )
     args = parser.parse_args(argv)
+    if (args.namespace or args.map_frame) and args.out is None:
+        parser.error("--namespace and --map-frame write another layout than the committed one: give --out")
+    try:
+        text = layout_json(build_layout(args.namespace, args.map_frame))
+    except ValueError as error:
+        parser.error(str(error))
     path = args.out or committed_layout_path()
-    text = layout_json(build_layout())
     if args.check:
         current = path.read_text(encoding="utf-8") if path.is_file() else None
         if current != text:

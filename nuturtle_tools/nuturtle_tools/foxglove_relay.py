@@ -290,14 +290,15 @@ def tf2_msgs_installed() -> bool:
 
 def slam_view_transforms(slam: Any, extra: Sequence[StaticTransform] = ()) -> dict[str, Any]:
     """The relay's keyword arguments ``tf_from_odometry`` and ``static_transforms`` for a 3D view around
-    the `slam` node ``slam`` where no node broadcasts /tf (module docstring): slam's pose (``slam/odom``,
-    ``map_id -> body_id``), its sensor mount (``body_id -> sensor_id``) and the ``extra`` transforms
-    the caller knows; {} when tf2_msgs is installed (the nodes' own /tf is relayed then)."""
+    the `slam` node ``slam`` where no node broadcasts /tf (module docstring): slam's pose (its ``~/odom``,
+    ``/slam/odom`` or ``/<namespace>/slam/odom``: ``map_id -> body_id``), its sensor mount (``body_id ->
+    sensor_id``) and the ``extra`` transforms the caller knows; {} when tf2_msgs is installed (the nodes'
+    own /tf is relayed then)."""
     if tf2_msgs_installed():
         return {}
     frames = slam.node_config
     mount = StaticTransform(frames.body_id, frames.sensor_id, slam.config.T_body_sensor)
-    return {"tf_from_odometry": ["slam/odom"], "static_transforms": [mount, *extra]}
+    return {"tf_from_odometry": [slam.resolve_topic_name("~/odom")], "static_transforms": [mount, *extra]}
 
 
 class FoxgloveRelayNode(Node):

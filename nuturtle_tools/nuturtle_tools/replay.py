@@ -36,13 +36,7 @@ from nuturtle_ros_common.dds_domain import add_domain_argument
 
 from .relay_config import add_foxglove_argument, parse_endpoint
 
-DEFAULT_TOPICS = {
-    "scan": "/scan",
-    "joint_states": "/joint_states",
-    "odom": "/odom",
-    "truth": "/nusim/ground_truth",
-    "fake_sensor": "/fake_sensor",
-}
+TOPIC_ROLES = ("scan", "joint_states", "odom", "truth", "fake_sensor")
 
 
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
@@ -73,13 +67,22 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--motion-source", choices=("joint_states", "odom"), default=None,
                         help="slam's motion_source parameter "
                         "(default: the params file's, else the node's)")  # fmt: skip
-    for role, option in (
-        ("scan", "--scan-topic"), ("joint_states", "--joint-states-topic"), ("odom", "--odom-topic"),
-        ("truth", "--truth-topic"), ("fake_sensor", "--fake-sensor-topic"),
-    ):  # fmt: skip
+    parser.add_argument("--namespace", default="", metavar="NS",
+                        help="replay the robot recorded under the namespace NS (e.g. tb3_1 of a --robots 2 "
+                        "demo bag): the topics below default to /NS/scan ..., the nodes run under NS with "
+                        "the frames NS/odom, NS/base_footprint, NS/base_scan (default: none)")  # fmt: skip
+    parser.add_argument(
+        "--map-frame",
+        default="",
+        metavar="FRAME",
+        help="slam's map frame (default: NS/map with --namespace, else the params file's)",
+    )
+    for role in TOPIC_ROLES:
         played = "nusim/ground_truth (metrics only)" if role == "truth" else role
-        parser.add_argument(option, default=DEFAULT_TOPICS[role], dest=f"{role}_topic",
-                            help=f"bag topic played as {played}")  # fmt: skip
+        default = "/nusim/ground_truth" if role == "truth" else f"/{role}"
+        parser.add_argument("--" + role.replace("_", "-") + "-topic", default=None, dest=f"{role}_topic",
+                            help=f"bag topic played as {played} (default: {default}, under /NS with "
+                            "--namespace)")  # fmt: skip
     parser.add_argument("--rate", type=float, default=None,
                         help="play at RATE x real time (log time against the wall clock); 0 = as fast as "
                         "the nodes keep up, nothing dropped (default; 1.0 with --play-only)")  # fmt: skip
@@ -300,7 +303,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     try:
         BagSource(args.bag)  # checks the path before anything heavy is imported
-        from .replay_run import ReplayOptions, run_replay
+        from .replay_run import ReplayOptions, default_topics, run_replay
 
         params = args.params if args.params is not None else recording_params(args.bag)
         if params is not None and args.params is None:
@@ -313,7 +316,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             association=args.association,
             motion_source=args.motion_source,
             model=args.model,
-            topics={role: getattr(args, f"{role}_topic") for role in DEFAULT_TOPICS},
+            topics={
+                role: getattr(args, f"{role}_topic") or default
+                for role, default in default_topics(args.namespace.strip("/")).items()
+            },
             rate=args.rate,
             play_only=args.play_only,
             wait_for_subscribers_s=args.wait_for_subscribers,
@@ -322,6 +328,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             domain_id=getattr(args, "domain_id", None),
             smooth=args.smooth,
             max_range_m=args.max_range_m,
+            namespace=args.namespace,
+            map_frame=args.map_frame,
         )
         for path in unfinished_runs(options.out_dir):
             print(f"note: {path}/ holds a replay that was killed (INCOMPLETE)", file=sys.stderr)

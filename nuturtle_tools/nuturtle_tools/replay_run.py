@@ -40,6 +40,15 @@ at the params' ``x0, y0, theta0``. The demo's pass/fail targets apply to nusim r
 
 ``max_range_m`` cuts the played scans to a shorter-ranged LiDAR's (an LDS-01's 3.5 m on a recording of a
 SICK's 40 m): ``range_max`` lowered to it and every reading beyond it made +inf (REP 117's "no return").
+
+A robot of several (``namespace``, e.g. ``tb3_1``: a recording of a namespaced robot, or one robot of the
+demo's ``--robots N`` bag): each role's default bag topic is that robot's (``/tb3_1/scan``, ...,
+``/tb3_1/nusim/ground_truth``; a topic given explicitly is taken as given), every node of the replay lives
+in the namespace (the topics above under ``/tb3_1``; /clock stays global) and slam gets the robot's frame
+ids (``tb3_1/odom``, ``tb3_1/base_footprint``, ``tb3_1/base_scan`` and ``tb3_1/map``, or ``map_frame``:
+:func:`nuturtle_ros_common.launch_parameters.robot_frames`), over the params file's, as a launch argument
+wins; the params file's sections for the nodes are those rcl gives nodes of that namespace
+(``tb3_1/slam``, as the demo's config.yaml has them). The outputs are those of any replay.
 """
 
 from __future__ import annotations
@@ -47,7 +56,7 @@ from __future__ import annotations
 import math
 import sys
 import time
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -81,6 +90,7 @@ from nuturtle_eval.run_evaluation import (
 from nuturtle_eval.run_folder import RunFolder, say_previous_result
 from nuturtle_ros_common.conversions import stamp_nanoseconds, transform_from_pose
 from nuturtle_ros_common.dds_domain import ENVIRONMENT, PRIVATE, DomainChoice, domain_choice, run_context
+from nuturtle_ros_common.launch_parameters import RobotFrames, robot_frames
 from nuturtle_ros_common.qos_events import drop_qos_event_handlers
 from nuturtle_ros_common.ros_files import flatten
 from nuturtle_ros_common.shared_clock import share_clock
@@ -137,24 +147,33 @@ ROLES = {
 SENSOR_ROLES = ("scan",)
 
 
+def default_topics(namespace: str = "") -> dict[str, str]:
+    """The bag topic of each role in a recording of the robot in ``namespace`` (``""``: none): ``/scan``,
+    ``/joint_states``, ``/odom``, ``/nusim/ground_truth``, ``/fake_sensor``, under ``/<namespace>``."""
+    prefix = f"/{namespace}" if namespace else ""
+    return {role: prefix + absolute(name) for role, (name, _) in ROLES.items()}
+
+
 @dataclass(frozen=True)
 class ReplayOptions:
     """What to replay (docs/replay.md): the recording ``bag`` (a bag directory or a single .mcap/.db3);
     ``out_dir``; ``params`` a ROS params file whose ``slam`` and ``landmarks`` sections (and ``/**``) go to
     those nodes; ``association`` / ``motion_source`` override it (None: the file's, or the node's default);
-    ``model`` slam's robot model (None: the file's, else TURTLEBOT3_MODEL, else burger; robot constants set
-    in the file still win over the model's, as any explicit parameter does);
-    ``topics`` the bag topic of each role (``scan``, ``joint_states``, ``odom``, ``truth``,
-    ``fake_sensor``); ``rate`` > 0 paces at that many times real time, 0 plays as fast as the nodes go
-    (None: 0, or 1.0 with ``play_only``); ``play_only`` runs only the player, which first waits up to
-    ``wait_for_subscribers_s`` (wall) for a subscriber on every played topic; ``progress`` a bar on
-    stderr; ``foxglove`` (host, port) serves every topic live on a Foxglove WebSocket there (docs/live.md;
-    with ``rate`` 1 it plays at robot speed); ``domain_id`` the run's DDS world: ``"private"`` (no other
-    ROS program hears it), ``"env"`` (the shell's ROS_DOMAIN_ID) or a domain id 0-232
-    (:mod:`nuturtle_ros_common.dds_domain`; None: private, or env with ``play_only``, whose listeners are
-    the user's nodes); ``smooth`` also smooths slam's whole run at the end (its ``smooth_saved_map``) and
-    writes it beside the filter's outputs, in ``smoothed/``; ``max_range_m`` (> 0) cuts the played scans'
-    ranges to it (module docstring; None: as recorded)."""
+    ``model`` slam's robot model (None: the file's, else TURTLEBOT3_MODEL, else burger; robot constants set in
+    the file still win over the model's, as any explicit parameter does); ``topics`` the bag topic of each
+    role (``scan``, ``joint_states``, ``odom``, ``truth``, ``fake_sensor``; None: :func:`default_topics` of
+    ``namespace``); ``rate`` > 0 paces at that many times real time, 0 plays as fast as the nodes go (None: 0,
+    or 1.0 with ``play_only``); ``play_only`` runs only the player, which first waits up to
+    ``wait_for_subscribers_s`` (wall) for a subscriber on every played topic; ``progress`` a bar on stderr;
+    ``foxglove`` (host, port) serves every topic live on a Foxglove WebSocket there (docs/live.md; with
+    ``rate`` 1 it plays at robot speed); ``domain_id`` the run's DDS world: ``"private"`` (no other ROS
+    program hears it), ``"env"`` (the shell's ROS_DOMAIN_ID) or a domain id 0-232
+    (:mod:`nuturtle_ros_common.dds_domain`; None: private, or env with ``play_only``, whose listeners are the
+    user's nodes); ``smooth`` also smooths slam's whole run at the end (its ``smooth_saved_map``) and writes
+    it beside the filter's outputs, in ``smoothed/``; ``max_range_m`` (> 0) cuts the played scans' ranges to
+    it (module docstring; None: as recorded); ``namespace`` the recorded robot's (``""``: none) and
+    ``map_frame`` its slam's map frame (``""``: ``<namespace>/map``; module docstring). ValueError for a
+    namespace that is not a ROS name."""
 
     bag: Path
     out_dir: Path = Path("out/replay")
@@ -162,15 +181,7 @@ class ReplayOptions:
     association: str | None = None
     motion_source: str | None = None
     model: str | None = None
-    topics: Mapping[str, str] = field(
-        default_factory=lambda: {
-            "scan": "/scan",
-            "joint_states": "/joint_states",
-            "odom": "/odom",
-            "truth": "/nusim/ground_truth",
-            "fake_sensor": "/fake_sensor",
-        }
-    )
+    topics: Mapping[str, str] | None = None
     rate: float | None = None
     play_only: bool = False
     wait_for_subscribers_s: float = 5.0
@@ -179,8 +190,14 @@ class ReplayOptions:
     domain_id: DomainChoice | None = None
     smooth: bool = False
     max_range_m: float | None = None
+    namespace: str = ""
+    map_frame: str = ""
 
     def __post_init__(self) -> None:
+        frames = robot_frames(self.namespace, self.map_frame)
+        object.__setattr__(self, "namespace", frames.namespace)
+        if self.topics is None:
+            object.__setattr__(self, "topics", default_topics(self.namespace))
         if self.max_range_m is not None and not (math.isfinite(self.max_range_m) and self.max_range_m > 0.0):
             raise ValueError(f"max_range_m must be > 0, got {self.max_range_m!r}")
         if self.smooth and self.play_only:
@@ -219,8 +236,17 @@ class ReplayOptions:
             return self.domain_id
         return ENVIRONMENT if self.play_only else PRIVATE
 
+    @property
+    def frames(self) -> RobotFrames:
+        """The recorded robot's frames (:func:`~nuturtle_ros_common.launch_parameters.robot_frames`)."""
+        return robot_frames(self.namespace, self.map_frame)
+
     def bag_topic(self, role: str) -> str:
         return absolute(self.topics.get(role, ""))
+
+    def topic(self, name: str) -> str:
+        """The replay's topic ``name`` (relative, as its nodes name it) in full, under ``namespace``."""
+        return absolute(f"{self.namespace}/{name}" if self.namespace else name)
 
 
 @dataclass(frozen=True)
@@ -235,10 +261,11 @@ class ReplayResult:
     interrupted: str | None
 
 
-def node_parameters_from_file(path: Path | None, node: str) -> dict[str, Any]:
-    """The parameters of ``node`` in a ROS params file by their dotted names: the ``/**`` entry, then the
-    node's own (``node`` or ``/node``), later ones winning; {} without a file. ValueError for a file that is
-    no params file."""
+def node_parameters_from_file(path: Path | None, node: str, namespace: str = "") -> dict[str, Any]:
+    """The parameters of ``node`` (in ``namespace``, ``""``: none) in a ROS params file by their dotted
+    names: the ``/**`` entry, then the node's own (``node`` or ``/node``; ``namespace/node`` or
+    ``/namespace/node`` in a namespace, as rcl matches them), later ones winning; {} without a file.
+    ValueError for a file that is no params file."""
     if path is None:
         return {}
     try:
@@ -248,7 +275,8 @@ def node_parameters_from_file(path: Path | None, node: str) -> dict[str, Any]:
     if not isinstance(document, dict):
         raise ValueError(f"{path} is not a ROS params file (a mapping of node names)")
     values: dict[str, Any] = {}
-    for key in ("/**", node, f"/{node}"):
+    name = f"{namespace}/{node}" if namespace else node
+    for key in ("/**", name, f"/{name}"):
         entry = document.get(key)
         if isinstance(entry, dict) and isinstance(entry.get("ros__parameters"), dict):
             values.update(flatten(entry["ros__parameters"]))
@@ -425,6 +453,12 @@ def resolve_topics(
                     if role == motion_source and options.bag_topic(other) in source.topics
                     else ""
                 )
+                robots = namespaces_with(source.topics, name) if options.namespace == "" else []
+                if robots:
+                    switch += (
+                        f"; the bag has it under the namespaces {', '.join(robots)}: replay one robot with "
+                        f"--namespace {robots[0]}"
+                    )
                 raise BagError(
                     f"{source.path} has no topic {name} for {role} "
                     f"(topics: {', '.join(sorted(source.topics))}; choose another with {option}{switch})"
@@ -435,6 +469,20 @@ def resolve_topics(
             raise BagError(f"{source.path}: {name} is {topic.type_name}, but {role} must be {expected}")
         resolved[role] = topic
     return resolved
+
+
+def namespaces_with(topics: Collection[str], name: str) -> list[str]:
+    """The namespaces under which ``topics`` has the topic ``name`` (``/scan``: ``tb3_0`` for
+    ``/tb3_0/scan``), sorted: the robots of a multi-robot recording."""
+    found = []
+    for topic in topics:
+        namespace = topic[: -len(name)].strip("/") if topic.endswith(name) and topic != name else ""
+        try:
+            if namespace and robot_frames(namespace).namespace == namespace:
+                found.append(namespace)
+        except ValueError:
+            continue
+    return sorted(found)
 
 
 def played_topics(topics: dict[str, BagTopic]) -> list[PlayedTopic]:
@@ -450,7 +498,8 @@ class Replay:
     def __init__(self, options: ReplayOptions, source: BagSource) -> None:
         self.options = options
         self.source = source
-        slam_file = node_parameters_from_file(options.params, "slam")
+        namespace = options.namespace
+        slam_file = node_parameters_from_file(options.params, "slam", namespace)
         self.association = options.association or str(slam_file.get("association", "unknown"))
         self.motion_source = options.motion_source or str(
             slam_file.get("motion_source", default_motion_source())
@@ -462,7 +511,7 @@ class Replay:
             else BagFacts()
         )
         # a nusim recording (the demo's): its pass/fail targets apply
-        self.nusim_recording = NUSIM_TRUTH_TOPIC in source.topics
+        self.nusim_recording = options.topic(TRUTH_PLAYED_AS) in source.topics
         self.notes: list[str] = [] if source.recovery is None else [source.recovery.note()]
         truth, motion = self.topics.get("truth"), self.topics.get(self.motion_source)
         if truth is not None and motion is not None and truth.name == motion.name:
@@ -470,14 +519,15 @@ class Replay:
                 f"the truth topic {truth.name} is also slam's motion ({self.motion_source}): the accuracy "
                 "compares slam with its own input"
             )
-        self.slam_values = dict(slam_file)
+        # the robot's frames win over the file's, as a launch argument does (none without a namespace)
+        self.slam_values = {**slam_file, **options.frames.slam()}
         self.slam_values["association"] = self.association
         self.slam_values["motion_source"] = self.motion_source
         if options.smooth:
             self.slam_values["smooth_saved_map"] = True
         if options.model is not None:
             self.slam_values["model"] = options.model
-        self.landmarks_values = node_parameters_from_file(options.params, "landmarks")
+        self.landmarks_values = node_parameters_from_file(options.params, "landmarks", namespace)
         if self.facts.truth is not None:
             T0 = truth_pose_at(self.facts.truth, self.facts.first_motion_ns, self.facts.odom_lead)
             self.slam_values.update(x0=T0.x, y0=T0.y, theta0=T0.theta)
@@ -516,7 +566,7 @@ class Replay:
         nodes: list[Any] = []
         writer = None
         try:
-            self.player = BagPlayer(played_topics(self.topics), context=context)
+            self.player = BagPlayer(played_topics(self.topics), context=context, **self._namespace)
             nodes.append(self.player)
             self.relay = None
             if not self.options.play_only:
@@ -564,17 +614,20 @@ class Replay:
 
         sim_time = [Parameter("use_sim_time", value=True)]
         self.writer = writer
+        namespace = self._namespace
         self.landmarks = LandmarksNode(
-            context=context, parameter_overrides=to_parameters(self.landmarks_values)
+            context=context, parameter_overrides=to_parameters(self.landmarks_values), **namespace
         )
-        self.slam = SlamNode(context=context, parameter_overrides=to_parameters(self.slam_values))
+        self.slam = SlamNode(
+            context=context, parameter_overrides=to_parameters(self.slam_values), **namespace
+        )
         self.relay = None if self.options.foxglove is None else self._relay()
         # one subscription per topic for the bag and the relay
         sink = writer if self.relay is None else TeeSink(writer, self.relay)
         self.recorder = TopicRecorder(
             sink, exclude=self._played_names(), context=context, parameter_overrides=sim_time
         )
-        self.monitor = RunMonitor(context=context, parameter_overrides=sim_time)
+        self.monitor = RunMonitor(context=context, parameter_overrides=sim_time, **namespace)
         nodes = [self.landmarks, self.slam, self.recorder, self.monitor]
         # all of them ours, in one process: no QoS event handlers, one /clock subscription (qos_events,
         # shared_clock; the player's handlers go too)
@@ -583,16 +636,30 @@ class Replay:
         share_clock(nodes)
         return nodes
 
+    @property
+    def _namespace(self) -> dict[str, str]:
+        """The ``namespace`` keyword of the replay's nodes (none without one: the nodes at the root)."""
+        return {"namespace": self.options.namespace} if self.options.namespace else {}
+
     def _played_names(self) -> list[str]:
-        return [absolute(ROLES[role][0]) for role in self.topics] + ["/clock"]
+        return [self.options.topic(ROLES[role][0]) for role in self.topics] + ["/clock"]
 
     def _relay(self) -> FoxgloveRelay:
         """The Foxglove relay; without /tf it is given slam's pose and sensor mount (none with
-        ``play_only``: no slam here). OSError when it cannot bind."""
+        ``play_only``: no slam here); under a namespace, how to write that robot's layout is printed.
+        OSError when it cannot bind."""
         host, port = self.options.foxglove
         transforms = {} if self.options.play_only else slam_view_transforms(self.slam)
         relay = FoxgloveRelay(host, port, name="nuturtle_tools.replay", **transforms)
         print(f"Foxglove WebSocket on {relay.url} (Foxglove: Open connection)", file=sys.stderr)
+        frames = self.options.frames
+        if frames.namespace:
+            choice = f" --map-frame {frames.map_frame}" if frames.map_frame else ""
+            print(
+                f"the layout of {frames.namespace}: python -P -m nuturtle_tools.foxglove_layout --namespace "
+                f"{frames.namespace}{choice} --out {frames.namespace}.json (docs/live.md)",
+                file=sys.stderr,
+            )
         return relay
 
     def _wait_for_matching(self, executor: SingleThreadedExecutor) -> None:
@@ -601,14 +668,18 @@ class Replay:
         # with joint_states motion, odom for map -> odom; the observations), the monitor (odom, truth)
         expected = {self.motion_source: 1, "odom": 2, TRUTH_PLAYED_AS: 1, "/clock": 1}
         expected["fake_sensor" if self.association == "known" else "scan"] = 1
-        required = {"/slam/odom", "/slam/path", "/slam/map"} | (
-            {"/landmarks"} if self.association == "unknown" else set()
+        outputs = ["slam/odom", "slam/path", "slam/map"] + (
+            ["landmarks"] if self.association == "unknown" else []
         )
+        required = {self.options.topic(name) for name in outputs}
 
         def ready() -> bool:
             counts = self.player.subscription_counts()
             matched = all(counts.get(name, n) >= n for name, n in expected.items())
-            observers = self.association == "known" or self.player.count_subscribers("/landmarks") >= 2
+            observers = (
+                self.association == "known"
+                or self.player.count_subscribers(self.options.topic("landmarks")) >= 2
+            )
             return matched and observers and required <= set(self.recorder.recorded_topics)
 
         if not spin_until(executor, self.logger, ready, DISCOVERY_TIMEOUT_S):

@@ -1,11 +1,14 @@
 """Two robots in the demo, in process (run_demo): each robot's SLAM meets its targets while the other drives
 around it, its scans see the other robot, and the outputs are a folder per robot and the summary. A short
-run (docs/demo.md has the two-minute figures of two and three robots in both worlds)."""
+run (docs/demo.md has the two-minute figures of two and three robots in both worlds). Its bag is then
+replayed for one robot (the replay's ``--namespace``): the real two-robot recording, at no extra run."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from bag_reading import read_bag
 from nuturtle_demo.cli import report
@@ -13,6 +16,8 @@ from nuturtle_demo.robot_stack import landmark_radius_window
 from nuturtle_demo.run import DemoOptions, run_demo
 from nuturtle_description.robot_params import burger_params
 from nuturtle_ros_common.conversions import stamp_seconds, yaw_from_quaternion
+from nuturtle_tools.replay import main as replay_main
+from nuturtle_tools.replay_run import ReplayOptions, run_replay
 from turtlelib import Transform2D
 
 DURATION_S = 20.0
@@ -50,14 +55,20 @@ def truth_by_stamp(bag, name: str) -> dict[float, Transform2D]:
     return poses
 
 
+@pytest.fixture(scope="module")
+def two_robots(tmp_path_factory) -> tuple[Path, object]:
+    """A two-robot demo run: its output folder and its result."""
+    out = tmp_path_factory.mktemp("two") / "out"
+    return out, run_demo(DemoOptions(duration_s=DURATION_S, out_dir=out, robots=2, progress=False))
+
+
 @pytest.mark.slow
 @pytest.mark.ros
-def test_two_robots_each_map_within_their_targets_and_see_each_other(tmp_path):
-    out = tmp_path / "out"
-    options = DemoOptions(duration_s=DURATION_S, out_dir=out, robots=2, progress=False)
-    result = run_demo(options)
+def test_two_robots_each_map_within_their_targets_and_see_each_other(two_robots):
+    out, result = two_robots
     assert [robot.name for robot in result.robots] == ["tb3_0", "tb3_1"]
     # several robots map once (no map file to continue): no --route-start hint in the report
+    options = DemoOptions(duration_s=DURATION_S, out_dir=out, robots=2, progress=False)
     assert "route: stopped" not in report(result, options)
     assert sorted(p.name for p in out.iterdir()) == ["config.yaml", "run", "summary.md", "tb3_0", "tb3_1"]
     summary = (out / "summary.md").read_text()
@@ -93,3 +104,44 @@ def test_two_robots_each_map_within_their_targets_and_see_each_other(tmp_path):
             gap_m = np.abs(np.hypot(*(p_world - truth[other][t_s].translation).T) - robot.collision_radius)
             seen += bool(np.any(gap_m <= ON_DISC_M))
         assert seen >= 0.5 * len(scans), f"{name} saw {other} in {seen} of {len(scans)} scans"
+
+
+@pytest.mark.slow
+@pytest.mark.ros
+def test_one_robot_of_the_two_robot_bag_replays_under_its_namespace(two_robots, tmp_path, capsys):
+    out, _ = two_robots
+    # without --namespace the bag has none of the default topics: the error names its robots
+    assert replay_main([str(out / "run"), "--out", str(tmp_path / "refused"), "--no-progress"]) == 2
+    error = capsys.readouterr().err
+    assert "under the namespaces tb3_0, tb3_1: replay one robot with --namespace tb3_0" in error
+    assert not (tmp_path / "refused").exists()
+
+    replayed = tmp_path / "tb3_1"
+    options = ReplayOptions(
+        bag=out / "run", out_dir=replayed, params=out / "config.yaml", namespace="tb3_1", progress=False
+    )
+    result = run_replay(options)
+    metrics = result.metrics
+    bag = read_bag(out / "run")
+    # that robot's topics played, every scan's landmarks applied by its slam
+    inputs = ("scan", "joint_states", "odom", "nusim/ground_truth")
+    assert metrics["messages_played"] == {
+        f"/tb3_1/{name}": len(bag.topic_records(f"/tb3_1/{name}")) for name in inputs
+    }
+    assert metrics["observation_arrays_applied"] == metrics["scans_played"] >= 0.95 * 5 * DURATION_S
+    # its estimate against its own truth, as the live run judged it (the same input in the same order)
+    live = json.loads((out / "tb3_1" / "metrics.json").read_text())
+    assert result.accuracy and metrics["nusim_recording"]
+    for key in ("final_position_error_slam_m", "ate_rmse_slam_m", "landmark_rmse_m"):
+        assert metrics[key] == pytest.approx(live[key], rel=0.2, abs=1e-3), key
+    assert metrics["landmarks_mapped"] == live["landmarks_mapped"] >= 3
+    # slam ran under /tb3_1 with the robot's frames (its own map frame: no --map-frame)
+    slam = yaml.safe_load((replayed / "config.yaml").read_text())["tb3_1/slam"]["ros__parameters"]
+    frames = ("map_id", "odom_id", "body_id", "sensor_id")
+    assert [slam[k] for k in frames] == ["tb3_1/map", "tb3_1/odom", "tb3_1/base_footprint", "tb3_1/base_scan"]
+    outputs = read_bag(replayed / "slam")
+    poses = outputs.decoded("/tb3_1/slam/odom")
+    assert poses and {(m.header.frame_id, m.child_frame_id) for m in poses} == {
+        ("tb3_1/map", "tb3_1/base_footprint")
+    }
+    assert len(outputs.topic_records("/tb3_1/landmarks")) == metrics["scans_played"]

@@ -10,6 +10,7 @@ import tempfile
 from functools import cache
 from pathlib import Path
 
+import pytest
 import yaml
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -119,6 +120,35 @@ def test_the_plots_show_the_slam_error_and_nees_over_receive_time():
     assert diagnostics["config"]["topicToRender"] == "/diagnostics"
     (raw,) = by_type("RawMessages")
     assert raw["config"]["topicPath"] == "/slam/odom"
+
+
+@pytest.mark.parametrize(("map_frame", "fixed_frame"), [("", "tb3_1/map"), ("map", "map")])
+def test_a_robot_s_layout_shows_its_topics_in_its_map_frame(map_frame, fixed_frame):
+    layout = json.loads(layout_json(build_layout("tb3_1", map_frame)))
+    referenced = set().union(*(referenced_topics(panel) for panel in panels(layout["content"])))
+    # the one robot's topics, each under /tb3_1 (the world's and the diagnostics stay global)
+    shared = {"/diagnostics", "/nusim/obstacles", "/nusim/walls"}
+    own = referenced - shared
+    assert all(topic.startswith("/tb3_1/") for topic in own), sorted(own)
+    assert {topic.removeprefix("/tb3_1") for topic in own} | shared == set().union(
+        *(referenced_topics(panel) for panel in panels(the_layout()["content"]))
+    )
+    (scene,) = [panel for panel in panels(layout["content"]) if panel["panelType"] == "ThreeDee"]
+    config = scene["config"]
+    assert (config["followTf"], config["fixedFrame"]) == (fixed_frame, fixed_frame)
+    assert config["layers"]["grid"]["frameId"] == fixed_frame
+
+
+def test_a_robot_s_layout_is_written_to_a_file_of_its_own(tmp_path, capsys):
+    with pytest.raises(SystemExit) as stop:
+        main(["--namespace", "tb3_1"])  # never over the committed layout
+    assert stop.value.code == 2 and "give --out" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["--namespace", "tb3 1", "--out", str(tmp_path / "bad.json")])
+    assert "namespace 'tb3 1'" in capsys.readouterr().err
+    out = tmp_path / "tb3_1.json"
+    assert main(["--namespace", "tb3_1", "--out", str(out)]) == 0
+    assert out.read_text(encoding="utf-8") == layout_json(build_layout("tb3_1"))
 
 
 @cache

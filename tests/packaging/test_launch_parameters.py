@@ -172,6 +172,50 @@ def test_the_launch_files_build_their_lists_with_these_functions(launch_file, fu
         assert f"parameters={function}" in text, function
 
 
+def test_managed_picks_the_lifecycle_variants_installed_by_nuslam():
+    from nuslam.launch_nodes import node_executable
+
+    assert [node_executable(node, False) for node in ("slam", "landmarks")] == ["slam", "landmarks"]
+    managed = [node_executable(node, True) for node in ("slam", "landmarks")]
+    assert managed == ["slam_managed", "landmarks_managed"]
+    setup = (ROOT / "nuslam" / "setup.py").read_text()
+    for executable in managed:
+        assert f'"{executable} = nuslam.managed_nodes:' in setup, executable
+    with pytest.raises(ValueError, match="only slam and landmarks"):
+        node_executable("odometry", True)
+
+
+@pytest.mark.parametrize(
+    "launch_file", ["nuslam/launch/slam.launch.py", "nuslam/launch/turtlebot3.launch.py"]
+)
+def test_the_slam_launch_files_start_managed_nodes_only_when_asked(launch_file):
+    import ast
+
+    tree = ast.parse((ROOT / launch_file).read_text())
+    calls = [node for node in ast.walk(tree) if isinstance(node, ast.Call)]
+    # managed:=false|true, false by default
+    assert any(
+        ast.unparse(call) == "switch_argument('managed', False, MANAGED_DESCRIPTION)" for call in calls
+    )
+    executables = {
+        ast.unparse(keyword.value)
+        for call in calls
+        if getattr(call.func, "id", None) == "Node"
+        for keyword in call.keywords
+        if keyword.arg == "executable"
+    }
+    # slam and landmarks by the switch; the one-process executable refused with it (it runs plain nodes)
+    assert {"node_executable('slam', managed)", "node_executable('landmarks', managed)"} <= executables
+    assert not {"'slam'", "'landmarks'", "'slam_managed'", "'landmarks_managed'"} & executables
+    (one_process,) = [
+        node
+        for node in ast.walk(tree)
+        if isinstance(node, ast.If) and "one_process" in ast.unparse(node.test)
+    ]
+    refusal = one_process.body[0]
+    assert ast.unparse(refusal) == "if managed:\n    raise ValueError(MANAGED_ONE_PROCESS)"
+
+
 def test_the_stock_turtlebot3_launch_drives_nothing_and_duplicates_no_odometry():
     # the robot's turtlebot3_node owns cmd_vel, odom and odom -> base_footprint
     text = (ROOT / "nuslam/launch/turtlebot3.launch.py").read_text()
