@@ -69,7 +69,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "(default: the params file's, else the node's)")  # fmt: skip
     parser.add_argument("--namespace", default="", metavar="NS",
                         help="replay the robot recorded under the namespace NS (e.g. tb3_1 of a --robots 2 "
-                        "demo bag): the topics below default to /NS/scan ..., the nodes run under NS with "
+                        "demo bag): the topics below are then /NS/scan ..., the nodes run under NS with "
                         "the frames NS/odom, NS/base_footprint, NS/base_scan (default: none)")  # fmt: skip
     parser.add_argument(
         "--map-frame",
