@@ -54,6 +54,7 @@ wins; the params file's sections for the nodes are those rcl gives nodes of that
 from __future__ import annotations
 
 import math
+import re
 import sys
 import time
 from collections.abc import Collection, Mapping
@@ -261,11 +262,22 @@ class ReplayResult:
     interrupted: str | None
 
 
+def node_name_matches(key: str, fully_qualified: str) -> bool:
+    """Whether a params file's node entry ``key`` names the node ``fully_qualified`` (``/ns/node``), as rcl
+    matches them: a key without a leading ``/`` is absolute all the same, ``*`` stands for one name token
+    and ``**`` for any number of them (``/**`` every node, ``/**/slam`` a slam in any namespace)."""
+    tokens = key.strip("/").split("/")
+    pattern = "".join(
+        "(/[^/]+)*" if t == "**" else "/[^/]+" if t == "*" else "/" + re.escape(t) for t in tokens
+    )
+    return re.fullmatch(pattern, fully_qualified) is not None
+
+
 def node_parameters_from_file(path: Path | None, node: str, namespace: str = "") -> dict[str, Any]:
     """The parameters of ``node`` (in ``namespace``, ``""``: none) in a ROS params file by their dotted
-    names: the ``/**`` entry, then the node's own (``node`` or ``/node``; ``namespace/node`` or
-    ``/namespace/node`` in a namespace, as rcl matches them), later ones winning; {} without a file.
-    ValueError for a file that is no params file."""
+    names: every entry whose key names it (:func:`node_name_matches`: ``/**``, ``/**/slam``, ``slam``,
+    ``tb3_0/slam`` ...), in the file's order, later ones winning; {} without a file. ValueError for a file
+    that is no params file."""
     if path is None:
         return {}
     try:
@@ -275,9 +287,10 @@ def node_parameters_from_file(path: Path | None, node: str, namespace: str = "")
     if not isinstance(document, dict):
         raise ValueError(f"{path} is not a ROS params file (a mapping of node names)")
     values: dict[str, Any] = {}
-    name = f"{namespace}/{node}" if namespace else node
-    for key in ("/**", name, f"/{name}"):
-        entry = document.get(key)
+    fully_qualified = f"/{namespace}/{node}" if namespace else f"/{node}"
+    for key, entry in document.items():
+        if not (isinstance(key, str) and node_name_matches(key, fully_qualified)):
+            continue
         if isinstance(entry, dict) and isinstance(entry.get("ros__parameters"), dict):
             values.update(flatten(entry["ros__parameters"]))
     return values

@@ -29,7 +29,14 @@ from nuturtle_eval.metrics import PoseSeries
 from nuturtle_tools.bag_source import BagError, BagSource
 from nuturtle_tools.foxglove_relay import tf2_msgs_installed
 from nuturtle_tools.replay import main
-from nuturtle_tools.replay_run import ReplayOptions, cut_scan, run_replay, truth_pose_at
+from nuturtle_tools.replay_run import (
+    ReplayOptions,
+    cut_scan,
+    node_parameters_from_file,
+    run_replay,
+    truth_pose_at,
+)
+from rclpy_harness import rcl_parameters
 from turtlelib import Transform2D
 from turtlelib.mapping.grid_map_file import load_grid_map
 from turtlelib.mapping.landmark_map import load_map
@@ -490,3 +497,26 @@ def test_the_model_option_reaches_slam_and_an_unknown_one_is_refused(live, tmp_p
         "python -m nuturtle_tools.replay: error: argument --model: invalid choice: 'burgr' "
         "(choose from 'burger', 'waffle', 'waffle_pi')"
     ]
+
+
+@pytest.mark.ros
+def test_the_replay_reads_a_params_file_as_rcl_gives_it_to_each_node(ros, tmp_path):
+    """The replay's own reading of a params file against rcl's: wildcard and namespaced keys, in any
+    namespace (the nodes' config files are keyed ``/**/slam``)."""
+    entries = {
+        "/**": {"a": 1, "b": 1},
+        "/**/slam": {"b": 2, "c": 2},
+        "slam": {"c": 3, "d": 3},
+        "tb3_0/slam": {"d": 4, "e": 4},
+        "/tb3_0/*": {"e": 5, "f": 5},
+        "/other/slam": {"g": 6},
+        "landmarks": {"h": 7},
+    }
+    path = tmp_path / "params.yaml"
+    path.write_text(yaml.safe_dump({key: {"ros__parameters": values} for key, values in entries.items()}))
+    for namespace in ("", "tb3_0", "fleet/tb3_1"):
+        rcl = rcl_parameters(ros.context, "slam", ["--ros-args", "--params-file", str(path)], namespace)
+        for own in ("use_sim_time", "start_type_description_service"):  # every node's, none from the file
+            rcl.pop(own, None)
+        assert node_parameters_from_file(path, "slam", namespace) == rcl, namespace
+    assert set(node_parameters_from_file(path, "slam", "tb3_0")) == {"a", "b", "c", "d", "e", "f"}
