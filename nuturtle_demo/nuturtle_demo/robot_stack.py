@@ -32,6 +32,7 @@ from nuturtle_control.turtle_control import TurtleControlNode
 from nuturtle_eval.grid_score import GridScore
 from nuturtle_eval.metrics import RunMetrics
 from nuturtle_eval.run_evaluation import RunScope, failed_targets
+from nuturtle_ros_common.launch_parameters import RobotFrames, robot_frames
 from nuturtle_tools.monitor import RunMonitor
 from nuturtle_tools.params import to_parameters
 from turtlelib import DetectorConfig, Transform2D, TwistNoise
@@ -62,8 +63,10 @@ class RobotPlan:
     route_start_s: float = 0.0
 
     @property
-    def frame_prefix(self) -> str:
-        return f"{self.name}/" if self.name else ""
+    def frames(self) -> RobotFrames:
+        """Its frame ids: ``tb3_k/odom`` ... and the shared ``map`` (module docstring); none of its own (the
+        nodes' defaults) for the one robot."""
+        return robot_frames(self.name, "map" if self.name else "")
 
     @property
     def namespace(self) -> dict[str, str]:
@@ -81,7 +84,6 @@ class RobotStack:
         sim_time = [Parameter("use_sim_time", value=True)]
         robot = sim_time + [Parameter("model", value=options.model)]
         where = plan.namespace
-        prefix = plan.frame_prefix
         route = {
             "radius": plan.radius_m,
             **({"route_start_s": plan.route_start_s} if plan.route_start_s else {}),
@@ -91,9 +93,8 @@ class RobotStack:
             context=context, parameter_overrides=robot + to_parameters(route), **where
         )
         self.turtle_control = TurtleControlNode(context=context, parameter_overrides=robot, **where)
-        frames = {"odom_id": f"{prefix}odom", "body_id": f"{prefix}base_footprint"} if prefix else {}
         self.odometry = OdometryNode(
-            context=context, parameter_overrides=robot + to_parameters(frames), **where
+            context=context, parameter_overrides=robot + to_parameters(plan.frames.odometry()), **where
         )
         self.landmarks, self.slam = slam_nodes(self, options, nusim, context, sim_time)
 
@@ -156,12 +157,8 @@ def slam_nodes(stack: RobotStack, options: Any, nusim: Any, context: Context, si
         "registration.drift_m2_per_m": 0.0,
         "registration.drift_rad2_per_m": 0.0,
     }
-    prefix = stack.plan.frame_prefix
-    if prefix:
-        # the shared map (module docstring), the robot's own odom, body and sensor frames
-        slam_values.update(
-            odom_id=f"{prefix}odom", body_id=f"{prefix}base_footprint", sensor_id=f"{prefix}base_scan"
-        )
+    # the shared map (module docstring), the robot's own odom, body and sensor frames
+    slam_values.update(stack.plan.frames.slam())
     if options.map_file is not None:
         slam_values["map_file"] = str(options.map_file)
     if options.motion_source == "odom":
@@ -171,7 +168,7 @@ def slam_nodes(stack: RobotStack, options: Any, nusim: Any, context: Context, si
     where = stack.plan.namespace
     window = (
         landmark_radius_window(simulation.circles[:, 2], simulation.config.robot.collision_radius)
-        if prefix
+        if stack.name
         else {}
     )
     landmarks = LandmarksNode(context=context, parameter_overrides=sim_time + to_parameters(window), **where)
