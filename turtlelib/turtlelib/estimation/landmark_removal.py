@@ -104,8 +104,10 @@ class LandmarkRemoval:
         """Judge the confirmed landmarks against ``payload`` with the filter at ``stamp_ns``; remove the ones
         due. ``APPLIED`` (the filter changed only by removals)."""
         config = self.config
+        if not config.enabled:
+            return StepResult(Outcome.APPLIED)
         ids, z_hat, covariance = slam.predicted_landmarks()
-        if not config.enabled or len(ids) == 0:
+        if len(ids) == 0:
             return StepResult(Outcome.APPLIED)
         scan, T_body_scan = payload
         p_scan, covariance_scan = _in_scan_frame(
@@ -119,7 +121,7 @@ class LandmarkRemoval:
             config.see_through_range_std,
             config.see_through_sigmas,
         )
-        present = ids[evidence == Evidence.PRESENT].tolist()
+        present = set(ids[evidence == Evidence.PRESENT].tolist())
         seen_through = ids[evidence == Evidence.SEEN_THROUGH].tolist()
         held = set(ids.tolist())
         self._counts = {i: count for i, count in self._counts.items() if i in held and i not in present}
