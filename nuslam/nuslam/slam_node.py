@@ -44,7 +44,9 @@ Subscribes
         or the robot's own), for `map -> odom` and (`motion_source: odom`) as the motion; gated like
         joint_states (`nuturtle_ros_common.odom_stream`: time and speed bounds, a reset source restarts).
     `scan` (sensor_msgs/LaserScan, frame `sensor_id` or `body_id`, sensor-data QoS; with `grid.enabled`
-        and no grid loaded, or with `scan_registration`): the occupancy grid's and the registration's input.
+        and no grid loaded, with `scan_registration`, or with `see_through_scans` > 0): the occupancy grid's,
+        the registration's and the landmark removal's input (each scan judged with the filter at its
+        stamp: `turtlelib.estimation.landmark_removal`).
     `initialpose` (geometry_msgs/PoseWithCovarianceStamped in `map_id`, RViz's "2D Pose Estimate"):
         relocalization: pose and (x, y, yaw) covariance (finite, symmetric, positive definite, else refused
         with a warning) replace the filter's at its time; the map is kept, independent of the new pose.
@@ -107,6 +109,9 @@ Parameters
     initial_*_std, jcbb_max_nodes),
     `turtlelib.TimelineConfig`
     (max_observation_delay, max_observation_lead, max_pending_observations),
+    `turtlelib.estimation.landmark_removal.LandmarkRemovalConfig` (see_through_scans, see_through_sigmas,
+    see_through_radius, see_through_travel, see_through_range_std: a confirmed landmark the LiDAR sees
+    through in `see_through_scans` scans is removed, logged at INFO and counted in /diagnostics; 0: never),
     `turtlelib.estimation.slip_recovery.SlipRecoveryConfig` (slip_recovery, slip_min_matches,
     slip_match_radius, slip_confirm_scans, slip_margin_m, slip_margin_rad, slip_stall_tolerance,
     slip_report_s), `model`, then
@@ -164,6 +169,7 @@ from nuslam.slam_report import SlamReport
 from nuturtle_description.robot_declaration import declare_robot
 from nuturtle_description.robot_params import RobotParams
 from nuturtle_ros_common.conversions import (
+    mounted_range_scan,
     odometry_message,
     positive_definite_pose_covariance,
     stamp_from_nanoseconds,
@@ -205,6 +211,7 @@ from turtlelib import (
     TwistNoise,
     WheelAngles,
 )
+from turtlelib.estimation.landmark_removal import LandmarkRemoval, LandmarkRemovalConfig, MountedScan
 from turtlelib.estimation.slip_recovery import SlipRecovery, SlipRecoveryConfig, lost_wheel_turn_per_m
 from turtlelib.mapping.landmark_map import LandmarkMap, load_map, save_map
 from turtlelib.motion.pose_twist import PoseTwist
@@ -329,7 +336,14 @@ class SlamNode(Node):
         topics = (frames.motion_source, "fake_sensor" if known else "landmarks")
         started_ns = self.get_clock().now().nanoseconds
         self.report = SlamReport(
-            self.slam, self.recovery, self.grid, self._warnings, topics, started_ns, self.motion_gate.tally
+            self.slam,
+            self.recovery,
+            self.grid,
+            self._warnings,
+            topics,
+            started_ns,
+            self.motion_gate.tally,
+            self.removal,
         )
         self._fused_reported = 0
         self.loop_closing = None
@@ -346,6 +360,8 @@ class SlamNode(Node):
         parameter) with its motion model and the map loaded at start-up, on its timeline with slip recovery
         acting on the scans."""
         frames, T_body_scan = self.node_config, robot.T_body_scan
+        # the frames a scan may come in, and where they are on the body
+        self._T_body_from = {frames.sensor_id: T_body_scan, frames.body_id: Transform2D()}
         fixed = {"sensor_x": T_body_scan.x, "sensor_y": T_body_scan.y, "sensor_theta": T_body_scan.theta}
         fixed.update({name: field_defaults(SlamConfig)[name] for name in FALLBACK_NOISE_FIELDS})
         self.config = declare_dataclass(self, SlamConfig, fixed=fixed)
@@ -360,9 +376,13 @@ class SlamNode(Node):
             slam.load_map(self._start_map, frames.T_map_body0)
         if frames.smooth_saved_map and self.config.mode == "localization":
             raise ValueError("smooth_saved_map needs mode mapping: in localization the map is fixed")
-        return SlamTimeline(
+        timeline = SlamTimeline(
             slam, signal, timeline_config, step=self.recovery, keep_history=frames.smooth_saved_map
         )
+        removal = declare_dataclass(self, LandmarkRemovalConfig)
+        self.removal = timeline.attach(LandmarkRemoval(removal)) if removal.enabled else None
+        self._removals_logged = 0
+        return timeline
 
     def _motion_model(
         self, robot: RobotParams
@@ -393,9 +413,10 @@ class SlamNode(Node):
         self.scan_odometry = None
         if not frames.scan_registration:
             return model, signal, odometry
-        T_body_from = {frames.sensor_id: robot.T_body_scan, frames.body_id: Transform2D()}
         speed_bounds = (robot.max_linear_speed, robot.max_angular_speed)
-        self.scan_odometry = ScanOdometry(config, input_noise, T_body_from, speed_bounds, self._warnings)
+        self.scan_odometry = ScanOdometry(
+            config, input_noise, self._T_body_from, speed_bounds, self._warnings
+        )
         return MeasuredMotion(), MeasuredPoses(), odometry
 
     def _connect(self, observation_topic: str) -> None:
@@ -411,7 +432,7 @@ class SlamNode(Node):
             self.create_subscription(JointState, "joint_states", self._on_joint_states, 10)
         self.create_subscription(Odometry, "odom", self._on_odom, 10)
         self.create_subscription(PoseWithCovarianceStamped, "initialpose", self._on_initial_pose, 10)
-        if self.scan_odometry is not None:
+        if self.scan_odometry is not None or self.removal is not None:
             self.create_subscription(LaserScan, "scan", self._on_scan, qos_profile_sensor_data)
         self.create_service(Trigger, "~/save_map", self._on_save_map)
         self.create_service(Trigger, "~/reset", self._on_reset)
@@ -493,7 +514,19 @@ class SlamNode(Node):
         start = time.perf_counter()
         applied = self.timeline.add_motion(t_ns, sample)
         self.report.applied(applied, 1e3 * (time.perf_counter() - start))
+        self._log_removals()
         return applied
+
+    def _log_removals(self) -> None:
+        """Log (INFO) the landmarks removed since the last call (``see_through_scans``)."""
+        removals = [] if self.removal is None else self.removal.removals[self._removals_logged :]
+        for removal in removals:
+            x, y = removal.xy
+            self.get_logger().info(
+                f"landmark {removal.landmark_id} at ({x:.3f}, {y:.3f}) removed: the LiDAR saw through it "
+                f"in {removal.scans} scans"
+            )
+        self._removals_logged += len(removals)
 
     def _input_pose(self, sample: tuple[float, ...]) -> Transform2D:
         """The motion input's pose ``T_odom_body`` at its newest sample: the odometry's pose, or the wheels'
@@ -503,7 +536,17 @@ class SlamNode(Node):
         return self.odometry.T_odom_body
 
     def _on_scan(self, msg: LaserScan) -> None:
-        """A scan for the registration (``scan_registration``): registered once the motion reaches it."""
+        """A scan for the landmark removal (``see_through_scans``), judged at its stamp, and for the
+        registration (``scan_registration``): registered once the motion reaches it."""
+        if self.removal is not None and not self._before_first_motion():
+            try:
+                t_ns, scan, T_body_scan = mounted_range_scan(msg, self._T_body_from)
+                self.timeline.add(t_ns, self.removal, MountedScan(scan, T_body_scan))
+                self._log_removals()
+            except ValueError as error:
+                self._warnings.warn("scan", f"scan skipped by the landmark removal: {error}")
+        if self.scan_odometry is None:
+            return
         self.scan_odometry.on_scan(msg)
         registered_to = self.timeline.latest_time_ns
         applied = self._add_registered_scans()

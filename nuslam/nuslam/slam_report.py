@@ -8,9 +8,9 @@ Statuses (diagnostic_msgs/DiagnosticStatus, hardware id ``slam``)
     `slam: motion gate`: the motion samples refused (implausible: a time gap, faster than the robot's
         speed bounds), the silences of the motion stream bridged (and the longest) and its restarts so far,
         with the last reason; WARN when some came since the last report.
-    `slam: filter`: mode, landmarks mapped and tentative, observations fused, rejected and (localization)
-        unmapped, arrays skipped, time per applied scan; WARN when observations were rejected or arrays
-        skipped since the last report.
+    `slam: filter`: mode, landmarks mapped and tentative, landmarks removed (the LiDAR saw through them),
+        observations fused, rejected and (localization) unmapped, arrays skipped, time per applied scan;
+        WARN when observations were rejected or arrays skipped since the last report.
     `slam: motion vs LiDAR` (`turtlelib.estimation.slip_recovery`): WARN naming the cause while scans
         contradict the wheels' motion and for ``slip_report_s`` after each relocalization against the map,
         ERROR when they keep coming; scans held, relocalizations and stalls so far, the last correction's
@@ -36,6 +36,7 @@ from nuturtle_ros_common.diagnostics import (
 from nuturtle_ros_common.diagnostics import status as diagnostic_status
 from nuturtle_ros_common.throttle import SourceWarnings
 from turtlelib import EkfSlam, Outcome, ScanResult
+from turtlelib.estimation.landmark_removal import LandmarkRemoval
 from turtlelib.estimation.slip_recovery import SlipRecovery
 from turtlelib.motion.sample_gate import GateTally
 
@@ -46,7 +47,8 @@ SLIP_LEVELS = {"ok": OK, "warn": WARN, "error": ERROR}
 class SlamReport:
     """slam's counts and statuses (module docstring) over its ``slam`` filter, ``recovery`` and ``grid``;
     the inputs are ``motion_topic`` and ``observation_topic``, watched from ``started_ns`` (node clock), the
-    motion samples gated with the totals ``motion_tally``."""
+    motion samples gated with the totals ``motion_tally``; ``removal`` removes the landmarks the LiDAR sees
+    through (None: off)."""
 
     def __init__(
         self,
@@ -57,8 +59,10 @@ class SlamReport:
         topics: tuple[str, str],
         started_ns: int,
         motion_tally: GateTally,
+        removal: LandmarkRemoval | None = None,
     ) -> None:
         self._slam, self._recovery, self._grid, self._warnings = slam, recovery, grid, warnings
+        self._removal = removal
         self._motion_tally = motion_tally
         self._motion_topic = topics[0]
         motion_topic, self.observation_topic = topics
@@ -90,6 +94,11 @@ class SlamReport:
                 )
             if result.outcome is Outcome.RELOCALIZED:
                 self._warnings.warn("slip", self._recovery.status.message)
+
+    @property
+    def landmarks_removed(self) -> int:
+        """Confirmed landmarks removed so far because the LiDAR saw through them (0 without removal)."""
+        return 0 if self._removal is None else len(self._removal.removals)
 
     def skipped(self, error: Exception) -> None:
         """An observation array refused (warned, throttled, and counted)."""
@@ -128,6 +137,7 @@ class SlamReport:
             "observations_rejected": self.counts["rejected"],
             "observations_unmapped": self.counts["unmapped"],
             "observation_arrays_skipped": self.counts["skipped"],
+            "landmarks_removed": self.landmarks_removed,
             **self._update_time.values("scan_update"),
         }
         slip = self._recovery.status

@@ -168,7 +168,8 @@ def slam_snapshot(slam_node: Any) -> SlamSnapshot:
 
 
 def slip_counts(slam_node: Any) -> dict[str, int | float | str | None]:
-    """The in-process slam node's slip recovery totals (its ``recovery`` attribute): scans held because they
+    """The in-process slam node's landmarks removed because the LiDAR saw through them (its ``report``
+    attribute) and its slip recovery totals (its ``recovery`` attribute): scans held because they
     contradicted the motion, relocalizations against the map, stalls and the size of the last correction
     (m, rad; None before any); and what its motion gate (its ``motion_gate`` attribute) refused, bridged
     and restarted: motion samples refused, silences bridged and the longest (s), restarts of the motion
@@ -176,6 +177,7 @@ def slip_counts(slam_node: Any) -> dict[str, int | float | str | None]:
     status, tally = slam_node.recovery.status, slam_node.motion_gate.tally
     correction = status.last_correction
     return {
+        "slam_landmarks_removed": slam_node.report.landmarks_removed,
         "slam_scans_held": status.held,
         "slam_relocalizations": status.relocalized,
         "slam_stalls": status.stalls,

@@ -96,6 +96,12 @@ class SlamView:
         """``(z_hat (k, 2), H_robot (k, 2, 3), H_landmark (k, 2, 2))`` of landmark ``slots`` (k,)."""
         return self._linearization.observe(self._state, self.model, slots)
 
+    def predicted(self, slots: NDArray[np.int64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """``(z_hat (k, 2), H P H^T (k, 2, 2))`` of landmark ``slots`` (k,): their predicted observations and
+        the covariance of those predictions."""
+        z_hat, H_robot, H_landmark = self.observe(slots)
+        return z_hat, self._predicted_covariances(H_robot, H_landmark, slots)
+
     def gate(self, z: NDArray[np.float64], R: NDArray[np.float64], slots: NDArray[np.int64]) -> Gating:
         """Every observation ``z`` (K, 2) against every landmark of ``slots`` (k,), O(K k)."""
         z_hat, H_robot, H_landmark = self.observe(slots)

@@ -590,10 +590,7 @@ class EkfSlam:
             if plan.birth_confirmed and policy.tentative:
                 confirmed_ids.append(landmark_ids[k : k + 1])
         # tentative landmarks the policy gives up are marginalised
-        dropped_ids = []
-        for slot in policy.expired(view, stamp_ns):
-            dropped_ids.append(int(self._state.tracks.ids[slot]))
-            self._state.remove(slot)
+        dropped_ids = [self._remove(slot) for slot in policy.expired(view, stamp_ns)]
         return Association(
             status,
             landmark_ids,
@@ -602,6 +599,21 @@ class EkfSlam:
             nis,
             2 * len(fused),
         )
+
+    def remove_landmark(self, landmark_id: int) -> None:
+        """Marginalise landmark ``landmark_id`` (confirmed or tentative) out of the filter: its rows and
+        columns of ``x`` and ``P`` deleted, its record forgotten (a tentative landmark's timeout does the
+        same). O(N). ValueError if no landmark has that id."""
+        slot = self._state.tracks.slot(int(landmark_id)) if isinstance(landmark_id, Integral) else None
+        if slot is None:
+            raise ValueError(f"no landmark with id {landmark_id!r}")
+        self._remove(slot)
+
+    def _remove(self, slot: int) -> int:
+        """Marginalise landmark ``slot`` out; returns its id."""
+        landmark_id = int(self._state.tracks.ids[slot])
+        self._state.remove(slot)
+        return landmark_id
 
     def update_pose(
         self, T_map_body: Transform2D, covariance: ArrayLike, gate: float = math.inf
@@ -794,6 +806,15 @@ class EkfSlam:
         filter's model); landmarks by slot."""
         model = self._measurement if measurement is None else measurement
         return SlamView(self._state, self._linearization, model, self._config.max_landmarks)
+
+    def predicted_landmarks(self) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
+        """The confirmed landmarks as the filter's measurement model predicts them now: ids (n,) ascending,
+        ``z_hat = h(x)`` (n, 2) and its covariance ``H P H^T`` (n, 2, 2) (pose and landmark uncertainty,
+        without the observation noise)."""
+        tracks = self._state.tracks
+        slots = tracks.slots_by_id(confirmed=True)
+        z_hat, covariance = self.view().predicted(slots)
+        return tracks.ids[slots], z_hat, covariance
 
     @property
     def pose(self) -> Transform2D:
