@@ -44,9 +44,10 @@ Subscribes
         or the robot's own), for `map -> odom` and (`motion_source: odom`) as the motion; gated like
         joint_states (`nuturtle_ros_common.odom_stream`: time and speed bounds, a reset source restarts).
     `scan` (sensor_msgs/LaserScan, frame `sensor_id` or `body_id`, sensor-data QoS; with `grid.enabled`
-        and no grid loaded, with `scan_registration`, or with `see_through_scans` > 0): the occupancy grid's,
-        the registration's and the landmark removal's input (each scan judged with the filter at its
-        stamp: `turtlelib.estimation.landmark_removal`).
+        and no grid loaded, with `scan_registration`, or with `see_through_scans` > 0 in mapping): the
+        occupancy grid's, the registration's and the landmark removal's input (each scan judged with the
+        filter at its stamp, `turtlelib.estimation.landmark_removal`; one the filter is already past says
+        nothing).
     `initialpose` (geometry_msgs/PoseWithCovarianceStamped in `map_id`, RViz's "2D Pose Estimate"):
         relocalization: pose and (x, y, yaw) covariance (finite, symmetric, positive definite, else refused
         with a warning) replace the filter's at its time; the map is kept, independent of the new pose.
@@ -111,7 +112,8 @@ Parameters
     (max_observation_delay, max_observation_lead, max_pending_observations),
     `turtlelib.estimation.landmark_removal.LandmarkRemovalConfig` (see_through_scans, see_through_sigmas,
     see_through_radius, see_through_travel, see_through_range_std: a confirmed landmark the LiDAR sees
-    through in `see_through_scans` scans is removed, logged at INFO and counted in /diagnostics; 0: never),
+    through in `see_through_scans` scans is removed, logged at INFO and counted in /diagnostics; 0: never;
+    mapping only: localization's map stays fixed),
     `turtlelib.estimation.slip_recovery.SlipRecoveryConfig` (slip_recovery, slip_min_matches,
     slip_match_radius, slip_confirm_scans, slip_margin_m, slip_margin_rad, slip_stall_tolerance,
     slip_report_s), `model`, then
@@ -380,7 +382,9 @@ class SlamNode(Node):
             slam, signal, timeline_config, step=self.recovery, keep_history=frames.smooth_saved_map
         )
         removal = declare_dataclass(self, LandmarkRemovalConfig)
-        self.removal = timeline.attach(LandmarkRemoval(removal)) if removal.enabled else None
+        # mapping only: localization's map is fixed
+        mapping = self.config.mode == "mapping"
+        self.removal = timeline.attach(LandmarkRemoval(removal)) if removal.enabled and mapping else None
         self._removals_logged = 0
         return timeline
 
@@ -541,8 +545,10 @@ class SlamNode(Node):
         if self.removal is not None and not self._before_first_motion():
             try:
                 t_ns, scan, T_body_scan = mounted_range_scan(msg, self._T_body_from)
-                self.timeline.add(t_ns, self.removal, MountedScan(scan, T_body_scan))
-                self._log_removals()
+                # a scan the filter is already past cannot be judged in stamp order: it only says nothing
+                if t_ns >= self.timeline.filter_time_ns:
+                    self.timeline.add(t_ns, self.removal, MountedScan(scan, T_body_scan))
+                    self._log_removals()
             except ValueError as error:
                 self._warnings.warn("scan", f"scan skipped by the landmark removal: {error}")
         if self.scan_odometry is None:
