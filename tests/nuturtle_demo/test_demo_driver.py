@@ -135,11 +135,9 @@ def test_open_loop_driver_waits_then_follows_sim_time_and_stops(ros):
     assert len(received) == count
 
 
-@pytest.mark.ros
-def test_closed_loop_driver_steers_back_onto_the_route(ros):
-    driver = ros.add(FigureEightDriver(context=ros.context, parameter_overrides=[
-        Parameter("use_sim_time", value=True), Parameter("start_delay", value=0.0),
-    ]))  # fmt: skip
+def feedback_rig(ros):
+    """A helper node around a driver: the cmd_vel it receives, and publishers of /clock and slam/odom,
+    once the driver listens to both."""
     helper = ros.node("helper")
     received = []
     helper.create_subscription(Twist, "cmd_vel", received.append, 10)
@@ -148,16 +146,26 @@ def test_closed_loop_driver_steers_back_onto_the_route(ros):
     assert ros.spin_until(
         lambda: helper.count_subscribers("/clock") >= 1 and helper.count_subscribers("slam/odom") >= 1, 5.0
     )
+    return received, clock, poses
 
-    def pose(x, y, theta):
-        msg = Odometry()
-        msg.pose.pose = pose_from_transform(Transform2D(x, y, theta))
-        return msg
+
+def pose_message(T_map_body: Transform2D) -> Odometry:
+    msg = Odometry()
+    msg.pose.pose = pose_from_transform(T_map_body)
+    return msg
+
+
+@pytest.mark.ros
+def test_closed_loop_driver_steers_back_onto_the_route(ros):
+    driver = ros.add(FigureEightDriver(context=ros.context, parameter_overrides=[
+        Parameter("use_sim_time", value=True), Parameter("start_delay", value=0.0),
+    ]))  # fmt: skip
+    received, clock, poses = feedback_rig(ros)
 
     # the first pose fixes the route's start; then the robot is 10 cm left of its reference
-    poses.publish(pose(0.0, 0.0, 0.0))
+    poses.publish(pose_message(Transform2D(0.0, 0.0, 0.0)))
     assert ros.spin_until(lambda: driver.T_map_route is not None, 5.0)
-    poses.publish(pose(0.0, 0.1, 0.0))
+    poses.publish(pose_message(Transform2D(0.0, 0.1, 0.0)))
     assert ros.spin_until(lambda: driver.T_map_body is not None and driver.T_map_body.y == 0.1, 5.0)
     clock.publish(Clock(clock=stamp_from_seconds(1.0)))
     ros.spin_for(0.1)
@@ -177,20 +185,11 @@ def test_driver_continues_a_route_from_where_it_stopped(ros):
         Parameter("use_sim_time", value=True), Parameter("start_delay", value=0.0),
         Parameter("route_start_s", value=1.25 * period), Parameter("model", value="burger"),
     ]))  # fmt: skip
-    helper = ros.node("helper")
-    received = []
-    helper.create_subscription(Twist, "cmd_vel", received.append, 10)
-    clock = helper.create_publisher(Clock, "/clock", 10)
-    poses = helper.create_publisher(Odometry, "slam/odom", 10)
-    assert ros.spin_until(
-        lambda: helper.count_subscribers("/clock") >= 1 and helper.count_subscribers("slam/odom") >= 1, 5.0
-    )
+    received, clock, poses = feedback_rig(ros)
     T_map_route = Transform2D(0.3, -0.2, 0.4)
     # where the route is 1.25 loops in: a quarter into the clockwise loop
     T_map_first = T_map_route @ driver.route.reference(1.25 * period)
-    msg = Odometry()
-    msg.pose.pose = pose_from_transform(T_map_first)
-    poses.publish(msg)
+    poses.publish(pose_message(T_map_first))
     assert ros.spin_until(lambda: driver.T_map_route is not None, 5.0)
     start = driver.T_map_route
     assert (start.x, start.y, start.theta) == pytest.approx((0.3, -0.2, 0.4), abs=1e-9)

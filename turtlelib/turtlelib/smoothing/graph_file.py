@@ -39,19 +39,9 @@ from ..mapping.atomic_files import replace_files
 from ..util.validation import covariance, finite_array
 
 GRAPH_FORMAT_VERSION = 1
-_KEYS = (
-    "version",
-    "t_ns",
-    "T_map_keyframe",
-    "point_counts",
-    "points",
-    "path_m",
-    "edge_i",
-    "edge_j",
-    "edge_Z",
-    "edge_S",
-    "edge_loop",
-)
+# the SavedGraph fields stored as they are; the keyframes' points are stored as point_counts and points
+_ARRAYS = ("t_ns", "T_map_keyframe", "path_m", "edge_i", "edge_j", "edge_Z", "edge_S", "edge_loop")
+_KEYS = ("version", "point_counts", "points", *_ARRAYS)
 
 
 def _integers(name: str, value: ArrayLike, length: int | None = None) -> NDArray[np.int64]:
@@ -127,19 +117,7 @@ class SavedGraph:
 
     def equals(self, other: SavedGraph) -> bool:
         """Whether ``other`` holds the same arrays, bit for bit."""
-        same = all(
-            np.array_equal(getattr(self, name), getattr(other, name))
-            for name in (
-                "t_ns",
-                "T_map_keyframe",
-                "path_m",
-                "edge_i",
-                "edge_j",
-                "edge_Z",
-                "edge_S",
-                "edge_loop",
-            )
-        )
+        same = all(np.array_equal(getattr(self, name), getattr(other, name)) for name in _ARRAYS)
         return (
             same
             and len(self.points) == len(other.points)
@@ -154,16 +132,9 @@ def save_graph(path: str | os.PathLike, graph: SavedGraph) -> None:
     np.savez(
         buffer,
         version=np.int64(GRAPH_FORMAT_VERSION),
-        t_ns=graph.t_ns,
-        T_map_keyframe=graph.T_map_keyframe,
         point_counts=counts,
         points=np.concatenate(graph.points) if graph.points else np.zeros((0, 2)),
-        path_m=graph.path_m,
-        edge_i=graph.edge_i,
-        edge_j=graph.edge_j,
-        edge_Z=graph.edge_Z,
-        edge_S=graph.edge_S,
-        edge_loop=graph.edge_loop,
+        **{name: getattr(graph, name) for name in _ARRAYS},
     )
     replace_files({Path(path): buffer.getvalue()})
 
@@ -207,13 +178,6 @@ def _from_arrays(arrays: dict[str, np.ndarray]) -> SavedGraph:
             f"got {points.shape}"
         )
     return SavedGraph(
-        t_ns=arrays["t_ns"],
-        T_map_keyframe=arrays["T_map_keyframe"],
         points=tuple(np.split(points, np.cumsum(counts)[:-1])) if len(counts) else (),
-        path_m=arrays["path_m"],
-        edge_i=arrays["edge_i"],
-        edge_j=arrays["edge_j"],
-        edge_Z=arrays["edge_Z"],
-        edge_S=arrays["edge_S"],
-        edge_loop=arrays["edge_loop"],
+        **{name: arrays[name] for name in _ARRAYS},
     )
