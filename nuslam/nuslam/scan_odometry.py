@@ -32,9 +32,7 @@ from collections.abc import Callable
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
 from numpy.typing import NDArray
-from sensor_msgs.msg import LaserScan
 
-from nuturtle_ros_common.conversions import mounted_range_scan
 from nuturtle_ros_common.diagnostics import ERROR, OK, WARN, status
 from nuturtle_ros_common.throttle import SourceWarnings
 from turtlelib import Transform2D, TwistNoise
@@ -66,18 +64,15 @@ INTERVAL_GAIN = 0.1
 
 class ScanOdometry:
     """The scans' registration between the motion input and slam's filter (module docstring).
-    ``T_body_from`` maps each accepted scan frame id to its mount ``T_body_frame``; ``speed_bounds`` are
-    the robot's ``(max_linear_speed, max_angular_speed)`` (m/s, rad/s)."""
+    ``speed_bounds`` are the robot's ``(max_linear_speed, max_angular_speed)`` (m/s, rad/s)."""
 
     def __init__(
         self,
         config: LidarOdometryConfig,
         noise: TwistNoise,
-        T_body_from: dict[str, Transform2D],
         speed_bounds: tuple[float, float],
         warnings: SourceWarnings,
     ) -> None:
-        self._T_body_from = T_body_from
         self._odometry = LidarOdometry(config, noise, *speed_bounds)
         self.noise = noise
         self._warnings = warnings
@@ -110,13 +105,8 @@ class ScanOdometry:
         # the scans' stamps on the old time base say nothing of the LiDAR on the new one
         self._newest_scan_ns = None
 
-    def on_scan(self, msg: LaserScan) -> None:
-        """Queue a scan (skipped with a throttled warning when it cannot be read)."""
-        try:
-            t_ns, scan, T_body_scan = mounted_range_scan(msg, self._T_body_from)
-        except ValueError as error:
-            self._skip(f"scan skipped by the scan registration: {error}")
-            return
+    def add_scan(self, t_ns: int, scan: RangeScan, T_body_scan: Transform2D) -> None:
+        """Queue the scan stamped ``t_ns`` (ns), taken by the LiDAR mounted at ``T_body_scan``."""
         self._waiting.append((t_ns, scan, T_body_scan))
         if self._newest_scan_ns is not None and t_ns > self._newest_scan_ns:
             # running mean of the scans' intervals
@@ -126,7 +116,7 @@ class ScanOdometry:
         self._newest_scan_ns = t_ns if self._newest_scan_ns is None else max(self._newest_scan_ns, t_ns)
         if len(self._waiting) > MAX_WAITING_SCANS:
             dropped_ns, _, _ = self._waiting.popleft()
-            self._skip(
+            self.skip(
                 f"scan at {dropped_ns} ns skipped by the scan registration: the motion input did not reach "
                 f"its stamp while {MAX_WAITING_SCANS} newer scans came (are joint_states / odom arriving?)"
             )
@@ -248,6 +238,7 @@ class ScanOdometry:
             }
         return status("slam: scan registration", "slam", level, message, values)
 
-    def _skip(self, text: str) -> None:
+    def skip(self, text: str) -> None:
+        """A scan not registered (``text`` why): counted in /diagnostics and warned (throttled)."""
         self.counts["skipped"] += 1
         self._warnings.warn("scan registration", text)

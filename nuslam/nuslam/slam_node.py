@@ -418,9 +418,7 @@ class SlamNode(Node):
         if not frames.scan_registration:
             return model, signal, odometry
         speed_bounds = (robot.max_linear_speed, robot.max_angular_speed)
-        self.scan_odometry = ScanOdometry(
-            config, input_noise, self._T_body_from, speed_bounds, self._warnings
-        )
+        self.scan_odometry = ScanOdometry(config, input_noise, speed_bounds, self._warnings)
         return MeasuredMotion(), MeasuredPoses(), odometry
 
     def _connect(self, observation_topic: str) -> None:
@@ -541,19 +539,27 @@ class SlamNode(Node):
 
     def _on_scan(self, msg: LaserScan) -> None:
         """A scan for the landmark removal (``see_through_scans``), judged at its stamp, and for the
-        registration (``scan_registration``): registered once the motion reaches it."""
+        registration (``scan_registration``): registered once the motion reaches it. One that cannot be
+        read is skipped with a (throttled) warning."""
+        try:
+            t_ns, scan, T_body_scan = mounted_range_scan(msg, self._T_body_from)
+        except ValueError as error:
+            if self.scan_odometry is not None:
+                self.scan_odometry.skip(f"scan skipped: {error}")
+            else:
+                self._warnings.warn("scan", f"scan skipped: {error}")
+            return
         if self.removal is not None and not self._before_first_motion():
-            try:
-                t_ns, scan, T_body_scan = mounted_range_scan(msg, self._T_body_from)
-                # a scan the filter is already past cannot be judged in stamp order: it only says nothing
-                if t_ns >= self.timeline.filter_time_ns:
+            # a scan the filter is already past cannot be judged in stamp order: it only says nothing
+            if t_ns >= self.timeline.filter_time_ns:
+                try:
                     self.timeline.add(t_ns, self.removal, MountedScan(scan, T_body_scan))
-                    self._log_removals()
-            except ValueError as error:
-                self._warnings.warn("scan", f"scan skipped by the landmark removal: {error}")
+                except ValueError as error:
+                    self._warnings.warn("scan", f"scan skipped by the landmark removal: {error}")
+                self._log_removals()
         if self.scan_odometry is None:
             return
-        self.scan_odometry.on_scan(msg)
+        self.scan_odometry.add_scan(t_ns, scan, T_body_scan)
         registered_to = self.timeline.latest_time_ns
         applied = self._add_registered_scans()
         if self._published is not None and registered_to != self.timeline.latest_time_ns:
