@@ -12,7 +12,7 @@ running (a callback then fails on a dead context), and re-raise SIGINT as a ``Ke
 the main thread is (a traceback and exit code -2 when a second SIGINT lands in the shutdown). A second
 signal while the node stops is ignored, and every stop signal once it has stopped; a signal whose
 disposition is SIG_IGN at start-up (``nohup``, a background job of a script) stays ignored. Exit codes: 0
-stopped (a signal, the context shut down, or a managed node's lifecycle shutdown: :class:`Finalizable`),
+stopped (a signal, the context shut down, or a managed node's lifecycle shutdown: :func:`all_finalized`),
 1 could not start (an invalid parameter, a port in use) or could not stop (below), 2 a bad command line
 (argparse's usage error).
 
@@ -90,18 +90,11 @@ class SafeStop(Protocol):
         :func:`run_node`, while the context is still up."""
 
 
-@runtime_checkable
-class Finalizable(Protocol):
-    """A node that can end its own life (a managed node's lifecycle shutdown)."""
-
-    @property
-    def finalized(self) -> bool:
-        """True once the node has nothing left to do: its process's spin loop ends."""
-
-
 def all_finalized(nodes: Sequence[Node]) -> bool:
-    """True when every node of ``nodes`` is :class:`Finalizable` and finalized."""
-    return all(isinstance(node, Finalizable) and node.finalized for node in nodes)
+    """True when every node of ``nodes`` has ended its own life: its ``finalized`` property is True (a
+    managed node after its lifecycle shutdown; a node without the property never is). Read at every spin,
+    so an attribute lookup, not a runtime protocol check."""
+    return all(getattr(node, "finalized", False) is True for node in nodes)
 
 
 def effective_parameters(node: Node) -> str:
