@@ -163,12 +163,12 @@ class ScanOdometry:
             if seeded and self._odometry.seed_map(t_ns, T_input_body, scan, T_body_scan):
                 self.counts["seeded"] += 1
                 return None
-            self._skip(f"scan at {t_ns} ns skipped by the scan registration: older than the last one")
+            self.skip(f"scan at {t_ns} ns skipped by the scan registration: older than the last one")
             return None
         try:
             step = self._odometry.step(t_ns, T_input_body, scan, T_body_scan)
         except (ValueError, np.linalg.LinAlgError) as error:
-            self._skip(f"scan at {t_ns} ns skipped by the scan registration: {error}")
+            self.skip(f"scan at {t_ns} ns skipped by the scan registration: {error}")
             return None
         self._last_ns, self.last, self._restarting = t_ns, step, False
         if self.step_listener is not None:

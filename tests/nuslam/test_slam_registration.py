@@ -64,6 +64,30 @@ def test_registered_scans_correct_drifting_wheels_and_diagnostics_say_so(ros):
     assert sum(c["scans_skipped"] for c in counts) == 0
 
 
+def test_a_scan_older_than_the_last_registered_one_is_skipped_counted_and_slam_goes_on(ros):
+    """A late scan stamped before the newest registered one: skipped, counted in /diagnostics, and the
+    next scan and joint_states are taken as usual (the skip path once raised in a callback)."""
+    rig = Rig(ros, scan_registration=True)
+    reports: list[DiagnosticArray] = []
+    rig.helper.create_subscription(DiagnosticArray, "/diagnostics", reports.append, 10)
+    truth = Arc(Transform2D(), S, vx=0.15, omega=0.5)
+    rng = np.random.default_rng(3)
+    for k in range(5):
+        t_ns = S + k * S // 5
+        count = len(rig.odoms)
+        if k == 3:  # the late one, stamped at step 1
+            rig.scans.publish(scan_message(truth.pose(S + S // 5), S + S // 5, rng))
+        rig.scans.publish(scan_message(truth.pose(t_ns), t_ns, rng))
+        if k == 0:
+            ros.spin_for(0.2)
+        rig.joint_states.publish(joint_state(t_ns, truth.angles(t_ns)))
+        assert k == 0 or ros.spin_until(lambda c=count: len(rig.odoms) > c, 5.0), f"no odom at step {k}"
+    diagnostics(rig, "slam: scan registration")
+    statuses = [s for a in reports for s in a.status if s.name == "slam: scan registration"]
+    skipped = [int(pair.value) for s in statuses for pair in s.values if pair.key == "scans_skipped"]
+    assert sum(skipped) == 1
+
+
 def test_with_the_lidar_quiet_slam_goes_on_with_the_wheels_and_says_so(ros):
     """No scan at all: every joint_states gets its pose, the wheels' dead reckoning exactly (never worse than
     the input), and /diagnostics says the pose rests on the motion input alone (ERROR)."""
