@@ -8,7 +8,11 @@ Each scan is registered by :class:`turtlelib.LidarOdometry` (the recorded ``/odo
 is every scan placed by the final graph, at its keyframe's correction (``map_from_odom(k) T_odom_body``,
 ``k`` the newest keyframe at or before the scan); "online" is each scan at the correction known when it was
 taken (what a live system publishes). Prints one markdown row per recording and range: RPE and ATE of
-each, loops accepted and refused (by reason), CPU time per scan (odometry, loop closure).
+each, loops accepted and refused (by reason), CPU time per scan (odometry, loop closure), and the
+agreement of the grid of every scan at its "closed" pose with the scans at the reference's poses
+(nuturtle_eval.grid_agreement; the closed poses rigidly aligned to the reference first, as this run starts
+in the odometry's frame, not the reference's): the map the graph gives, in seconds rather than a replay's
+minutes.
 
 Usage: python -P bench/loop_closure.py [FOLDER ...] [--max-range-m 3.5]
 """
@@ -24,11 +28,14 @@ from pathlib import Path
 import numpy as np
 from rosbags.highlevel import AnyReader
 
-from nuturtle_eval.metrics import PoseSeries, ate_rmse_aligned
+from nuturtle_eval.grid_agreement import grid_agreement as agreement_of
+from nuturtle_eval.grid_agreement import occupied_cells, reference_cells, scan_endpoints
+from nuturtle_eval.metrics import PoseSeries, align_se2, ate_rmse_aligned
 from nuturtle_eval.relative_error import relative_pose_error
 from turtlelib import LidarOdometry, LidarOdometryConfig, RangeScan, Transform2D, TwistNoise
 from turtlelib.estimation.lidar_odometry import scan_points
 from turtlelib.geometry.pose_buffer import PoseBuffer
+from turtlelib.mapping.occupancy_grid import GridConfig, OccupancyGrid
 from turtlelib.smoothing.loop_closure import LoopClosure, Verdict
 
 DATASETS = Path(__file__).resolve().parents[2] / "shared" / "datasets" / "radish_offices"
@@ -71,6 +78,21 @@ def series(stamps: list[int], poses: list[Transform2D]) -> PoseSeries:
     return PoseSeries(np.array(stamps) / 1e9, np.array([T.as_array() for T in poses]))
 
 
+def grid_agreement(
+    stamps: list[int], poses: list[Transform2D], scans: list[RangeScan], truth: PoseSeries
+) -> tuple[float, float]:
+    """``(found, unexplained)``: the grid of ``scans`` at ``poses`` (aligned to ``truth`` first) against the
+    scans at ``truth``'s poses."""
+    estimate = series(stamps, poses)
+    T_ref_est = align_se2(estimate.poses[:, :2], truth.interpolate(estimate.t_s)[:, :2])
+    grid = OccupancyGrid(GridConfig(max_size_m=300.0))
+    for T, scan in zip(poses, scans, strict=True):
+        grid.insert_scan(scan, T_ref_est @ T)
+    reference = reference_cells(scan_endpoints(zip(estimate.t_s, scans, strict=True), truth, Transform2D()))
+    result = agreement_of(reference, occupied_cells(grid.grid_map()))
+    return result.found_fraction, result.unexplained_fraction
+
+
 def run(folder: Path, max_range_m: float | None) -> str:
     odom, reference, scans = read(folder, max_range_m)
     buffer = PoseBuffer(10**7)
@@ -78,7 +100,7 @@ def run(folder: Path, max_range_m: float | None) -> str:
         buffer.add(t_ns, T)
     lidar_odometry = LidarOdometry(LidarOdometryConfig(), NOISE)
     loops = LoopClosure()
-    stamps, T_odom, online, keyframe_of = [], [], [], []
+    stamps, T_odom, online, keyframe_of, used = [], [], [], [], []
     cpu_odometry = cpu_loops = 0.0
     for t_ns, scan in scans:
         T_input = buffer.at(t_ns)
@@ -94,6 +116,7 @@ def run(folder: Path, max_range_m: float | None) -> str:
         T_odom.append(step.T_odom_body)
         online.append(loops.map_from_odom() @ step.T_odom_body)
         keyframe_of.append(len(loops.keyframes) - 1)
+        used.append(scan)
     closed = [loops.map_from_odom(k) @ T for k, T in zip(keyframe_of, T_odom, strict=True)]
     truth = series([t for t, _ in reference], [T for _, T in reference])
     verdicts = Counter(c.verdict for c in loops.candidates)
@@ -105,19 +128,21 @@ def run(folder: Path, max_range_m: float | None) -> str:
         cells.append(
             f"{rpe.translation_m:.3f} / {rpe.rotation_deg:.2f} | {ate_rmse_aligned(estimate, truth):.2f}"
         )
+    found, unexplained = grid_agreement(stamps, closed, used, truth)
     n = len(stamps)
     range_text = "full" if max_range_m is None else f"{max_range_m:g} m"
     return (
         f"| {folder.name} | {range_text} | {n} | {len(loops.keyframes)} | {' | '.join(cells)} | "
         f"{verdicts[Verdict.ACCEPTED]} | {sum(refused.values())} {dict(sorted(refused.items()))} | "
-        f"{1000 * cpu_odometry / n:.0f} | {1000 * cpu_loops / n:.0f} |"
+        f"{1000 * cpu_odometry / n:.0f} | {1000 * cpu_loops / n:.0f} | {found:.1%} | {unexplained:.1%} |"
     )
 
 
 HEADER = (
     "| recording | range | scans | keyframes | odometry RPE (m / deg) | odometry ATE (m) | online RPE | "
     "online ATE | closed RPE | closed ATE | loops accepted | refused (by reason) | CPU odometry (ms/scan) | "
-    "CPU loops (ms/scan) |\n|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|"
+    "CPU loops (ms/scan) | closed grid found | closed grid unexplained |\n"
+    "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|---:|"
 )
 
 
