@@ -340,3 +340,23 @@ def test_invalid_configuration_and_edges_are_refused():
         graph.add_edge(1, 1, Transform2D(), np.eye(3), loop=False)
     with pytest.raises(ValueError, match="covariance"):
         graph.add_edge(0, 1, Transform2D(), np.zeros((3, 3)), loop=False)
+
+
+def test_an_odometry_edge_composes_the_anchored_increments():
+    """The edge between two keyframes is what the steps' anchored increments compose to (by hand along a
+    straight line: A = [[1, 0, 0], [0, 1, dx], [0, 0, 1]] per step, then into frame a), not the filter's
+    increments, which also hold the input's motion between scans (here 100 times larger)."""
+    rng = np.random.default_rng(5)
+    loops = LoopClosure(LoopClosureConfig())
+    anchored = np.diag([1e-6, 4e-6, 1e-6])
+    S = np.zeros((3, 3))
+    for k in range(6):  # 0.2 m a step: keyframes at 0 and 1 m
+        T = Transform2D(0.2 * k, 0.0, 0.0)
+        step = OdometryStep(k * 10**8, T, 100 * anchored, Basis.REGISTERED, None, 10**8, anchored * (k > 0))
+        loops.add_step(step, scan_at(T, RING, RING_PILLARS, rng))
+        if k:
+            A = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.2], [0.0, 0.0, 1.0]])
+            S = A @ S @ A.T + anchored
+    assert len(loops.keyframes) == 2 and loops.graph.n_edges == 1
+    _, S_edge = loops.graph.measurement(0)
+    np.testing.assert_allclose(S_edge, S + 1e-6 * np.eye(3), rtol=1e-12, atol=1e-18)

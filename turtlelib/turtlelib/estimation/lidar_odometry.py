@@ -66,6 +66,24 @@ against it can see, grows with the distance travelled by more than ``B`` holds w
 (a wall seen at a glancing angle, glass, a LiDAR's range bias: errors that do not average out). Each
 registered step of ``d_k`` metres adds ``d_k diag(q_xy, q_xy, q_theta)`` (``drift_m2_per_m``,
 ``drift_rad2_per_m``) for it; 0 where the scans are unbiased, as in a simulator.
+
+Anchored increments (a keyframe graph's edges)
+----------------------------------------------
+While no scan comes (a LiDAR slower than the input, or scans kept only every half metre, as in recorded
+logs), the input alone moves the pose on and its motion adds to ``A``: the filter's pose between the scans
+is that uncertain. The next scan, registered, puts the pose back within ``B + C_k`` of the world, but a sum
+cannot shrink, so ``A`` keeps the motion for good. Between two registered scans that is not their relative
+pose's uncertainty: a keyframe graph built on the steps would take the input's noise for the registrations'
+and bend the wrong edges when a loop closes. So each step also carries its *anchored* increment
+``Sigma_anchored``, with its own sum ``A_a`` kept like ``A`` but for the steps without a scan, whose motion
+is deferred (``D <- D + Q``, carried like the rest) rather than summed::
+
+    registered:                        Q_a = [B + C_k - A_a]_+ (+ the drift since the last one),   D <- 0
+    a scan that did not register:      Q_a = Q + D,  D <- 0          (the input's motion is the pose's)
+    no scan:                           Q_a = 0,      D <- D + Q
+
+(the registration's prior holds ``P_since``, so ``C_k`` carries the deferred motion where the scan leaves
+the prior in charge), ``A_a <- A_a + Q_a``. Where every step has a scan, ``Sigma_anchored = Sigma``.
 """
 
 from __future__ import annotations
@@ -138,7 +156,8 @@ class OdometryStep:
     """One scan's result: its stamp, its pose ``T_odom_body`` (frame ``lidar_odom``), the covariance
     ``Sigma`` (3, 3) the step adds to the pose's (module docstring: what the newest error against the
     keyframe exceeds of the steps since it, plus the map's drift over the step), what it rests on
-    (``basis``) and the registration (None for ``Basis.MOTION``)."""
+    (``basis``), the registration (None for ``Basis.MOTION``), and ``Sigma_anchored`` (3, 3), the step's
+    anchored increment (module docstring, "Anchored increments"; ``Sigma`` when not given)."""
 
     t_ns: int
     T_odom_body: Transform2D
@@ -146,6 +165,11 @@ class OdometryStep:
     basis: Basis
     registration: Registration | None
     interval_ns: int
+    Sigma_anchored: NDArray[np.float64] | None = None
+
+    def __post_init__(self) -> None:
+        if self.Sigma_anchored is None:
+            object.__setattr__(self, "Sigma_anchored", self.Sigma)
 
     @property
     def sample(self) -> Sample:
@@ -198,6 +222,12 @@ class LidarOdometry:
         self._A = np.zeros((3, 3))
         self._B = np.zeros((3, 3))
         self._C = np.zeros((3, 3))
+        # A_a: the anchored increments summed; D: the motion of the steps without a scan since the last
+        # registered one, deferred (module docstring, "Anchored increments")
+        self._A_anchored = np.zeros((3, 3))
+        self._deferred = np.zeros((3, 3))
+        # the path (m) of those steps, whose drift the next registered one adds to its anchored increment
+        self._deferred_m = 0.0
         # M of the newest step: how much of its pose the prior, not the scan, decided (I: the input alone)
         self._M = np.eye(3)
 
@@ -283,12 +313,23 @@ class LidarOdometry:
         P_prior = P_since + _PRIOR_FLOOR
         if self._map is not None and len(points) >= self.config.registration.min_points:
             registration = register(points, self._map, T_prior, P_prior, self.config.registration)
-        self._A, self._B, self._C = (G @ X @ G.T for X in (self._A, self._B, self._C))
+        self._A, self._B, self._C, self._A_anchored, self._deferred = (
+            G @ X @ G.T for X in (self._A, self._B, self._C, self._A_anchored, self._deferred)
+        )
         if registration is None:
             self._M = np.eye(3)
             self._P_since = P_since
             self._A = self._A + P_motion
-            return OdometryStep(t_ns, T_prior, P_motion, Basis.MOTION, None, t_ns - t_prev)
+            if len(points):
+                # a scan that did not register: Q_a = Q + D, D <- 0
+                anchored, self._deferred = P_motion + self._deferred, np.zeros((3, 3))
+                self._deferred_m = 0.0
+            else:
+                # no scan: Q_a = 0, D <- D + Q
+                anchored, self._deferred = np.zeros((3, 3)), self._deferred + P_motion
+                self._deferred_m += math.hypot(T_prior.x - T_prev.x, T_prior.y - T_prev.y)
+            self._A_anchored = self._A_anchored + anchored
+            return OdometryStep(t_ns, T_prior, P_motion, Basis.MOTION, None, t_ns - t_prev, anchored)
         self._P_since = np.zeros((3, 3))
         basis = Basis.DEGENERATE if registration.degenerate else Basis.REGISTERED
         # C_k = Sigma_k + M C_k-1 M^T,  M = Sigma_k P_prior^-1
@@ -296,14 +337,21 @@ class LidarOdometry:
         M = np.linalg.solve(P_prior, Sigma).T
         self._C = Sigma + M @ self._C @ M.T
         self._M = M
-        # Q_k = [B + C_k - A]_+,  A <- A + Q_k
+        # Q_k = [B + C_k - A]_+,  A <- A + Q_k;  Q_a = [B + C_k - A_a]_+,  A_a <- A_a + Q_a,  D <- 0
         Q = _positive_part(self._B + self._C - self._A)
         self._A = self._A + Q
-        # + d_k diag(q_xy, q_xy, q_theta): the local map's own drift over the step's d_k metres
+        Q_anchored = _positive_part(self._B + self._C - self._A_anchored)
+        self._A_anchored = self._A_anchored + Q_anchored
+        # + d_k diag(q_xy, q_xy, q_theta): the local map's own drift over the step's d_k metres (the anchored
+        # increment's over the path since the last registered scan: the deferred steps' too)
         d_m = math.hypot(registration.T_map_body.x - T_prev.x, registration.T_map_body.y - T_prev.y)
         q = self.config
-        Q = Q + d_m * np.diag([q.drift_m2_per_m, q.drift_m2_per_m, q.drift_rad2_per_m])
-        return OdometryStep(t_ns, registration.T_map_body, Q, basis, registration, t_ns - t_prev)
+        drift = np.diag([q.drift_m2_per_m, q.drift_m2_per_m, q.drift_rad2_per_m])
+        anchored = Q_anchored + (d_m + self._deferred_m) * drift
+        self._deferred, self._deferred_m = np.zeros((3, 3)), 0.0
+        return OdometryStep(
+            t_ns, registration.T_map_body, Q + d_m * drift, basis, registration, t_ns - t_prev, anchored
+        )
 
     def _is_keyframe(self, T_odom_body: Transform2D) -> bool:
         """True when a scan at ``T_odom_body`` moved or turned far enough from the newest keyframe."""

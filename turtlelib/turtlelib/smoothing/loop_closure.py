@@ -5,10 +5,11 @@ Keyframes and odometry edges
 ----------------------------
 :class:`turtlelib.estimation.lidar_odometry.LidarOdometry` gives each scan ``k`` its pose ``T_k``
 (``T_odom_body``) and the covariance ``Sigma_k`` of its motion since scan ``k-1`` (additive ``[x, y, theta]``
-in the odometry frame, independent increments). A scan that moved ``keyframe_distance_m`` or turned
-``keyframe_angle_rad`` from the newest keyframe becomes one: its points (body frame, thinned to the
-registration's ``voxel_m``), pose and stamp. Between keyframes ``a`` and ``b`` the increments compose, with
-``Sigma_w`` the covariance of the newest scan's pose given ``T_a``::
+in the odometry frame, independent increments; its anchored increment, which leaves out the motion of the
+steps without a scan that a registered scan re-anchored: "Anchored increments" there). A scan that moved
+``keyframe_distance_m`` or turned ``keyframe_angle_rad`` from the newest keyframe becomes one: its points
+(body frame, thinned to the registration's ``voxel_m``), pose and stamp. Between keyframes ``a`` and ``b`` the
+anchored increments compose, with ``Sigma_w`` the covariance of the newest scan's pose given ``T_a``::
 
     Sigma_w <- A_k Sigma_w A_k^T + Sigma_k,     A_k = [[1, 0, -(y_k - y_k-1)], [0, 1, x_k - x_k-1], [0, 0, 1]]
 
@@ -329,7 +330,7 @@ class LoopClosure:
             dx, dy = T.x - self._last_T.x, T.y - self._last_T.y
             # Sigma_w <- A Sigma_w A^T + Sigma_k
             A = np.array([[1.0, 0.0, -dy], [0.0, 1.0, dx], [0.0, 0.0, 1.0]])
-            self._Sigma_w = A @ self._Sigma_w @ A.T + step.Sigma
+            self._Sigma_w = A @ self._Sigma_w @ A.T + step.Sigma_anchored
             self._path_m += math.hypot(dx, dy)
         self._last_T = T
         if self.session_keyframe is not None:
