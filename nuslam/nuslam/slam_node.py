@@ -644,8 +644,9 @@ class SlamNode(Node):
 
     def smooth_run(self) -> SmoothingOutcome:
         """The run so far smoothed as a whole (``smooth_saved_map``: the history is kept), with the loops
-        closed (``loop_closure``) and a pose at every scan the grid keeps (so the smoothed grid places each);
-        ValueError without a history or before the first motion sample."""
+        closed (``loop_closure``), a pose at every scan the grid keeps (so the smoothed grid places each)
+        and the landmarks removed as gone left out (the revision does not map them again); ValueError
+        without a history or before the first motion sample."""
         if self.timeline.history is None:
             raise ValueError("no run history: smooth_saved_map is false")
         return smooth_history(
@@ -658,6 +659,7 @@ class SlamNode(Node):
             revise=self.node_config.association == "unknown",
             loops=() if self.loop_closing is None else self.loop_closing.loops.loop_edges(),
             extra_t_ns=self.grid.keyframes.stamps_ns,
+            removed_ids=[] if self.removal is None else [r.landmark_id for r in self.removal.removals],
         )
 
     def map_to_save(self, outcome: SmoothingOutcome | None = None) -> LandmarkMap:

@@ -142,3 +142,25 @@ def test_a_smoothing_after_a_break_covers_the_landmarks_seen_since():
     np.testing.assert_array_equal(outcome.run.landmark_ids, [1])
     np.testing.assert_allclose(outcome.run.landmarks, LANDMARKS[1:], atol=1e-6)
     assert outcome.pose_at(180 * MS) is not None and outcome.pose_at(185 * MS) is None
+
+
+def test_a_landmark_removed_as_gone_leaves_the_revisions_pool():
+    """Landmark 0, seen at every scan, is not in the final map: as a tentative one that timed out, its
+    observations wait unassigned for the revision (to join a landmark compatible with them, or make one);
+    as one the filter removed because the LiDAR saw through it (``removed_ids``), they are left out: an
+    object that is gone is neither mapped again nor pulls a landmark near where it was."""
+    line = timeline()
+    drive(line, range(0, 200, 10))
+    slam = line.slam
+    keep = slam.landmark_ids == 1
+    for removed_ids, waiting in (((), 10), ((0,), 0)):
+        _, _, _, unassigned = problem_from_history(
+            line.history, MOTION, HeldInputs(), CONFIG, np.array([1]), removed_ids=removed_ids
+        )
+        assert len(unassigned.z) == waiting
+        outcome = smooth_history(
+            line.history, MOTION, HeldInputs(), CONFIG, slam.landmark_ids[keep], slam.landmarks[keep],
+            revise=True, removed_ids=removed_ids,
+        )  # fmt: skip
+        assert outcome.revision.unassigned == waiting
+        np.testing.assert_array_equal(outcome.run.landmark_ids, [1])

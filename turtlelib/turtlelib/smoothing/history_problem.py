@@ -46,13 +46,16 @@ def problem_from_history(
     landmark_ids: NDArray[np.int64],
     loops: Sequence[LoopEdge] = (),
     extra_t_ns: Sequence[int] = (),
+    removed_ids: Sequence[int] = (),
 ) -> tuple[SmoothingProblem, NDArray[np.float64], Rescale, Unassigned]:
     """``(problem, poses (P, 3), rescale, unassigned)``: the factors of ``history`` (module docstring) for
     the final map's ``landmark_ids``, the filter's poses at the problem's stamps (the warm start: at a stamp
     of several scans, the pose after the last), the viewpoint scales of the noise for any labelling of the
     observations, and the usable observations of no landmark of the map (the last two for
-    :func:`turtlelib.smoothing.association_revision.revise_associations`). ValueError before the history's
-    start."""
+    :func:`turtlelib.smoothing.association_revision.revise_associations`), but for those the filter had
+    associated with a landmark it later removed as gone (``removed_ids``: a post the LiDAR saw through,
+    :mod:`turtlelib.estimation.landmark_removal`), which the revision must not map again. ValueError before
+    the history's start."""
     if history.start_pose is None:
         raise ValueError("the run has not started: no motion sample yet")
     scan_t_ns = np.array(history.scan_t_ns, dtype=np.int64)
@@ -104,7 +107,9 @@ def problem_from_history(
             sensor_xy, labelled.observation_pose, labelled.observation_landmark, config.fusion_scale
         )
 
-    # the observations of no landmark that the sensor model takes (in its range, as the filter checks)
-    free = ~kept & measurement.usable(all_z)
+    # the observations of no landmark that the sensor model takes (in its range, as the filter checks),
+    # but those of a landmark that is gone
+    gone = np.isin(associated, np.asarray(removed_ids, dtype=np.int64))
+    free = ~kept & ~gone & measurement.usable(all_z)
     unassigned = Unassigned(observation_pose[free], all_z[free], all_R[free])
     return replace(problem, noise_scale=rescale(problem)), poses, rescale, unassigned

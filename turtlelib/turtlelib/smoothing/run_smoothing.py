@@ -90,11 +90,13 @@ def smooth_history(
     revision: RevisionConfig | None = None,
     loops: Sequence[LoopEdge] = (),
     extra_t_ns: Sequence[int] = (),
+    removed_ids: Sequence[int] = (),
 ) -> SmoothingOutcome:
     """The run of ``history`` smoothed with the filter's ``motion`` model (its samples read through
     ``signal``), its ``slam_config`` and its final map (``landmark_ids`` (n,), ``landmarks`` (n, 2)), as the
     module docstring says; ``revise`` for unknown association; ``loops`` closed during the run (their
-    factors join the problem's) and ``extra_t_ns`` further stamps to give a pose
+    factors join the problem's), ``extra_t_ns`` further stamps to give a pose and ``removed_ids`` the
+    landmarks the filter removed as gone, whose observations the revision leaves out
     (:func:`~turtlelib.smoothing.history_problem.problem_from_history`). The
     landmarks of the map that the history never saw (before a relocalization) have no factor and are left
     out of the smoothed map. ValueError for a history that has not started, or a problem without a unique
@@ -103,7 +105,7 @@ def smooth_history(
     seen = np.isin(landmark_ids, history.observed_landmarks())
     landmark_ids, landmarks = landmark_ids[seen], landmarks[seen]
     problem, poses, rescale, unassigned = problem_from_history(
-        history, motion, signal, slam_config, landmark_ids, loops, extra_t_ns
+        history, motion, signal, slam_config, landmark_ids, loops, extra_t_ns, removed_ids
     )
     smoother = Smoother(slam_config.measurement_model(), config)
     if not revise:
