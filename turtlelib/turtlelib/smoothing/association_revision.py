@@ -23,7 +23,8 @@ and the run smoothed again from its last optimum, until none does (or ``max_roun
    one, and was not seen from that pose. ``L_i`` is the information of landmark ``i``'s inlier points (its
    precision relative to the poses: its marginal covariance also holds the uncertainty of the whole map
    in the start's frame, which a comparison within the run does not see).
-4. **New landmarks from what no landmark explains** (unassigned observations and outliers): two of them
+4. **New landmarks from what no landmark explains** (the outliers of the labelled observations, once steps
+   1-3 change nothing; an unassigned observation only ever joins a landmark, step 3): two of them
    from different poses agree when ``(p_a - p_b)^T (C_a + C_b)^-1 (p_a - p_b) < chi2_2^-1(merge_gate)``; the
    one that agrees with the most others makes a landmark with them (the nearest per pose) if they are
    ``min_support`` together, at their information-weighted mean, kept only if no landmark is compatible
