@@ -645,7 +645,7 @@ class SlamNode(Node):
     def smooth_run(self) -> SmoothingOutcome:
         """The run so far smoothed as a whole (``smooth_saved_map``: the history is kept), with the loops
         closed (``loop_closure``), a pose at every scan the grid keeps (so the smoothed grid places each)
-        and the landmarks removed as gone left out (the revision does not map them again); ValueError
+        and the observations of the landmarks removed as gone left out (no landmark takes them); ValueError
         without a history or before the first motion sample."""
         if self.timeline.history is None:
             raise ValueError("no run history: smooth_saved_map is false")

@@ -54,8 +54,8 @@ def problem_from_history(
     observations, and the usable observations of no landmark of the map (the last two for
     :func:`turtlelib.smoothing.association_revision.revise_associations`), but for those the filter had
     associated with a landmark it later removed as gone (``removed_ids``: a post the LiDAR saw through,
-    :mod:`turtlelib.estimation.landmark_removal`), which the revision must not map again. ValueError before
-    the history's start."""
+    :mod:`turtlelib.estimation.landmark_removal`), which no landmark of the revision may take. ValueError
+    before the history's start."""
     if history.start_pose is None:
         raise ValueError("the run has not started: no motion sample yet")
     scan_t_ns = np.array(history.scan_t_ns, dtype=np.int64)
