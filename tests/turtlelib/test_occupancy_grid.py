@@ -25,9 +25,9 @@ from turtlelib.mapping.occupancy_grid import (
 )
 
 RES = 0.1
-# the hand-computed cells below are at this inverse sensor model of a pass (log odds -0.405: 40 %), not the
-# default, so that they stay what was computed by hand
-MISS_PROBABILITY = 0.4
+# the hand-computed cells below have every pass at miss_probability (log odds -0.405: 40 %), none near the
+# end (test_a_pass_near_a_returns_end_is_the_weaker_model has those)
+NEAR_END_M = 0.0
 coordinate = st.floats(-1.5, 1.5, allow_nan=False)
 heading = st.floats(-math.pi, math.pi, allow_nan=False)
 
@@ -68,7 +68,7 @@ def end_cell(point: np.ndarray) -> tuple[int, int]:
 
 def test_one_beam_by_hand():
     # sensor at (0.05, 0.05) facing +x, a return at 0.32 m ends at x = 0.37: cells 0, 1, 2 passed, 3 hit
-    grid = OccupancyGrid(GridConfig(resolution_m=RES, miss_probability=MISS_PROBABILITY, initial_size_m=1.0))
+    grid = OccupancyGrid(GridConfig(resolution_m=RES, near_end_m=NEAR_END_M, initial_size_m=1.0))
     grid.insert_scan(one_beam(0.32), Transform2D(0.05, 0.05, 0.0))
     assert observed_cells(grid) == {(0, 0): 40, (1, 0): 40, (2, 0): 40, (3, 0): 70}
     grid_map = grid.grid_map()
@@ -80,7 +80,7 @@ def test_one_beam_by_hand():
     )
     # from (0.05, 0.02) at 135 deg for 0.14 sqrt(2) m: crosses x = 0 at y = 0.07 (into cell (-1, 0)), then
     # y = 0.1 at x = -0.03 (into (-1, 1)), ends at (-0.09, 0.16) in (-1, 1)
-    grid = OccupancyGrid(GridConfig(resolution_m=RES, miss_probability=MISS_PROBABILITY, initial_size_m=1.0))
+    grid = OccupancyGrid(GridConfig(resolution_m=RES, near_end_m=NEAR_END_M, initial_size_m=1.0))
     grid.insert_scan(one_beam(math.hypot(0.14, 0.14), 0.75 * math.pi), Transform2D(0.05, 0.02, 0.0))
     assert observed_cells(grid) == {(0, 0): 40, (-1, 0): 40, (-1, 1): 70}
 
@@ -89,7 +89,7 @@ def test_one_beam_by_hand():
 @given(coordinate, coordinate, st.floats(0.06, 3.0), heading)
 def test_a_beam_marks_its_end_occupied_and_the_cells_before_it_free(x, y, range_m, angle_rad):
     T_map_scan = Transform2D(x, y, 0.0)
-    grid = OccupancyGrid(GridConfig(resolution_m=RES, miss_probability=MISS_PROBABILITY, initial_size_m=1.0))
+    grid = OccupancyGrid(GridConfig(resolution_m=RES, near_end_m=NEAR_END_M, initial_size_m=1.0))
     grid.insert_scan(one_beam(range_m, angle_rad), T_map_scan)
     start = np.array([x, y])
     end = start + range_m * np.array([math.cos(angle_rad), math.sin(angle_rad)])
@@ -114,6 +114,7 @@ def test_repeated_scans_converge_to_the_clamps(n_scans, hit_probability, miss_pr
         initial_size_m=1.0,
         hit_probability=hit_probability,
         miss_probability=miss_probability,
+        near_end_m=NEAR_END_M,
     )
     grid = OccupancyGrid(config)
     for _ in range(n_scans):
@@ -130,13 +131,13 @@ def test_a_cell_is_updated_once_per_scan_and_an_end_wins_over_a_pass():
     # three beams along +x from (0.05, 0.05): 0.32 m ends in cell 3, 0.52 m and 0.54 m pass through it
     # and end in cell 5; every cell once: 0..2 and 4 free (40), 3 and 5 occupied (70)
     scan = RangeScan(np.array([0.32, 0.52, 0.54]), 0.0, 1e-9, 0.05, 3.5)
-    grid = OccupancyGrid(GridConfig(resolution_m=RES, miss_probability=MISS_PROBABILITY, initial_size_m=1.0))
+    grid = OccupancyGrid(GridConfig(resolution_m=RES, near_end_m=NEAR_END_M, initial_size_m=1.0))
     grid.insert_scan(scan, Transform2D(0.05, 0.05, 0.0))
     assert observed_cells(grid) == {(0, 0): 40, (1, 0): 40, (2, 0): 40, (3, 0): 70, (4, 0): 40, (5, 0): 70}
 
 
 def test_the_clamped_values_are_the_bounds():
-    grid = OccupancyGrid(GridConfig(resolution_m=RES, miss_probability=MISS_PROBABILITY, initial_size_m=1.0))
+    grid = OccupancyGrid(GridConfig(resolution_m=RES, near_end_m=NEAR_END_M, initial_size_m=1.0))
     for _ in range(20):
         grid.insert_scan(one_beam(0.32), Transform2D(0.05, 0.05, 0.0))
     assert observed_cells(grid) == {(0, 0): 12, (1, 0): 12, (2, 0): 12, (3, 0): 97}
@@ -151,9 +152,7 @@ def test_no_return_beams_never_mark_occupied_and_clear_up_to_the_bound(ranges, x
     scan = RangeScan(np.array(ranges), -1.0, 0.05, 0.05, 3.5)
     T_map_scan = Transform2D(x, 0.0, theta)
     grid = OccupancyGrid(
-        GridConfig(
-            resolution_m=RES, miss_probability=MISS_PROBABILITY, initial_size_m=1.0, no_return_clear_m=0.6
-        )
+        GridConfig(resolution_m=RES, near_end_m=NEAR_END_M, initial_size_m=1.0, no_return_clear_m=0.6)
     )
     grid.insert_scan(scan, T_map_scan)
     cells = observed_cells(grid)
@@ -177,9 +176,7 @@ def test_no_return_beams_never_mark_occupied_and_clear_up_to_the_bound(ranges, x
 
 def test_no_return_clearing_can_be_turned_off():
     grid = OccupancyGrid(
-        GridConfig(
-            resolution_m=RES, miss_probability=MISS_PROBABILITY, initial_size_m=1.0, no_return_clear_m=0.0
-        )
+        GridConfig(resolution_m=RES, near_end_m=NEAR_END_M, initial_size_m=1.0, no_return_clear_m=0.0)
     )
     grid.insert_scan(RangeScan(np.array([math.inf, math.nan, 0.0]), 0.0, 0.5, 0.1, 3.5), Transform2D())
     assert not grid.observed.any()
@@ -193,11 +190,9 @@ def test_growing_keeps_every_cell_in_place(poses):
     rng = np.random.default_rng(0)
     scans = [RangeScan(rng.uniform(0.1, 2.0, 36), 0.0, 2 * math.pi / 36, 0.05, 3.5) for _ in poses]
     small = OccupancyGrid(
-        GridConfig(resolution_m=RES, miss_probability=MISS_PROBABILITY, initial_size_m=0.5, grow_margin_m=0.3)
+        GridConfig(resolution_m=RES, near_end_m=NEAR_END_M, initial_size_m=0.5, grow_margin_m=0.3)
     )
-    large = OccupancyGrid(
-        GridConfig(resolution_m=RES, miss_probability=MISS_PROBABILITY, initial_size_m=12.0)
-    )
+    large = OccupancyGrid(GridConfig(resolution_m=RES, near_end_m=NEAR_END_M, initial_size_m=12.0))
     for scan, pose in zip(scans, poses, strict=True):
         small.insert_scan(scan, Transform2D(*pose))
         large.insert_scan(scan, Transform2D(*pose))
@@ -224,7 +219,7 @@ def test_a_scan_longer_than_the_bound_is_clipped_by_hand():
     # and clips. Along +x from (0.05, 0.05): 0.32 m ends in cell 3 (occupied), 0.47 m ends at x = 0.52 in
     # cell 5, just past the grid (not occupied), 3 m is cut at the grid: cells 0..4 passed, nothing hit
     grid = OccupancyGrid(
-        GridConfig(resolution_m=RES, miss_probability=MISS_PROBABILITY, initial_size_m=1.0, max_size_m=1.0)
+        GridConfig(resolution_m=RES, near_end_m=NEAR_END_M, initial_size_m=1.0, max_size_m=1.0)
     )
     scan = RangeScan(np.array([0.32, 0.47, 3.0]), 0.0, 1e-9, 0.05, 3.5)
     assert grid.insert_scan(scan, Transform2D(0.05, 0.05, 0.0))
@@ -236,7 +231,7 @@ def test_a_scan_longer_than_the_bound_is_clipped_by_hand():
     assert grid.insert_scan(one_beam(3.0), Transform2D(0.15, 0.05, 0.0)) and grid.col0 == -4
     # a return 1e299 m away (a LiDAR's range_max is only required finite) is cut the same
     grid = OccupancyGrid(
-        GridConfig(resolution_m=RES, miss_probability=MISS_PROBABILITY, initial_size_m=1.0, max_size_m=1.0)
+        GridConfig(resolution_m=RES, near_end_m=NEAR_END_M, initial_size_m=1.0, max_size_m=1.0)
     )
     assert grid.insert_scan(
         RangeScan(np.array([1e299]), 0.0, 0.01, 0.05, 1e300), Transform2D(0.05, 0.05, 0.0)
@@ -245,7 +240,7 @@ def test_a_scan_longer_than_the_bound_is_clipped_by_hand():
     # along (2, 1) / sqrt(5): crosses x = 0.1 at y = 0.075, y = 0.1 at x = 0.15, x = 0.2 at y = 0.125,
     # x = 0.3 at y = 0.175, y = 0.2 at x = 0.35, x = 0.4 at y = 0.225, then x = 0.5 out of the grid
     grid = OccupancyGrid(
-        GridConfig(resolution_m=RES, miss_probability=MISS_PROBABILITY, initial_size_m=1.0, max_size_m=1.0)
+        GridConfig(resolution_m=RES, near_end_m=NEAR_END_M, initial_size_m=1.0, max_size_m=1.0)
     )
     assert grid.insert_scan(one_beam(3.0, math.atan2(1.0, 2.0)), Transform2D(0.05, 0.05, 0.0))
     assert observed_cells(grid) == {
@@ -258,7 +253,7 @@ def test_past_the_bound_the_grid_moves_toward_the_scan_by_hand():
     grid = OccupancyGrid(
         GridConfig(
             resolution_m=RES,
-            miss_probability=MISS_PROBABILITY,
+            near_end_m=NEAR_END_M,
             initial_size_m=1.0,
             max_size_m=2.0,
             grow_margin_m=0.3,
@@ -289,12 +284,12 @@ def test_a_clipped_scan_leaves_the_cells_of_the_whole_scan_inside_the_grid(x, y,
     small = OccupancyGrid(
         GridConfig(
             resolution_m=RES,
-            miss_probability=MISS_PROBABILITY,
+            near_end_m=NEAR_END_M,
             initial_size_m=max_size_m,
             max_size_m=max_size_m,
         )
     )
-    large = OccupancyGrid(GridConfig(resolution_m=RES, miss_probability=MISS_PROBABILITY, initial_size_m=8.0))
+    large = OccupancyGrid(GridConfig(resolution_m=RES, near_end_m=NEAR_END_M, initial_size_m=8.0))
     T_map_scan = Transform2D(x, y, theta)
     assert small.insert_scan(scan, T_map_scan) and not large.insert_scan(scan, T_map_scan)
     height, width = small.log_odds.shape
@@ -312,7 +307,7 @@ def test_a_clipped_scan_leaves_the_cells_of_the_whole_scan_inside_the_grid(x, y,
 def test_the_grid_never_holds_more_than_its_bound_and_always_its_sensor(poses):
     rng = np.random.default_rng(0)
     grid = OccupancyGrid(
-        GridConfig(resolution_m=RES, miss_probability=MISS_PROBABILITY, initial_size_m=1.0, max_size_m=6.0)
+        GridConfig(resolution_m=RES, near_end_m=NEAR_END_M, initial_size_m=1.0, max_size_m=6.0)
     )
     for pose in poses:
         scan = RangeScan(rng.uniform(0.1, 3.5, 36), 0.0, 2 * math.pi / 36, 0.05, 3.5)
@@ -330,7 +325,9 @@ def test_the_grid_never_holds_more_than_its_bound_and_always_its_sensor(poses):
         ("resolution_m", 0.0, "resolution_m must be finite and > 0"),
         ("hit_probability", 0.5, r"hit_probability must be in \(0.5, 1.0\)"),
         ("miss_probability", 0.6, r"miss_probability must be in \(0.0, 0.5\)"),
-        ("min_probability", 0.5, r"min_probability must be in \(0.0, 0.45\]"),
+        ("min_probability", 0.45, r"min_probability must be in \(0.0, 0.4\]"),
+        ("near_miss_probability", 0.3, r"near_miss_probability must be in \[0.4, 0.5\)"),
+        ("near_end_m", -0.1, "near_end_m must be finite and >= 0"),
         ("max_probability", 1.0, r"max_probability must be in \[0.7, 1.0\)"),
         ("no_return_clear_m", -1.0, "no_return_clear_m must be finite and >= 0"),
         ("max_size_m", 1.0, "max_size_m must be >= initial_size_m"),
@@ -360,7 +357,7 @@ def test_keyframes_are_decimated_and_render_at_the_corrected_poses():
         return None if stamp_ns == 9 * 10**8 else Transform2D(0.04 * stamp_ns / 10**8, 0.3, 0.0)
 
     T_body_scan = Transform2D(-0.03, 0.0, 0.0)
-    config = GridConfig(resolution_m=RES, miss_probability=MISS_PROBABILITY, initial_size_m=4.0)
+    config = GridConfig(resolution_m=RES, near_end_m=NEAR_END_M, initial_size_m=4.0)
     rendered = keyframes.render(corrected, T_body_scan, config)
     expected = OccupancyGrid(config)
     for k in (0, 3, 6):
@@ -410,7 +407,7 @@ def trinary(occupancy: np.ndarray) -> np.ndarray:
 
 
 def test_a_saved_half_continued_with_the_other_half_is_the_grid_of_all_scans(tmp_path):
-    config = GridConfig(miss_probability=MISS_PROBABILITY)
+    config = GridConfig(near_end_m=NEAR_END_M)
     first, second = corridor_scans(np.linspace(-3.5, -1.0, 12)), corridor_scans(np.linspace(1.0, 3.5, 12))
     whole = OccupancyGrid(config)
     for T_map_scan, scan in first + second:
@@ -456,7 +453,7 @@ def test_a_saved_half_continued_with_the_other_half_is_the_grid_of_all_scans(tmp
     st.lists(st.tuples(st.floats(-4.0, 4.0), st.floats(-4.0, 4.0), heading), min_size=1, max_size=3),
 )
 def test_a_continued_grid_keeps_every_cell_in_place_and_updates_like_the_original(before, after):
-    config = GridConfig(resolution_m=RES, miss_probability=MISS_PROBABILITY, initial_size_m=2.0)
+    config = GridConfig(resolution_m=RES, near_end_m=NEAR_END_M, initial_size_m=2.0)
     lidar = LidarConfig(samples=90, angle_increment=2.0 * math.pi / 90)
     walls = arena_walls(5.0, 4.0)
     scans = [
@@ -487,7 +484,7 @@ def test_a_continued_grid_keeps_every_cell_in_place_and_updates_like_the_origina
 def test_a_door_closed_since_the_save_flips_after_a_bounded_number_of_scans_by_hand():
     # a saved 1 m grid, free everywhere: the clamp l_min (12 %); a beam from (0.05, 0.05) ending in cell
     # (3, 0) hits it once a scan: l_min + k l_hit is 24, 43, 63, 80 % (saved occupied, >= 65, at the 4th)
-    config = GridConfig(resolution_m=RES, miss_probability=MISS_PROBABILITY, initial_size_m=1.0)
+    config = GridConfig(resolution_m=RES, near_end_m=NEAR_END_M, initial_size_m=1.0)
     free = GridMap(np.zeros((10, 10), dtype=np.int8), RES, Transform2D(-0.5, -0.5, 0.0))
     grid = OccupancyGrid.from_grid_map(free, config)
     assert observed_cells(grid)[(3, 0)] == 12
@@ -509,7 +506,7 @@ def test_a_door_closed_since_the_save_flips_after_a_bounded_number_of_scans_by_h
 
 def test_a_saved_grid_starts_from_the_clamps_and_unknown_cells_unobserved_by_hand():
     occupancy = np.array([[0, 100, -1], [50, 5, 99]], dtype=np.int8)
-    config = GridConfig(resolution_m=RES, miss_probability=MISS_PROBABILITY, initial_size_m=1.0)
+    config = GridConfig(resolution_m=RES, near_end_m=NEAR_END_M, initial_size_m=1.0)
     grid = OccupancyGrid.from_grid_map(GridMap(occupancy, RES, Transform2D(0.3, -0.2, 0.0)), config)
     assert (grid.col0, grid.row0) == (3, -2) and grid.log_odds.shape == (2, 3)
     assert grid.observed.tolist() == [[True, True, False], [True, True, True]]
@@ -531,7 +528,7 @@ def test_a_saved_grid_starts_from_the_clamps_and_unknown_cells_unobserved_by_han
 def test_a_saved_grid_that_cannot_continue_is_refused(resolution_m, origin, message):
     saved = GridMap(np.zeros((3, 3), dtype=np.int8), resolution_m, origin)
     with pytest.raises(ValueError, match=message):
-        OccupancyGrid.from_grid_map(saved, GridConfig(resolution_m=RES, miss_probability=MISS_PROBABILITY))
+        OccupancyGrid.from_grid_map(saved, GridConfig(resolution_m=RES, near_end_m=NEAR_END_M))
 
 
 def test_a_saved_grid_larger_than_the_bound_is_refused():
@@ -539,7 +536,25 @@ def test_a_saved_grid_larger_than_the_bound_is_refused():
     with pytest.raises(ValueError, match=r"11 x 5 cells\) is larger than max_size_m = 1.0 m \(10 cells\)"):
         OccupancyGrid.from_grid_map(
             saved,
-            GridConfig(
-                resolution_m=RES, miss_probability=MISS_PROBABILITY, initial_size_m=1.0, max_size_m=1.0
-            ),
+            GridConfig(resolution_m=RES, near_end_m=NEAR_END_M, initial_size_m=1.0, max_size_m=1.0),
         )
+
+
+def test_a_pass_near_a_returns_end_is_the_weaker_model():
+    """Sensor at x = 0.05 facing +x (0.1 m cells), a return at 1.0 m ends in cell 10; cell k is entered at
+    x = 0.1 k, 1.05 - 0.1 k before the end: cells 8 and 9 within near_end_m = 0.3 m have the near model
+    (49 %), 0 to 7 the far one (40 %). Then a wall cell (5, 5) hit once (70 %), and a return along y = 0.55
+    from x = 0.95 toward -x entering it at x = 0.6: ending at x = 0.35 it passes the cell 0.25 m before its
+    end and the cell stays occupied (log odds 0.847 - 0.040: 69 %); ending at x = 0.05, 0.55 m before, it
+    clears it (0.847 - 0.405: 61 %, below map_server's 65 %)."""
+    config = GridConfig(resolution_m=RES, initial_size_m=4.0)
+    assert (config.miss_probability, config.near_end_m, config.near_miss_probability) == (0.4, 0.3, 0.49)
+    grid = OccupancyGrid(config)
+    grid.insert_scan(one_beam(1.0), Transform2D(0.05, 0.05, 0.0))
+    assert observed_cells(grid) == {(k, 0): 40 for k in range(8)} | {(8, 0): 49, (9, 0): 49, (10, 0): 70}
+    for range_m, after in ((0.6, 69), (0.9, 61)):
+        wall = OccupancyGrid(config)
+        wall.insert_scan(one_beam(0.5, math.pi / 2), Transform2D(0.55, 0.05, 0.0))
+        assert observed_cells(wall)[(5, 5)] == 70
+        wall.insert_scan(one_beam(range_m, math.pi), Transform2D(0.95, 0.55, 0.0))
+        assert observed_cells(wall)[(5, 5)] == after
