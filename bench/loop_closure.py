@@ -28,8 +28,7 @@ from pathlib import Path
 import numpy as np
 from rosbags.highlevel import AnyReader
 
-from nuturtle_eval.grid_agreement import grid_agreement as agreement_of
-from nuturtle_eval.grid_agreement import occupied_cells, reference_cells, scan_endpoints
+from nuturtle_eval.grid_agreement import grid_agreement, occupied_cells, reference_cells, scan_endpoints
 from nuturtle_eval.metrics import PoseSeries, align_se2, ate_rmse_aligned
 from nuturtle_eval.relative_error import relative_pose_error
 from turtlelib import LidarOdometry, LidarOdometryConfig, RangeScan, Transform2D, TwistNoise
@@ -78,7 +77,7 @@ def series(stamps: list[int], poses: list[Transform2D]) -> PoseSeries:
     return PoseSeries(np.array(stamps) / 1e9, np.array([T.as_array() for T in poses]))
 
 
-def grid_agreement(
+def map_agreement(
     stamps: list[int], poses: list[Transform2D], scans: list[RangeScan], truth: PoseSeries
 ) -> tuple[float, float]:
     """``(found, unexplained)``: the grid of ``scans`` at ``poses`` (aligned to ``truth`` first) against the
@@ -89,7 +88,7 @@ def grid_agreement(
     for T, scan in zip(poses, scans, strict=True):
         grid.insert_scan(scan, T_ref_est @ T)
     reference = reference_cells(scan_endpoints(zip(estimate.t_s, scans, strict=True), truth, Transform2D()))
-    result = agreement_of(reference, occupied_cells(grid.grid_map()))
+    result = grid_agreement(reference, occupied_cells(grid.grid_map()))
     return result.found_fraction, result.unexplained_fraction
 
 
@@ -128,7 +127,7 @@ def run(folder: Path, max_range_m: float | None) -> str:
         cells.append(
             f"{rpe.translation_m:.3f} / {rpe.rotation_deg:.2f} | {ate_rmse_aligned(estimate, truth):.2f}"
         )
-    found, unexplained = grid_agreement(stamps, closed, used, truth)
+    found, unexplained = map_agreement(stamps, closed, used, truth)
     n = len(stamps)
     range_text = "full" if max_range_m is None else f"{max_range_m:g} m"
     return (

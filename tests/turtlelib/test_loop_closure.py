@@ -77,7 +77,8 @@ def drive(loops: LoopClosure, truth, walls, circles, rng, noise_std=STEP_STD, bi
             noise = rng.normal(0.0, noise_std / 4.0) + [0.0, 0.0, bias_rad]
             T_odom = Transform2D(*(T_odom.as_array() + noise))
         odometry.append(T_odom)
-        step = OdometryStep(k * 10**8, T_odom, np.diag(noise_std**2) * (k > 0), Basis.REGISTERED, None, 10**8)
+        Sigma = np.diag(noise_std**2) * (k > 0)
+        step = OdometryStep(k * 10**8, T_odom, Sigma, Basis.REGISTERED, None, 10**8, Sigma)
         accepted += loops.add_step(step, scan_at(T_true, walls, circles, rng))
     return odometry, accepted
 
@@ -191,7 +192,8 @@ def test_an_identical_room_elsewhere_is_refused_by_the_graph_it_contradicts():
     T_i = loops.graph.pose(i)
     T_j = T_i @ Transform2D(0.3, 0.2, 0.1)
     T_j_twin = Transform2D(T_j.x + 10.0, T_j.y, T_j.theta)
-    step = OdometryStep(10**12, T_j_twin, np.diag([1e-8, 1e-8, 1e-8]), Basis.REGISTERED, None, 10**8)
+    Sigma = np.diag([1e-8, 1e-8, 1e-8])
+    step = OdometryStep(10**12, T_j_twin, Sigma, Basis.REGISTERED, None, 10**8, Sigma)
     loops.add_step(step, scan_at(T_j_twin, TWIN_ROOMS, TWIN_PILLARS, rng))
     j = len(loops.keyframes) - 1
     # offered the room's perfect fit (keyframe j where i's room has it), the match is good ...

@@ -157,7 +157,7 @@ class OdometryStep:
     ``Sigma`` (3, 3) the step adds to the pose's (module docstring: what the newest error against the
     keyframe exceeds of the steps since it, plus the map's drift over the step), what it rests on
     (``basis``), the registration (None for ``Basis.MOTION``), and ``Sigma_anchored`` (3, 3), the step's
-    anchored increment (module docstring, "Anchored increments"; ``Sigma`` when not given)."""
+    anchored increment (module docstring, "Anchored increments")."""
 
     t_ns: int
     T_odom_body: Transform2D
@@ -165,11 +165,7 @@ class OdometryStep:
     basis: Basis
     registration: Registration | None
     interval_ns: int
-    Sigma_anchored: NDArray[np.float64] | None = None
-
-    def __post_init__(self) -> None:
-        if self.Sigma_anchored is None:
-            object.__setattr__(self, "Sigma_anchored", self.Sigma)
+    Sigma_anchored: NDArray[np.float64]
 
     @property
     def sample(self) -> Sample:
@@ -254,7 +250,7 @@ class LidarOdometry:
             points = voxel_centroids(scan_points(scan, mount), self.config.registration.voxel_m)
         if self._last is None:
             # the first scan: frame lidar_odom starts as the input's own
-            step = OdometryStep(t_ns, T_input_body, np.zeros((3, 3)), Basis.MOTION, None, 0)
+            step = OdometryStep(t_ns, T_input_body, np.zeros((3, 3)), Basis.MOTION, None, 0, np.zeros((3, 3)))
         else:
             step = self._registered(t_ns, T_input_body, points)
         self._last = (t_ns, step.T_odom_body, T_input_body)

@@ -268,7 +268,7 @@ class OccupancyGrid:
         self.col0 = self.row0 = -half
         self.log_odds = np.zeros((2 * half, 2 * half), dtype=np.float32)
         self.observed = np.zeros((2 * half, 2 * half), dtype=bool)
-        self._hit_scratch = np.zeros(self.log_odds.size, dtype=bool)
+        self._marked_scratch = np.zeros(self.log_odds.size, dtype=bool)
         self._layout: tuple[int, float, float] | None = None
         self._directions = np.zeros((0, 2))
 
@@ -307,7 +307,7 @@ class OccupancyGrid:
         grid.log_odds = np.where(observed, log_odds_grid, 0.0).astype(np.float32)
         grid.observed = observed
         grid.col0, grid.row0 = round(offsets[0]), round(offsets[1])
-        grid._hit_scratch = np.zeros(grid.log_odds.size, dtype=bool)
+        grid._marked_scratch = np.zeros(grid.log_odds.size, dtype=bool)
         return grid
 
     @property
@@ -318,7 +318,7 @@ class OccupancyGrid:
     @property
     def nbytes(self) -> int:
         """The bytes the grid's state holds now (``BYTES_PER_CELL`` per cell)."""
-        return self.log_odds.nbytes + self.observed.nbytes + self._hit_scratch.nbytes
+        return self.log_odds.nbytes + self.observed.nbytes + self._marked_scratch.nbytes
 
     @property
     def max_cells(self) -> int:
@@ -376,7 +376,8 @@ class OccupancyGrid:
         # cells in the map frame's cell units (independent of the grid's extent), then in the grid
         height, width = self.log_odds.shape
         start = (math.floor(sy) - self.row0) * width + math.floor(sx) - self.col0
-        ends = returns.copy()
+        # every return (those ending past the grid too: their passes near the end are near ones)
+        ends = returns
         if past_bound:  # the returns that end inside the grid (compared before any cast to integers)
             returns = returns & (ex >= self.col0) & (ex < self.col0 + width)
             returns &= (ey >= self.row0) & (ey < self.row0 + height)
@@ -388,15 +389,16 @@ class OccupancyGrid:
         near = ends[beam] & ((1.0 - t) * reach_m[beam] < self.config.near_end_m)
         end_row = np.floor(ey[returns]).astype(np.int64) - self.row0
         hit = end_row * width + np.floor(ex[returns]).astype(np.int64) - self.col0
-        # an end wins over a pass, a pass far from the end over one near it (a cell is updated once a scan)
-        is_hit = self._hit_scratch
-        is_hit[hit] = True
-        free = traversed[~near & ~is_hit[traversed]]
-        if not is_hit[start] and reach_m.max() > 0.0:
+        # an end wins over a pass, a pass far from the end over one near it (a cell is updated once a scan):
+        # the cells already given an update are marked in the scratch, which is left all False again
+        marked = self._marked_scratch
+        marked[hit] = True
+        free = traversed[~near & ~marked[traversed]]
+        if not marked[start] and reach_m.max() > 0.0:
             free = np.append(free, start)
-        is_hit[free] = True
-        near_free = traversed[near & ~is_hit[traversed]]
-        is_hit[hit] = is_hit[free] = False
+        marked[free] = True
+        near_free = traversed[near & ~marked[traversed]]
+        marked[hit] = marked[free] = False
         flat_l = self.log_odds.reshape(-1)
         flat_observed = self.observed.reshape(-1)
         # duplicates in free (or hit) write the same value: each cell is updated once
@@ -449,8 +451,8 @@ class OccupancyGrid:
             observed[new] = self.observed[old]
         self.log_odds, self.observed = log_odds_grid, observed
         self.col0, self.row0 = col0, row0
-        if self._hit_scratch.size != log_odds_grid.size:  # (all false between scans)
-            self._hit_scratch = np.zeros(log_odds_grid.size, dtype=bool)
+        if self._marked_scratch.size != log_odds_grid.size:  # (all false between scans)
+            self._marked_scratch = np.zeros(log_odds_grid.size, dtype=bool)
         return past_x or past_y
 
     def _clipped_traversed_cells(
